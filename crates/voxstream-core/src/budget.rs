@@ -1,0 +1,88 @@
+//! Splitting one memory budget between the node pool and the brick pool.
+//!
+//! GigaVoxels [P09] §5: both pools are caches of fixed size (their paper: a 4 MB node pool beside a 430 MB brick
+//! pool). voxstream derives both capacities from one `--budget-mb`, counting every per-slot byte (nodes, voxels,
+//! bookkeeping, feedback flags), so the pools can never exceed it.
+
+use crate::brick_pool::BRICK_RECORD_BYTES;
+use crate::error::CoreError;
+use crate::key::TreeShape;
+use crate::lru::LRU_BYTES_PER_SLOT;
+use crate::node::Node;
+use crate::node_pool::TILE_RECORD_BYTES;
+
+/// Share of the budget given to the node pool (the rest holds bricks).
+pub const NODE_POOL_SHARE: f64 = 1.0 / 16.0;
+
+/// Bytes of one voxel in the brick pool (`u16`, values normalised to `[0, 1]`).
+pub const VOXEL_BYTES: usize = 2;
+
+/// Capacities of both pools, derived from a byte budget.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PoolCapacities {
+    /// Tiles of `N³` nodes, the root tile included.
+    pub tiles: u32,
+    /// Bricks of `(M+2)³` voxels.
+    pub bricks: u32,
+    /// Bytes per tile, all bookkeeping included.
+    pub bytes_per_tile: u64,
+    /// Bytes per brick, all bookkeeping included.
+    pub bytes_per_brick: u64,
+    /// The budget these capacities respect.
+    pub budget_bytes: u64,
+}
+
+impl PoolCapacities {
+    /// Plans capacities so that `tiles·bytes_per_tile + bricks·bytes_per_brick ≤ budget_bytes`.
+    pub fn plan(shape: &TreeShape, budget_bytes: u64) -> Result<PoolCapacities, CoreError> {
+        let bytes_per_tile = (shape.nodes_per_tile() as usize * std::mem::size_of::<Node>()
+            + TILE_RECORD_BYTES
+            + LRU_BYTES_PER_SLOT
+            + 1) as u64;
+        let bytes_per_brick =
+            (shape.voxels_per_brick() * VOXEL_BYTES + BRICK_RECORD_BYTES + LRU_BYTES_PER_SLOT + 1) as u64;
+        // The smallest useful cache: the root tile plus a few tiles, a parent brick and all its children.
+        let min_tiles = 4u64;
+        let min_bricks = 2 * shape.nodes_per_tile() as u64;
+        let minimum_bytes = min_tiles * bytes_per_tile + min_bricks * bytes_per_brick;
+        if budget_bytes < minimum_bytes {
+            return Err(CoreError::BudgetTooSmall { budget_bytes, minimum_bytes });
+        }
+        let node_bytes = ((budget_bytes as f64 * NODE_POOL_SHARE) as u64).max(min_tiles * bytes_per_tile);
+        let tiles = (node_bytes / bytes_per_tile).min(crate::node::MAX_TILE_INDEX as u64);
+        let bricks = ((budget_bytes - tiles * bytes_per_tile) / bytes_per_brick).min(u32::MAX as u64 - 1);
+        if bricks < min_bricks {
+            return Err(CoreError::BudgetTooSmall { budget_bytes, minimum_bytes });
+        }
+        Ok(PoolCapacities { tiles: tiles as u32, bricks: bricks as u32, bytes_per_tile, bytes_per_brick, budget_bytes })
+    }
+
+    /// Bytes used by `tiles` tiles and `bricks` bricks.
+    pub fn bytes_for(&self, tiles: u32, bricks: u32) -> u64 {
+        tiles as u64 * self.bytes_per_tile + bricks as u64 * self.bytes_per_brick
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    #[test]
+    fn zero_budget_is_an_error() {
+        let shape = TreeShape::new(2, 8, 10).unwrap();
+        assert!(matches!(PoolCapacities::plan(&shape, 0), Err(CoreError::BudgetTooSmall { .. })));
+    }
+
+    proptest! {
+        #[test]
+        fn plan_never_exceeds_the_budget(budget in 0u64..(1 << 34), n in 2u32..4, m in 2u32..33) {
+            let shape = TreeShape::new(n, m, 8).unwrap();
+            if let Ok(caps) = PoolCapacities::plan(&shape, budget) {
+                prop_assert!(caps.bytes_for(caps.tiles, caps.bricks) <= budget);
+                prop_assert!(caps.tiles >= 4);
+                prop_assert!(caps.bricks >= 2 * shape.nodes_per_tile());
+            }
+        }
+    }
+}

@@ -1,0 +1,398 @@
+//! The cache manager: turns a frame's feedback into pool updates by asking the producer for what rays missed.
+//!
+//! Implements GigaVoxels [P09] §5 ("Cache management", "Ray-guided data requests") and the producer side of [R08] §4.
+//!
+//! # Design choices
+//! - **One budget.** Node and brick pool capacities come from one byte budget ([`PoolCapacities::plan`]), every
+//!   per-slot byte counted; memory grows with use and never passes the budget.
+//! - **LRU order.** After a frame, every tile and brick a ray used is refreshed in index order (deterministic).
+//!   Allocation takes a free slot, else the least recently used one, but never one used during the current frame:
+//!   the renderer might point at it. When nothing can be recycled the request waits (it is counted as deferred).
+//! - **No dangling pointers.** Recycling a brick clears its owner's brick pointer. Recycling a tile clears its
+//!   parent's child pointer and frees its whole subtree (tiles and bricks), because descendants are never more
+//!   recently used than their ancestors.
+//! - **Dedup and priority.** [`RequestQueue`]: duplicates merged, parents before children, then by how many rays
+//!   asked, bounded per frame in interactive mode.
+//! - **Threads.** Production runs on the rayon worker threads, outside any lock; results are applied by the
+//!   calling thread in queue order, so the final pools do not depend on scheduling.
+//! - **Failures.** A producer error is recorded once; the node stays missing, its ancestor stands in, and it is
+//!   not requested again.
+//! - **Brick analysis.** A produced brick whose voxels are all equal becomes a constant node (no brick slot).
+
+use std::collections::HashSet;
+
+use rayon::prelude::*;
+
+use crate::brick_pool::{dequantize, BrickPool};
+use crate::budget::PoolCapacities;
+use crate::error::{CoreError, ProduceError};
+use crate::feedback::{FeedbackBuffer, Request, RequestKind};
+use crate::key::{NodeKey, TreeShape};
+use crate::node::{Node, NodeData, NodeId, TileId};
+use crate::node_pool::{NodePool, ROOT_TILE};
+use crate::producer::{NodeContent, Produced, Producer};
+use crate::request_queue::RequestQueue;
+use crate::tree_view::TreeView;
+
+/// What serving one frame's requests did.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct ServeReport {
+    /// Distinct requests the rays made.
+    pub requests: usize,
+    /// Requests served (some work done).
+    pub served: usize,
+    /// Requests left for a later frame (over the per-frame bound, or the pools were full of this frame's data).
+    pub deferred: usize,
+    /// Bricks produced and stored.
+    pub bricks_produced: usize,
+    /// Nodes that turned out constant (oracle or brick analysis).
+    pub constant_nodes: usize,
+    /// Tiles created.
+    pub tiles_created: usize,
+    /// Bricks evicted to make room.
+    pub bricks_evicted: usize,
+    /// Tiles evicted (with their subtrees) to make room.
+    pub tiles_evicted: usize,
+    /// Producer failures recorded this frame.
+    pub failures: Vec<ProduceError>,
+}
+
+/// Residency figures of the cache.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Residency {
+    /// Bricks resident.
+    pub bricks: u32,
+    /// Nodes resident (tiles in use × N³).
+    pub nodes: u64,
+    /// Tiles in use.
+    pub tiles: u32,
+    /// Bytes of pool memory touched so far (high-water marks × per-slot bytes); never above the budget.
+    pub bytes: u64,
+    /// The budget.
+    pub budget_bytes: u64,
+}
+
+/// Owns the pools and the producer; serves the rays' requests between frames.
+pub struct CacheManager<P: Producer> {
+    producer: P,
+    shape: TreeShape,
+    capacities: PoolCapacities,
+    node_pool: NodePool,
+    brick_pool: BrickPool,
+    feedback: FeedbackBuffer,
+    frame: u32,
+    failed: HashSet<NodeKey>,
+}
+
+impl<P: Producer> CacheManager<P> {
+    /// A cache for `producer` within `budget_bytes`. Only the root exists; its data is requested by the first rays.
+    pub fn new(producer: P, budget_bytes: u64) -> Result<CacheManager<P>, CoreError> {
+        let shape = producer.shape();
+        let capacities = PoolCapacities::plan(&shape, budget_bytes)?;
+        let node_pool = NodePool::new(shape, capacities.tiles);
+        let brick_pool = BrickPool::new(&shape, capacities.bricks);
+        let feedback = FeedbackBuffer::new(node_pool.tiles_allocated(), 0);
+        Ok(CacheManager {
+            producer,
+            shape,
+            capacities,
+            node_pool,
+            brick_pool,
+            feedback,
+            frame: 1,
+            failed: HashSet::new(),
+        })
+    }
+
+    /// The producer.
+    pub fn producer(&self) -> &P {
+        &self.producer
+    }
+
+    /// The tree shape.
+    pub fn shape(&self) -> &TreeShape {
+        &self.shape
+    }
+
+    /// The planned capacities.
+    pub fn capacities(&self) -> &PoolCapacities {
+        &self.capacities
+    }
+
+    /// The node pool (read-only).
+    pub fn node_pool(&self) -> &NodePool {
+        &self.node_pool
+    }
+
+    /// The brick pool (read-only).
+    pub fn brick_pool(&self) -> &BrickPool {
+        &self.brick_pool
+    }
+
+    /// Current frame number (starts at 1).
+    pub fn frame(&self) -> u32 {
+        self.frame
+    }
+
+    /// Starts a frame: clears the feedback buffer. Then render with [`CacheManager::view`] and
+    /// [`CacheManager::feedback`], and finish with [`CacheManager::end_frame`].
+    pub fn begin_frame(&mut self) {
+        self.feedback.reset(self.node_pool.tiles_allocated(), self.brick_pool.allocated());
+    }
+
+    /// The pools as renderers read them.
+    pub fn view(&self) -> TreeView<'_> {
+        TreeView { shape: self.shape, nodes: self.node_pool.nodes(), voxels: self.brick_pool.voxels() }
+    }
+
+    /// The feedback buffer the renderer writes into.
+    pub fn feedback(&self) -> &FeedbackBuffer {
+        &self.feedback
+    }
+
+    /// Residency figures.
+    pub fn residency(&self) -> Residency {
+        Residency {
+            bricks: self.brick_pool.len(),
+            nodes: self.node_pool.tiles_in_use() as u64 * self.shape.nodes_per_tile() as u64,
+            tiles: self.node_pool.tiles_in_use(),
+            bytes: self.capacities.bytes_for(self.node_pool.tiles_allocated(), self.brick_pool.allocated()),
+            budget_bytes: self.capacities.budget_bytes,
+        }
+    }
+
+    /// Ends the frame: refreshes what the rays used, then serves at most `limit` of their requests (all if `None`).
+    pub fn end_frame(&mut self, limit: Option<usize>) -> ServeReport {
+        let frame = self.frame;
+        for tile in self.feedback.used_tiles().collect::<Vec<_>>() {
+            self.node_pool.touch(tile, frame);
+        }
+        for brick in self.feedback.used_bricks().collect::<Vec<_>>() {
+            self.brick_pool.touch(brick, frame);
+        }
+        let raw = self.feedback.take_requests();
+        let node_pool = &self.node_pool;
+        let queue = RequestQueue::build(raw, None, |node| node_pool.key(node).level);
+        let mut report = ServeReport { requests: queue.len(), ..ServeReport::default() };
+
+        // Keep what is still valid and not known to fail, up to the bound.
+        let mut work: Vec<(Request, NodeKey)> = Vec::new();
+        for queued in &queue.requests {
+            let request = queued.request;
+            let node = self.node_pool.node(request.node);
+            let key = self.node_pool.key(request.node);
+            let is_valid = match request.kind {
+                RequestKind::Produce => node.data() == NodeData::Missing && !self.failed.contains(&key),
+                RequestKind::Subdivide => {
+                    !node.is_constant()
+                        && !node.is_terminal()
+                        && node.child_tile().is_none()
+                        && key.level < self.shape.max_level
+                }
+            };
+            if is_valid {
+                work.push((request, key));
+            }
+        }
+        if let Some(limit) = limit {
+            report.deferred += work.len().saturating_sub(limit);
+            work.truncate(limit);
+        }
+
+        // Produce on worker threads, with no lock held; oracle answers for the children of subdivided nodes too.
+        let producer = &self.producer;
+        let shape = self.shape;
+        let per_brick = shape.voxels_per_brick();
+        let results: Vec<WorkResult> = work
+            .par_iter()
+            .map(|&(request, key)| match request.kind {
+                RequestKind::Produce => {
+                    let mut voxels = vec![0u16; per_brick];
+                    let produced = producer.produce(key, &mut voxels);
+                    WorkResult::Produced(produced.map(|p| analyse(p, voxels, key, &shape)))
+                }
+                RequestKind::Subdivide => WorkResult::Children(
+                    (0..shape.nodes_per_tile()).map(|c| producer.oracle(key.child(c, shape.n))).collect(),
+                ),
+            })
+            .collect();
+
+        // Apply in queue order.
+        for ((request, key), result) in work.into_iter().zip(results) {
+            let applied = match result {
+                WorkResult::Produced(Ok(brick)) => self.apply_produced(request.node, brick, &mut report),
+                WorkResult::Produced(Err(error)) => {
+                    self.failed.insert(key);
+                    report.failures.push(error);
+                    true
+                }
+                WorkResult::Children(hints) => self.apply_subdivide(request.node, &hints, &mut report),
+            };
+            if applied {
+                report.served += 1;
+            } else {
+                report.deferred += 1;
+            }
+        }
+        self.frame += 1;
+        report
+    }
+
+    fn apply_produced(&mut self, node_id: NodeId, brick: AnalysedBrick, report: &mut ServeReport) -> bool {
+        match brick.content {
+            NodeContent::Empty | NodeContent::Constant(_) => {
+                let value = if let NodeContent::Constant(v) = brick.content { v } else { 0.0 };
+                // A constant node never has children: free any subtree it still has.
+                if let Some(child) = self.node_pool.node(node_id).child_tile() {
+                    self.free_subtree(child);
+                }
+                *self.node_pool.node_mut(node_id) = Node::constant(value);
+                report.constant_nodes += 1;
+                true
+            }
+            NodeContent::Brick => {
+                let Some((slot, evicted)) = self.brick_pool.insert(node_id, &brick.voxels, self.frame) else {
+                    return false;
+                };
+                if let Some(previous_owner) = evicted {
+                    self.node_pool.node_mut(previous_owner).set_brick(None);
+                    report.bricks_evicted += 1;
+                }
+                let node = self.node_pool.node_mut(node_id);
+                node.set_brick(Some(slot));
+                node.set_terminal(brick.is_terminal);
+                report.bricks_produced += 1;
+                true
+            }
+        }
+    }
+
+    fn apply_subdivide(&mut self, node_id: NodeId, hints: &[Option<f32>], report: &mut ServeReport) -> bool {
+        if let Some(victim) = self.node_pool.oldest_recyclable(self.frame) {
+            self.detach_and_free(victim);
+            report.tiles_evicted += 1;
+        }
+        let Some((tile, _)) = self.node_pool.allocate(node_id, self.frame) else {
+            return false;
+        };
+        self.node_pool.node_mut(node_id).set_child_tile(Some(tile));
+        let per_tile = self.shape.nodes_per_tile();
+        for (child, hint) in hints.iter().enumerate() {
+            if let Some(value) = hint {
+                *self.node_pool.node_mut(NodeId::new(tile, child as u32, per_tile)) = Node::constant(*value);
+                report.constant_nodes += 1;
+            }
+        }
+        report.tiles_created += 1;
+        true
+    }
+
+    /// Clears the parent's pointer to `tile`, then frees the tile's subtree.
+    fn detach_and_free(&mut self, tile: TileId) {
+        let parent = self.node_pool.record(tile).parent;
+        if parent != u32::MAX {
+            self.node_pool.node_mut(NodeId(parent)).set_child_tile(None);
+        }
+        self.free_subtree(tile);
+    }
+
+    fn free_subtree(&mut self, tile: TileId) {
+        let per_tile = self.shape.nodes_per_tile();
+        let mut stack = vec![tile];
+        while let Some(tile) = stack.pop() {
+            for child in 0..per_tile {
+                let node = self.node_pool.node(NodeId::new(tile, child, per_tile));
+                if let Some(slot) = node.brick() {
+                    self.brick_pool.release(slot);
+                }
+                if let Some(grandchildren) = node.child_tile() {
+                    stack.push(grandchildren);
+                }
+            }
+            if tile != ROOT_TILE {
+                self.node_pool.release(tile);
+            }
+        }
+    }
+
+    /// Checks every structural invariant; returns the first violation. Used by tests.
+    ///
+    /// - every child pointer names a tile in use whose record points back at the node;
+    /// - every brick pointer names a slot in use whose owner is the node;
+    /// - every tile in use is reachable from the root, every brick in use is owned by a reachable node;
+    /// - the touched memory is within the budget.
+    pub fn check_invariants(&self) -> Result<(), String> {
+        let per_tile = self.shape.nodes_per_tile();
+        let mut reachable_tiles = 1u32;
+        let mut reachable_bricks = 0u32;
+        let mut stack: Vec<(NodeId, u32)> = vec![(NodeId::ROOT, 0)];
+        while let Some((id, level)) = stack.pop() {
+            let node = self.node_pool.node(id);
+            if let Some(slot) = node.brick() {
+                if !self.brick_pool.is_in_use(slot) {
+                    return Err(format!("node {id:?} points at free brick {slot:?}"));
+                }
+                if self.brick_pool.owner(slot) != id {
+                    return Err(format!("brick {slot:?} is owned by {:?}, not {id:?}", self.brick_pool.owner(slot)));
+                }
+                reachable_bricks += 1;
+            }
+            if let Some(tile) = node.child_tile() {
+                if node.is_constant() {
+                    return Err(format!("constant node {id:?} has children"));
+                }
+                if !self.node_pool.is_in_use(tile) {
+                    return Err(format!("node {id:?} points at free tile {tile:?}"));
+                }
+                if self.node_pool.record(tile).parent != id.0 {
+                    return Err(format!("tile {tile:?} does not point back at {id:?}"));
+                }
+                if self.node_pool.record(tile).level != level + 1 {
+                    return Err(format!("tile {tile:?} has the wrong level"));
+                }
+                reachable_tiles += 1;
+                for child in 0..per_tile {
+                    stack.push((NodeId::new(tile, child, per_tile), level + 1));
+                }
+            }
+        }
+        if reachable_tiles != self.node_pool.tiles_in_use() {
+            return Err(format!("{} tiles in use, {} reachable", self.node_pool.tiles_in_use(), reachable_tiles));
+        }
+        if reachable_bricks != self.brick_pool.len() {
+            return Err(format!("{} bricks in use, {} reachable", self.brick_pool.len(), reachable_bricks));
+        }
+        let residency = self.residency();
+        if residency.bytes > residency.budget_bytes {
+            return Err(format!("{} bytes resident, budget {}", residency.bytes, residency.budget_bytes));
+        }
+        Ok(())
+    }
+}
+
+enum WorkResult {
+    Produced(Result<AnalysedBrick, ProduceError>),
+    Children(Vec<Option<f32>>),
+}
+
+struct AnalysedBrick {
+    content: NodeContent,
+    is_terminal: bool,
+    voxels: Vec<u16>,
+}
+
+/// Brick analysis before upload ([R08] §4): a brick of equal voxels is a constant node.
+fn analyse(produced: Produced, voxels: Vec<u16>, key: NodeKey, shape: &TreeShape) -> AnalysedBrick {
+    let is_terminal = produced.is_terminal || key.level >= shape.max_level;
+    let content = match produced.content {
+        NodeContent::Brick if voxels.iter().all(|&v| v == voxels[0]) => {
+            if voxels[0] == 0 {
+                NodeContent::Empty
+            } else {
+                NodeContent::Constant(dequantize(voxels[0]))
+            }
+        }
+        other => other,
+    };
+    AnalysedBrick { content, is_terminal, voxels }
+}

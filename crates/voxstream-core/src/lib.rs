@@ -1,0 +1,63 @@
+//! # voxstream-core: the GigaVoxels cache, as flat data
+//!
+//! The bottom of voxstream's data flow:
+//!
+//! ```text
+//! camera → renderer → feedback → cache manager → producers → pools → renderer
+//!             ▲          (this crate: FeedbackBuffer, CacheManager, Producer, NodePool, BrickPool)
+//! ```
+//!
+//! - [`Node`]: two 32-bit words (child tile + flags, brick slot or constant), GigaVoxels [P09] §4.
+//! - [`NodePool`]: tiles of `N³` siblings; [`BrickPool`]: bricks of `(M+2)³` `u16` voxels with a one-voxel border.
+//! - [`PoolCapacities`]: both pools sized from one byte budget, never exceeded.
+//! - [`FeedbackBuffer`]: what rays used and what they missed; [`RequestQueue`]: dedup, parent-first, bounded.
+//! - [`CacheManager`]: serves requests by calling a [`Producer`] on worker threads; LRU recycling.
+//! - [`TreeView`]: the immutable flat view renderers read during a frame.
+//!
+//! ```
+//! use voxstream_core::{CacheManager, NodeContent, NodeKey, Produced, Producer, ProduceError, TreeShape};
+//!
+//! /// Everything is empty: the root turns out constant after one request.
+//! struct Vacuum;
+//! impl Producer for Vacuum {
+//!     fn shape(&self) -> TreeShape { TreeShape::new(2, 8, 4).unwrap() }
+//!     fn produce(&self, _: NodeKey, _: &mut [u16]) -> Result<Produced, ProduceError> {
+//!         Ok(Produced { content: NodeContent::Empty, is_terminal: true })
+//!     }
+//! }
+//! let mut cache = CacheManager::new(Vacuum, 1 << 20).unwrap();
+//! cache.begin_frame();
+//! // A renderer would write this request when its ray finds the root missing.
+//! cache.feedback().push_requests(&[voxstream_core::Request {
+//!     node: voxstream_core::NodeId::ROOT,
+//!     kind: voxstream_core::RequestKind::Produce,
+//! }]);
+//! let report = cache.end_frame(None);
+//! assert_eq!(report.constant_nodes, 1);
+//! assert!(cache.view().root().is_constant());
+//! ```
+
+pub mod brick_pool;
+pub mod budget;
+pub mod cache_manager;
+pub mod error;
+pub mod feedback;
+pub mod key;
+pub mod lru;
+pub mod node;
+pub mod node_pool;
+pub mod producer;
+pub mod request_queue;
+pub mod tree_view;
+
+pub use brick_pool::{dequantize, quantize, BrickPool, VOXEL_MAX};
+pub use budget::PoolCapacities;
+pub use cache_manager::{CacheManager, Residency, ServeReport};
+pub use error::{CoreError, ProduceError};
+pub use feedback::{FeedbackBuffer, Request, RequestKind};
+pub use key::{NodeKey, TreeShape, BRICK_BORDER};
+pub use node::{BrickSlot, Node, NodeData, NodeId, TileId};
+pub use node_pool::NodePool;
+pub use producer::{NodeContent, Produced, Producer};
+pub use request_queue::{QueuedRequest, RequestQueue};
+pub use tree_view::TreeView;

@@ -1,0 +1,46 @@
+//! The producer interface: where bricks come from (procedural generators, files, converters).
+//!
+//! GigaVoxels [R08] §4 ("Producers") and [P09] §5: given a node (level and integer coordinates), a producer yields
+//! an empty region, a constant value, or a brick of `(M+2)³` voxels including the one-voxel border; an oracle
+//! answers conservatively, without producing, whether a region is known to be empty or constant. Reichl's framework
+//! (seed 004, ch. 4) calls the same role a data supplier. Producers run on worker threads, hence `Send + Sync`.
+
+use crate::error::ProduceError;
+use crate::key::{NodeKey, TreeShape};
+
+/// What a node turned out to hold.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum NodeContent {
+    /// Nothing (value 0) here and below.
+    Empty,
+    /// The same value everywhere here and below.
+    Constant(f32),
+    /// The voxels were written to the output brick.
+    Brick,
+}
+
+/// The result of producing one node.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Produced {
+    /// What the node holds.
+    pub content: NodeContent,
+    /// Whether the source has no finer data below this node.
+    pub is_terminal: bool,
+}
+
+/// A source of bricks for an N³-tree.
+pub trait Producer: Send + Sync {
+    /// Shape of the tree this producer feeds (N, brick size, deepest level).
+    fn shape(&self) -> TreeShape;
+
+    /// A conservative a-priori answer: `Some(value)` if the whole node is known to hold `value` (0 = empty) without
+    /// producing it, `None` if unknown. Must be cheap; called for every child of a subdivided node.
+    fn oracle(&self, key: NodeKey) -> Option<f32> {
+        let _ = key;
+        None
+    }
+
+    /// Produces the node `key`. For [`NodeContent::Brick`], `voxels` (length `(M+2)³`, x fastest) receives the
+    /// brick with its border: voxel `(i, j, k)` of the array is centred at `lower + (i − 1 + ½, …)·voxel_size`.
+    fn produce(&self, key: NodeKey, voxels: &mut [u16]) -> Result<Produced, ProduceError>;
+}
