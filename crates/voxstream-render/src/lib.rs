@@ -1,1 +1,38 @@
+//! # voxstream-render: the CPU cone-tracing ray caster
+//!
+//! Where it sits in the loop:
+//!
+//! ```text
+//! camera → [renderer] → feedback → cache manager → producers → pools → [renderer]
+//! ```
+//!
+//! The renderer reads a [`voxstream_core::TreeView`] (flat node and brick pools, shared layout with a GPU backend)
+//! and writes a [`voxstream_core::FeedbackBuffer`]. It knows nothing of producers or the cache manager.
+//!
+//! - [`Camera`]: eye/target/up/fov, right-handed like `vtkCamera`.
+//! - [`TransferFunction`] / [`TransferLut`]: piecewise-linear 1-D transfer function, VTK's opacity unit distance.
+//! - [`render_frame`]: rayon over 16×16 image tiles, one [`RayCaster`] ray per pixel.
+//!
+//! ```
+//! use voxstream_render::{TransferFunction, TransferLut};
+//! let tf = TransferFunction::from_json(r#"{"points": [[0, 0,0,0, 0], [1, 1,1,1, 1]]}"#).unwrap();
+//! let lut = TransferLut::new(&tf, 0.0, 1.0, 0.01);
+//! assert!(lut.lookup(1.0).sigma > lut.lookup(0.5).sigma);
+//! ```
 
+pub mod camera;
+pub mod error;
+pub mod frame;
+pub mod image;
+pub mod ray_caster;
+pub mod sampler;
+pub mod settings;
+pub mod transfer_function;
+
+pub use camera::{Camera, CameraFrame};
+pub use error::RenderError;
+pub use frame::{render_frame, RenderedFrame, IMAGE_TILE};
+pub use image::{psnr, Image};
+pub use ray_caster::{RayCaster, RayStats};
+pub use settings::{PhongCoefficients, RenderSettings, Shading, VolumePlacement};
+pub use transfer_function::{TransferFunction, TransferLut};

@@ -1,0 +1,124 @@
+//! Render settings: image size, shading, background, step size and where the volume sits in the world.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::RenderError;
+
+/// How samples are lit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Shading {
+    /// Emission–absorption only: the transfer function's colour.
+    None,
+    /// Phong with the density gradient as normal (GigaVoxels [R08] §5), two-sided.
+    Phong,
+}
+
+/// Phong coefficients (ambient, diffuse, specular, shininess).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PhongCoefficients {
+    /// Ambient term.
+    pub ambient: f32,
+    /// Diffuse term.
+    pub diffuse: f32,
+    /// Specular term.
+    pub specular: f32,
+    /// Specular exponent.
+    pub shininess: f32,
+}
+
+impl Default for PhongCoefficients {
+    fn default() -> Self {
+        PhongCoefficients { ambient: 0.25, diffuse: 0.75, specular: 0.25, shininess: 16.0 }
+    }
+}
+
+/// Where the unit cube of the tree sits in world space: `world = origin + size · volume`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VolumePlacement {
+    /// World position of the cube's corner `(0, 0, 0)`.
+    pub origin: [f64; 3],
+    /// World edge of the cube.
+    pub size: f64,
+}
+
+impl Default for VolumePlacement {
+    fn default() -> Self {
+        VolumePlacement { origin: [0.0; 3], size: 1.0 }
+    }
+}
+
+/// Everything about a frame except the camera, the transfer function and the data.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderSettings {
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Lighting model.
+    pub shading: Shading,
+    /// Phong coefficients.
+    pub phong: PhongCoefficients,
+    /// Direction towards the light, world; `None` = a headlight (from the eye).
+    pub light_direction: Option<[f64; 3]>,
+    /// Linear background colour.
+    pub background: [f32; 3],
+    /// Ray-march step as a fraction of the sampled level's voxel edge.
+    pub step_factor: f64,
+    /// Shifts the level of detail: positive = finer than one voxel per pixel.
+    pub lod_bias: f64,
+    /// Placement of the volume in the world.
+    pub placement: VolumePlacement,
+    /// Accumulated opacity at which a ray stops.
+    pub opacity_cutoff: f32,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        RenderSettings {
+            width: 512,
+            height: 512,
+            shading: Shading::None,
+            phong: PhongCoefficients::default(),
+            light_direction: None,
+            background: [0.0; 3],
+            step_factor: 0.5,
+            lod_bias: 0.0,
+            placement: VolumePlacement::default(),
+            opacity_cutoff: 0.998,
+        }
+    }
+}
+
+impl RenderSettings {
+    /// Checks every field.
+    pub fn validate(&self) -> Result<(), RenderError> {
+        let bad = |m: String| Err(RenderError::InvalidSetting(m));
+        if self.width == 0 || self.height == 0 {
+            return bad(format!("image size must be positive, got {}x{}", self.width, self.height));
+        }
+        if self.width > 16384 || self.height > 16384 {
+            return bad(format!("image size {}x{} exceeds 16384x16384", self.width, self.height));
+        }
+        if !(self.step_factor.is_finite() && self.step_factor > 0.01 && self.step_factor <= 4.0) {
+            return bad(format!("step factor must be in (0.01, 4], got {}", self.step_factor));
+        }
+        if !self.lod_bias.is_finite() {
+            return bad("lod bias must be finite".into());
+        }
+        if self.background.iter().any(|c| !(0.0..=1.0).contains(c)) {
+            return bad("background components must be in [0, 1]".into());
+        }
+        if let Some(light) = self.light_direction {
+            let length = light.iter().map(|v| v * v).sum::<f64>().sqrt();
+            if !(length.is_finite() && length > 0.0) {
+                return bad("light direction must be a non-zero finite vector".into());
+            }
+        }
+        let p = &self.placement;
+        if !(p.size.is_finite() && p.size > 0.0 && p.origin.iter().all(|v| v.is_finite())) {
+            return bad("volume placement must be finite with a positive size".into());
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,189 @@
+//! The 1-D transfer function: value → colour and opacity, piecewise linear, with VTK's opacity convention.
+//!
+//! File format (JSON): `{"points": [[value, r, g, b, alpha], ...], "unit_distance": 0.01}`. Values must increase.
+//! `alpha` is the opacity accumulated over `unit_distance` world units (VTK's `ScalarOpacityUnitDistance`); when the
+//! key is absent it defaults to one finest voxel of the scene. Colours are linear and composited without gamma.
+//!
+//! For rendering, the function is tabulated as colour and extinction `σ = −ln(1 − alpha) / unit_distance`, so the
+//! opacity of any step `Δt` is `1 − exp(−σ·Δt)` (the opacity correction of GigaVoxels [P09] §6 / [R08] §5).
+
+use serde::Deserialize;
+
+use crate::error::RenderError;
+
+/// A parsed, validated transfer function.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TransferFunction {
+    /// Control points `[value, r, g, b, alpha]`, values strictly increasing.
+    pub points: Vec<[f64; 5]>,
+    /// World distance over which `alpha` is reached; `None` = one finest voxel.
+    pub unit_distance: Option<f64>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TransferFunctionFile {
+    points: Vec<Vec<f64>>,
+    #[serde(default)]
+    unit_distance: Option<f64>,
+}
+
+/// Largest opacity kept finite when converted to extinction.
+const MAX_ALPHA: f64 = 1.0 - 1e-6;
+
+impl TransferFunction {
+    /// Builds and validates a transfer function.
+    pub fn new(points: Vec<[f64; 5]>, unit_distance: Option<f64>) -> Result<TransferFunction, RenderError> {
+        let bad = |m: String| Err(RenderError::InvalidTransferFunction(m));
+        if points.is_empty() {
+            return bad("no points".into());
+        }
+        for (i, p) in points.iter().enumerate() {
+            if p.iter().any(|v| !v.is_finite()) {
+                return bad(format!("point {i} has a non-finite number"));
+            }
+            if p[1..].iter().any(|v| !(0.0..=1.0).contains(v)) {
+                return bad(format!("point {i}: r, g, b and alpha must be in [0, 1]"));
+            }
+        }
+        if let Some(i) = points.windows(2).position(|w| w[1][0] <= w[0][0]) {
+            return bad(format!("values must increase strictly: point {} ({}) follows {}", i + 1, points[i + 1][0], points[i][0]));
+        }
+        if let Some(u) = unit_distance {
+            if !(u.is_finite() && u > 0.0) {
+                return bad(format!("unit_distance must be a positive number, got {u}"));
+            }
+        }
+        Ok(TransferFunction { points, unit_distance })
+    }
+
+    /// Parses the JSON format described in the module docs.
+    pub fn from_json(text: &str) -> Result<TransferFunction, RenderError> {
+        let file: TransferFunctionFile = serde_json::from_str(text)
+            .map_err(|e| RenderError::InvalidTransferFunction(format!("malformed JSON: {e}")))?;
+        let mut points = Vec::with_capacity(file.points.len());
+        for (i, p) in file.points.iter().enumerate() {
+            let Ok(array) = <[f64; 5]>::try_from(p.as_slice()) else {
+                return Err(RenderError::InvalidTransferFunction(format!(
+                    "point {i} has {} numbers, expected 5 (value, r, g, b, alpha)",
+                    p.len()
+                )));
+            };
+            points.push(array);
+        }
+        TransferFunction::new(points, file.unit_distance)
+    }
+
+    /// `[r, g, b, alpha]` at `value`, linear between points, clamped outside.
+    pub fn evaluate(&self, value: f64) -> [f64; 4] {
+        let first = &self.points[0];
+        let last = &self.points[self.points.len() - 1];
+        let pick = |p: &[f64; 5]| [p[1], p[2], p[3], p[4]];
+        if value <= first[0] {
+            return pick(first);
+        }
+        if value >= last[0] {
+            return pick(last);
+        }
+        let i = self.points.partition_point(|p| p[0] <= value);
+        let (a, b) = (&self.points[i - 1], &self.points[i]);
+        let f = (value - a[0]) / (b[0] - a[0]);
+        std::array::from_fn(|c| a[c + 1] + (b[c + 1] - a[c + 1]) * f)
+    }
+}
+
+/// One entry of the tabulated transfer function.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct LutEntry {
+    /// Linear colour.
+    pub color: [f32; 3],
+    /// Extinction per world unit.
+    pub sigma: f32,
+}
+
+/// The transfer function tabulated over a value range for the per-sample loop.
+#[derive(Clone, Debug)]
+pub struct TransferLut {
+    entries: Vec<LutEntry>,
+    lower: f32,
+    scale: f32,
+}
+
+/// Entries in the table.
+pub const LUT_SIZE: usize = 4096;
+
+impl TransferLut {
+    /// Tabulates `tf` over `[lower, upper]`; `default_unit_distance` applies when the function names none.
+    pub fn new(tf: &TransferFunction, lower: f32, upper: f32, default_unit_distance: f64) -> TransferLut {
+        let unit = tf.unit_distance.unwrap_or(default_unit_distance);
+        let entries = (0..LUT_SIZE)
+            .map(|i| {
+                let value = lower as f64 + (upper - lower) as f64 * i as f64 / (LUT_SIZE - 1) as f64;
+                let [r, g, b, alpha] = tf.evaluate(value);
+                let sigma = -(1.0 - alpha.min(MAX_ALPHA)).ln() / unit;
+                LutEntry { color: [r as f32, g as f32, b as f32], sigma: sigma as f32 }
+            })
+            .collect();
+        let span = (upper - lower).max(f32::MIN_POSITIVE);
+        TransferLut { entries, lower, scale: (LUT_SIZE - 1) as f32 / span }
+    }
+
+    /// Colour and extinction at `value` (linear between entries).
+    #[inline]
+    pub fn lookup(&self, value: f32) -> LutEntry {
+        let x = ((value - self.lower) * self.scale).clamp(0.0, (LUT_SIZE - 1) as f32);
+        let i = (x as usize).min(LUT_SIZE - 2);
+        let f = x - i as f32;
+        let (a, b) = (self.entries[i], self.entries[i + 1]);
+        LutEntry {
+            color: std::array::from_fn(|c| a.color[c] + (b.color[c] - a.color[c]) * f),
+            sigma: a.sigma + (b.sigma - a.sigma) * f,
+        }
+    }
+
+    /// Whether some value in `[lower, upper]` has non-zero extinction (conservative, for empty-space skipping).
+    pub fn is_visible_in(&self, lower: f32, upper: f32) -> bool {
+        let index = |v: f32| (((v - self.lower) * self.scale).clamp(0.0, (LUT_SIZE - 1) as f32)) as usize;
+        let (a, b) = (index(lower), (index(upper) + 1).min(LUT_SIZE - 1));
+        self.entries[a..=b].iter().any(|e| e.sigma > 0.0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_and_interpolates() {
+        let tf = TransferFunction::from_json(r#"{"points": [[0, 0,0,0, 0], [1, 1,0.5,0, 0.5]], "unit_distance": 2}"#)
+            .unwrap();
+        assert_eq!(tf.evaluate(0.5), [0.5, 0.25, 0.0, 0.25]);
+        assert_eq!(tf.evaluate(-3.0), [0.0; 4]);
+        let lut = TransferLut::new(&tf, 0.0, 1.0, 1.0);
+        let e = lut.lookup(1.0);
+        // alpha 0.5 over 2 units: sigma = ln 2 / 2.
+        assert!((e.sigma as f64 - std::f64::consts::LN_2 / 2.0).abs() < 1e-6);
+        assert!(lut.is_visible_in(0.0, 0.01));
+        let gated = TransferFunction::new(vec![[0.0, 0.0, 0.0, 0.0, 0.0], [0.5, 0.0, 0.0, 0.0, 0.0], [1.0, 1.0, 1.0, 1.0, 1.0]], None)
+            .unwrap();
+        let lut = TransferLut::new(&gated, 0.0, 1.0, 1.0);
+        assert!(!lut.is_visible_in(0.0, 0.45));
+        assert!(lut.is_visible_in(0.3, 0.6));
+    }
+
+    #[test]
+    fn rejects_bad_functions() {
+        for text in [
+            "not json",
+            r#"{"points": []}"#,
+            r#"{"points": [[0, 0, 0, 0]]}"#,
+            r#"{"points": [[0.5, 0,0,0,0], [0.2, 1,1,1,1]]}"#,
+            r#"{"points": [[0.5, 0,0,0,0], [0.5, 1,1,1,1]]}"#,
+            r#"{"points": [[0, 0,0,0, 2]]}"#,
+            r#"{"points": [[0, 0,0,0, 1]], "unit_distance": 0}"#,
+            r#"{"points": [[0, 0,0,0, 1]], "colour": 1}"#,
+        ] {
+            assert!(TransferFunction::from_json(text).is_err(), "accepted {text}");
+        }
+    }
+}
