@@ -34,11 +34,16 @@ use crate::producer::{NodeContent, Produced, Producer};
 use crate::request_queue::RequestQueue;
 use crate::tree_view::TreeView;
 
+/// Requests produced concurrently before their results are applied (bounds transient memory).
+pub const PRODUCTION_BATCH: usize = 256;
+
 /// What serving one frame's requests did.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct ServeReport {
     /// Distinct requests the rays made.
     pub requests: usize,
+    /// Valid requests (still needing work) before the per-frame bound: 0 means the frame was complete.
+    pub pending: usize,
     /// Requests served (some work done).
     pub served: usize,
     /// Requests left for a later frame (over the per-frame bound, or the pools were full of this frame's data).
@@ -194,44 +199,46 @@ impl<P: Producer> CacheManager<P> {
                 work.push((request, key));
             }
         }
+        report.pending = work.len();
         if let Some(limit) = limit {
             report.deferred += work.len().saturating_sub(limit);
             work.truncate(limit);
         }
 
-        // Produce on worker threads, with no lock held; oracle answers for the children of subdivided nodes too.
-        let producer = &self.producer;
-        let shape = self.shape;
-        let per_brick = shape.voxels_per_brick();
-        let results: Vec<WorkResult> = work
-            .par_iter()
-            .map(|&(request, key)| match request.kind {
-                RequestKind::Produce => {
-                    let mut voxels = vec![0u16; per_brick];
-                    let produced = producer.produce(key, &mut voxels);
-                    WorkResult::Produced(produced.map(|p| analyse(p, voxels, key, &shape)))
+        // Produce on worker threads, with no lock held, a batch at a time so that produced-but-unapplied bricks
+        // stay a bounded transient; then apply each batch in queue order.
+        for batch in work.chunks(PRODUCTION_BATCH) {
+            let producer = &self.producer;
+            let shape = self.shape;
+            let per_brick = shape.voxels_per_brick();
+            let results: Vec<WorkResult> = batch
+                .par_iter()
+                .map(|&(request, key)| match request.kind {
+                    RequestKind::Produce => {
+                        let mut voxels = vec![0u16; per_brick];
+                        let produced = producer.produce(key, &mut voxels);
+                        WorkResult::Produced(produced.map(|p| analyse(p, voxels, key, &shape)))
+                    }
+                    RequestKind::Subdivide => WorkResult::Children(
+                        (0..shape.nodes_per_tile()).map(|c| producer.oracle(key.child(c, shape.n))).collect(),
+                    ),
+                })
+                .collect();
+            for (&(request, key), result) in batch.iter().zip(results) {
+                let applied = match result {
+                    WorkResult::Produced(Ok(brick)) => self.apply_produced(request.node, brick, &mut report),
+                    WorkResult::Produced(Err(error)) => {
+                        self.failed.insert(key);
+                        report.failures.push(error);
+                        true
+                    }
+                    WorkResult::Children(hints) => self.apply_subdivide(request.node, &hints, &mut report),
+                };
+                if applied {
+                    report.served += 1;
+                } else {
+                    report.deferred += 1;
                 }
-                RequestKind::Subdivide => WorkResult::Children(
-                    (0..shape.nodes_per_tile()).map(|c| producer.oracle(key.child(c, shape.n))).collect(),
-                ),
-            })
-            .collect();
-
-        // Apply in queue order.
-        for ((request, key), result) in work.into_iter().zip(results) {
-            let applied = match result {
-                WorkResult::Produced(Ok(brick)) => self.apply_produced(request.node, brick, &mut report),
-                WorkResult::Produced(Err(error)) => {
-                    self.failed.insert(key);
-                    report.failures.push(error);
-                    true
-                }
-                WorkResult::Children(hints) => self.apply_subdivide(request.node, &hints, &mut report),
-            };
-            if applied {
-                report.served += 1;
-            } else {
-                report.deferred += 1;
             }
         }
         self.frame += 1;

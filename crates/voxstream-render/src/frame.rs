@@ -28,6 +28,28 @@ pub struct RenderedFrame {
     pub raw_requests: usize,
 }
 
+/// An image being completed over several passes ([R08] §6, "interrupt and resume"): after each pass only the
+/// rays that reported a miss are traced again; the others already used exactly the data they needed.
+#[derive(Clone, Debug)]
+pub struct ProgressiveImage {
+    /// The image so far.
+    pub image: Image,
+    /// Per pixel: whether its ray must be traced again.
+    pub pending: Vec<bool>,
+}
+
+impl ProgressiveImage {
+    /// A new image where every ray is pending.
+    pub fn new(width: u32, height: u32) -> ProgressiveImage {
+        ProgressiveImage { image: Image::new(width, height), pending: vec![true; width as usize * height as usize] }
+    }
+
+    /// Pixels still pending.
+    pub fn pending_count(&self) -> usize {
+        self.pending.iter().filter(|&&p| p).count()
+    }
+}
+
 /// Renders one frame of `view` from `camera`, writing usage and requests into `feedback`.
 pub fn render_frame(
     view: TreeView<'_>,
@@ -36,30 +58,61 @@ pub fn render_frame(
     lut: &TransferLut,
     settings: &RenderSettings,
 ) -> Result<RenderedFrame, RenderError> {
+    let mut progressive = ProgressiveImage::new(settings.width, settings.height);
+    let (stats, raw_requests) = render_pass(view, feedback, camera, lut, settings, &mut progressive)?;
+    Ok(RenderedFrame { image: progressive.image, stats, raw_requests })
+}
+
+/// Traces the pending rays of `progressive`, updating their pixels and marking which still miss data.
+/// Returns the ray counters and the number of raw requests.
+pub fn render_pass(
+    view: TreeView<'_>,
+    feedback: &FeedbackBuffer,
+    camera: &Camera,
+    lut: &TransferLut,
+    settings: &RenderSettings,
+    progressive: &mut ProgressiveImage,
+) -> Result<(RayStats, usize), RenderError> {
     settings.validate()?;
     let (width, height) = (settings.width, settings.height);
+    if progressive.image.width != width || progressive.image.height != height {
+        return Err(RenderError::InvalidSetting("progressive image size differs from the settings".into()));
+    }
     let frame = camera.frame(width, height)?;
     let caster = RayCaster::new(view, feedback, lut, settings);
     let tiles_x = width.div_ceil(IMAGE_TILE);
     let tiles_y = height.div_ceil(IMAGE_TILE);
-    let results: Vec<(Vec<[f32; 4]>, RayStats, usize)> = (0..tiles_x * tiles_y)
+    let pending = &progressive.pending;
+    let results: Vec<TileResult> = (0..tiles_x * tiles_y)
         .into_par_iter()
-        .map(|tile| render_tile(&caster, &frame, settings, tile % tiles_x, tile / tiles_x, feedback))
+        .map(|tile| render_tile(&caster, &frame, settings, tile % tiles_x, tile / tiles_x, feedback, pending))
         .collect();
-    let mut image = Image::new(width, height);
     let mut stats = RayStats::default();
     let mut raw_requests = 0;
-    for (tile, (pixels, tile_stats, requests)) in results.into_iter().enumerate() {
+    for (tile, result) in results.into_iter().enumerate() {
         let (x0, y0) = ((tile as u32 % tiles_x) * IMAGE_TILE, (tile as u32 / tiles_x) * IMAGE_TILE);
         let tile_width = IMAGE_TILE.min(width - x0) as usize;
-        for (row, chunk) in pixels.chunks(tile_width).enumerate() {
+        for (row, (chunk, flags)) in result.pixels.chunks(tile_width).zip(result.pending.chunks(tile_width)).enumerate() {
             let start = (y0 as usize + row) * width as usize + x0 as usize;
-            image.pixels[start..start + tile_width].copy_from_slice(chunk);
+            for (offset, (pixel, still_pending)) in chunk.iter().zip(flags).enumerate() {
+                if let Some(pixel) = pixel {
+                    progressive.image.pixels[start + offset] = *pixel;
+                    progressive.pending[start + offset] = *still_pending;
+                }
+            }
         }
-        stats.add(&tile_stats);
-        raw_requests += requests;
+        stats.add(&result.stats);
+        raw_requests += result.raw_requests;
     }
-    Ok(RenderedFrame { image, stats, raw_requests })
+    Ok((stats, raw_requests))
+}
+
+struct TileResult {
+    /// `None` where the pixel was not traced this pass.
+    pixels: Vec<Option<[f32; 4]>>,
+    pending: Vec<bool>,
+    stats: RayStats,
+    raw_requests: usize,
 }
 
 fn render_tile(
@@ -69,7 +122,8 @@ fn render_tile(
     tile_x: u32,
     tile_y: u32,
     feedback: &FeedbackBuffer,
-) -> (Vec<[f32; 4]>, RayStats, usize) {
+    pending: &[bool],
+) -> TileResult {
     let (width, height) = (settings.width, settings.height);
     let x0 = tile_x * IMAGE_TILE;
     let y0 = tile_y * IMAGE_TILE;
@@ -77,25 +131,39 @@ fn render_tile(
     let y1 = (y0 + IMAGE_TILE).min(height);
     let placement = &settings.placement;
     let origin = (frame.eye - glam::DVec3::from(placement.origin)) / placement.size;
-    let mut pixels = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
-    let mut stats = RayStats::default();
+    let count = ((x1 - x0) * (y1 - y0)) as usize;
+    let mut result = TileResult {
+        pixels: Vec::with_capacity(count),
+        pending: Vec::with_capacity(count),
+        stats: RayStats::default(),
+        raw_requests: 0,
+    };
     let mut requests: Vec<Request> = Vec::new();
     let background = settings.background;
     for y in y0..y1 {
         for x in x0..x1 {
+            if !pending[(y * width + x) as usize] {
+                result.pixels.push(None);
+                result.pending.push(false);
+                continue;
+            }
             let direction = frame.direction(x, y, width, height);
-            let mut request = None;
-            let (color, alpha) = caster.trace(origin, direction, frame.pixel_spread, &mut stats, &mut request);
-            requests.extend(request);
+            let before = requests.len();
+            let (color, alpha) = caster.trace(origin, direction, frame.pixel_spread, &mut result.stats, &mut requests);
+            result.pending.push(requests.len() > before);
             let t = 1.0 - alpha;
-            pixels.push([
+            result.pixels.push(Some([
                 color[0] + t * background[0],
                 color[1] + t * background[1],
                 color[2] + t * background[2],
                 alpha,
-            ]);
+            ]));
         }
     }
+    // Neighbouring rays miss the same nodes: merge them here so the frame's request list stays small.
+    result.raw_requests = requests.len();
+    requests.sort_unstable();
+    requests.dedup();
     feedback.push_requests(&requests);
-    (pixels, stats, requests.len())
+    result
 }

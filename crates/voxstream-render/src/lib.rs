@@ -31,7 +31,7 @@ pub mod transfer_function;
 
 pub use camera::{Camera, CameraFrame};
 pub use error::RenderError;
-pub use frame::{render_frame, RenderedFrame, IMAGE_TILE};
+pub use frame::{render_frame, render_pass, ProgressiveImage, RenderedFrame, IMAGE_TILE};
 pub use image::{psnr, Image};
 pub use ray_caster::{RayCaster, RayStats};
 pub use settings::{PhongCoefficients, RenderSettings, Shading, VolumePlacement};

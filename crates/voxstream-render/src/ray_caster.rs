@@ -8,7 +8,8 @@
 //! 2. Descend from the root to the node containing the point at level `⌈ℓ⌉`, marking each tile and brick used.
 //!    Stop early at a constant node (integrated analytically), a terminal node, a node whose data is missing
 //!    (request production; the deepest ancestor with data stands in) or a node without children (request a
-//!    subdivision). At most one request per ray per frame.
+//!    subdivision). A ray then goes on with the coarser data and may report further misses, up to
+//!    `max_requests_per_ray` per frame (GigaVoxels allowed one, which makes translucent scenes converge slowly).
 //! 3. March the node's box with steps of `step_factor` voxels of the sampled level, blending the trilinear samples
 //!    of the two adjacent levels by `frac(ℓ)` (quadrilinear), correcting opacity for the step length, optionally
 //!    Phong-shading with the gradient, and stop once opaque.
@@ -79,6 +80,7 @@ pub struct RayCaster<'a> {
     lod_bias: f64,
     world_per_volume: f64,
     opacity_cutoff: f32,
+    max_requests_per_ray: u32,
     /// `N^d` for every level.
     scale: [f64; MAX_TABLE_LEVELS],
     n: u64,
@@ -111,6 +113,7 @@ impl<'a> RayCaster<'a> {
             lod_bias: settings.lod_bias,
             world_per_volume: settings.placement.size,
             opacity_cutoff: settings.opacity_cutoff,
+            max_requests_per_ray: settings.max_requests_per_ray,
             scale,
             n: shape.n as u64,
             brick_size: shape.brick_size as f64,
@@ -128,15 +131,17 @@ impl<'a> RayCaster<'a> {
     }
 
     /// Traces one ray in volume space (`origin`, unit `direction`); returns premultiplied `[r, g, b]` and opacity.
-    /// `request` receives at most one request.
+    /// Appends at most `max_requests_per_ray` requests to `requests`.
     pub fn trace(
         &self,
         origin: DVec3,
         direction: DVec3,
         spread: f64,
         stats: &mut RayStats,
-        request: &mut Option<Request>,
+        requests: &mut Vec<Request>,
     ) -> ([f32; 3], f32) {
+        let mut sink = RequestSink { requests, remaining: self.max_requests_per_ray };
+        let request = &mut sink;
         stats.rays += 1;
         let mut color = [0f32; 3];
         let mut transmittance = 1f32;
@@ -228,7 +233,7 @@ impl<'a> RayCaster<'a> {
 
     /// Descends from the root towards `target_level` at `p`; returns the data to use and the box of the deepest
     /// node visited (the segment to march).
-    fn descend(&self, p: DVec3, target_level: u32, request: &mut Option<Request>) -> (SegmentData, u32, [u64; 3]) {
+    fn descend(&self, p: DVec3, target_level: u32, request: &mut RequestSink<'_>) -> (SegmentData, u32, [u64; 3]) {
         let n = self.n;
         let mut id = NodeId::ROOT;
         let mut node = self.view.root();
@@ -246,9 +251,7 @@ impl<'a> RayCaster<'a> {
                     fine = Some(BrickRef { slot, level, ijk });
                 }
                 NodeData::Missing => {
-                    if request.is_none() {
-                        *request = Some(Request { node: id, kind: RequestKind::Produce });
-                    }
+                    request.push(Request { node: id, kind: RequestKind::Produce });
                     break;
                 }
             }
@@ -256,9 +259,7 @@ impl<'a> RayCaster<'a> {
                 break;
             }
             let Some(tile) = node.child_tile() else {
-                if request.is_none() {
-                    *request = Some(Request { node: id, kind: RequestKind::Subdivide });
-                }
+                request.push(Request { node: id, kind: RequestKind::Subdivide });
                 break;
             };
             self.feedback.mark_tile(tile);
@@ -298,6 +299,22 @@ impl<'a> RayCaster<'a> {
         let half = (light + view).normalize_or_zero();
         let specular = (normal.dot(half).abs() as f32).powf(self.phong.shininess);
         color.map(|c| c * (self.phong.ambient + self.phong.diffuse * diffuse) + self.phong.specular * specular)
+    }
+}
+
+/// Where a ray's requests go, with its remaining allowance for this frame.
+struct RequestSink<'v> {
+    requests: &'v mut Vec<Request>,
+    remaining: u32,
+}
+
+impl RequestSink<'_> {
+    #[inline]
+    fn push(&mut self, request: Request) {
+        if self.remaining > 0 {
+            self.remaining -= 1;
+            self.requests.push(request);
+        }
     }
 }
 

@@ -71,6 +71,8 @@ pub struct RenderSettings {
     pub placement: VolumePlacement,
     /// Accumulated opacity at which a ray stops.
     pub opacity_cutoff: f32,
+    /// Requests a ray may report per frame (GigaVoxels: 1).
+    pub max_requests_per_ray: u32,
 }
 
 impl Default for RenderSettings {
@@ -86,6 +88,7 @@ impl Default for RenderSettings {
             lod_bias: 0.0,
             placement: VolumePlacement::default(),
             opacity_cutoff: 0.998,
+            max_requests_per_ray: 4,
         }
     }
 }

@@ -1,1 +1,77 @@
-fn main(){}
+//! The `voxstream` binary: parses the command line and reports errors as one line (exit 2 for bad flags, 1 for
+//! everything else). The work is in the `voxstream` library.
+
+use std::process::ExitCode;
+
+use clap::Parser;
+use voxstream::cli::{Cli, Command, RenderArgs};
+use voxstream::{bench, render_command, scenes, session};
+
+fn main() -> ExitCode {
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(error) => {
+            use clap::error::ErrorKind;
+            if matches!(error.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion) {
+                let _ = error.print();
+                return ExitCode::SUCCESS;
+            }
+            // One line: clap's first line names the flag and the problem.
+            let text = error.render().to_string();
+            eprintln!("{}", text.lines().next().unwrap_or("error: invalid arguments"));
+            return ExitCode::from(2);
+        }
+    };
+    let result = match cli.command {
+        None => {
+            let args = match Cli::try_parse_from(["voxstream", "render"]) {
+                Ok(Cli { command: Some(Command::Render(args)) }) => args,
+                _ => unreachable_default(),
+            };
+            render_command::run(&args)
+        }
+        Some(Command::Render(args)) => render_command::run(&args),
+        Some(Command::Scenes) => {
+            for name in scenes::SCENE_NAMES {
+                if let Some(scene) = scenes::builtin(name) {
+                    println!("{:<14}{}", scene.name, scene.description);
+                }
+            }
+            Ok(())
+        }
+        Some(Command::Bench(args)) => bench::run(&args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(error) => {
+            eprintln!("error: {error:#}");
+            ExitCode::from(1)
+        }
+    }
+}
+
+/// The default render arguments always parse; this only satisfies the type checker.
+fn unreachable_default() -> RenderArgs {
+    RenderArgs {
+        source: scenes::DEFAULT_SCENE.into(),
+        out: "frame.png".into(),
+        width: 512,
+        height: 512,
+        eye: None,
+        target: None,
+        up: None,
+        fov: None,
+        tf: None,
+        shading: None,
+        light: None,
+        background: [0.0; 3],
+        budget_mb: 256,
+        mode: session::Mode::Converged,
+        frames: 1,
+        requests_per_frame: 1024,
+        path: None,
+        stats: None,
+        step: 0.5,
+        lod_bias: 0.0,
+    }
+}

@@ -1,0 +1,145 @@
+//! `voxstream bench`: per built-in scene, converged time from a cold cache, frames to converge interactively,
+//! warm frame time once resident (frames/s, rays/s, samples/s), and frame times along an interactive camera path.
+
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use serde::Serialize;
+use voxstream_render::RenderSettings;
+
+use crate::camera_path::orbit;
+use crate::cli::BenchArgs;
+use crate::memory::peak_rss_bytes;
+use crate::scenes::{builtin, Scene, SCENE_NAMES};
+use crate::session::{LoopLimits, Mode, Session};
+
+/// Figures for one scene.
+#[derive(Clone, Debug, Serialize)]
+pub struct SceneFigures {
+    /// Scene name.
+    pub scene: String,
+    /// Image edge.
+    pub size: u32,
+    /// Cold converged frame: wall time, ms.
+    pub converged_ms: f64,
+    /// Cold converged frame: render passes.
+    pub converged_passes: u32,
+    /// Interactive frames until a frame needed nothing more.
+    pub frames_to_converge: u32,
+    /// Warm frame (data resident): median ms.
+    pub warm_frame_ms: f64,
+    /// Warm frames per second.
+    pub warm_fps: f64,
+    /// Warm rays per second.
+    pub rays_per_second: f64,
+    /// Warm samples per second.
+    pub samples_per_second: f64,
+    /// Interactive camera path: median frame ms (render + bounded production).
+    pub path_median_ms: f64,
+    /// Interactive camera path: 95th percentile frame ms.
+    pub path_p95_ms: f64,
+    /// Bricks resident after the path.
+    pub bricks_resident: u32,
+    /// Peak pool bytes.
+    pub resident_bytes_peak: u64,
+}
+
+/// Runs the benchmark and prints a Markdown table.
+pub fn run(args: &BenchArgs) -> Result<()> {
+    let names: Vec<String> =
+        if args.scenes.is_empty() { SCENE_NAMES.iter().map(|s| s.to_string()).collect() } else { args.scenes.clone() };
+    let mut figures = Vec::new();
+    for name in &names {
+        let scene = builtin(name).with_context(|| format!("unknown scene '{name}'"))?;
+        eprintln!("bench: {name} at {0}x{0} …", args.size);
+        figures.push(bench_scene(&scene, args)?);
+    }
+    println!(
+        "threads: {}, peak RSS: {:.0} MiB\n",
+        rayon::current_num_threads(),
+        peak_rss_bytes().unwrap_or(0) as f64 / 1048576.0
+    );
+    println!("| scene | size | converged (cold) | passes | frames to converge (interactive) | warm frame | warm fps | rays/s | samples/s | path median | path p95 |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    for f in &figures {
+        println!(
+            "| {} | {}² | {:.0} ms | {} | {} | {:.1} ms | {:.1} | {:.2} M | {:.1} M | {:.1} ms | {:.1} ms |",
+            f.scene,
+            f.size,
+            f.converged_ms,
+            f.converged_passes,
+            f.frames_to_converge,
+            f.warm_frame_ms,
+            f.warm_fps,
+            f.rays_per_second / 1e6,
+            f.samples_per_second / 1e6,
+            f.path_median_ms,
+            f.path_p95_ms
+        );
+    }
+    if let Some(path) = &args.json {
+        std::fs::write(path, serde_json::to_string_pretty(&figures)?)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    Ok(())
+}
+
+fn new_session(scene: &Scene, args: &BenchArgs) -> Result<Session<crate::scenes::SceneProducer>> {
+    let settings =
+        RenderSettings { width: args.size, height: args.size, shading: scene.shading, ..RenderSettings::default() };
+    Session::new(scene.producer, &scene.transfer_function, settings, args.budget_mb * 1048576, LoopLimits::default())
+}
+
+fn bench_scene(scene: &Scene, args: &BenchArgs) -> Result<SceneFigures> {
+    // Cold, converged.
+    let mut session = new_session(scene, args)?;
+    let cold = session.render(&scene.camera, Mode::Converged)?;
+
+    // Warm: everything resident, no request left.
+    let mut warm_ms = Vec::new();
+    let (mut rays, mut samples) = (0u64, 0u64);
+    let start = Instant::now();
+    for _ in 0..args.warm_frames.max(1) {
+        let frame = session.render(&scene.camera, Mode::Interactive)?;
+        warm_ms.push(frame.elapsed_ms);
+        rays += frame.rays;
+        samples += frame.samples;
+    }
+    let warm_seconds = start.elapsed().as_secs_f64();
+    let warm_frame_ms = median(&mut warm_ms);
+
+    // Interactive from cold: frames until complete.
+    let mut session = new_session(scene, args)?;
+    let (frames_to_converge, _) = session.render_until_converged_interactively(&scene.camera, 2000)?;
+
+    // Interactive camera path from cold.
+    let mut session = new_session(scene, args)?;
+    let mut path_ms = Vec::new();
+    for camera in orbit(args.path_frames.max(1), scene.camera.target, 2.6, 0.45, scene.camera.fov) {
+        path_ms.push(session.render(&camera, Mode::Interactive)?.elapsed_ms);
+    }
+    let path_median_ms = median(&mut path_ms.clone());
+    path_ms.sort_by(f64::total_cmp);
+    let path_p95_ms = path_ms[((path_ms.len() as f64 * 0.95) as usize).min(path_ms.len() - 1)];
+
+    Ok(SceneFigures {
+        scene: scene.name.to_string(),
+        size: args.size,
+        converged_ms: cold.elapsed_ms,
+        converged_passes: cold.passes,
+        frames_to_converge,
+        warm_frame_ms,
+        warm_fps: 1e3 / warm_frame_ms,
+        rays_per_second: rays as f64 / warm_seconds,
+        samples_per_second: samples as f64 / warm_seconds,
+        path_median_ms,
+        path_p95_ms,
+        bricks_resident: session.residency().bricks,
+        resident_bytes_peak: session.peak_resident_bytes(),
+    })
+}
+
+fn median(values: &mut [f64]) -> f64 {
+    values.sort_by(f64::total_cmp);
+    values.get(values.len() / 2).copied().unwrap_or(0.0)
+}

@@ -1,0 +1,160 @@
+//! Command-line definitions (clap). Flags are validated here; objects are built in `render_command`.
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand};
+
+use crate::session::Mode;
+
+/// voxstream: render volumes far larger than memory, loading only what the rays reach.
+#[derive(Parser, Debug)]
+#[command(name = "voxstream", version, about, long_about = None)]
+pub struct Cli {
+    /// What to do (default: render the default scene to frame.png).
+    #[command(subcommand)]
+    pub command: Option<Command>,
+}
+
+/// Subcommands.
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Render a scene to PNG.
+    Render(RenderArgs),
+    /// List the built-in scenes.
+    Scenes,
+    /// Measure converged time, frames to converge, interactive frame times and throughput per scene.
+    Bench(BenchArgs),
+}
+
+/// Shading choice on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ShadingArg {
+    /// Emission-absorption only.
+    None,
+    /// Phong with the density gradient.
+    Phong,
+}
+
+/// `voxstream render`.
+#[derive(Args, Debug, Clone)]
+pub struct RenderArgs {
+    /// A built-in scene: sponge, hypertexture or shell.
+    #[arg(default_value = crate::scenes::DEFAULT_SCENE)]
+    pub source: String,
+    /// Output PNG (with --path, frames are numbered: frame_0000.png, …).
+    #[arg(long, default_value = "frame.png")]
+    pub out: PathBuf,
+    /// Image width in pixels.
+    #[arg(long, default_value_t = 512)]
+    pub width: u32,
+    /// Image height in pixels.
+    #[arg(long, default_value_t = 512)]
+    pub height: u32,
+    /// Eye position x,y,z (world units; the built-in scenes fill the unit cube [0,1]^3).
+    #[arg(long, value_parser = parse_vec3)]
+    pub eye: Option<[f64; 3]>,
+    /// Point looked at, x,y,z.
+    #[arg(long, value_parser = parse_vec3)]
+    pub target: Option<[f64; 3]>,
+    /// Up direction x,y,z.
+    #[arg(long, value_parser = parse_vec3)]
+    pub up: Option<[f64; 3]>,
+    /// Vertical field of view in degrees.
+    #[arg(long)]
+    pub fov: Option<f64>,
+    /// Transfer function JSON: {"points": [[value, r, g, b, alpha], ...], "unit_distance": u}.
+    #[arg(long)]
+    pub tf: Option<PathBuf>,
+    /// Lighting (default: the scene's).
+    #[arg(long, value_enum)]
+    pub shading: Option<ShadingArg>,
+    /// Direction towards the light x,y,z (default: a headlight).
+    #[arg(long, value_parser = parse_vec3)]
+    pub light: Option<[f64; 3]>,
+    /// Background colour r,g,b in [0,1] (linear).
+    #[arg(long, value_parser = parse_vec3, default_value = "0,0,0")]
+    pub background: [f64; 3],
+    /// Memory budget of the node and brick pools, MiB.
+    #[arg(long, default_value_t = 256)]
+    pub budget_mb: u64,
+    /// converged: iterate until exact; interactive: bounded production per frame.
+    #[arg(long, value_enum, default_value_t = Mode::Converged)]
+    pub mode: Mode,
+    /// Interactive mode with a single camera: frames to render (the last is written).
+    #[arg(long, default_value_t = 1)]
+    pub frames: u32,
+    /// Interactive mode: requests served per frame.
+    #[arg(long, default_value_t = 1024)]
+    pub requests_per_frame: usize,
+    /// Camera path JSON (a list of cameras), rendered in sequence reusing the cache.
+    #[arg(long)]
+    pub path: Option<PathBuf>,
+    /// Write statistics JSON here.
+    #[arg(long)]
+    pub stats: Option<PathBuf>,
+    /// Ray-march step as a fraction of the sampled voxel.
+    #[arg(long, default_value_t = 0.5)]
+    pub step: f64,
+    /// Level-of-detail bias (positive = finer than one voxel per pixel).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub lod_bias: f64,
+}
+
+/// `voxstream bench`.
+#[derive(Args, Debug, Clone)]
+pub struct BenchArgs {
+    /// Scenes to measure (default: all built-in scenes).
+    #[arg(long, value_delimiter = ',')]
+    pub scenes: Vec<String>,
+    /// Image edge in pixels.
+    #[arg(long, default_value_t = 512)]
+    pub size: u32,
+    /// Frames of the interactive camera path.
+    #[arg(long, default_value_t = 60)]
+    pub path_frames: usize,
+    /// Warm frames timed once the data is resident.
+    #[arg(long, default_value_t = 20)]
+    pub warm_frames: u32,
+    /// Memory budget, MiB.
+    #[arg(long, default_value_t = 512)]
+    pub budget_mb: u64,
+    /// Also write the figures as JSON here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+/// Parses `x,y,z`.
+pub fn parse_vec3(text: &str) -> Result<[f64; 3], String> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    if parts.len() != 3 {
+        return Err(format!("expected three comma-separated numbers x,y,z, got '{text}'"));
+    }
+    let mut out = [0.0; 3];
+    for (slot, part) in out.iter_mut().zip(&parts) {
+        let value: f64 = part.parse().map_err(|_| format!("'{part}' is not a number"))?;
+        if !value.is_finite() {
+            return Err(format!("'{part}' is not a finite number"));
+        }
+        *slot = value;
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn vec3_parsing() {
+        assert_eq!(parse_vec3("1, -2.5,3e1").unwrap(), [1.0, -2.5, 30.0]);
+        assert!(parse_vec3("1,2").is_err());
+        assert!(parse_vec3("1,2,x").is_err());
+        assert!(parse_vec3("1,2,inf").is_err());
+    }
+
+    #[test]
+    fn cli_definition_is_consistent() {
+        use clap::CommandFactory;
+        Cli::command().debug_assert();
+    }
+}

@@ -1,0 +1,17 @@
+//! # voxstream: the command-line application
+//!
+//! `voxstream render [SOURCE]` renders a built-in scene through the whole GigaVoxels loop (see
+//! `docs/ARCHITECTURE.md`); `voxstream bench` measures it; `voxstream scenes` lists the scenes.
+//!
+//! This crate closes the loop camera → renderer → feedback → cache manager → producers → pools in
+//! [`session::Session::render`]; the other modules parse flags and files and write images and statistics.
+
+pub mod bench;
+pub mod camera_path;
+pub mod cli;
+pub mod memory;
+pub mod png_output;
+pub mod render_command;
+pub mod scenes;
+pub mod session;
+pub mod stats;

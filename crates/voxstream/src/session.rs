@@ -1,0 +1,187 @@
+//! The frame loop: camera → renderer → feedback → cache manager → producers → pools → renderer.
+//!
+//! GigaVoxels' two display modes ([R08] §6 multi-pass, [P09] §5 "second display mode"):
+//! - **converged**: render, serve every request, repeat until the rays ask for nothing: the exact image;
+//! - **interactive**: one pass per frame with whatever is resident (coarser ancestors stand in), then a bounded
+//!   number of requests served, so the frame time stays bounded and detail arrives over the next frames.
+//!
+//! In converged mode, only the rays that reported a miss are traced again in the next pass ([R08]'s "interrupt and
+//! resume"); a ray that missed nothing already used exactly the data it needs.
+
+use std::time::Instant;
+
+use anyhow::{bail, Result};
+use voxstream_core::{CacheManager, ProduceError, Producer, Residency};
+use voxstream_render::{render_pass, Camera, Image, ProgressiveImage, RenderSettings, TransferFunction, TransferLut};
+
+/// How a frame is completed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// Repeat render + produce until no request remains.
+    Converged,
+    /// One render per frame, bounded production between frames.
+    Interactive,
+}
+
+/// Requests a ray may report per pass in converged mode.
+pub const CONVERGED_REQUESTS_PER_RAY: u32 = 64;
+
+/// Limits of the frame loop.
+#[derive(Clone, Copy, Debug)]
+pub struct LoopLimits {
+    /// Requests served per frame in interactive mode.
+    pub requests_per_frame: usize,
+    /// Passes after which a converged frame gives up (reported as not converged).
+    pub max_passes: u32,
+}
+
+impl Default for LoopLimits {
+    fn default() -> Self {
+        LoopLimits { requests_per_frame: 1024, max_passes: 400 }
+    }
+}
+
+/// The outcome of one output frame.
+#[derive(Clone, Debug)]
+pub struct FrameResult {
+    /// The final image.
+    pub image: Image,
+    /// Render passes (1 in interactive mode).
+    pub passes: u32,
+    /// Wall time of the frame, rendering and production, milliseconds.
+    pub elapsed_ms: f64,
+    /// Wall time spent rendering, milliseconds.
+    pub render_ms: f64,
+    /// Rays traced over all passes.
+    pub rays: u64,
+    /// Samples taken over all passes.
+    pub samples: u64,
+    /// Distinct requests over all passes.
+    pub requests: u64,
+    /// Bricks produced.
+    pub bricks_produced: u64,
+    /// Requests still pending after the last pass: 0 = the image is exact.
+    pub pending: usize,
+    /// Producer failures met in this frame.
+    pub failures: Vec<ProduceError>,
+}
+
+impl FrameResult {
+    /// Whether no ray of the final pass missed anything.
+    pub fn is_converged(&self) -> bool {
+        self.pending == 0
+    }
+}
+
+/// A producer, its cache, and the render state shared by consecutive frames.
+pub struct Session<P: Producer> {
+    cache: CacheManager<P>,
+    lut: TransferLut,
+    settings: RenderSettings,
+    limits: LoopLimits,
+    peak_resident_bytes: u64,
+}
+
+impl<P: Producer> Session<P> {
+    /// A session within `budget_bytes`. The transfer function's unit distance defaults to one finest voxel.
+    pub fn new(
+        producer: P,
+        transfer_function: &TransferFunction,
+        settings: RenderSettings,
+        budget_bytes: u64,
+        limits: LoopLimits,
+    ) -> Result<Session<P>> {
+        settings.validate()?;
+        let shape = producer.shape();
+        let finest_voxel = settings.placement.size * shape.voxel_size(shape.max_level);
+        let lut = TransferLut::new(transfer_function, 0.0, 1.0, finest_voxel);
+        let cache = CacheManager::new(producer, budget_bytes)?;
+        Ok(Session { cache, lut, settings, limits, peak_resident_bytes: 0 })
+    }
+
+    /// The cache.
+    pub fn cache(&self) -> &CacheManager<P> {
+        &self.cache
+    }
+
+    /// The render settings.
+    pub fn settings(&self) -> &RenderSettings {
+        &self.settings
+    }
+
+    /// Highest resident pool bytes seen.
+    pub fn peak_resident_bytes(&self) -> u64 {
+        self.peak_resident_bytes
+    }
+
+    /// Residency now.
+    pub fn residency(&self) -> Residency {
+        self.cache.residency()
+    }
+
+    /// Renders one output frame from `camera`.
+    pub fn render(&mut self, camera: &Camera, mode: Mode) -> Result<FrameResult> {
+        let start = Instant::now();
+        let mut result = FrameResult {
+            image: Image::new(0, 0),
+            passes: 0,
+            elapsed_ms: 0.0,
+            render_ms: 0.0,
+            rays: 0,
+            samples: 0,
+            requests: 0,
+            bricks_produced: 0,
+            pending: 0,
+            failures: Vec::new(),
+        };
+        let mut progressive = ProgressiveImage::new(self.settings.width, self.settings.height);
+        // Converged frames let each ray report every miss along its path, so passes are few.
+        let mut settings = self.settings.clone();
+        if mode == Mode::Converged {
+            settings.max_requests_per_ray = settings.max_requests_per_ray.max(CONVERGED_REQUESTS_PER_RAY);
+        }
+        loop {
+            self.cache.begin_frame();
+            let render_start = Instant::now();
+            let (stats, _) =
+                render_pass(self.cache.view(), self.cache.feedback(), camera, &self.lut, &settings, &mut progressive)?;
+            result.render_ms += render_start.elapsed().as_secs_f64() * 1e3;
+            let limit = match mode {
+                Mode::Converged => None,
+                Mode::Interactive => Some(self.limits.requests_per_frame),
+            };
+            let report = self.cache.end_frame(limit);
+            self.peak_resident_bytes = self.peak_resident_bytes.max(self.cache.residency().bytes);
+            result.passes += 1;
+            result.rays += stats.rays;
+            result.samples += stats.samples;
+            result.requests += report.requests as u64;
+            result.bricks_produced += report.bricks_produced as u64;
+            result.pending = report.pending;
+            result.failures.extend(report.failures);
+            let stalled = report.pending > 0 && report.served == 0;
+            if mode == Mode::Interactive || report.pending == 0 || stalled || result.passes >= self.limits.max_passes {
+                break;
+            }
+        }
+        result.image = progressive.image;
+        result.elapsed_ms = start.elapsed().as_secs_f64() * 1e3;
+        Ok(result)
+    }
+
+    /// Renders `frames` interactive frames from `camera` (or until converged if `frames` is 0).
+    pub fn render_until_converged_interactively(&mut self, camera: &Camera, max_frames: u32) -> Result<(u32, FrameResult)> {
+        if max_frames == 0 {
+            bail!("at least one frame is needed");
+        }
+        let mut frames = 0;
+        loop {
+            let result = self.render(camera, Mode::Interactive)?;
+            frames += 1;
+            if result.is_converged() || frames >= max_frames {
+                return Ok((frames, result));
+            }
+        }
+    }
+}

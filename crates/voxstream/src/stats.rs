@@ -1,0 +1,42 @@
+//! The `--stats` JSON: what a run did, frame by frame and in total.
+
+use serde::Serialize;
+
+/// Statistics of a `voxstream render` run.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct RunStats {
+    /// Scene or source rendered.
+    pub source: String,
+    /// "converged" or "interactive".
+    pub mode: String,
+    /// Output frames written.
+    pub frames: usize,
+    /// Whether the last frame was complete (no ray missed anything).
+    pub converged: bool,
+    /// Wall time per output frame (rendering and production), ms.
+    pub frame_ms: Vec<f64>,
+    /// Render passes per output frame.
+    pub passes: Vec<u32>,
+    /// Rays traced, all passes.
+    pub rays: u64,
+    /// Samples taken, all passes.
+    pub samples: u64,
+    /// Distinct requests, all passes.
+    pub requests: u64,
+    /// Bricks produced.
+    pub bricks_produced: u64,
+    /// Bricks resident at the end.
+    pub bricks_resident: u64,
+    /// Nodes resident at the end.
+    pub nodes_resident: u64,
+    /// Peak bytes of the node and brick pools.
+    pub resident_bytes_peak: u64,
+    /// The pools' budget.
+    pub budget_bytes: u64,
+    /// Peak resident set size of the whole process, if known.
+    pub peak_rss_bytes: Option<u64>,
+    /// Producer failures (bricks drawn from their ancestors instead).
+    pub producer_failures: usize,
+    /// Worker threads used.
+    pub threads: usize,
+}
