@@ -1,0 +1,58 @@
+//! Helpers shared by the integration tests (included with `mod common;`).
+#![allow(dead_code)]
+
+use glam::DVec3;
+use voxstream::scenes::{builtin, SceneProducer};
+use voxstream::session::{LoopLimits, Mode, Session};
+use voxstream_render::{Camera, Image, RenderSettings};
+
+/// A session on a built-in scene at `size`², with the scene's transfer function and shading.
+pub fn scene_session(name: &str, size: u32, budget_bytes: u64) -> Session<SceneProducer> {
+    let scene = builtin(name).expect("built-in scene");
+    let settings = RenderSettings { width: size, height: size, shading: scene.shading, ..RenderSettings::default() };
+    Session::new(scene.producer, &scene.transfer_function, settings, budget_bytes, LoopLimits::default())
+        .expect("session")
+}
+
+/// Renders a converged frame and checks it converged.
+pub fn converged(session: &mut Session<SceneProducer>, camera: &Camera) -> Image {
+    let result = session.render(camera, Mode::Converged).expect("render");
+    assert!(result.is_converged(), "frame did not converge after {} passes", result.passes);
+    result.image
+}
+
+/// Unit direction through pixel (x, y), computed independently of the renderer's camera code.
+pub fn pixel_direction(camera: &Camera, x: u32, y: u32, width: u32, height: u32) -> DVec3 {
+    let eye = DVec3::from(camera.eye);
+    let forward = (DVec3::from(camera.target) - eye).normalize();
+    let right = forward.cross(DVec3::from(camera.up)).normalize();
+    let up = right.cross(forward);
+    let half = (camera.fov.to_radians() / 2.0).tan();
+    let aspect = width as f64 / height as f64;
+    let sx = ((x as f64 + 0.5) / width as f64 * 2.0 - 1.0) * half * aspect;
+    let sy = (1.0 - (y as f64 + 0.5) / height as f64 * 2.0) * half;
+    (forward + right * sx + up * sy).normalize()
+}
+
+/// Slab test: entry and exit distances of a ray through the cube `[lower, lower + size]`.
+pub fn ray_box(origin: DVec3, direction: DVec3, lower: DVec3, size: f64) -> Option<(f64, f64)> {
+    let mut t0 = 0.0f64;
+    let mut t1 = f64::INFINITY;
+    for a in 0..3 {
+        let inv = 1.0 / direction[a];
+        let (mut near, mut far) = ((lower[a] - origin[a]) * inv, (lower[a] + size - origin[a]) * inv);
+        if near > far {
+            std::mem::swap(&mut near, &mut far);
+        }
+        if near.is_nan() || far.is_nan() {
+            // Parallel to the slab: inside or never.
+            if origin[a] < lower[a] || origin[a] > lower[a] + size {
+                return None;
+            }
+            continue;
+        }
+        t0 = t0.max(near);
+        t1 = t1.min(far);
+    }
+    (t0 <= t1).then_some((t0, t1))
+}
