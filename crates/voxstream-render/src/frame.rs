@@ -10,7 +10,7 @@ use voxstream_core::{FeedbackBuffer, Request, TreeView};
 use crate::camera::{Camera, CameraFrame};
 use crate::error::RenderError;
 use crate::image::Image;
-use crate::ray_caster::{RayCaster, RayStats};
+use crate::ray_caster::{DescentPath, RayCaster, RayStats};
 use crate::settings::RenderSettings;
 use crate::transfer_function::TransferLut;
 
@@ -139,6 +139,7 @@ fn render_tile(
         raw_requests: 0,
     };
     let mut requests: Vec<Request> = Vec::new();
+    let mut path = DescentPath::new(caster.view());
     let background = settings.background;
     for y in y0..y1 {
         for x in x0..x1 {
@@ -149,7 +150,7 @@ fn render_tile(
             }
             let direction = frame.direction(x, y, width, height);
             let before = requests.len();
-            let (color, alpha) = caster.trace(origin, direction, frame.pixel_spread, &mut result.stats, &mut requests);
+            let (color, alpha) = caster.trace(origin, direction, frame.pixel_spread, &mut result.stats, &mut requests, &mut path);
             result.pending.push(requests.len() > before);
             let t = 1.0 - alpha;
             result.pixels.push(Some([

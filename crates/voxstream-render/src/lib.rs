@@ -33,6 +33,6 @@ pub use camera::{Camera, CameraFrame};
 pub use error::RenderError;
 pub use frame::{render_frame, render_pass, ProgressiveImage, RenderedFrame, IMAGE_TILE};
 pub use image::{psnr, Image};
-pub use ray_caster::{RayCaster, RayStats};
+pub use ray_caster::{DescentPath, RayCaster, RayStats};
 pub use settings::{PhongCoefficients, RenderSettings, Shading, VolumePlacement};
 pub use transfer_function::{TransferFunction, TransferLut};

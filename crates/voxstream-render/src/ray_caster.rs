@@ -13,13 +13,14 @@
 //! 3. March the node's box with steps of `step_factor` voxels of the sampled level, blending the trilinear samples
 //!    of the two adjacent levels by `frac(ℓ)` (quadrilinear), correcting opacity for the step length, optionally
 //!    Phong-shading with the gradient, and stop once opaque.
-//! 4. Leave the box and restart the descent from the root (kd-restart).
+//! 4. Leave the box and descend again for the next point, from the deepest node of the previous path that still
+//!    contains it (kd-restart from the root, shortened by keeping the path).
 //!
 //! Positions are `f64` in the unit cube and node coordinates are integers, so zooms far below `2⁻²⁰` stay exact
 //! (GigaVoxels stopped at `2¹⁹` because of float32 precision).
 
 use glam::DVec3;
-use voxstream_core::{BrickSlot, FeedbackBuffer, NodeData, NodeId, Request, RequestKind, TreeView};
+use voxstream_core::{BrickSlot, FeedbackBuffer, Node, NodeData, NodeId, Request, RequestKind, TreeView};
 
 use crate::sampler::{gradient, trilinear};
 use crate::settings::{PhongCoefficients, RenderSettings, Shading};
@@ -47,6 +48,39 @@ impl RayStats {
         self.rays += other.rays;
         self.samples += other.samples;
         self.descents += other.descents;
+    }
+}
+
+/// Deepest level a descent path can hold.
+const MAX_PATH: usize = MAX_TABLE_LEVELS;
+
+/// One node of the current descent.
+#[derive(Clone, Copy, Debug)]
+struct PathEntry {
+    id: NodeId,
+    node: Node,
+    ijk: [u64; 3],
+}
+
+/// The nodes from the root to the last node reached, reused between segments so that a new descent restarts from
+/// the deepest ancestor that still contains the point (a short-stack variant of kd-restart). One per thread, reused
+/// from ray to ray.
+pub struct DescentPath {
+    entries: [PathEntry; MAX_PATH],
+    len: usize,
+}
+
+impl DescentPath {
+    /// A path holding only the root of `view`.
+    pub fn new(view: TreeView<'_>) -> DescentPath {
+        let root = PathEntry { id: NodeId::ROOT, node: view.root(), ijk: [0; 3] };
+        DescentPath { entries: [root; MAX_PATH], len: 1 }
+    }
+
+    /// Back to the root, for a new ray.
+    fn reset(&mut self, view: TreeView<'_>) {
+        self.entries[0] = PathEntry { id: NodeId::ROOT, node: view.root(), ijk: [0; 3] };
+        self.len = 1;
     }
 }
 
@@ -122,6 +156,11 @@ impl<'a> RayCaster<'a> {
         }
     }
 
+    /// The tree view this caster reads.
+    pub fn view(&self) -> TreeView<'a> {
+        self.view
+    }
+
     /// Continuous level of detail at distance `t` (volume units) for a cone of `spread` per unit distance.
     #[inline]
     fn level_at(&self, t: f64, spread: f64) -> f64 {
@@ -139,6 +178,7 @@ impl<'a> RayCaster<'a> {
         spread: f64,
         stats: &mut RayStats,
         requests: &mut Vec<Request>,
+        path: &mut DescentPath,
     ) -> ([f32; 3], f32) {
         let mut sink = RequestSink { requests, remaining: self.max_requests_per_ray };
         let request = &mut sink;
@@ -150,18 +190,22 @@ impl<'a> RayCaster<'a> {
         };
         let mut t = t_enter.max(0.0);
         let light = self.light.unwrap_or(-direction);
+        path.reset(self.view);
+        if let Some(slot) = path.entries[0].node.brick() {
+            self.feedback.mark_brick(slot);
+        }
         let mut segments = 0;
         while t < t_leave && 1.0 - transmittance < self.opacity_cutoff && segments < MAX_SEGMENTS {
             segments += 1;
             stats.descents += 1;
             let p = origin + direction * t;
             let level = self.level_at(t, spread);
-            let (data, box_level, box_ijk) = self.descend(p, level.ceil() as u32, request);
+            let (data, box_level, box_ijk) = self.descend(p, level.ceil() as u32, path, request);
             let node_size = 1.0 / self.scale[box_level as usize];
             let lower = DVec3::new(box_ijk[0] as f64, box_ijk[1] as f64, box_ijk[2] as f64) * node_size;
             let t_exit = intersect_box(origin, direction, lower, node_size).map_or(t, |(_, exit)| exit).min(t_leave);
-            // Never stall on a boundary: move at least a sliver of the node forward.
-            let t_exit = t_exit.max(t + node_size * 1e-9).max(t * (1.0 + 1e-15));
+            // Never stall on a boundary: move at least a sliver of the node, and more than the rounding of p.
+            let t_exit = t_exit.max(t + node_size * 1e-7 + 8e-16 * (p.abs().max_element() + t));
             match data {
                 SegmentData::Nothing => {}
                 SegmentData::Constant(value) => {
@@ -231,25 +275,35 @@ impl<'a> RayCaster<'a> {
         std::array::from_fn(|a| (local[a] * self.brick_size + 0.5) as f32)
     }
 
-    /// Descends from the root towards `target_level` at `p`; returns the data to use and the box of the deepest
-    /// node visited (the segment to march).
-    fn descend(&self, p: DVec3, target_level: u32, request: &mut RequestSink<'_>) -> (SegmentData, u32, [u64; 3]) {
+    /// Descends towards `target_level` at `p`, restarting from the deepest node of the previous descent that still
+    /// contains `p` (the root at worst, which is GigaVoxels' kd-restart); returns the data to use and the box of the
+    /// deepest node visited (the segment to march).
+    fn descend(
+        &self,
+        p: DVec3,
+        target_level: u32,
+        path: &mut DescentPath,
+        request: &mut RequestSink<'_>,
+    ) -> (SegmentData, u32, [u64; 3]) {
         let n = self.n;
-        let mut id = NodeId::ROOT;
-        let mut node = self.view.root();
-        let mut level = 0u32;
-        let mut ijk = [0u64; 3];
-        let mut fine: Option<BrickRef> = None;
-        let mut coarse: Option<BrickRef> = None;
         let pa = [p.x, p.y, p.z];
+        // Keep the ancestors that contain p, and no deeper than the target.
+        let mut keep = path.len.min(target_level as usize + 1).max(1);
+        while keep > 1 {
+            let entry = &path.entries[keep - 1];
+            let s = self.scale[keep - 1];
+            if (0..3).all(|a| (pa[a] * s) as u64 == entry.ijk[a]) {
+                break;
+            }
+            keep -= 1;
+        }
+        path.len = keep;
         loop {
+            let level = (path.len - 1) as u32;
+            let PathEntry { id, node, ijk } = path.entries[path.len - 1];
             match node.data() {
                 NodeData::Constant(value) => return (SegmentData::Constant(value), level, ijk),
-                NodeData::Brick(slot) => {
-                    self.feedback.mark_brick(slot);
-                    coarse = fine;
-                    fine = Some(BrickRef { slot, level, ijk });
-                }
+                NodeData::Brick(_) => {}
                 NodeData::Missing => {
                     request.push(Request { node: id, kind: RequestKind::Produce });
                     break;
@@ -269,21 +323,36 @@ impl<'a> RayCaster<'a> {
             let mut stride = 1u64;
             for a in 0..3 {
                 let lo = ijk[a] * n;
-                let g = ((pa[a] * s).floor().max(0.0) as u64).clamp(lo, lo + n - 1);
+                // Positions are non-negative, so truncation is floor.
+                let g = ((pa[a] * s) as u64).clamp(lo, lo + n - 1);
                 child_ijk[a] = g;
                 child_index += (g - lo) * stride;
                 stride *= n;
             }
-            (id, node) = self.view.child(tile, child_index as u32);
-            level += 1;
-            ijk = child_ijk;
+            let (child_id, child) = self.view.child(tile, child_index as u32);
+            if let Some(slot) = child.brick() {
+                self.feedback.mark_brick(slot);
+            }
+            path.entries[path.len] = PathEntry { id: child_id, node: child, ijk: child_ijk };
+            path.len += 1;
         }
-        let data = match fine {
-            None => SegmentData::Nothing,
-            // Blend with the parent only when the finest data is at the level the cone asked for.
-            Some(f) => SegmentData::Bricks { fine: f, coarse, blend_level: f.level == target_level },
+        // Every node on the path but the last holds a brick; find the two deepest bricks.
+        let deepest = path.len - 1;
+        let last = path.entries[deepest];
+        let brick_at = |level: usize| {
+            path.entries[level].node.brick().map(|slot| BrickRef { slot, level: level as u32, ijk: path.entries[level].ijk })
         };
-        (data, level, ijk)
+        let fine_level = if last.node.brick().is_some() { Some(deepest) } else { deepest.checked_sub(1) };
+        let data = match fine_level.and_then(|l| brick_at(l).map(|b| (l, b))) {
+            None => SegmentData::Nothing,
+            Some((l, fine)) => SegmentData::Bricks {
+                fine,
+                coarse: l.checked_sub(1).and_then(brick_at),
+                // Blend with the parent only when the finest data is at the level the cone asked for.
+                blend_level: fine.level == target_level,
+            },
+        };
+        (data, deepest as u32, last.ijk)
     }
 
     /// Two-sided Phong with the density gradient as normal.
