@@ -22,7 +22,7 @@
 use glam::DVec3;
 use voxstream_core::{BrickSlot, FeedbackBuffer, Node, NodeData, NodeId, Request, RequestKind, TreeView};
 
-use crate::sampler::{gradient, trilinear};
+use crate::sampler::{trilinear, trilinear_with_gradient};
 use crate::settings::{PhongCoefficients, RenderSettings, Shading};
 use crate::transfer_function::TransferLut;
 
@@ -189,6 +189,7 @@ impl<'a> RayCaster<'a> {
             return (color, 0.0);
         };
         let mut t = t_enter.max(0.0);
+        let inverse_direction = DVec3::ONE / direction;
         let light = self.light.unwrap_or(-direction);
         path.reset(self.view);
         if let Some(slot) = path.entries[0].node.brick() {
@@ -203,7 +204,7 @@ impl<'a> RayCaster<'a> {
             let (data, box_level, box_ijk) = self.descend(p, level.ceil() as u32, path, request);
             let node_size = 1.0 / self.scale[box_level as usize];
             let lower = DVec3::new(box_ijk[0] as f64, box_ijk[1] as f64, box_ijk[2] as f64) * node_size;
-            let t_exit = intersect_box(origin, direction, lower, node_size).map_or(t, |(_, exit)| exit).min(t_leave);
+            let t_exit = exit_distance(origin, inverse_direction, lower, node_size).min(t_leave);
             // Never stall on a boundary: move at least a sliver of the node, and more than the rounding of p.
             let t_exit = t_exit.max(t + node_size * 1e-7 + 8e-16 * (p.abs().max_element() + t));
             match data {
@@ -227,11 +228,16 @@ impl<'a> RayCaster<'a> {
                     let dt_world = dt * self.world_per_volume;
                     let fine_brick = self.view.brick(fine.slot);
                     let coarse_brick = coarse.map(|c| (c, self.view.brick(c.slot)));
+                    let shaded = self.shading == Shading::Phong;
                     for step in 0..steps as u64 {
                         let ts = t + (step as f64 + 0.5) * dt;
                         let ps = origin + direction * ts;
                         let x_fine = self.brick_coordinates(ps, &fine);
-                        let mut value = trilinear(fine_brick, self.stored, x_fine);
+                        let (mut value, g) = if shaded {
+                            trilinear_with_gradient(fine_brick, self.stored, x_fine)
+                        } else {
+                            (trilinear(fine_brick, self.stored, x_fine), [0.0; 3])
+                        };
                         if blend_level {
                             if let Some((c, brick)) = coarse_brick {
                                 let weight = (self.level_at(ts, spread) - c.level as f64).clamp(0.0, 1.0) as f32;
@@ -248,8 +254,7 @@ impl<'a> RayCaster<'a> {
                         }
                         let alpha = 1.0 - (-(entry.sigma as f64) * dt_world).exp() as f32;
                         let mut sample_color = entry.color;
-                        if self.shading == Shading::Phong {
-                            let g = gradient(fine_brick, self.stored, x_fine);
+                        if shaded {
                             sample_color = self.phong_shade(entry.color, g, light, -direction);
                         }
                         for c in 0..3 {
@@ -366,8 +371,28 @@ impl<'a> RayCaster<'a> {
         let normal = DVec3::new(-g[0] as f64, -g[1] as f64, -g[2] as f64) / length as f64;
         let diffuse = normal.dot(light).abs() as f32;
         let half = (light + view).normalize_or_zero();
-        let specular = (normal.dot(half).abs() as f32).powf(self.phong.shininess);
+        let specular = power(normal.dot(half).abs() as f32, self.phong.shininess);
         color.map(|c| c * (self.phong.ambient + self.phong.diffuse * diffuse) + self.phong.specular * specular)
+    }
+}
+
+/// `base^exponent`, by repeated squaring when the exponent is a small whole number (the usual Phong case).
+#[inline]
+fn power(base: f32, exponent: f32) -> f32 {
+    if exponent == exponent.trunc() && (0.0..=64.0).contains(&exponent) {
+        let mut result = 1.0;
+        let mut b = base;
+        let mut e = exponent as u32;
+        while e > 0 {
+            if e & 1 == 1 {
+                result *= b;
+            }
+            b *= b;
+            e >>= 1;
+        }
+        result
+    } else {
+        base.powf(exponent)
     }
 }
 
@@ -385,6 +410,20 @@ impl RequestSink<'_> {
             self.requests.push(request);
         }
     }
+}
+
+/// Distance at which a ray inside (or on) the cube `[lower, lower + size]` leaves it; `1/direction` precomputed.
+#[inline]
+fn exit_distance(origin: DVec3, inverse_direction: DVec3, lower: DVec3, size: f64) -> f64 {
+    let mut exit = f64::INFINITY;
+    for a in 0..3 {
+        let inv = inverse_direction[a];
+        if inv.is_finite() {
+            let bound = if inv > 0.0 { lower[a] + size } else { lower[a] };
+            exit = exit.min((bound - origin[a]) * inv);
+        }
+    }
+    exit
 }
 
 /// Slab test against the axis-aligned cube `[lower, lower + size]`; returns `(t_enter, t_exit)` when hit ahead.
@@ -415,6 +454,23 @@ pub fn intersect_box(origin: DVec3, direction: DVec3, lower: DVec3, size: f64) -
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn exit_distance_matches_the_slab_test() {
+        let origin = DVec3::new(0.3, 0.2, 0.9);
+        let direction = DVec3::new(0.5, -0.3, 0.2).normalize();
+        let (_, exit) = intersect_box(origin, direction, DVec3::ZERO, 1.0).unwrap();
+        assert!((exit_distance(origin, DVec3::ONE / direction, DVec3::ZERO, 1.0) - exit).abs() < 1e-12);
+        let axis = DVec3::new(0.0, 0.0, -1.0);
+        assert!((exit_distance(origin, DVec3::ONE / axis, DVec3::ZERO, 1.0) - 0.9).abs() < 1e-12);
+    }
+
+    #[test]
+    fn power_matches_powf() {
+        for (b, e) in [(0.5f32, 16.0f32), (0.9, 3.0), (0.7, 2.5), (0.0, 0.0)] {
+            assert!((power(b, e) - b.powf(e)).abs() < 1e-6);
+        }
+    }
 
     #[test]
     fn box_intersection() {
