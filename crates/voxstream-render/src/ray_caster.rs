@@ -227,32 +227,33 @@ impl<'a> RayCaster<'a> {
                     let dt = length / steps;
                     let dt_world = dt * self.world_per_volume;
                     let fine_brick = self.view.brick(fine.slot);
-                    let coarse_brick = coarse.map(|c| (c, self.view.brick(c.slot)));
                     let shaded = self.shading == Shading::Phong;
+                    // Brick coordinates are linear in t along the segment: x(t) = start + t·rate.
+                    let (fine_start, fine_rate) = self.brick_line(origin, direction, &fine);
+                    // The level changes by ~1% of a level across one node: one blend weight per segment.
+                    let coarse_brick = coarse.filter(|_| blend_level).and_then(|c| {
+                        let weight = (self.level_at(0.5 * (t + t_exit), spread) - c.level as f64).clamp(0.0, 1.0) as f32;
+                        (weight < 1.0).then(|| (self.view.brick(c.slot), self.brick_line(origin, direction, &c), weight))
+                    });
+                    let sigma_scale = -(dt_world as f32);
                     for step in 0..steps as u64 {
                         let ts = t + (step as f64 + 0.5) * dt;
-                        let ps = origin + direction * ts;
-                        let x_fine = self.brick_coordinates(ps, &fine);
+                        let x_fine = at(fine_start, fine_rate, ts);
                         let (mut value, g) = if shaded {
                             trilinear_with_gradient(fine_brick, self.stored, x_fine)
                         } else {
                             (trilinear(fine_brick, self.stored, x_fine), [0.0; 3])
                         };
-                        if blend_level {
-                            if let Some((c, brick)) = coarse_brick {
-                                let weight = (self.level_at(ts, spread) - c.level as f64).clamp(0.0, 1.0) as f32;
-                                if weight < 1.0 {
-                                    let v_coarse = trilinear(brick, self.stored, self.brick_coordinates(ps, &c));
-                                    value = v_coarse + (value - v_coarse) * weight;
-                                }
-                            }
+                        if let Some((brick, (start, rate), weight)) = coarse_brick {
+                            let v_coarse = trilinear(brick, self.stored, at(start, rate, ts));
+                            value = v_coarse + (value - v_coarse) * weight;
                         }
                         stats.samples += 1;
                         let entry = self.lut.lookup(value);
                         if entry.sigma <= 0.0 {
                             continue;
                         }
-                        let alpha = 1.0 - (-(entry.sigma as f64) * dt_world).exp() as f32;
+                        let alpha = 1.0 - (entry.sigma * sigma_scale).exp();
                         let mut sample_color = entry.color;
                         if shaded {
                             sample_color = self.phong_shade(entry.color, g, light, -direction);
@@ -272,12 +273,16 @@ impl<'a> RayCaster<'a> {
         (color, 1.0 - transmittance)
     }
 
-    /// Continuous voxel index of `p` in the brick of `node`.
+    /// The continuous voxel index in the brick of `node` along the ray, as `start + t·rate` per axis.
     #[inline]
-    fn brick_coordinates(&self, p: DVec3, node: &BrickRef) -> [f32; 3] {
+    fn brick_line(&self, origin: DVec3, direction: DVec3, node: &BrickRef) -> ([f64; 3], [f64; 3]) {
         let s = self.scale[node.level as usize];
-        let local = [p.x * s - node.ijk[0] as f64, p.y * s - node.ijk[1] as f64, p.z * s - node.ijk[2] as f64];
-        std::array::from_fn(|a| (local[a] * self.brick_size + 0.5) as f32)
+        let m = self.brick_size;
+        let (o, d) = (origin.to_array(), direction.to_array());
+        (
+            std::array::from_fn(|a| (o[a] * s - node.ijk[a] as f64) * m + 0.5),
+            std::array::from_fn(|a| d[a] * s * m),
+        )
     }
 
     /// Descends towards `target_level` at `p`, restarting from the deepest node of the previous descent that still
@@ -410,6 +415,12 @@ impl RequestSink<'_> {
             self.requests.push(request);
         }
     }
+}
+
+/// A point of a brick line at distance `t`.
+#[inline]
+fn at(start: [f64; 3], rate: [f64; 3], t: f64) -> [f32; 3] {
+    [(start[0] + rate[0] * t) as f32, (start[1] + rate[1] * t) as f32, (start[2] + rate[2] * t) as f32]
 }
 
 /// Distance at which a ray inside (or on) the cube `[lower, lower + size]` leaves it; `1/direction` precomputed.

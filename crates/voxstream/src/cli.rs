@@ -51,13 +51,13 @@ pub struct RenderArgs {
     #[arg(long, default_value_t = 512)]
     pub height: u32,
     /// Eye position x,y,z (world units; the built-in scenes fill the unit cube [0,1]^3).
-    #[arg(long, value_parser = parse_vec3)]
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     pub eye: Option<[f64; 3]>,
     /// Point looked at, x,y,z.
-    #[arg(long, value_parser = parse_vec3)]
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     pub target: Option<[f64; 3]>,
     /// Up direction x,y,z.
-    #[arg(long, value_parser = parse_vec3)]
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     pub up: Option<[f64; 3]>,
     /// Vertical field of view in degrees.
     #[arg(long)]
@@ -69,10 +69,10 @@ pub struct RenderArgs {
     #[arg(long, value_enum)]
     pub shading: Option<ShadingArg>,
     /// Direction towards the light x,y,z (default: a headlight).
-    #[arg(long, value_parser = parse_vec3)]
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     pub light: Option<[f64; 3]>,
     /// Background colour r,g,b in [0,1] (linear).
-    #[arg(long, value_parser = parse_vec3, default_value = "0,0,0")]
+    #[arg(long, value_parser = parse_vec3, default_value = "0,0,0", allow_hyphen_values = true)]
     pub background: [f64; 3],
     /// Memory budget of the node and brick pools, MiB.
     #[arg(long, default_value_t = 256)]
