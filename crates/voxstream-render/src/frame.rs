@@ -130,7 +130,8 @@ fn render_tile(
     let x1 = (x0 + IMAGE_TILE).min(width);
     let y1 = (y0 + IMAGE_TILE).min(height);
     let placement = &settings.placement;
-    let origin = (frame.eye - glam::DVec3::from(placement.origin)) / placement.size;
+    let scale = glam::DVec3::from(placement.scale);
+    let origin = (frame.eye - glam::DVec3::from(placement.origin)) / scale;
     let count = ((x1 - x0) * (y1 - y0)) as usize;
     let mut result = TileResult {
         pixels: Vec::with_capacity(count),
@@ -148,7 +149,8 @@ fn render_tile(
                 result.pending.push(false);
                 continue;
             }
-            let direction = frame.direction(x, y, width, height);
+            // In volume space, with t still measured in world units.
+            let direction = frame.direction(x, y, width, height) / scale;
             let before = requests.len();
             let (color, alpha) = caster.trace(origin, direction, frame.pixel_spread, &mut result.stats, &mut requests, &mut path);
             result.pending.push(requests.len() > before);

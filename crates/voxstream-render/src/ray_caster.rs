@@ -113,6 +113,9 @@ pub struct RayCaster<'a> {
     step_factor: f64,
     lod_bias: f64,
     world_per_volume: f64,
+    gradient_scale: [f32; 3],
+    clip_lower: DVec3,
+    clip_upper: DVec3,
     opacity_cutoff: f32,
     max_requests_per_ray: u32,
     /// `N^d` for every level.
@@ -145,7 +148,10 @@ impl<'a> RayCaster<'a> {
             light: settings.light_direction.map(|l| DVec3::from(l).normalize()),
             step_factor: settings.step_factor,
             lod_bias: settings.lod_bias,
-            world_per_volume: settings.placement.size,
+            world_per_volume: settings.placement.mean_scale(),
+            gradient_scale: settings.placement.scale.map(|s| (1.0 / s) as f32),
+            clip_lower: DVec3::from(settings.placement.clip_lower),
+            clip_upper: DVec3::from(settings.placement.clip_upper),
             opacity_cutoff: settings.opacity_cutoff,
             max_requests_per_ray: settings.max_requests_per_ray,
             scale,
@@ -161,15 +167,16 @@ impl<'a> RayCaster<'a> {
         self.view
     }
 
-    /// Continuous level of detail at distance `t` (volume units) for a cone of `spread` per unit distance.
+    /// Continuous level of detail at distance `t` (world units) for a cone of `spread` per unit distance.
     #[inline]
     fn level_at(&self, t: f64, spread: f64) -> f64 {
-        let footprint = (t * spread).max(1e-300);
+        let footprint = (t * spread / self.world_per_volume).max(1e-300);
         let level = -(self.brick_size * footprint).ln() * self.inv_ln_n + self.lod_bias;
         level.clamp(0.0, self.view.shape.max_level as f64)
     }
 
-    /// Traces one ray in volume space (`origin`, unit `direction`); returns premultiplied `[r, g, b]` and opacity.
+    /// Traces one ray given in volume space with `t` in world units (`origin` in volume units, `direction` = the unit
+    /// world direction divided by the placement's scale); returns premultiplied `[r, g, b]` and opacity.
     /// Appends at most `max_requests_per_ray` requests to `requests`.
     pub fn trace(
         &self,
@@ -185,12 +192,15 @@ impl<'a> RayCaster<'a> {
         stats.rays += 1;
         let mut color = [0f32; 3];
         let mut transmittance = 1f32;
-        let Some((t_enter, t_leave)) = intersect_box(origin, direction, DVec3::ZERO, 1.0) else {
+        let Some((t_enter, t_leave)) = intersect_aabb(origin, direction, self.clip_lower, self.clip_upper) else {
             return (color, 0.0);
         };
+        // Volume units travelled per unit of t.
+        let speed = direction.length();
         let mut t = t_enter.max(0.0);
         let inverse_direction = DVec3::ONE / direction;
-        let light = self.light.unwrap_or(-direction);
+        let world_direction = (direction * DVec3::from(self.gradient_scale.map(|g| 1.0 / g as f64))).normalize();
+        let light = self.light.unwrap_or(-world_direction);
         path.reset(self.view);
         if let Some(slot) = path.entries[0].node.brick() {
             self.feedback.mark_brick(slot);
@@ -206,14 +216,14 @@ impl<'a> RayCaster<'a> {
             let lower = DVec3::new(box_ijk[0] as f64, box_ijk[1] as f64, box_ijk[2] as f64) * node_size;
             let t_exit = exit_distance(origin, inverse_direction, lower, node_size).min(t_leave);
             // Never stall on a boundary: move at least a sliver of the node, and more than the rounding of p.
-            let t_exit = t_exit.max(t + node_size * 1e-7 + 8e-16 * (p.abs().max_element() + t));
+            let t_exit = t_exit.max(t + (node_size * 1e-7 + 8e-16 * p.abs().max_element()) / speed + 8e-16 * t);
             match data {
                 SegmentData::Nothing => {}
                 SegmentData::Constant(value) => {
                     stats.samples += 1;
                     let entry = self.lut.lookup(value);
                     if entry.sigma > 0.0 {
-                        let alpha = 1.0 - (-(entry.sigma as f64) * (t_exit - t) * self.world_per_volume).exp() as f32;
+                        let alpha = 1.0 - (-(entry.sigma as f64) * (t_exit - t)).exp() as f32;
                         for c in 0..3 {
                             color[c] += transmittance * alpha * entry.color[c];
                         }
@@ -223,9 +233,9 @@ impl<'a> RayCaster<'a> {
                 SegmentData::Bricks { fine, coarse, blend_level } => {
                     let voxel = 1.0 / (self.scale[fine.level as usize] * self.brick_size);
                     let length = t_exit - t;
-                    let steps = (length / (voxel * self.step_factor)).ceil().max(1.0);
+                    let steps = (length * speed / (voxel * self.step_factor)).ceil().max(1.0);
                     let dt = length / steps;
-                    let dt_world = dt * self.world_per_volume;
+                    let dt_world = dt;
                     let fine_brick = self.view.brick(fine.slot);
                     let shaded = self.shading == Shading::Phong;
                     // Brick coordinates are linear in t along the segment: x(t) = start + t·rate.
@@ -256,7 +266,8 @@ impl<'a> RayCaster<'a> {
                         let alpha = 1.0 - (entry.sigma * sigma_scale).exp();
                         let mut sample_color = entry.color;
                         if shaded {
-                            sample_color = self.phong_shade(entry.color, g, light, -direction);
+                            let g = [0, 1, 2].map(|a| g[a] * self.gradient_scale[a]);
+                            sample_color = self.phong_shade(entry.color, g, light, -world_direction);
                         }
                         for c in 0..3 {
                             color[c] += transmittance * alpha * sample_color[c];
@@ -435,6 +446,16 @@ fn exit_distance(origin: DVec3, inverse_direction: DVec3, lower: DVec3, size: f6
         }
     }
     exit
+}
+
+/// Slab test against the box `[lower, upper]`; returns `(t_enter, t_exit)` when hit ahead.
+#[inline]
+pub fn intersect_aabb(origin: DVec3, direction: DVec3, lower: DVec3, upper: DVec3) -> Option<(f64, f64)> {
+    let size = upper - lower;
+    // Scale to a unit cube so one slab test serves both.
+    let o = (origin - lower) / size;
+    let d = direction / size;
+    intersect_box(o, d, DVec3::ZERO, 1.0)
 }
 
 /// Slab test against the axis-aligned cube `[lower, lower + size]`; returns `(t_enter, t_exit)` when hit ahead.

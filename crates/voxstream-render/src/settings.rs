@@ -33,18 +33,35 @@ impl Default for PhongCoefficients {
     }
 }
 
-/// Where the unit cube of the tree sits in world space: `world = origin + size · volume`.
+/// Where the unit cube of the tree sits in world space: `world = origin + scale ⊙ volume` (per axis, so anisotropic
+/// voxels are fine), and the box of the cube that holds data (rays are clipped to it).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct VolumePlacement {
     /// World position of the cube's corner `(0, 0, 0)`.
     pub origin: [f64; 3],
-    /// World edge of the cube.
-    pub size: f64,
+    /// World edge of the cube along x, y, z.
+    pub scale: [f64; 3],
+    /// Lower corner of the data box, volume units.
+    pub clip_lower: [f64; 3],
+    /// Upper corner of the data box, volume units.
+    pub clip_upper: [f64; 3],
 }
 
 impl Default for VolumePlacement {
     fn default() -> Self {
-        VolumePlacement { origin: [0.0; 3], size: 1.0 }
+        VolumePlacement { origin: [0.0; 3], scale: [1.0; 3], clip_lower: [0.0; 3], clip_upper: [1.0; 3] }
+    }
+}
+
+impl VolumePlacement {
+    /// The cube of edge `size` at `origin`, all of it data.
+    pub fn cube(origin: [f64; 3], size: f64) -> VolumePlacement {
+        VolumePlacement { origin, scale: [size; 3], ..VolumePlacement::default() }
+    }
+
+    /// Geometric mean of the scales: world length of one volume unit, for level-of-detail and steps.
+    pub fn mean_scale(&self) -> f64 {
+        (self.scale[0] * self.scale[1] * self.scale[2]).cbrt()
     }
 }
 
@@ -119,8 +136,11 @@ impl RenderSettings {
             }
         }
         let p = &self.placement;
-        if !(p.size.is_finite() && p.size > 0.0 && p.origin.iter().all(|v| v.is_finite())) {
-            return bad("volume placement must be finite with a positive size".into());
+        if !(p.scale.iter().all(|s| s.is_finite() && *s > 0.0) && p.origin.iter().all(|v| v.is_finite())) {
+            return bad("volume placement must be finite with a positive scale".into());
+        }
+        if (0..3).any(|a| !(p.clip_lower[a] < p.clip_upper[a])) {
+            return bad("volume clip box is empty".into());
         }
         Ok(())
     }

@@ -101,7 +101,8 @@ pub struct LutEntry {
     pub sigma: f32,
 }
 
-/// The transfer function tabulated over a value range for the per-sample loop.
+/// The transfer function tabulated over the data's value range `[lower, upper]` for the per-sample loop; lookups take
+/// normalised values (`0` = `lower`, `1` = `upper`), which is what bricks hold.
 #[derive(Clone, Debug)]
 pub struct TransferLut {
     entries: Vec<LutEntry>,
@@ -113,7 +114,7 @@ pub struct TransferLut {
 pub const LUT_SIZE: usize = 4096;
 
 impl TransferLut {
-    /// Tabulates `tf` over `[lower, upper]`; `default_unit_distance` applies when the function names none.
+    /// Tabulates `tf` over data values `[lower, upper]`; `default_unit_distance` applies when the function names none.
     pub fn new(tf: &TransferFunction, lower: f32, upper: f32, default_unit_distance: f64) -> TransferLut {
         let unit = tf.unit_distance.unwrap_or(default_unit_distance);
         let entries = (0..LUT_SIZE)
@@ -124,11 +125,10 @@ impl TransferLut {
                 LutEntry { color: [r as f32, g as f32, b as f32], sigma: sigma as f32 }
             })
             .collect();
-        let span = (upper - lower).max(f32::MIN_POSITIVE);
-        TransferLut { entries, lower, scale: (LUT_SIZE - 1) as f32 / span }
+        TransferLut { entries, lower: 0.0, scale: (LUT_SIZE - 1) as f32 }
     }
 
-    /// Colour and extinction at `value` (linear between entries).
+    /// Colour and extinction at normalised `value` (linear between entries).
     #[inline]
     pub fn lookup(&self, value: f32) -> LutEntry {
         let x = ((value - self.lower) * self.scale).clamp(0.0, (LUT_SIZE - 1) as f32);
@@ -141,7 +141,8 @@ impl TransferLut {
         }
     }
 
-    /// Whether some value in `[lower, upper]` has non-zero extinction (conservative, for empty-space skipping).
+    /// Whether some normalised value in `[lower, upper]` has non-zero extinction (conservative, for empty-space
+    /// skipping).
     pub fn is_visible_in(&self, lower: f32, upper: f32) -> bool {
         let index = |v: f32| (((v - self.lower) * self.scale).clamp(0.0, (LUT_SIZE - 1) as f32)) as usize;
         let (a, b) = (index(lower), (index(upper) + 1).min(LUT_SIZE - 1));
@@ -169,6 +170,10 @@ mod tests {
         let lut = TransferLut::new(&gated, 0.0, 1.0, 1.0);
         assert!(!lut.is_visible_in(0.0, 0.45));
         assert!(lut.is_visible_in(0.3, 0.6));
+        // Data range 100..300: normalised 0.5 is the value 200.
+        let ranged = TransferFunction::new(vec![[100.0, 0.0, 0.0, 0.0, 0.0], [300.0, 1.0, 1.0, 1.0, 0.5]], Some(1.0)).unwrap();
+        let lut = TransferLut::new(&ranged, 100.0, 300.0, 1.0);
+        assert!((lut.lookup(0.5).color[0] - 0.5).abs() < 1e-3);
     }
 
     #[test]

@@ -84,7 +84,8 @@ pub struct Session<P: Producer> {
 }
 
 impl<P: Producer> Session<P> {
-    /// A session within `budget_bytes`. The transfer function's unit distance defaults to one finest voxel.
+    /// A session within `budget_bytes` on a producer whose values span `[0, 1]`. The transfer function's unit
+    /// distance defaults to one finest voxel.
     pub fn new(
         producer: P,
         transfer_function: &TransferFunction,
@@ -92,10 +93,23 @@ impl<P: Producer> Session<P> {
         budget_bytes: u64,
         limits: LoopLimits,
     ) -> Result<Session<P>> {
+        Session::with_value_range(producer, transfer_function, settings, budget_bytes, limits, [0.0, 1.0])
+    }
+
+    /// A session on a producer whose normalised values stand for data values `value_range` (the transfer function
+    /// is written in data values).
+    pub fn with_value_range(
+        producer: P,
+        transfer_function: &TransferFunction,
+        settings: RenderSettings,
+        budget_bytes: u64,
+        limits: LoopLimits,
+        value_range: [f64; 2],
+    ) -> Result<Session<P>> {
         settings.validate()?;
         let shape = producer.shape();
-        let finest_voxel = settings.placement.size * shape.voxel_size(shape.max_level);
-        let lut = TransferLut::new(transfer_function, 0.0, 1.0, finest_voxel);
+        let finest_voxel = settings.placement.mean_scale() * shape.voxel_size(shape.max_level);
+        let lut = TransferLut::new(transfer_function, value_range[0] as f32, value_range[1] as f32, finest_voxel);
         let cache = CacheManager::new(producer, budget_bytes)?;
         Ok(Session { cache, lut, settings, limits, peak_resident_bytes: 0 })
     }

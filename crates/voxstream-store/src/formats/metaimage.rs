@@ -1,0 +1,78 @@
+//! MetaImage (`.mha` with local data, `.mhd` with a data file), ITK's text-header format, raw or zlib-compressed.
+
+use std::fs::File;
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+
+use super::header_text::three;
+use super::sample_stream::{Compression, Endian, SampleStream};
+use crate::error::StoreError;
+use crate::volume::{DType, VolumeInfo};
+
+/// Opens a MetaImage volume.
+pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
+    let file = File::open(path).map_err(|e| StoreError::io(path, e))?;
+    let mut reader = BufReader::new(file);
+    let mut line = String::new();
+    let mut header_bytes = 0u64;
+    let (mut dims, mut dtype, mut data_file) = (None, None, None::<String>);
+    let (mut spacing, mut origin, mut endian, mut compression) = ([1.0; 3], [0.0; 3], Endian::Little, Compression::None);
+    loop {
+        line.clear();
+        let read = reader.read_line(&mut line).map_err(|e| StoreError::format(path, format!("unreadable header: {e}")))?;
+        if read == 0 {
+            break;
+        }
+        header_bytes += read as u64;
+        let Some((key, value)) = line.split_once('=') else {
+            return Err(StoreError::format(path, format!("malformed header line '{}'", line.trim())));
+        };
+        let value = value.trim();
+        match key.trim() {
+            "NDims" if value != "3" => {
+                return Err(StoreError::Unsupported { path: path.into(), message: format!("NDims = {value} (only 3)") })
+            }
+            "DimSize" => dims = Some(three::<u64>(path, "DimSize", value)?),
+            "ElementSpacing" | "ElementSize" => spacing = three(path, "ElementSpacing", value)?,
+            "Offset" | "Position" | "Origin" => origin = three(path, "Offset", value)?,
+            "ElementNumberOfChannels" if value != "1" => {
+                return Err(StoreError::Unsupported { path: path.into(), message: "multi-channel images".into() })
+            }
+            "BinaryDataByteOrderMSB" | "ElementByteOrderMSB" => {
+                endian = if value.eq_ignore_ascii_case("true") { Endian::Big } else { Endian::Little }
+            }
+            "CompressedData" => {
+                compression = if value.eq_ignore_ascii_case("true") { Compression::Zlib } else { Compression::None }
+            }
+            "ElementType" => {
+                dtype = Some(match value {
+                    "MET_UCHAR" => DType::U8,
+                    "MET_USHORT" => DType::U16,
+                    "MET_SHORT" => DType::I16,
+                    "MET_FLOAT" => DType::F32,
+                    other => {
+                        return Err(StoreError::Unsupported {
+                            path: path.into(),
+                            message: format!("ElementType {other} (MET_UCHAR, MET_USHORT, MET_SHORT, MET_FLOAT)"),
+                        })
+                    }
+                })
+            }
+            "ElementDataFile" => {
+                data_file = Some(value.to_string());
+                break;
+            }
+            _ => {}
+        }
+    }
+    let dims = dims.ok_or_else(|| StoreError::format(path, "header has no DimSize"))?;
+    let dtype = dtype.ok_or_else(|| StoreError::format(path, "header has no ElementType"))?;
+    let data_file = data_file.ok_or_else(|| StoreError::format(path, "header has no ElementDataFile"))?;
+    let info = VolumeInfo { dims, dtype, spacing, origin };
+    if data_file == "LOCAL" {
+        SampleStream::open(path, header_bytes, compression, 0, info, endian)
+    } else {
+        let data_path = path.parent().unwrap_or(Path::new(".")).join(data_file);
+        SampleStream::open(&data_path, 0, compression, 0, info, endian)
+    }
+}

@@ -1,0 +1,52 @@
+//! Importers: each parses a header and returns a [`SampleStream`] over the samples, read in z slabs.
+//!
+//! | format | extensions | encodings |
+//! |---|---|---|
+//! | raw | any, with `RawLayout` | plain |
+//! | NRRD | `.nrrd`, `.nhdr` | raw, gzip |
+//! | NIfTI-1 | `.nii`, `.nii.gz` | plain, gzip |
+//! | MetaImage | `.mha`, `.mhd` | plain, zlib |
+//! | INRIMAGE-4 | `.inr`, `.inr.gz` | plain, gzip |
+//! | NumPy | `.npy` | plain |
+
+pub mod header_text;
+pub mod inr;
+pub mod metaimage;
+pub mod nifti;
+pub mod npy;
+pub mod nrrd;
+pub mod raw;
+pub mod sample_stream;
+
+use std::path::Path;
+
+pub use raw::RawLayout;
+pub use sample_stream::{Compression, Endian, SampleStream};
+
+use crate::error::StoreError;
+
+/// Opens `path` by its extension; `raw` describes headerless files (required for them, ignored otherwise).
+pub fn open_volume(path: &Path, raw: Option<&RawLayout>) -> Result<SampleStream, StoreError> {
+    if !path.exists() {
+        return Err(StoreError::io(path, std::io::Error::new(std::io::ErrorKind::NotFound, "no such file")));
+    }
+    let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+    if let Some(layout) = raw {
+        return raw::open(path, layout);
+    }
+    match () {
+        _ if name.ends_with(".nrrd") || name.ends_with(".nhdr") => nrrd::open(path),
+        _ if name.ends_with(".nii.gz") => nifti::open(path, true),
+        _ if name.ends_with(".nii") => nifti::open(path, false),
+        _ if name.ends_with(".mha") || name.ends_with(".mhd") => metaimage::open(path),
+        _ if name.ends_with(".inr.gz") => inr::open(path, true),
+        _ if name.ends_with(".inr") => inr::open(path, false),
+        _ if name.ends_with(".npy") => npy::open(path),
+        _ => Err(StoreError::Unsupported {
+            path: path.into(),
+            message: "unknown format: expected .nrrd, .nhdr, .nii, .nii.gz, .mha, .mhd, .inr, .inr.gz or .npy, \
+                      or a raw file with --dims and --dtype"
+                .into(),
+        }),
+    }
+}

@@ -1,0 +1,83 @@
+//! NIfTI-1 (`.nii`, `.nii.gz`): the 348-byte header, then samples at `vox_offset`.
+//!
+//! Spacing comes from `pixdim[1..3]`, the origin from the qform offsets (or the sform translation). Rotations in
+//! the qform/sform are not applied: the volume is axis-aligned in voxstream's world, as in VTK's image data. Values
+//! are kept as stored; a `scl_slope`/`scl_inter` scaling is reported, not applied.
+
+use std::io::Read;
+use std::path::Path;
+
+use super::sample_stream::{Compression, Endian, SampleStream};
+use crate::error::StoreError;
+use crate::volume::{DType, VolumeInfo};
+
+/// Opens a NIfTI-1 volume.
+pub fn open(path: &Path, is_gzip: bool) -> Result<SampleStream, StoreError> {
+    let file = std::fs::File::open(path).map_err(|e| StoreError::io(path, e))?;
+    let mut reader: Box<dyn Read> =
+        if is_gzip { Box::new(flate2::read::MultiGzDecoder::new(file)) } else { Box::new(file) };
+    let mut h = [0u8; 348];
+    reader.read_exact(&mut h).map_err(|_| StoreError::format(path, "shorter than a NIfTI-1 header (348 bytes)"))?;
+    let endian = if i32::from_le_bytes([h[0], h[1], h[2], h[3]]) == 348 {
+        Endian::Little
+    } else if i32::from_be_bytes([h[0], h[1], h[2], h[3]]) == 348 {
+        Endian::Big
+    } else {
+        return Err(StoreError::format(path, "not a NIfTI-1 file (sizeof_hdr is not 348)"));
+    };
+    if &h[344..347] != b"n+1" {
+        return Err(StoreError::Unsupported {
+            path: path.into(),
+            message: "only single-file NIfTI-1 (magic n+1) is read; convert .hdr/.img pairs".into(),
+        });
+    }
+    let i16_at = |o: usize| match endian {
+        Endian::Little => i16::from_le_bytes([h[o], h[o + 1]]),
+        Endian::Big => i16::from_be_bytes([h[o], h[o + 1]]),
+    };
+    let f32_at = |o: usize| {
+        let b = [h[o], h[o + 1], h[o + 2], h[o + 3]];
+        match endian {
+            Endian::Little => f32::from_le_bytes(b),
+            Endian::Big => f32::from_be_bytes(b),
+        }
+    };
+    let ndims = i16_at(40);
+    let dim = [i16_at(42), i16_at(44), i16_at(46)];
+    if !(3..=4).contains(&ndims) || (ndims == 4 && i16_at(48) > 1) {
+        return Err(StoreError::Unsupported { path: path.into(), message: format!("{ndims}-D image (only 3-D)") });
+    }
+    if dim.iter().any(|&d| d <= 0) {
+        return Err(StoreError::format(path, format!("dimensions must be positive, got {dim:?}")));
+    }
+    let dtype = match i16_at(70) {
+        2 => DType::U8,
+        4 => DType::I16,
+        16 => DType::F32,
+        512 => DType::U16,
+        code => {
+            return Err(StoreError::Unsupported {
+                path: path.into(),
+                message: format!("datatype code {code} (supported: 2 uint8, 4 int16, 16 float32, 512 uint16)"),
+            })
+        }
+    };
+    let spacing = [f32_at(80), f32_at(84), f32_at(88)].map(|v| if v > 0.0 { v.abs() as f64 } else { 1.0 });
+    let origin = if i16_at(252) > 0 {
+        [f32_at(268), f32_at(272), f32_at(276)].map(|v| v as f64)
+    } else if i16_at(254) > 0 {
+        [f32_at(292), f32_at(308), f32_at(324)].map(|v| v as f64)
+    } else {
+        [0.0; 3]
+    };
+    let vox_offset = f32_at(108);
+    if !(vox_offset >= 348.0) {
+        return Err(StoreError::format(path, format!("vox_offset {vox_offset} is before the end of the header")));
+    }
+    let info = VolumeInfo { dims: dim.map(|d| d as u64), dtype, spacing, origin };
+    if is_gzip {
+        SampleStream::open(path, 0, Compression::Gzip, vox_offset as u64, info, endian)
+    } else {
+        SampleStream::open(path, vox_offset as u64, Compression::None, 0, info, endian)
+    }
+}

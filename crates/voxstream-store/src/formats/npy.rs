@@ -1,0 +1,64 @@
+//! NumPy `.npy` (format versions 1–3): a 3-D array of `u1`, `u2`, `i2` or `f4`, C or Fortran order.
+//!
+//! A C-order array of shape `(Z, Y, X)` (NumPy's usual `volume[z, y, x]`) and a Fortran-order array of shape
+//! `(X, Y, Z)` both have x fastest in the file, which is voxstream's order. Spacing 1, origin 0.
+
+use std::io::Read;
+use std::path::Path;
+
+use super::sample_stream::{Compression, Endian, SampleStream};
+use crate::error::StoreError;
+use crate::volume::{DType, VolumeInfo};
+
+/// Opens a `.npy` array.
+pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
+    let mut file = std::fs::File::open(path).map_err(|e| StoreError::io(path, e))?;
+    let mut magic = [0u8; 8];
+    file.read_exact(&mut magic).map_err(|_| StoreError::format(path, "too short for a .npy file"))?;
+    if &magic[..6] != b"\x93NUMPY" {
+        return Err(StoreError::format(path, "not a .npy file (bad magic)"));
+    }
+    let (length_bytes, prefix) = match magic[6] {
+        1 => (2usize, 10u64),
+        2 | 3 => (4, 12),
+        v => return Err(StoreError::Unsupported { path: path.into(), message: format!(".npy format version {v}") }),
+    };
+    let mut length = [0u8; 4];
+    file.read_exact(&mut length[..length_bytes]).map_err(|_| StoreError::format(path, "truncated .npy header"))?;
+    let header_len = u32::from_le_bytes(length) as u64;
+    let mut header = vec![0u8; header_len as usize];
+    file.read_exact(&mut header).map_err(|_| StoreError::format(path, "truncated .npy header"))?;
+    let header = String::from_utf8_lossy(&header).into_owned();
+    let field = |key: &str| -> Option<String> {
+        let start = header.find(&format!("'{key}'"))? + key.len() + 2;
+        let rest = header[start..].trim_start().strip_prefix(':')?.trim_start();
+        let end = if rest.starts_with('(') { rest.find(')')? + 1 } else { rest.find([',', '}'])? };
+        Some(rest[..end].trim().trim_matches('\'').to_string())
+    };
+    let descr = field("descr").ok_or_else(|| StoreError::format(path, "header has no 'descr'"))?;
+    let fortran = field("fortran_order").ok_or_else(|| StoreError::format(path, "header has no 'fortran_order'"))? == "True";
+    let shape_text = field("shape").ok_or_else(|| StoreError::format(path, "header has no 'shape'"))?;
+    let shape: Vec<u64> = shape_text
+        .trim_matches(['(', ')'])
+        .split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .map(|s| s.parse().map_err(|_| StoreError::format(path, format!("bad shape '{shape_text}'"))))
+        .collect::<Result<_, _>>()?;
+    if shape.len() != 3 {
+        return Err(StoreError::Unsupported { path: path.into(), message: format!("{}-D array (only 3-D)", shape.len()) });
+    }
+    let endian = if descr.starts_with('>') { Endian::Big } else { Endian::Little };
+    let dtype = match descr.trim_start_matches(['<', '>', '|', '=']) {
+        "u1" => DType::U8,
+        "u2" => DType::U16,
+        "i2" => DType::I16,
+        "f4" => DType::F32,
+        other => {
+            return Err(StoreError::Unsupported { path: path.into(), message: format!("dtype '{other}' (u1, u2, i2, f4)") })
+        }
+    };
+    let dims = if fortran { [shape[0], shape[1], shape[2]] } else { [shape[2], shape[1], shape[0]] };
+    let info = VolumeInfo { dims, dtype, spacing: [1.0; 3], origin: [0.0; 3] };
+    SampleStream::open(path, prefix + header_len, Compression::None, 0, info, endian)
+}

@@ -1,0 +1,412 @@
+//! Importing a volume into a store, in bounded memory: the input is read in slabs of one brick of z slices; each
+//! level keeps at most one slab of its own resolution, writes it as one row of shards, and passes the 2×2×2 average
+//! to the next level. Reichl (seed 004, ch. 4) calls this building the data pool once, offline.
+//!
+//! Memory: about `brick_size · X · Y · 4 bytes · 4/3` for the slabs of all levels (f32 samples), plus one shard row
+//! being encoded. An import writes into `STORE.partial` and renames it to `STORE` only when complete, so an
+//! interrupted import never leaves a store that looks complete; running it again restarts cleanly.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use rayon::prelude::*;
+use zarrs::array::{Array, ArrayBuilder, DataType};
+use zarrs::filesystem::FilesystemStore;
+use zarrs::group::GroupBuilder;
+
+use crate::error::StoreError;
+use crate::layout::PyramidLayout;
+use crate::metadata::{ome_multiscales, StoreAttributes, MINMAX_GROUP};
+use crate::volume::{DType, VolumeInfo, VolumeSource};
+
+/// Choices of an import.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ImportOptions {
+    /// Brick (inner chunk) edge in samples.
+    pub brick_size: u64,
+    /// Bricks per shard along x and y (a shard is one brick deep in z, so a slab writes whole shards).
+    pub shard_bricks: u64,
+    /// zstd level.
+    pub zstd_level: i32,
+    /// Replace an existing store.
+    pub overwrite: bool,
+}
+
+impl Default for ImportOptions {
+    fn default() -> Self {
+        ImportOptions { brick_size: 32, shard_bricks: 8, zstd_level: 3, overwrite: false }
+    }
+}
+
+/// What an import did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ImportReport {
+    /// Levels written.
+    pub levels: usize,
+    /// Smallest and largest value.
+    pub value_range: [f64; 2],
+    /// Bricks per level that hold data (written).
+    pub bricks_written: Vec<u64>,
+    /// Bricks per level skipped because all their samples are 0 (the fill value).
+    pub bricks_empty: Vec<u64>,
+}
+
+/// Imports `source` into a new store at `out`. `progress(done, total)` is called with input bytes.
+pub fn import_volume(
+    source: &mut dyn VolumeSource,
+    out: &Path,
+    options: &ImportOptions,
+    progress: &mut dyn FnMut(u64, u64),
+) -> Result<ImportReport, StoreError> {
+    if !(4..=256).contains(&options.brick_size) || options.brick_size % 2 != 0 {
+        return Err(StoreError::store(out, format!("brick size must be even and in 4..=256, got {}", options.brick_size)));
+    }
+    if out.exists() && !options.overwrite {
+        return Err(StoreError::store(out, "already exists (use --overwrite to replace it)"));
+    }
+    let info = source.info().clone();
+    let layout = PyramidLayout::new(info.dims, options.brick_size);
+    let partial = partial_path(out);
+    if partial.exists() {
+        std::fs::remove_dir_all(&partial).map_err(|e| StoreError::io(&partial, e))?;
+    }
+    std::fs::create_dir_all(&partial).map_err(|e| StoreError::io(&partial, e))?;
+    let store = Arc::new(FilesystemStore::new(&partial).map_err(|e| StoreError::store(&partial, e.to_string()))?);
+    let zarr = |e: &dyn std::fmt::Display| StoreError::store(&partial, e.to_string());
+
+    let mut levels: Vec<LevelWriter> = Vec::new();
+    for level in 0..layout.levels() {
+        let array = build_level_array(&store, &layout, level, info.dtype, options).map_err(|e| zarr(&e))?;
+        array.store_metadata().map_err(|e| zarr(&e))?;
+        levels.push(LevelWriter::new(array, &layout, level, info.dtype));
+    }
+
+    let brick = options.brick_size as usize;
+    let total = info.byte_len();
+    let slice_bytes = info.slice_len() as u64 * info.dtype.size() as u64;
+    let mut value_range = [f64::INFINITY, f64::NEG_INFINITY];
+    let mut slab = Vec::new();
+    let mut z = 0u64;
+    while z < info.dims[2] {
+        let count = (info.dims[2] - z).min(brick as u64) as usize;
+        slab.clear();
+        source.read_slices(count, &mut slab)?;
+        for &v in &slab {
+            value_range[0] = value_range[0].min(v as f64);
+            value_range[1] = value_range[1].max(v as f64);
+        }
+        push_planes(&mut levels, 0, &slab, count, false).map_err(|e| zarr(&e))?;
+        z += count as u64;
+        progress(z * slice_bytes, total);
+    }
+    // Flush what the coarser levels still hold.
+    for level in 0..levels.len() {
+        if levels[level].planes > 0 {
+            push_planes(&mut levels, level, &[], 0, true).map_err(|e| zarr(&e))?;
+        }
+    }
+    if !value_range[0].is_finite() {
+        value_range = [0.0, 0.0];
+    }
+
+    // Per-brick min/max, hierarchical: a coarse brick's range covers every full-resolution sample below it.
+    for level in 1..levels.len() {
+        let (finer, coarser) = levels.split_at_mut(level);
+        coarser[0].aggregate_minmax_from(&finer[level - 1]);
+    }
+    for (level, writer) in levels.iter().enumerate() {
+        write_minmax(&store, &layout, level, &writer.minmax).map_err(|e| zarr(&e))?;
+    }
+    GroupBuilder::new().build(store.clone(), &format!("/{MINMAX_GROUP}")).map_err(|e| zarr(&e))?
+        .store_metadata().map_err(|e| zarr(&e))?;
+
+    let report = ImportReport {
+        levels: layout.levels(),
+        value_range,
+        bricks_written: levels.iter().map(|l| l.written).collect(),
+        bricks_empty: levels.iter().map(|l| l.empty).collect(),
+    };
+    let name = out.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let attributes = StoreAttributes::new(&info, &layout, value_range, true);
+    let mut group = GroupBuilder::new().build(store.clone(), "/").map_err(|e| zarr(&e))?;
+    group.attributes_mut().insert("ome".into(), ome_multiscales(&name, &info, &layout));
+    group.attributes_mut().insert("voxstream".into(), serde_json::to_value(&attributes).map_err(|e| zarr(&e))?);
+    group.store_metadata().map_err(|e| zarr(&e))?;
+    drop(store);
+    if out.exists() {
+        std::fs::remove_dir_all(out).map_err(|e| StoreError::io(out, e))?;
+    }
+    std::fs::rename(&partial, out).map_err(|e| StoreError::io(out, e))?;
+    Ok(report)
+}
+
+/// Where an import in progress writes.
+pub fn partial_path(out: &Path) -> PathBuf {
+    let mut name = out.file_name().map(|n| n.to_os_string()).unwrap_or_default();
+    name.push(".partial");
+    out.with_file_name(name)
+}
+
+fn data_type(dtype: DType) -> DataType {
+    match dtype {
+        DType::U8 => zarrs::array::data_type::uint8(),
+        DType::U16 => zarrs::array::data_type::uint16(),
+        DType::I16 => zarrs::array::data_type::int16(),
+        DType::F32 => zarrs::array::data_type::float32(),
+    }
+}
+
+fn build_level_array(
+    store: &Arc<FilesystemStore>,
+    layout: &PyramidLayout,
+    level: usize,
+    dtype: DType,
+    options: &ImportOptions,
+) -> Result<Array<FilesystemStore>, Box<dyn std::error::Error>> {
+    use zarrs::array::codec::array_to_bytes::sharding::ShardingCodecBuilder;
+    use zarrs::array::codec::ZstdCodec;
+    let [x, y, z] = layout.level_dims[level];
+    let b = layout.brick_size;
+    let shard = vec![b, b * options.shard_bricks, b * options.shard_bricks];
+    let edge = std::num::NonZeroU64::new(b).ok_or("brick size must be positive")?;
+    let mut sharding = ShardingCodecBuilder::new(vec![edge; 3], &data_type(dtype));
+    sharding.bytes_to_bytes_codecs(vec![Arc::new(ZstdCodec::new(options.zstd_level, false))]);
+    let fill = match dtype {
+        DType::U8 => zarrs::array::FillValue::from(0u8),
+        DType::U16 => zarrs::array::FillValue::from(0u16),
+        DType::I16 => zarrs::array::FillValue::from(0i16),
+        DType::F32 => zarrs::array::FillValue::from(0f32),
+    };
+    let array = ArrayBuilder::new(vec![z, y, x], shard, data_type(dtype), fill)
+        .array_to_bytes_codec(Arc::new(sharding.build()))
+        .dimension_names(["z", "y", "x"].into())
+        .build(store.clone(), &format!("/{level}"))?;
+    Ok(array)
+}
+
+/// One level being written: a slab of up to one brick of z planes.
+struct LevelWriter {
+    array: Array<FilesystemStore>,
+    dims: [u64; 3],
+    bricks: [u64; 3],
+    brick: u64,
+    dtype: DType,
+    /// Planes held (x fastest), `planes` of them.
+    buffer: Vec<f32>,
+    planes: usize,
+    /// Next z row of bricks to write.
+    row: u64,
+    /// Per brick (x fastest, then y, then z): `[min, max]`.
+    minmax: Vec<[f32; 2]>,
+    written: u64,
+    empty: u64,
+}
+
+impl LevelWriter {
+    fn new(array: Array<FilesystemStore>, layout: &PyramidLayout, level: usize, dtype: DType) -> LevelWriter {
+        let bricks = layout.bricks(level);
+        LevelWriter {
+            array,
+            dims: layout.level_dims[level],
+            bricks,
+            brick: layout.brick_size,
+            dtype,
+            buffer: Vec::new(),
+            planes: 0,
+            row: 0,
+            minmax: vec![[f32::INFINITY, f32::NEG_INFINITY]; bricks.iter().product::<u64>() as usize],
+            written: 0,
+            empty: 0,
+        }
+    }
+
+    fn aggregate_minmax_from(&mut self, finer: &LevelWriter) {
+        let fb = finer.bricks;
+        for z in 0..fb[2] {
+            for y in 0..fb[1] {
+                for x in 0..fb[0] {
+                    let child = finer.minmax[((z * fb[1] + y) * fb[0] + x) as usize];
+                    let parent = ((z / 2 * self.bricks[1] + y / 2) * self.bricks[0] + x / 2) as usize;
+                    let entry = &mut self.minmax[parent];
+                    entry[0] = entry[0].min(child[0]);
+                    entry[1] = entry[1].max(child[1]);
+                }
+            }
+        }
+    }
+
+    /// Writes the held planes as one row of shards; returns the 2×2×2-averaged planes for the next level.
+    fn flush(&mut self) -> Result<(Vec<f32>, usize), Box<dyn std::error::Error + Send + Sync>> {
+        let [nx, ny, _] = self.dims;
+        let b = self.brick;
+        let planes = self.planes;
+        let shard_xy = self.array.chunk_grid_shape()[1..].to_vec();
+        let shard_edge = self.array.chunk_shape(&[self.row, 0, 0])?.iter().map(|d| d.get()).collect::<Vec<_>>();
+        let (shard_y, shard_x) = (shard_edge[1], shard_edge[2]);
+        let shards: Vec<(u64, u64)> =
+            (0..shard_xy[0]).flat_map(|sy| (0..shard_xy[1]).map(move |sx| (sy, sx))).collect();
+        let buffer = &self.buffer;
+        let dtype = self.dtype;
+        let array = &self.array;
+        let row = self.row;
+        // Encode and write the shards of this row in parallel.
+        let results: Vec<Result<Vec<(u64, [f32; 2], bool)>, String>> = shards
+            .par_iter()
+            .map(|&(sy, sx)| {
+                let mut elements = vec![0f32; (b * shard_y * shard_x) as usize];
+                let mut brick_ranges: Vec<(u64, [f32; 2], bool)> = Vec::new();
+                for z in 0..planes as u64 {
+                    for y in 0..shard_y {
+                        let gy = sy * shard_y + y;
+                        if gy >= ny {
+                            break;
+                        }
+                        let start = ((z * ny + gy) * nx + sx * shard_x) as usize;
+                        let len = (shard_x).min(nx.saturating_sub(sx * shard_x)) as usize;
+                        let dst = ((z * shard_y + y) * shard_x) as usize;
+                        elements[dst..dst + len].copy_from_slice(&buffer[start..start + len]);
+                    }
+                }
+                // Min/max of the valid samples of each brick of the shard.
+                for by in 0..shard_y / b {
+                    for bx in 0..shard_x / b {
+                        let (gbx, gby) = (sx * shard_x / b + bx, sy * shard_y / b + by);
+                        if gbx * b >= nx || gby * b >= ny {
+                            continue;
+                        }
+                        let mut range = [f32::INFINITY, f32::NEG_INFINITY];
+                        for z in 0..planes as u64 {
+                            for y in by * b..((by + 1) * b).min(ny - sy * shard_y) {
+                                for x in bx * b..((bx + 1) * b).min(nx - sx * shard_x) {
+                                    let v = elements[((z * shard_y + y) * shard_x + x) as usize];
+                                    range[0] = range[0].min(v);
+                                    range[1] = range[1].max(v);
+                                }
+                            }
+                        }
+                        brick_ranges.push((gby * (nx.div_ceil(b)) + gbx, range, range == [0.0, 0.0]));
+                    }
+                }
+                store_shard(array, &[row, sy, sx], &elements, dtype).map_err(|e| e.to_string())?;
+                Ok(brick_ranges)
+            })
+            .collect();
+        for result in results {
+            for (index_in_row, range, is_empty) in result.map_err(|e| -> Box<dyn std::error::Error + Send + Sync> { e.into() })? {
+                let index = (row * self.bricks[0] * self.bricks[1] + index_in_row) as usize;
+                self.minmax[index] = range;
+                if is_empty {
+                    self.empty += 1;
+                } else {
+                    self.written += 1;
+                }
+            }
+        }
+        let coarse = downsample(&self.buffer, [nx, ny, planes as u64]);
+        self.buffer.clear();
+        self.planes = 0;
+        self.row += 1;
+        Ok((coarse, planes.div_ceil(2)))
+    }
+}
+
+fn store_shard(
+    array: &Array<FilesystemStore>,
+    indices: &[u64],
+    elements: &[f32],
+    dtype: DType,
+) -> Result<(), Box<dyn std::error::Error>> {
+    match dtype {
+        DType::U8 => array.store_chunk(indices, &elements.iter().map(|&v| v.round() as u8).collect::<Vec<_>>())?,
+        DType::U16 => array.store_chunk(indices, &elements.iter().map(|&v| v.round() as u16).collect::<Vec<_>>())?,
+        DType::I16 => array.store_chunk(indices, &elements.iter().map(|&v| v.round() as i16).collect::<Vec<_>>())?,
+        DType::F32 => array.store_chunk(indices, elements)?,
+    }
+    Ok(())
+}
+
+/// Appends `count` planes to `level`; writes a row when a brick's worth is held (or `finish`), cascading down.
+fn push_planes(
+    levels: &mut [LevelWriter],
+    level: usize,
+    planes: &[f32],
+    count: usize,
+    finish: bool,
+) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
+    let writer = &mut levels[level];
+    writer.buffer.extend_from_slice(planes);
+    writer.planes += count;
+    if writer.planes as u64 >= writer.brick || (finish && writer.planes > 0) {
+        let (coarse, coarse_planes) = writer.flush()?;
+        if level + 1 < levels.len() {
+            push_planes(levels, level + 1, &coarse, coarse_planes, false)?;
+        }
+    }
+    Ok(())
+}
+
+/// Averages 2×2×2 blocks of `planes` (dims x, y, z); odd edges average the samples that exist.
+fn downsample(planes: &[f32], dims: [u64; 3]) -> Vec<f32> {
+    let [nx, ny, nz] = dims.map(|d| d as usize);
+    let [ox, oy, oz] = [nx.div_ceil(2), ny.div_ceil(2), nz.div_ceil(2)];
+    let mut out = vec![0f32; ox * oy * oz];
+    for z in 0..oz {
+        for y in 0..oy {
+            for x in 0..ox {
+                let (mut sum, mut n) = (0f64, 0u32);
+                for dz in 0..2 {
+                    for dy in 0..2 {
+                        for dx in 0..2 {
+                            let (sx, sy, sz) = (2 * x + dx, 2 * y + dy, 2 * z + dz);
+                            if sx < nx && sy < ny && sz < nz {
+                                sum += planes[(sz * ny + sy) * nx + sx] as f64;
+                                n += 1;
+                            }
+                        }
+                    }
+                }
+                out[(z * oy + y) * ox + x] = (sum / n as f64) as f32;
+            }
+        }
+    }
+    out
+}
+
+fn write_minmax(
+    store: &Arc<FilesystemStore>,
+    layout: &PyramidLayout,
+    level: usize,
+    minmax: &[[f32; 2]],
+) -> Result<(), Box<dyn std::error::Error>> {
+    let [bx, by, bz] = layout.bricks(level);
+    let array = ArrayBuilder::new(vec![bz, by, bx, 2], vec![bz, by, bx, 2], zarrs::array::data_type::float32(), zarrs::array::FillValue::from(0f32))
+        .dimension_names(["z", "y", "x", "minmax"].into())
+        .build(store.clone(), &format!("/{MINMAX_GROUP}/{level}"))?;
+    array.store_metadata()?;
+    let flat: Vec<f32> = minmax.iter().flat_map(|r| if r[0] > r[1] { [0.0, 0.0] } else { *r }).collect();
+    array.store_chunk(&[0, 0, 0, 0], &flat)?;
+    Ok(())
+}
+
+/// Geometry of a store being read, for tests and `info`.
+pub fn volume_of(attributes: &StoreAttributes) -> Option<VolumeInfo> {
+    Some(VolumeInfo {
+        dims: attributes.dims,
+        dtype: attributes.dtype()?,
+        spacing: attributes.spacing,
+        origin: attributes.origin,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn downsampling_averages_blocks_and_edges() {
+        // 3×1×1 → 2×1×1: (a+b)/2 and c.
+        assert_eq!(downsample(&[1.0, 3.0, 10.0], [3, 1, 1]), vec![2.0, 10.0]);
+        let cube: Vec<f32> = (0..8).map(|i| i as f32).collect();
+        assert_eq!(downsample(&cube, [2, 2, 2]), vec![3.5]);
+    }
+}

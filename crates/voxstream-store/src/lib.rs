@@ -1,0 +1,22 @@
+//! # voxstream-store: real volumes, out of core
+//!
+//! Where it sits in the loop (camera → renderer → feedback → cache manager → **producers** → pools): the
+//! [`StoreProducer`](store_producer::StoreProducer) answers the cache manager's requests by reading bricks from an
+//! on-disk OME-Zarr store, which [`import_volume`](import::import_volume) builds once from a volume file.
+//!
+//! - [`formats`]: importers (raw, NRRD, NIfTI-1, MetaImage, INR, NumPy), read in z slabs.
+//! - [`import`]: the streaming pyramid writer (OME-Zarr 0.5 / Zarr v3, sharded, zstd, per-brick min/max).
+//! - [`store_producer`]: bricks with borders, streamed from the store (GigaVoxels' producer reading from disk;
+//!   Reichl's streaming supplier, seed 004 ch. 4).
+
+pub mod error;
+pub mod formats;
+pub mod import;
+pub mod layout;
+pub mod metadata;
+pub mod volume;
+
+pub use error::StoreError;
+pub use import::{import_volume, ImportOptions, ImportReport};
+pub use layout::PyramidLayout;
+pub use volume::{DType, VolumeInfo, VolumeSource};

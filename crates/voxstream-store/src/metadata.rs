@@ -1,0 +1,88 @@
+//! The store's metadata: OME-Zarr 0.5 multiscales (what standard readers use) plus voxstream's own attributes.
+
+use serde::{Deserialize, Serialize};
+use serde_json::{json, Value};
+
+use crate::layout::PyramidLayout;
+use crate::volume::{DType, VolumeInfo};
+
+/// Path of the per-brick min/max arrays under the store root (`minmax/0`, `minmax/1`, …).
+pub const MINMAX_GROUP: &str = "voxstream_minmax";
+
+/// voxstream's attributes, under `attributes.voxstream` of the root group.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StoreAttributes {
+    /// Format version of these attributes.
+    pub format_version: u32,
+    /// Samples per axis at level 0 (x, y, z).
+    pub dims: [u64; 3],
+    /// Sample type name (`u8`, `u16`, `i16`, `f32`).
+    pub dtype: String,
+    /// World spacing (x, y, z).
+    pub spacing: [f64; 3],
+    /// World origin of sample (0, 0, 0).
+    pub origin: [f64; 3],
+    /// Brick (inner chunk) edge.
+    pub brick_size: u64,
+    /// Levels, 0 = full resolution.
+    pub levels: usize,
+    /// Smallest and largest sample value at level 0.
+    pub value_range: [f64; 2],
+    /// The import finished: absent or false means an interrupted import.
+    pub complete: bool,
+}
+
+impl StoreAttributes {
+    /// Attributes for a volume and layout.
+    pub fn new(info: &VolumeInfo, layout: &PyramidLayout, value_range: [f64; 2], complete: bool) -> StoreAttributes {
+        StoreAttributes {
+            format_version: 1,
+            dims: info.dims,
+            dtype: info.dtype.name().into(),
+            spacing: info.spacing,
+            origin: info.origin,
+            brick_size: layout.brick_size,
+            levels: layout.levels(),
+            value_range,
+            complete,
+        }
+    }
+
+    /// The sample type.
+    pub fn dtype(&self) -> Option<DType> {
+        DType::from_name(&self.dtype)
+    }
+}
+
+/// The `ome` attribute: axes z, y, x and one dataset per level with its scale and translation.
+pub fn ome_multiscales(name: &str, info: &VolumeInfo, layout: &PyramidLayout) -> Value {
+    let datasets: Vec<Value> = (0..layout.levels())
+        .map(|level| {
+            let factor = (1u64 << level) as f64;
+            // A level-l sample averages a 2^l block: its centre is (2^l − 1)/2 samples from the block's first one.
+            let shift = (factor - 1.0) / 2.0;
+            let [sx, sy, sz] = info.spacing;
+            let [ox, oy, oz] = info.origin;
+            json!({
+                "path": level.to_string(),
+                "coordinateTransformations": [
+                    {"type": "scale", "scale": [sz * factor, sy * factor, sx * factor]},
+                    {"type": "translation", "translation": [oz + shift * sz, oy + shift * sy, ox + shift * sx]}
+                ]
+            })
+        })
+        .collect();
+    json!({
+        "version": "0.5",
+        "multiscales": [{
+            "name": name,
+            "axes": [
+                {"name": "z", "type": "space"},
+                {"name": "y", "type": "space"},
+                {"name": "x", "type": "space"}
+            ],
+            "datasets": datasets,
+            "type": "mean"
+        }]
+    })
+}

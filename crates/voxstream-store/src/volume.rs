@@ -1,0 +1,101 @@
+//! What an imported volume is: dimensions, sample type, spacing and origin (VTK/ITK convention: sample `(i, j, k)`
+//! lies at `origin + spacing·(i, j, k)`), and a source that yields it slab by slab.
+
+use crate::error::StoreError;
+
+/// Sample types kept from the input.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DType {
+    /// Unsigned 8-bit.
+    U8,
+    /// Unsigned 16-bit.
+    U16,
+    /// Signed 16-bit.
+    I16,
+    /// 32-bit float.
+    F32,
+}
+
+impl DType {
+    /// Bytes per sample.
+    pub fn size(self) -> usize {
+        match self {
+            DType::U8 => 1,
+            DType::U16 | DType::I16 => 2,
+            DType::F32 => 4,
+        }
+    }
+
+    /// Name used on the command line and in metadata (`u8`, `u16`, `i16`, `f32`).
+    pub fn name(self) -> &'static str {
+        match self {
+            DType::U8 => "u8",
+            DType::U16 => "u16",
+            DType::I16 => "i16",
+            DType::F32 => "f32",
+        }
+    }
+
+    /// Parses a command-line name.
+    pub fn from_name(name: &str) -> Option<DType> {
+        match name {
+            "u8" | "uint8" => Some(DType::U8),
+            "u16" | "uint16" => Some(DType::U16),
+            "i16" | "int16" => Some(DType::I16),
+            "f32" | "float32" => Some(DType::F32),
+            _ => None,
+        }
+    }
+}
+
+/// Geometry and type of a volume.
+#[derive(Clone, Debug, PartialEq)]
+pub struct VolumeInfo {
+    /// Samples along x, y, z (x fastest in memory).
+    pub dims: [u64; 3],
+    /// Sample type.
+    pub dtype: DType,
+    /// World distance between samples along x, y, z.
+    pub spacing: [f64; 3],
+    /// World position of sample (0, 0, 0).
+    pub origin: [f64; 3],
+}
+
+impl VolumeInfo {
+    /// Checks dimensions and spacing.
+    pub fn validate(&self, path: &std::path::Path) -> Result<(), StoreError> {
+        if self.dims.iter().any(|&d| d == 0) {
+            return Err(StoreError::format(path, format!("dimensions must be positive, got {:?}", self.dims)));
+        }
+        if self.dims.iter().any(|&d| d > 1 << 20) {
+            return Err(StoreError::format(path, format!("dimensions {:?} exceed 2^20 per axis", self.dims)));
+        }
+        if self.spacing.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
+            return Err(StoreError::format(path, format!("spacing must be positive, got {:?}", self.spacing)));
+        }
+        if self.origin.iter().any(|o| !o.is_finite()) {
+            return Err(StoreError::format(path, "origin must be finite"));
+        }
+        Ok(())
+    }
+
+    /// Samples in one z slice.
+    pub fn slice_len(&self) -> usize {
+        (self.dims[0] * self.dims[1]) as usize
+    }
+
+    /// Bytes of all samples.
+    pub fn byte_len(&self) -> u64 {
+        self.dims.iter().product::<u64>() * self.dtype.size() as u64
+    }
+}
+
+/// A volume read front to back, a few z slices at a time, so imports run in bounded memory.
+pub trait VolumeSource: Send {
+    /// Geometry and type.
+    fn info(&self) -> &VolumeInfo;
+
+    /// Appends the next `count` z slices to `out` (x fastest, then y, then z), as `f32` (exact for every supported
+    /// type).
+    fn read_slices(&mut self, count: usize, out: &mut Vec<f32>) -> Result<(), StoreError>;
+}
