@@ -14,9 +14,13 @@ pub mod formats;
 pub mod import;
 pub mod layout;
 pub mod metadata;
+pub mod store_producer;
+pub mod store_reader;
 pub mod volume;
 
 pub use error::StoreError;
 pub use import::{import_volume, ImportOptions, ImportReport};
 pub use layout::PyramidLayout;
+pub use store_producer::StoreProducer;
+pub use store_reader::StoreReader;
 pub use volume::{DType, VolumeInfo, VolumeSource};

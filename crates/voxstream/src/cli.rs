@@ -18,8 +18,12 @@ pub struct Cli {
 /// Subcommands.
 #[derive(Subcommand, Debug)]
 pub enum Command {
-    /// Render a scene to PNG.
+    /// Render a built-in scene or a store to PNG.
     Render(RenderArgs),
+    /// Import a volume file into a multiresolution OME-Zarr brick store.
+    Import(ImportArgs),
+    /// Describe a store: dimensions, type, spacing, levels, bricks, bytes, value range.
+    Info(InfoArgs),
     /// List the built-in scenes.
     Scenes,
     /// Measure converged time, frames to converge, interactive frame times and throughput per scene.
@@ -38,7 +42,7 @@ pub enum ShadingArg {
 /// `voxstream render`.
 #[derive(Args, Debug, Clone)]
 pub struct RenderArgs {
-    /// A built-in scene: sponge, hypertexture or shell.
+    /// A built-in scene (sponge, hypertexture, shell) or a store folder made by `voxstream import`.
     #[arg(default_value = crate::scenes::DEFAULT_SCENE)]
     pub source: String,
     /// Output PNG (with --path, frames are numbered: frame_0000.png, …).
@@ -100,6 +104,62 @@ pub struct RenderArgs {
     pub lod_bias: f64,
 }
 
+/// Byte order of a raw file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum EndianArg {
+    /// Least significant byte first.
+    Little,
+    /// Most significant byte first.
+    Big,
+}
+
+/// `voxstream import`.
+#[derive(Args, Debug, Clone)]
+pub struct ImportArgs {
+    /// Input: .nrrd/.nhdr, .nii/.nii.gz, .mha/.mhd, .inr/.inr.gz, .npy, or a raw file with --dims and --dtype.
+    pub input: PathBuf,
+    /// The store folder to create.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Raw input: samples along x,y,z.
+    #[arg(long, value_parser = parse_dims)]
+    pub dims: Option<[u64; 3]>,
+    /// Raw input: sample type u8, u16, i16 or f32.
+    #[arg(long)]
+    pub dtype: Option<String>,
+    /// Raw input: byte order.
+    #[arg(long, value_enum, default_value_t = EndianArg::Little)]
+    pub endian: EndianArg,
+    /// Raw input: bytes to skip before the samples.
+    #[arg(long, default_value_t = 0)]
+    pub header_bytes: u64,
+    /// Raw input: spacing x,y,z (world units).
+    #[arg(long, value_parser = parse_vec3, default_value = "1,1,1")]
+    pub spacing: [f64; 3],
+    /// Raw input: world position of sample (0,0,0).
+    #[arg(long, value_parser = parse_vec3, default_value = "0,0,0", allow_hyphen_values = true)]
+    pub origin: [f64; 3],
+    /// Brick edge in samples (even, 4..=256).
+    #[arg(long, default_value_t = 32)]
+    pub brick_size: u64,
+    /// Replace an existing store.
+    #[arg(long)]
+    pub overwrite: bool,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// `voxstream info`.
+#[derive(Args, Debug, Clone)]
+pub struct InfoArgs {
+    /// The store folder.
+    pub store: PathBuf,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
 /// `voxstream bench`.
 #[derive(Args, Debug, Clone)]
 pub struct BenchArgs {
@@ -121,6 +181,22 @@ pub struct BenchArgs {
     /// Also write the figures as JSON here.
     #[arg(long)]
     pub json: Option<PathBuf>,
+}
+
+/// Parses `x,y,z` positive integers.
+pub fn parse_dims(text: &str) -> Result<[u64; 3], String> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    if parts.len() != 3 {
+        return Err(format!("expected three comma-separated sizes x,y,z, got '{text}'"));
+    }
+    let mut out = [0u64; 3];
+    for (slot, part) in out.iter_mut().zip(&parts) {
+        *slot = part.parse().map_err(|_| format!("'{part}' is not a positive integer"))?;
+        if *slot == 0 {
+            return Err("sizes must be positive".into());
+        }
+    }
+    Ok(out)
 }
 
 /// Parses `x,y,z`.

@@ -9,6 +9,8 @@
 pub mod bench;
 pub mod camera_path;
 pub mod cli;
+pub mod import_command;
+pub mod info_command;
 pub mod memory;
 pub mod png_output;
 pub mod render_command;

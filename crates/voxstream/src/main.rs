@@ -5,7 +5,7 @@ use std::process::ExitCode;
 
 use clap::Parser;
 use voxstream::cli::{Cli, Command, RenderArgs};
-use voxstream::{bench, render_command, scenes, session};
+use voxstream::{bench, import_command, info_command, render_command, scenes, session};
 
 fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
@@ -40,6 +40,8 @@ fn main() -> ExitCode {
             Ok(())
         }
         Some(Command::Bench(args)) => bench::run(&args),
+        Some(Command::Import(args)) => import_command::run(&args),
+        Some(Command::Info(args)) => info_command::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

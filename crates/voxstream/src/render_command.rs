@@ -1,9 +1,13 @@
 //! `voxstream render`: builds the session from the flags, renders a frame or a camera path, writes PNGs and stats.
 
 use std::path::Path;
+use std::sync::Arc;
 
 use anyhow::{bail, Context, Result};
-use voxstream_render::{RenderSettings, Shading, TransferFunction};
+use voxstream_core::Producer;
+use voxstream_render::{Camera, RenderSettings, Shading, TransferFunction, VolumePlacement};
+use voxstream_store::import::partial_path;
+use voxstream_store::{StoreProducer, StoreReader};
 
 use crate::camera_path::read_camera_path;
 use crate::cli::{RenderArgs, ShadingArg};
@@ -16,11 +20,56 @@ use crate::stats::RunStats;
 /// Largest accepted budget (1 TiB): guards against typos that would overflow.
 const MAX_BUDGET_MB: u64 = 1 << 20;
 
+/// What `voxstream render` draws: a built-in scene or a store, with its defaults.
+struct Source<P> {
+    name: String,
+    producer: P,
+    transfer_function: TransferFunction,
+    shading: Shading,
+    camera: Camera,
+    placement: VolumePlacement,
+    value_range: [f64; 2],
+}
+
 /// Runs `voxstream render`.
 pub fn run(args: &RenderArgs) -> Result<()> {
-    let scene = builtin(&args.source).with_context(|| {
-        format!("unknown source '{}': expected a built-in scene ({})", args.source, SCENE_NAMES.join(", "))
-    })?;
+    check_flags(args)?;
+    if let Some(scene) = builtin(&args.source) {
+        let source = Source {
+            name: scene.name.to_string(),
+            producer: scene.producer,
+            transfer_function: scene.transfer_function,
+            shading: scene.shading,
+            camera: scene.camera,
+            placement: VolumePlacement::default(),
+            value_range: [0.0, 1.0],
+        };
+        return render_source(args, source);
+    }
+    let path = Path::new(&args.source);
+    if path.is_dir() || partial_path(path).is_dir() || path.join("zarr.json").exists() {
+        let reader = Arc::new(StoreReader::open(path)?);
+        let producer = StoreProducer::new(reader.clone())?;
+        let attributes = reader.attributes().clone();
+        let source = Source {
+            name: args.source.clone(),
+            producer,
+            transfer_function: default_store_transfer_function(attributes.value_range)?,
+            shading: Shading::None,
+            camera: store_camera(reader.info()),
+            placement: store_placement(&reader),
+            value_range: attributes.value_range,
+        };
+        return render_source(args, source);
+    }
+    bail!(
+        "unknown source '{}': expected a built-in scene ({}) or a store folder made by `voxstream import`",
+        args.source,
+        SCENE_NAMES.join(", ")
+    )
+}
+
+fn check_flags(args: &RenderArgs) -> Result<()> {
     if args.width == 0 || args.height == 0 {
         bail!("image size must be positive, got {}x{}", args.width, args.height);
     }
@@ -36,9 +85,56 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     if args.requests_per_frame == 0 {
         bail!("--requests-per-frame must be at least 1");
     }
+    Ok(())
+}
+
+/// Where a store's tree cube sits in the world: sample `(i, j, k)` at `origin + spacing·(i, j, k)` (VTK/ITK), the
+/// rays clipped to the box of the sample centres, as VTK's ray casters do.
+pub fn store_placement(reader: &StoreReader) -> VolumePlacement {
+    let info = reader.info();
+    let layout = reader.layout();
+    let span = (layout.brick_size << layout.max_tree_level()) as f64;
+    VolumePlacement {
+        origin: [0, 1, 2].map(|a| info.origin[a] - 0.5 * info.spacing[a]),
+        scale: [0, 1, 2].map(|a| info.spacing[a] * span),
+        clip_lower: [0.5 / span; 3],
+        clip_upper: [0, 1, 2].map(|a| ((info.dims[a] as f64 - 0.5) / span).max(0.5 / span + 1e-9)),
+    }
+}
+
+/// A three-quarter view framing the whole volume with a 30° field of view.
+pub fn store_camera(info: &voxstream_store::VolumeInfo) -> Camera {
+    let lower = glam::DVec3::from(info.origin);
+    let upper = lower + glam::DVec3::from([0, 1, 2].map(|a| (info.dims[a] as f64 - 1.0) * info.spacing[a]));
+    let centre = (lower + upper) * 0.5;
+    let radius = ((upper - lower).length() * 0.5).max(1e-9);
+    let fov: f64 = 30.0;
+    // The bounding sphere is loose for most scans: frame 80% of it.
+    let distance = radius / (fov.to_radians() * 0.5).sin() * 0.8;
+    let eye = centre + glam::DVec3::new(0.55, -0.65, 0.52).normalize() * distance;
+    Camera { eye: eye.to_array(), target: centre.to_array(), up: [0.0, 0.0, 1.0], fov }
+}
+
+/// A soft ramp over the upper 80% of the value range, reaching opacity 0.05 per voxel (one sample spacing).
+pub fn default_store_transfer_function(range: [f64; 2]) -> Result<TransferFunction> {
+    let [lo, hi] = range;
+    let hi = if hi > lo { hi } else { lo + 1.0 };
+    let at = |f: f64| lo + (hi - lo) * f;
+    Ok(TransferFunction::new(
+        vec![
+            [lo, 0.0, 0.0, 0.0, 0.0],
+            [at(0.2), 0.55, 0.35, 0.25, 0.0],
+            [at(0.6), 0.95, 0.8, 0.6, 0.05],
+            [hi, 1.0, 1.0, 1.0, 0.12],
+        ],
+        None,
+    )?)
+}
+
+fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>) -> Result<()> {
     let transfer_function = match &args.tf {
         Some(path) => read_transfer_function(path)?,
-        None => scene.transfer_function.clone(),
+        None => source.transfer_function.clone(),
     };
     let settings = RenderSettings {
         width: args.width,
@@ -46,19 +142,20 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         shading: match args.shading {
             Some(ShadingArg::None) => Shading::None,
             Some(ShadingArg::Phong) => Shading::Phong,
-            None => scene.shading,
+            None => source.shading,
         },
         light_direction: args.light,
         background: args.background.map(|c| c as f32),
         step_factor: args.step,
         lod_bias: args.lod_bias,
+        placement: source.placement,
         ..RenderSettings::default()
     };
     settings.validate().context("invalid flags")?;
     let cameras = match &args.path {
         Some(path) => read_camera_path(path)?,
         None => {
-            let mut camera = scene.camera;
+            let mut camera = source.camera;
             if let Some(eye) = args.eye {
                 camera.eye = eye;
             }
@@ -83,9 +180,16 @@ pub fn run(args: &RenderArgs) -> Result<()> {
 
     let budget_bytes = args.budget_mb * 1024 * 1024;
     let limits = LoopLimits { requests_per_frame: args.requests_per_frame, ..LoopLimits::default() };
-    let mut session = Session::new(scene.producer, &transfer_function, settings, budget_bytes, limits)?;
+    let mut session = Session::with_value_range(
+        source.producer,
+        &transfer_function,
+        settings,
+        budget_bytes,
+        limits,
+        source.value_range,
+    )?;
     let mut stats = RunStats {
-        source: scene.name.to_string(),
+        source: source.name.clone(),
         mode: format!("{:?}", args.mode).to_lowercase(),
         budget_bytes,
         threads: rayon::current_num_threads(),

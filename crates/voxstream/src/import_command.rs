@@ -1,0 +1,55 @@
+//! `voxstream import`: a volume file into a store, with a progress bar (throughput and ETA).
+
+use anyhow::{bail, Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use voxstream_store::formats::{open_volume, Endian, RawLayout};
+use voxstream_store::{import_volume, DType, ImportOptions, VolumeInfo, VolumeSource};
+
+use crate::cli::{EndianArg, ImportArgs};
+
+/// Runs `voxstream import`.
+pub fn run(args: &ImportArgs) -> Result<()> {
+    let raw = match (&args.dims, &args.dtype) {
+        (Some(dims), Some(dtype)) => {
+            let dtype = DType::from_name(dtype)
+                .with_context(|| format!("unknown --dtype '{dtype}': expected u8, u16, i16 or f32"))?;
+            Some(RawLayout {
+                info: VolumeInfo { dims: *dims, dtype, spacing: args.spacing, origin: args.origin },
+                endian: if args.endian == EndianArg::Big { Endian::Big } else { Endian::Little },
+                header_bytes: args.header_bytes,
+            })
+        }
+        (None, None) => None,
+        _ => bail!("a raw input needs both --dims and --dtype"),
+    };
+    let mut source = open_volume(&args.input, raw.as_ref())?;
+    let info = source.info().clone();
+    let options = ImportOptions { brick_size: args.brick_size, overwrite: args.overwrite, ..ImportOptions::default() };
+    let bar = if args.quiet { ProgressBar::hidden() } else { ProgressBar::new(info.byte_len()) };
+    bar.set_style(
+        ProgressStyle::with_template("{msg} [{bar:30}] {bytes}/{total_bytes} {binary_bytes_per_sec} ETA {eta}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    bar.set_message(format!("importing {}", args.input.display()));
+    let mut progress = |done: u64, _total: u64| bar.set_position(done);
+    let report = import_volume(&mut source as &mut dyn VolumeSource, &args.out, &options, &mut progress)?;
+    bar.finish_and_clear();
+    if !args.quiet {
+        eprintln!(
+            "imported {} ({}x{}x{} {}) into {}: {} levels, {} bricks written, {} empty, values {} to {}",
+            args.input.display(),
+            info.dims[0],
+            info.dims[1],
+            info.dims[2],
+            info.dtype.name(),
+            args.out.display(),
+            report.levels,
+            report.bricks_written.iter().sum::<u64>(),
+            report.bricks_empty.iter().sum::<u64>(),
+            report.value_range[0],
+            report.value_range[1]
+        );
+    }
+    Ok(())
+}
