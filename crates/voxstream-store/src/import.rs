@@ -51,8 +51,22 @@ pub struct ImportReport {
     pub bricks_empty: Vec<u64>,
 }
 
-/// Imports `source` into a new store at `out`. `progress(done, total)` is called with input bytes.
+/// Imports `source` into a new store at `out`. `progress(done, total)` is called with input bytes. On failure the
+/// partial store is removed and an existing store at `out` is left untouched.
 pub fn import_volume(
+    source: &mut dyn VolumeSource,
+    out: &Path,
+    options: &ImportOptions,
+    progress: &mut dyn FnMut(u64, u64),
+) -> Result<ImportReport, StoreError> {
+    let result = import_into_partial(source, out, options, progress);
+    if result.is_err() {
+        let _ = std::fs::remove_dir_all(partial_path(out));
+    }
+    result
+}
+
+fn import_into_partial(
     source: &mut dyn VolumeSource,
     out: &Path,
     options: &ImportOptions,

@@ -1,0 +1,327 @@
+//! Every importer against a synthetic volume written in its format: level 0 of the store must equal the source
+//! exactly, geometry must be kept, and bad files must fail with a clear error naming the file.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use voxstream_store::formats::{open_volume, Endian, RawLayout};
+use voxstream_store::{import_volume, DType, ImportOptions, StoreError, StoreReader, VolumeInfo, VolumeSource};
+
+const DIMS: [u64; 3] = [37, 29, 23];
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("voxstream-import-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// The test volume's value at (i, j, k), representable exactly in every type.
+fn value(i: u64, j: u64, k: u64, dtype: DType) -> f32 {
+    let v = ((i * 7 + j * 13 + k * 3) % 251) as f32;
+    match dtype {
+        DType::U8 => v,
+        DType::U16 => v * 200.0,
+        DType::I16 => v * 100.0 - 12000.0,
+        DType::F32 => v * 0.37 - 20.25,
+    }
+}
+
+fn samples(dtype: DType) -> Vec<f32> {
+    let mut out = Vec::new();
+    for k in 0..DIMS[2] {
+        for j in 0..DIMS[1] {
+            for i in 0..DIMS[0] {
+                out.push(value(i, j, k, dtype));
+            }
+        }
+    }
+    out
+}
+
+fn encode(dtype: DType, endian: Endian) -> Vec<u8> {
+    let big = endian == Endian::Big;
+    samples(dtype)
+        .into_iter()
+        .flat_map(|v| -> Vec<u8> {
+            match dtype {
+                DType::U8 => vec![v as u8],
+                DType::U16 => if big { (v as u16).to_be_bytes().to_vec() } else { (v as u16).to_le_bytes().to_vec() },
+                DType::I16 => if big { (v as i16).to_be_bytes().to_vec() } else { (v as i16).to_le_bytes().to_vec() },
+                DType::F32 => if big { v.to_be_bytes().to_vec() } else { v.to_le_bytes().to_vec() },
+            }
+        })
+        .collect()
+}
+
+fn gzip(bytes: &[u8]) -> Vec<u8> {
+    let mut encoder = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    encoder.write_all(bytes).unwrap();
+    encoder.finish().unwrap()
+}
+
+fn zlib(bytes: &[u8]) -> Vec<u8> {
+    let mut encoder = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::fast());
+    encoder.write_all(bytes).unwrap();
+    encoder.finish().unwrap()
+}
+
+/// Imports `path` and checks level 0 and the geometry.
+fn check_import(path: &Path, raw: Option<&RawLayout>, dtype: DType, spacing: [f64; 3], origin: [f64; 3]) {
+    let dir = path.parent().unwrap();
+    let store = dir.join(format!("{}.zarr", path.file_name().unwrap().to_string_lossy()));
+    let mut source = open_volume(path, raw).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    assert_eq!(source.info().dims, DIMS);
+    assert_eq!(source.info().dtype, dtype);
+    let options = ImportOptions { brick_size: 8, shard_bricks: 2, ..ImportOptions::default() };
+    import_volume(&mut source as &mut dyn VolumeSource, &store, &options, &mut |_, _| {})
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let reader = StoreReader::open(&store).unwrap();
+    assert_eq!(reader.info().dtype, dtype, "{}", path.display());
+    for a in 0..3 {
+        assert!((reader.info().spacing[a] - spacing[a]).abs() < 1e-6, "{}: spacing {:?}", path.display(), reader.info().spacing);
+        assert!((reader.info().origin[a] - origin[a]).abs() < 1e-6, "{}: origin {:?}", path.display(), reader.info().origin);
+    }
+    let level0 = reader.read_region(0, [0, 0, 0], DIMS).unwrap();
+    assert!(level0 == samples(dtype), "{}: level 0 differs from the source", path.display());
+    // The pyramid: 37 → 19 → 10 → 5 samples; the last level fits one brick of 8.
+    assert_eq!(reader.layout().levels(), 4);
+    // Level 1 averages 2×2×2 blocks.
+    let coarse = reader.read_region(1, [0, 0, 0], [1, 1, 1]).unwrap()[0];
+    let mut mean = 0.0;
+    for (i, j, k) in [(0, 0, 0), (1, 0, 0), (0, 1, 0), (1, 1, 0), (0, 0, 1), (1, 0, 1), (0, 1, 1), (1, 1, 1)] {
+        mean += value(i, j, k, dtype) as f64 / 8.0;
+    }
+    let tolerance = if dtype == DType::F32 { 1e-3 } else { 0.5 };
+    assert!((coarse as f64 - mean).abs() <= tolerance, "{}: level 1 {coarse} vs mean {mean}", path.display());
+}
+
+fn nrrd_header(dtype: &str, encoding: &str, data_file: Option<&str>) -> String {
+    let mut h = format!(
+        "NRRD0004\n# test\ntype: {dtype}\ndimension: 3\nspace: left-posterior-superior\nsizes: {} {} {}\n\
+         space directions: (0.5,0,0) (0,0.75,0) (0,0,2)\nendian: little\nencoding: {encoding}\n\
+         space origin: (-1,2.5,3)\n",
+        DIMS[0], DIMS[1], DIMS[2]
+    );
+    if let Some(file) = data_file {
+        h.push_str(&format!("data file: {file}\n"));
+    }
+    h.push('\n');
+    h
+}
+
+#[test]
+fn nrrd_raw_gzip_and_detached() {
+    let dir = scratch("nrrd");
+    let spacing = [0.5, 0.75, 2.0];
+    let origin = [-1.0, 2.5, 3.0];
+    let mut attached = nrrd_header("short", "raw", None).into_bytes();
+    attached.extend(encode(DType::I16, Endian::Little));
+    std::fs::write(dir.join("a.nrrd"), attached).unwrap();
+    check_import(&dir.join("a.nrrd"), None, DType::I16, spacing, origin);
+
+    let mut compressed = nrrd_header("float", "gzip", None).into_bytes();
+    compressed.extend(gzip(&encode(DType::F32, Endian::Little)));
+    std::fs::write(dir.join("b.nrrd"), compressed).unwrap();
+    check_import(&dir.join("b.nrrd"), None, DType::F32, spacing, origin);
+
+    std::fs::write(dir.join("c.nhdr"), nrrd_header("ushort", "raw", Some("c.raw"))).unwrap();
+    std::fs::write(dir.join("c.raw"), encode(DType::U16, Endian::Little)).unwrap();
+    check_import(&dir.join("c.nhdr"), None, DType::U16, spacing, origin);
+}
+
+fn nifti(dtype: DType, code: i16, bitpix: i16) -> Vec<u8> {
+    let mut h = vec![0u8; 352];
+    h[0..4].copy_from_slice(&348i32.to_le_bytes());
+    let dims = [3i16, DIMS[0] as i16, DIMS[1] as i16, DIMS[2] as i16, 1, 1, 1, 1];
+    for (n, d) in dims.iter().enumerate() {
+        h[40 + 2 * n..42 + 2 * n].copy_from_slice(&d.to_le_bytes());
+    }
+    h[70..72].copy_from_slice(&code.to_le_bytes());
+    h[72..74].copy_from_slice(&bitpix.to_le_bytes());
+    for (n, p) in [1.0f32, 1.5, 0.8, 2.0].iter().enumerate() {
+        h[76 + 4 * n..80 + 4 * n].copy_from_slice(&p.to_le_bytes());
+    }
+    h[108..112].copy_from_slice(&352f32.to_le_bytes());
+    h[252..254].copy_from_slice(&1i16.to_le_bytes());
+    for (n, o) in [-90.0f32, -126.0, -72.0].iter().enumerate() {
+        h[268 + 4 * n..272 + 4 * n].copy_from_slice(&o.to_le_bytes());
+    }
+    h[344..348].copy_from_slice(b"n+1\0");
+    h.extend(encode(dtype, Endian::Little));
+    h
+}
+
+#[test]
+fn nifti_plain_and_gzip() {
+    let dir = scratch("nifti");
+    let spacing = [1.5, 0.800000011920929, 2.0];
+    let origin = [-90.0, -126.0, -72.0];
+    std::fs::write(dir.join("a.nii"), nifti(DType::U8, 2, 8)).unwrap();
+    check_import(&dir.join("a.nii"), None, DType::U8, spacing, origin);
+    std::fs::write(dir.join("b.nii.gz"), gzip(&nifti(DType::U16, 512, 16))).unwrap();
+    check_import(&dir.join("b.nii.gz"), None, DType::U16, spacing, origin);
+}
+
+#[test]
+fn metaimage_local_compressed_and_detached() {
+    let dir = scratch("mha");
+    let header = |element: &str, compressed: bool, file: &str| {
+        format!(
+            "ObjectType = Image\nNDims = 3\nBinaryData = True\nBinaryDataByteOrderMSB = False\nCompressedData = {}\n\
+             Offset = 1 2 3\nElementSpacing = 0.25 0.5 4\nDimSize = {} {} {}\nElementType = {element}\n\
+             ElementDataFile = {file}\n",
+            if compressed { "True" } else { "False" },
+            DIMS[0], DIMS[1], DIMS[2]
+        )
+    };
+    let spacing = [0.25, 0.5, 4.0];
+    let origin = [1.0, 2.0, 3.0];
+    let mut local = header("MET_SHORT", false, "LOCAL").into_bytes();
+    local.extend(encode(DType::I16, Endian::Little));
+    std::fs::write(dir.join("a.mha"), local).unwrap();
+    check_import(&dir.join("a.mha"), None, DType::I16, spacing, origin);
+
+    let mut compressed = header("MET_FLOAT", true, "LOCAL").into_bytes();
+    compressed.extend(zlib(&encode(DType::F32, Endian::Little)));
+    std::fs::write(dir.join("b.mha"), compressed).unwrap();
+    check_import(&dir.join("b.mha"), None, DType::F32, spacing, origin);
+
+    std::fs::write(dir.join("c.mhd"), header("MET_UCHAR", false, "c.raw")).unwrap();
+    std::fs::write(dir.join("c.raw"), encode(DType::U8, Endian::Little)).unwrap();
+    check_import(&dir.join("c.mhd"), None, DType::U8, spacing, origin);
+}
+
+fn inr(kind: &str, bits: u32, cpu: &str, endian: Endian, dtype: DType) -> Vec<u8> {
+    let mut header = format!(
+        "#INRIMAGE-4#{{\nXDIM={}\nYDIM={}\nZDIM={}\nVDIM=1\nTYPE={kind}\nPIXSIZE={bits} bits\nCPU={cpu}\nVX=0.5\nVY=0.5\nVZ=1.25\n",
+        DIMS[0], DIMS[1], DIMS[2]
+    );
+    while header.len() < 252 {
+        header.push('\n');
+    }
+    header.push_str("##}\n");
+    let mut bytes = header.into_bytes();
+    bytes.extend(encode(dtype, endian));
+    bytes
+}
+
+#[test]
+fn inr_plain_and_gzip() {
+    let dir = scratch("inr");
+    std::fs::write(dir.join("a.inr"), inr("unsigned fixed", 8, "decm", Endian::Little, DType::U8)).unwrap();
+    check_import(&dir.join("a.inr"), None, DType::U8, [0.5, 0.5, 1.25], [0.0; 3]);
+    std::fs::write(dir.join("b.inr.gz"), gzip(&inr("float", 32, "sun", Endian::Big, DType::F32))).unwrap();
+    check_import(&dir.join("b.inr.gz"), None, DType::F32, [0.5, 0.5, 1.25], [0.0; 3]);
+}
+
+#[test]
+fn npy_and_raw() {
+    let dir = scratch("npy");
+    let dict = format!("{{'descr': '<i2', 'fortran_order': False, 'shape': ({}, {}, {}), }}", DIMS[2], DIMS[1], DIMS[0]);
+    let mut header = dict.into_bytes();
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(b' ');
+    }
+    header.push(b'\n');
+    let mut npy = b"\x93NUMPY\x01\x00".to_vec();
+    npy.extend((header.len() as u16).to_le_bytes());
+    npy.extend(header);
+    npy.extend(encode(DType::I16, Endian::Little));
+    std::fs::write(dir.join("a.npy"), npy).unwrap();
+    check_import(&dir.join("a.npy"), None, DType::I16, [1.0; 3], [0.0; 3]);
+
+    let mut raw = vec![7u8; 62];
+    raw.extend(encode(DType::U16, Endian::Big));
+    std::fs::write(dir.join("b.den"), raw).unwrap();
+    let layout = RawLayout {
+        info: VolumeInfo { dims: DIMS, dtype: DType::U16, spacing: [2.0, 2.0, 3.0], origin: [5.0, 0.0, -5.0] },
+        endian: Endian::Big,
+        header_bytes: 62,
+    };
+    check_import(&dir.join("b.den"), Some(&layout), DType::U16, [2.0, 2.0, 3.0], [5.0, 0.0, -5.0]);
+}
+
+fn import_error(path: &Path, raw: Option<&RawLayout>) -> StoreError {
+    let store = path.with_extension("zarr");
+    let result = open_volume(path, raw).and_then(|mut source| {
+        import_volume(&mut source as &mut dyn VolumeSource, &store, &ImportOptions::default(), &mut |_, _| {})
+    });
+    let error = result.expect_err("bad input was accepted");
+    assert!(!store.exists(), "a failed import left a store");
+    assert!(!voxstream_store::import::partial_path(&store).exists(), "a failed import left a partial store");
+    error
+}
+
+#[test]
+fn bad_files_fail_naming_the_file_and_the_problem() {
+    let dir = scratch("bad");
+    // Truncated NRRD (raw and gzip), NIfTI and npy.
+    let mut short = nrrd_header("short", "raw", None).into_bytes();
+    short.extend(&encode(DType::I16, Endian::Little)[..1000]);
+    std::fs::write(dir.join("short.nrrd"), short).unwrap();
+    let e = import_error(&dir.join("short.nrrd"), None).to_string();
+    assert!(e.contains("short.nrrd") && e.contains("truncated"), "{e}");
+
+    let mut short_gz = nrrd_header("short", "gzip", None).into_bytes();
+    short_gz.extend(gzip(&encode(DType::I16, Endian::Little)[..5000]));
+    std::fs::write(dir.join("shortgz.nrrd"), short_gz).unwrap();
+    let e = import_error(&dir.join("shortgz.nrrd"), None).to_string();
+    assert!(e.contains("shortgz.nrrd") && e.contains("truncated"), "{e}");
+
+    let nii = nifti(DType::U8, 2, 8);
+    std::fs::write(dir.join("short.nii"), &nii[..nii.len() - 10]).unwrap();
+    let e = import_error(&dir.join("short.nii"), None).to_string();
+    assert!(e.contains("short.nii") && e.contains("truncated"), "{e}");
+
+    // Header and size disagree: a raw file larger than its layout.
+    std::fs::write(dir.join("big.raw"), vec![0u8; 100_000]).unwrap();
+    let layout = RawLayout {
+        info: VolumeInfo { dims: DIMS, dtype: DType::U8, spacing: [1.0; 3], origin: [0.0; 3] },
+        endian: Endian::Little,
+        header_bytes: 0,
+    };
+    let e = import_error(&dir.join("big.raw"), Some(&layout)).to_string();
+    assert!(e.contains("big.raw") && e.contains("--dims"), "{e}");
+
+    // Unsupported type, wrong magic, nonsense dimensions.
+    let mut double = nrrd_header("double", "raw", None).into_bytes();
+    double.extend(vec![0u8; 8]);
+    std::fs::write(dir.join("double.nrrd"), double).unwrap();
+    let e = import_error(&dir.join("double.nrrd"), None).to_string();
+    assert!(e.contains("unsupported") && e.contains("double"), "{e}");
+    std::fs::write(dir.join("fake.nii"), vec![1u8; 400]).unwrap();
+    assert!(import_error(&dir.join("fake.nii"), None).to_string().contains("not a NIfTI-1 file"));
+    let zero = "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 0 4 4\nencoding: raw\n\n";
+    std::fs::write(dir.join("zero.nrrd"), zero).unwrap();
+    assert!(import_error(&dir.join("zero.nrrd"), None).to_string().contains("positive"));
+    std::fs::write(dir.join("what.xyz"), b"hello").unwrap();
+    assert!(import_error(&dir.join("what.xyz"), None).to_string().contains("unknown format"));
+}
+
+#[test]
+fn existing_store_is_kept_unless_overwritten_and_interrupted_imports_never_open() {
+    let dir = scratch("overwrite");
+    let mut bytes = nrrd_header("uchar", "raw", None).into_bytes();
+    bytes.extend(encode(DType::U8, Endian::Little));
+    std::fs::write(dir.join("v.nrrd"), bytes).unwrap();
+    let store = dir.join("v.zarr");
+    let run = |overwrite: bool| {
+        let mut source = open_volume(&dir.join("v.nrrd"), None).unwrap();
+        let options = ImportOptions { overwrite, ..ImportOptions::default() };
+        import_volume(&mut source as &mut dyn VolumeSource, &store, &options, &mut |_, _| {})
+    };
+    run(false).unwrap();
+    let e = run(false).unwrap_err().to_string();
+    assert!(e.contains("already exists"), "{e}");
+    assert!(StoreReader::open(&store).is_ok(), "the existing store survives a refused import");
+    run(true).unwrap();
+    // An interrupted import leaves only STORE.partial: the store does not open, and a new import restarts cleanly.
+    let other = dir.join("w.zarr");
+    std::fs::create_dir_all(voxstream_store::import::partial_path(&other)).unwrap();
+    let e = StoreReader::open(&other).err().unwrap().to_string();
+    assert!(e.contains("interrupted"), "{e}");
+    let mut source = open_volume(&dir.join("v.nrrd"), None).unwrap();
+    import_volume(&mut source as &mut dyn VolumeSource, &other, &ImportOptions::default(), &mut |_, _| {}).unwrap();
+    assert!(StoreReader::open(&other).is_ok());
+}
