@@ -1,0 +1,128 @@
+//! The store through the command line: import with progress, info, render, and a corrupt brick at render time.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn voxstream(args: &[&str], dir: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_voxstream")).args(args).current_dir(dir).output().expect("run voxstream")
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("voxstream-store-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// A 96×80×72 u16 NRRD: a soft ball in an empty box.
+fn write_ball(path: &Path) {
+    let (nx, ny, nz) = (96usize, 80usize, 72usize);
+    let mut bytes = format!(
+        "NRRD0004\ntype: ushort\ndimension: 3\nsizes: {nx} {ny} {nz}\nspacings: 0.5 0.5 0.6\nencoding: raw\nendian: little\n\n"
+    )
+    .into_bytes();
+    for k in 0..nz {
+        for j in 0..ny {
+            for i in 0..nx {
+                let d = (((i as f64 - 48.0) / 30.0).powi(2) + ((j as f64 - 40.0) / 28.0).powi(2) + ((k as f64 - 36.0) / 25.0).powi(2)).sqrt();
+                let v = if d < 1.0 { (4000.0 * (1.0 - d * d)) as u16 + 100 } else { 0 };
+                bytes.extend(v.to_le_bytes());
+            }
+        }
+    }
+    std::fs::write(path, bytes).unwrap();
+}
+
+fn stderr(output: &Output) -> String {
+    String::from_utf8_lossy(&output.stderr).into_owned()
+}
+
+#[test]
+fn import_info_render_and_survive_a_corrupt_brick() {
+    let dir = scratch("flow");
+    write_ball(&dir.join("ball.nrrd"));
+    let output = voxstream(&["import", "ball.nrrd", "--out", "ball.zarr", "--brick-size", "16"], &dir);
+    assert!(output.status.success(), "{}", stderr(&output));
+
+    let output = voxstream(&["info", "ball.zarr", "--json"], &dir);
+    assert!(output.status.success(), "{}", stderr(&output));
+    let info: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    assert_eq!(info["dims"], serde_json::json!([96, 80, 72]));
+    assert_eq!(info["dtype"], "u16");
+    assert_eq!(info["value_range"][1].as_f64().unwrap(), 4100.0);
+    let level0 = &info["levels"][0];
+    assert_eq!(level0["bricks"], 6 * 5 * 5);
+    assert!(level0["empty"].as_u64().unwrap() > 0 && level0["stored"].as_u64().unwrap() > 0);
+    assert!(info["bytes_on_disk"].as_u64().unwrap() > 0);
+
+    let output = voxstream(&["render", "ball.zarr", "--width", "64", "--height", "64", "--out", "a.png", "--stats", "a.json"], &dir);
+    assert!(output.status.success(), "{}", stderr(&output));
+    assert!(!stderr(&output).contains("warning"), "{}", stderr(&output));
+    let stats: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("a.json")).unwrap()).unwrap();
+    assert_eq!(stats["converged"], true);
+    assert!(stats["bricks_produced"].as_u64().unwrap() > 0);
+
+    // Corrupt every shard of level 0: the render completes, each failed brick is reported once (as a warning), and
+    // coarser levels stand in.
+    let mut corrupted = 0;
+    for entry in walk(&dir.join("ball.zarr/0")) {
+        if entry.file_name().is_some_and(|n| n != "zarr.json") {
+            std::fs::write(&entry, b"not a shard").unwrap();
+            corrupted += 1;
+        }
+    }
+    assert!(corrupted > 0);
+    let output = voxstream(&["render", "ball.zarr", "--width", "64", "--height", "64", "--out", "b.png", "--stats", "b.json", "--lod-bias", "3"], &dir);
+    let text = stderr(&output);
+    assert!(output.status.success(), "{text}");
+    assert!(text.contains("warning") && text.contains("ball.zarr"), "{text}");
+    assert!(!text.contains("panicked"), "{text}");
+    let stats: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("b.json")).unwrap()).unwrap();
+    let failures = stats["producer_failures"].as_u64().unwrap();
+    assert!(failures > 0);
+    // Reported once each: no more failures than level-0 bricks.
+    assert!(failures <= 6 * 5 * 5, "{failures} failures for at most 150 bricks");
+    assert!(dir.join("b.png").exists());
+}
+
+fn walk(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for entry in std::fs::read_dir(dir).unwrap().flatten() {
+        let path = entry.path();
+        if path.is_dir() {
+            out.extend(walk(&path));
+        } else {
+            out.push(path);
+        }
+    }
+    out
+}
+
+#[test]
+fn bad_stores_and_inputs_fail_with_one_line() {
+    let dir = scratch("bad");
+    write_ball(&dir.join("ball.nrrd"));
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (vec!["render", "missing.zarr", "--out", "x.png"], "unknown source"),
+        (vec!["info", "missing.zarr"], "no such store"),
+        (vec!["import", "missing.nrrd", "--out", "m.zarr"], "missing.nrrd"),
+        (vec!["import", "ball.nrrd", "--out", "b.zarr", "--brick-size", "7"], "brick size"),
+        (vec!["import", "ball.nrrd", "--out", "b.zarr", "--dims", "4,4,4"], "--dtype"),
+        (vec!["import", "ball.nrrd", "--out", "b.zarr", "--dims", "4,4,4", "--dtype", "u64"], "--dtype"),
+    ];
+    for (args, needle) in cases {
+        let output = voxstream(&args, &dir);
+        let text = stderr(&output);
+        assert!(!output.status.success(), "{args:?} succeeded");
+        assert_eq!(text.trim_end().lines().count(), 1, "{args:?}: {text}");
+        assert!(text.contains(needle), "{args:?}: '{text}' lacks '{needle}'");
+    }
+    // A store whose metadata is corrupt.
+    let output = voxstream(&["import", "ball.nrrd", "--out", "c.zarr", "--quiet"], &dir);
+    assert!(output.status.success(), "{}", stderr(&output));
+    std::fs::write(dir.join("c.zarr/zarr.json"), "{ broken").unwrap();
+    let output = voxstream(&["render", "c.zarr", "--out", "x.png"], &dir);
+    let text = stderr(&output);
+    assert!(!output.status.success() && text.contains("zarr.json"), "{text}");
+    assert_eq!(text.trim_end().lines().count(), 1, "{text}");
+}
