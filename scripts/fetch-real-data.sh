@@ -6,6 +6,7 @@
 #   CGAL liver labels    Debian libcgal-demo 5.5.1-2  INR gz, 438x353x165 u8
 #   CGAL skull CT        Debian libcgal-demo 5.5.1-2  INR, 64^3 f32
 #   volpack brainsmall   Debian libvolpack1-dev 1.0b3-9  62-byte header + 128x128x84 u8
+#   frog tissue labels   PyPI pyvista==0.49.1        VTK XML ImageData (zlib, inline base64), 500x470x136 u8
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 out=data/real
@@ -41,6 +42,13 @@ if [ ! -f "$out/brainsmall.den" ]; then
     cp "$work/volpack/usr/share/doc/libvolpack1-dev/examples/brainsmall.den" "$out/"
 fi
 check "$out/brainsmall.den" eebfa050a1775f556718c2c9716cb624bc2270392e82176b1ce4812b36d4f286
+
+if [ ! -f "$out/frog_tissues.vti" ]; then
+    python3 -m pip download --quiet --no-deps --only-binary=:all: -d "$work" pyvista==0.49.1
+    check "$work/pyvista-0.49.1-py3-none-any.whl" e4bd78c829051207e885281c45d03280dcde25445e1885c0824518ea7849b1c8
+    unzip -q -j -o "$work/pyvista-0.49.1-py3-none-any.whl" pyvista/examples/frog_tissues.vti -d "$out"
+fi
+check "$out/frog_tissues.vti" 844e3e324548fcebab4e14fa30be1400d34fafa7a0a14030b643b38db89da66c
 
 # Independent decoders for the reference arrays.
 python3 -m pip install --quiet numpy==2.1.3 nibabel==5.3.2

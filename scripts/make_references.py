@@ -3,8 +3,11 @@
 For each volume NAME it writes NAME.reference.npy (C order, shape (z, y, x): x fastest, as voxstream stores) and
 NAME.reference.json (dims x,y,z, dtype, spacing, origin).
 """
+import base64
 import gzip
 import json
+import re
+import zlib
 import sys
 from pathlib import Path
 
@@ -34,6 +37,24 @@ def inr(path: Path):
     return data.reshape(dims[2], dims[1], dims[0]), spacing
 
 
+def vti_inline_zlib_uint32(path: Path):
+    """The frog file's layout: one UInt8 array, inline base64, zlib blocks, UInt32 headers."""
+    text = path.read_text()
+    extent = [int(v) for v in re.search(r'WholeExtent="([^"]+)"', text).group(1).split()]
+    spacing = [float(v) for v in re.search(r'Spacing="([^"]+)"', text).group(1).split()]
+    payload = re.search(r"<DataArray[^>]*>\s*([^<]+?)\s*</DataArray>", text).group(1).strip()
+    blocks = int(np.frombuffer(base64.b64decode(payload[:8])[:4], "<u4")[0])
+    header_chars = 4 * -(-(3 + blocks) * 4 // 3)
+    header = np.frombuffer(base64.b64decode(payload[:header_chars])[:(3 + blocks) * 4], "<u4")
+    data = base64.b64decode(payload[header_chars:])
+    raw, at = b"", 0
+    for size in header[3:3 + blocks]:
+        raw += zlib.decompress(data[at:at + size])
+        at += size
+    dims = [extent[1] - extent[0] + 1, extent[3] - extent[2] + 1, extent[5] - extent[4] + 1]
+    return np.frombuffer(raw, "u1").reshape(dims[2], dims[1], dims[0]), spacing
+
+
 def main(out: Path):
     image = nibabel.load(out / "mni152_t1.nii.gz")
     data = np.asarray(image.dataobj)  # stored values, no scaling: (x, y, z)
@@ -44,6 +65,9 @@ def main(out: Path):
     for name in ("liver.inr.gz", "skull_2.9.inr"):
         array, spacing = inr(out / name)
         save(out, name.split(".")[0], array, spacing, [0, 0, 0])
+
+    frog, spacing = vti_inline_zlib_uint32(out / "frog_tissues.vti")
+    save(out, "frog_tissues", frog, spacing, [0, 0, 0])
 
     den = (out / "brainsmall.den").read_bytes()
     save(out, "brainsmall", np.frombuffer(den[62:], dtype="u1").reshape(84, 128, 128), [1, 1, 1], [0, 0, 0])

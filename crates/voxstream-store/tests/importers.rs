@@ -325,3 +325,65 @@ fn existing_store_is_kept_unless_overwritten_and_interrupted_imports_never_open(
     import_volume(&mut source as &mut dyn VolumeSource, &other, &ImportOptions::default(), &mut |_, _| {}).unwrap();
     assert!(StoreReader::open(&other).is_ok());
 }
+
+#[test]
+fn vti_appended_raw_inline_compressed_and_ascii() {
+    let dir = scratch("vti");
+    let extent = format!("2 {} 0 {} 1 {}", 2 + DIMS[0] - 1, DIMS[1] - 1, DIMS[2]);
+    // Appended raw, UInt64 header, no compression, Int16.
+    let data = encode(DType::I16, Endian::Little);
+    let mut file = format!(
+        "<?xml version=\"1.0\"?>\n<VTKFile type=\"ImageData\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n\
+         <ImageData WholeExtent=\"{extent}\" Origin=\"10 20 30\" Spacing=\"0.5 0.25 2\">\n<Piece Extent=\"{extent}\">\n\
+         <PointData Scalars=\"s\"><DataArray type=\"Int16\" Name=\"s\" format=\"appended\" offset=\"0\"/></PointData>\n\
+         </Piece></ImageData>\n<AppendedData encoding=\"raw\">\n_"
+    )
+    .into_bytes();
+    file.extend((data.len() as u64).to_le_bytes());
+    file.extend(&data);
+    file.extend(b"\n</AppendedData>\n</VTKFile>\n");
+    std::fs::write(dir.join("a.vti"), file).unwrap();
+    // Origin shifts by the extent's start: 10 + 0.5·2, 20, 30 + 2·1.
+    check_import(&dir.join("a.vti"), None, DType::I16, [0.5, 0.25, 2.0], [11.0, 20.0, 32.0]);
+
+    // Inline base64, zlib in two blocks, UInt32 headers, Float32.
+    let data = encode(DType::F32, Endian::Little);
+    let block = 40_000usize;
+    let chunks: Vec<&[u8]> = data.chunks(block).collect();
+    let compressed: Vec<Vec<u8>> = chunks.iter().map(|c| zlib(c)).collect();
+    let mut header = Vec::new();
+    for v in [chunks.len(), block, chunks.last().unwrap().len()] {
+        header.extend((v as u32).to_le_bytes());
+    }
+    for c in &compressed {
+        header.extend((c.len() as u32).to_le_bytes());
+    }
+    use base64::Engine;
+    let b64 = base64::engine::general_purpose::STANDARD;
+    let payload = format!("{}{}", b64.encode(&header), b64.encode(compressed.concat()));
+    let file = format!(
+        "<VTKFile type=\"ImageData\" version=\"0.1\" byte_order=\"LittleEndian\" header_type=\"UInt32\" compressor=\"vtkZLibDataCompressor\">\n\
+         <ImageData WholeExtent=\"0 {} 0 {} 0 {}\" Origin=\"0 0 0\" Spacing=\"1 1 1\"><Piece>\n\
+         <PointData><DataArray type=\"Float32\" Name=\"f\" format=\"binary\">\n{payload}\n</DataArray></PointData>\n\
+         </Piece></ImageData></VTKFile>\n",
+        DIMS[0] - 1, DIMS[1] - 1, DIMS[2] - 1
+    );
+    std::fs::write(dir.join("b.vti"), file).unwrap();
+    check_import(&dir.join("b.vti"), None, DType::F32, [1.0; 3], [0.0; 3]);
+
+    // ASCII UInt8.
+    let text: Vec<String> = samples(DType::U8).iter().map(|v| (*v as u8).to_string()).collect();
+    let file = format!(
+        "<VTKFile type=\"ImageData\" byte_order=\"LittleEndian\"><ImageData WholeExtent=\"0 {} 0 {} 0 {}\" Spacing=\"1 1 1\">\n\
+         <Piece><PointData><DataArray type=\"UInt8\" format=\"ascii\">{}</DataArray></PointData></Piece></ImageData></VTKFile>",
+        DIMS[0] - 1, DIMS[1] - 1, DIMS[2] - 1, text.join(" ")
+    );
+    std::fs::write(dir.join("c.vti"), file).unwrap();
+    check_import(&dir.join("c.vti"), None, DType::U8, [1.0; 3], [0.0; 3]);
+
+    // Truncated compressed data is an error naming the file.
+    let cut = std::fs::read_to_string(dir.join("b.vti")).unwrap().replace(&payload, &payload[..payload.len() / 2]);
+    std::fs::write(dir.join("cut.vti"), cut).unwrap();
+    let e = import_error(&dir.join("cut.vti"), None).to_string();
+    assert!(e.contains("cut.vti"), "{e}");
+}

@@ -8,6 +8,7 @@
 //! | MetaImage | `.mha`, `.mhd` | plain, zlib |
 //! | INRIMAGE-4 | `.inr`, `.inr.gz` | plain, gzip |
 //! | NumPy | `.npy` | plain |
+//! | VTK XML ImageData | `.vti` | inline binary/ascii, appended raw/base64, zlib |
 
 pub mod header_text;
 pub mod inr;
@@ -17,6 +18,7 @@ pub mod npy;
 pub mod nrrd;
 pub mod raw;
 pub mod sample_stream;
+pub mod vti;
 
 use std::path::Path;
 
@@ -42,9 +44,10 @@ pub fn open_volume(path: &Path, raw: Option<&RawLayout>) -> Result<SampleStream,
         _ if name.ends_with(".inr.gz") => inr::open(path, true),
         _ if name.ends_with(".inr") => inr::open(path, false),
         _ if name.ends_with(".npy") => npy::open(path),
+        _ if name.ends_with(".vti") => vti::open(path),
         _ => Err(StoreError::Unsupported {
             path: path.into(),
-            message: "unknown format: expected .nrrd, .nhdr, .nii, .nii.gz, .mha, .mhd, .inr, .inr.gz or .npy, \
+            message: "unknown format: expected .nrrd, .nhdr, .nii, .nii.gz, .mha, .mhd, .inr, .inr.gz, .npy or .vti, \
                       or a raw file with --dims and --dtype"
                 .into(),
         }),

@@ -84,6 +84,14 @@ impl SampleStream {
     }
 }
 
+impl SampleStream {
+    /// Samples of `info` from any reader (a decoded in-memory buffer, say), reported under `path`.
+    pub fn from_reader(path: &Path, reader: Box<dyn Read + Send>, info: VolumeInfo, endian: Endian) -> Result<SampleStream, StoreError> {
+        info.validate(path)?;
+        Ok(SampleStream { info, endian, reader, path: path.into(), consumed: 0, bytes: Vec::new() })
+    }
+}
+
 fn gzip_error(path: &Path, error: std::io::Error) -> StoreError {
     StoreError::format(path, format!("corrupt gzip data: {error}"))
 }
