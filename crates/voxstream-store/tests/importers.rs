@@ -5,7 +5,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use voxstream_store::formats::{open_volume, Endian, RawLayout};
-use voxstream_store::{import_volume, DType, ImportOptions, StoreError, StoreReader, VolumeInfo, VolumeSource};
+use voxstream_store::{import_volume, DType, ImportOptions, StoreError, StoreReader, VolumeInfo};
 
 const DIMS: [u64; 3] = [37, 29, 23];
 
@@ -74,7 +74,7 @@ fn check_import(path: &Path, raw: Option<&RawLayout>, dtype: DType, spacing: [f6
     assert_eq!(source.info().dims, DIMS);
     assert_eq!(source.info().dtype, dtype);
     let options = ImportOptions { brick_size: 8, shard_bricks: 2, ..ImportOptions::default() };
-    import_volume(&mut source as &mut dyn VolumeSource, &store, &options, &mut |_, _| {})
+    import_volume(source.as_mut(), &store, &options, &mut |_, _| {})
         .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let reader = StoreReader::open(&store).unwrap();
     assert_eq!(reader.info().dtype, dtype, "{}", path.display());
@@ -245,7 +245,7 @@ fn npy_and_raw() {
 fn import_error(path: &Path, raw: Option<&RawLayout>) -> StoreError {
     let store = path.with_extension("zarr");
     let result = open_volume(path, raw).and_then(|mut source| {
-        import_volume(&mut source as &mut dyn VolumeSource, &store, &ImportOptions::default(), &mut |_, _| {})
+        import_volume(source.as_mut(), &store, &ImportOptions::default(), &mut |_, _| {})
     });
     let error = result.expect_err("bad input was accepted");
     assert!(!store.exists(), "a failed import left a store");
@@ -309,7 +309,7 @@ fn existing_store_is_kept_unless_overwritten_and_interrupted_imports_never_open(
     let run = |overwrite: bool| {
         let mut source = open_volume(&dir.join("v.nrrd"), None).unwrap();
         let options = ImportOptions { overwrite, ..ImportOptions::default() };
-        import_volume(&mut source as &mut dyn VolumeSource, &store, &options, &mut |_, _| {})
+        import_volume(source.as_mut(), &store, &options, &mut |_, _| {})
     };
     run(false).unwrap();
     let e = run(false).unwrap_err().to_string();
@@ -322,7 +322,7 @@ fn existing_store_is_kept_unless_overwritten_and_interrupted_imports_never_open(
     let e = StoreReader::open(&other).err().unwrap().to_string();
     assert!(e.contains("interrupted"), "{e}");
     let mut source = open_volume(&dir.join("v.nrrd"), None).unwrap();
-    import_volume(&mut source as &mut dyn VolumeSource, &other, &ImportOptions::default(), &mut |_, _| {}).unwrap();
+    import_volume(source.as_mut(), &other, &ImportOptions::default(), &mut |_, _| {}).unwrap();
     assert!(StoreReader::open(&other).is_ok());
 }
 
@@ -386,4 +386,40 @@ fn vti_appended_raw_inline_compressed_and_ascii() {
     std::fs::write(dir.join("cut.vti"), cut).unwrap();
     let e = import_error(&dir.join("cut.vti"), None).to_string();
     assert!(e.contains("cut.vti"), "{e}");
+}
+
+#[test]
+fn tiff_multipage_and_folder_of_slices() {
+    use tiff::encoder::{colortype, TiffEncoder};
+    let dir = scratch("tiff");
+    let values = samples(DType::U16);
+    let slice = (DIMS[0] * DIMS[1]) as usize;
+    {
+        let file = std::fs::File::create(dir.join("stack.tif")).unwrap();
+        let mut encoder = TiffEncoder::new(file).unwrap();
+        for z in 0..DIMS[2] as usize {
+            let page: Vec<u16> = values[z * slice..(z + 1) * slice].iter().map(|&v| v as u16).collect();
+            encoder.write_image::<colortype::Gray16>(DIMS[0] as u32, DIMS[1] as u32, &page).unwrap();
+        }
+    }
+    check_import(&dir.join("stack.tif"), None, DType::U16, [1.0; 3], [0.0; 3]);
+
+    let folder = dir.join("slices");
+    std::fs::create_dir_all(&folder).unwrap();
+    let floats = samples(DType::F32);
+    for z in 0..DIMS[2] as usize {
+        let file = std::fs::File::create(folder.join(format!("slice_{z:03}.tiff"))).unwrap();
+        let mut encoder = TiffEncoder::new(file).unwrap();
+        encoder
+            .write_image::<colortype::Gray32Float>(DIMS[0] as u32, DIMS[1] as u32, &floats[z * slice..(z + 1) * slice])
+            .unwrap();
+    }
+    check_import(&folder, None, DType::F32, [1.0; 3], [0.0; 3]);
+
+    // A slice of another size is an error naming it.
+    let file = std::fs::File::create(folder.join("slice_999.tiff")).unwrap();
+    TiffEncoder::new(file).unwrap().write_image::<colortype::Gray32Float>(3, 3, &[0.0; 9]).unwrap();
+    std::fs::remove_dir_all(dir.join("slices.zarr")).unwrap();
+    let e = import_error(&folder, None).to_string();
+    assert!(e.contains("slice_999.tiff"), "{e}");
 }

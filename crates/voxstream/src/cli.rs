@@ -116,7 +116,8 @@ pub enum EndianArg {
 /// `voxstream import`.
 #[derive(Args, Debug, Clone)]
 pub struct ImportArgs {
-    /// Input: .nrrd/.nhdr, .nii/.nii.gz, .mha/.mhd, .inr/.inr.gz, .npy, or a raw file with --dims and --dtype.
+    /// Input: .nrrd/.nhdr, .nii/.nii.gz, .mha/.mhd, .inr/.inr.gz, .vti, .npy, .tif/.tiff (or a folder of slices),
+    /// or a raw file with --dims and --dtype.
     pub input: PathBuf,
     /// The store folder to create.
     #[arg(long)]
@@ -133,12 +134,12 @@ pub struct ImportArgs {
     /// Raw input: bytes to skip before the samples.
     #[arg(long, default_value_t = 0)]
     pub header_bytes: u64,
-    /// Raw input: spacing x,y,z (world units).
-    #[arg(long, value_parser = parse_vec3, default_value = "1,1,1")]
-    pub spacing: [f64; 3],
-    /// Raw input: world position of sample (0,0,0).
-    #[arg(long, value_parser = parse_vec3, default_value = "0,0,0", allow_hyphen_values = true)]
-    pub origin: [f64; 3],
+    /// Spacing x,y,z (world units): required meaning for raw input (default 1,1,1); replaces the file's otherwise.
+    #[arg(long, value_parser = parse_vec3)]
+    pub spacing: Option<[f64; 3]>,
+    /// World position of sample (0,0,0): default 0,0,0 for raw input; replaces the file's otherwise.
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub origin: Option<[f64; 3]>,
     /// Brick edge in samples (even, 4..=256).
     #[arg(long, default_value_t = 32)]
     pub brick_size: u64,

@@ -2,7 +2,7 @@
 
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
-use voxstream_store::formats::{open_volume, Endian, RawLayout};
+use voxstream_store::formats::{open_volume, Endian, RawLayout, WithGeometry};
 use voxstream_store::{import_volume, DType, ImportOptions, VolumeInfo, VolumeSource};
 
 use crate::cli::{EndianArg, ImportArgs};
@@ -14,7 +14,12 @@ pub fn run(args: &ImportArgs) -> Result<()> {
             let dtype = DType::from_name(dtype)
                 .with_context(|| format!("unknown --dtype '{dtype}': expected u8, u16, i16 or f32"))?;
             Some(RawLayout {
-                info: VolumeInfo { dims: *dims, dtype, spacing: args.spacing, origin: args.origin },
+                info: VolumeInfo {
+                    dims: *dims,
+                    dtype,
+                    spacing: args.spacing.unwrap_or([1.0; 3]),
+                    origin: args.origin.unwrap_or([0.0; 3]),
+                },
                 endian: if args.endian == EndianArg::Big { Endian::Big } else { Endian::Little },
                 header_bytes: args.header_bytes,
             })
@@ -22,7 +27,11 @@ pub fn run(args: &ImportArgs) -> Result<()> {
         (None, None) => None,
         _ => bail!("a raw input needs both --dims and --dtype"),
     };
-    let mut source = open_volume(&args.input, raw.as_ref())?;
+    let mut source: Box<dyn VolumeSource> =
+        Box::new(WithGeometry::new(open_volume(&args.input, raw.as_ref())?, args.spacing, args.origin));
+    if let Some(s) = args.spacing.filter(|s| s.iter().any(|v| *v <= 0.0)) {
+        bail!("--spacing must be positive, got {s:?}");
+    }
     let info = source.info().clone();
     let options = ImportOptions { brick_size: args.brick_size, overwrite: args.overwrite, ..ImportOptions::default() };
     let bar = if args.quiet { ProgressBar::hidden() } else { ProgressBar::new(info.byte_len()) };
@@ -33,7 +42,7 @@ pub fn run(args: &ImportArgs) -> Result<()> {
     );
     bar.set_message(format!("importing {}", args.input.display()));
     let mut progress = |done: u64, _total: u64| bar.set_position(done);
-    let report = import_volume(&mut source as &mut dyn VolumeSource, &args.out, &options, &mut progress)?;
+    let report = import_volume(source.as_mut(), &args.out, &options, &mut progress)?;
     bar.finish_and_clear();
     if !args.quiet {
         eprintln!(

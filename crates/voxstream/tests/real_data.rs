@@ -10,7 +10,7 @@ use voxstream::render_command::{default_store_transfer_function, store_camera, s
 use voxstream::session::{LoopLimits, Mode, Session};
 use voxstream_render::{psnr, Camera, Image, RenderSettings, TransferFunction};
 use voxstream_store::formats::{open_volume, Endian, RawLayout};
-use voxstream_store::{import_volume, DType, ImportOptions, StoreProducer, StoreReader, VolumeInfo, VolumeSource};
+use voxstream_store::{import_volume, DType, ImportOptions, StoreProducer, StoreReader, VolumeInfo};
 
 /// (file, reference name, raw layout for headerless files)
 fn volumes() -> Vec<(&'static str, &'static str, Option<RawLayout>)> {
@@ -63,7 +63,7 @@ fn reference(dir: &Path, name: &str) -> (Vec<f32>, serde_json::Value) {
 fn import(dir: &Path, file: &str, raw: Option<&RawLayout>, store: &Path) -> Arc<StoreReader> {
     let mut source = open_volume(&dir.join(file), raw).unwrap();
     let options = ImportOptions { overwrite: true, ..ImportOptions::default() };
-    import_volume(&mut source as &mut dyn VolumeSource, store, &options, &mut |_, _| {}).unwrap();
+    import_volume(source.as_mut(), store, &options, &mut |_, _| {}).unwrap();
     Arc::new(StoreReader::open(store).unwrap())
 }
 

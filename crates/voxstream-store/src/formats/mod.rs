@@ -8,6 +8,7 @@
 //! | MetaImage | `.mha`, `.mhd` | plain, zlib |
 //! | INRIMAGE-4 | `.inr`, `.inr.gz` | plain, gzip |
 //! | NumPy | `.npy` | plain |
+//! | TIFF stack | `.tif`, `.tiff`, or a folder of them | as the tiff crate decodes |
 //! | VTK XML ImageData | `.vti` | inline binary/ascii, appended raw/base64, zlib |
 
 pub mod header_text;
@@ -18,6 +19,7 @@ pub mod npy;
 pub mod nrrd;
 pub mod raw;
 pub mod sample_stream;
+pub mod tiff_stack;
 pub mod vti;
 
 use std::path::Path;
@@ -26,17 +28,22 @@ pub use raw::RawLayout;
 pub use sample_stream::{Compression, Endian, SampleStream};
 
 use crate::error::StoreError;
+use crate::volume::{VolumeInfo, VolumeSource};
 
-/// Opens `path` by its extension; `raw` describes headerless files (required for them, ignored otherwise).
-pub fn open_volume(path: &Path, raw: Option<&RawLayout>) -> Result<SampleStream, StoreError> {
+/// Opens `path` by its extension (a folder is a TIFF stack); `raw` describes headerless files (required for them,
+/// ignored otherwise).
+pub fn open_volume(path: &Path, raw: Option<&RawLayout>) -> Result<Box<dyn VolumeSource>, StoreError> {
     if !path.exists() {
         return Err(StoreError::io(path, std::io::Error::new(std::io::ErrorKind::NotFound, "no such file")));
     }
     let name = path.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
     if let Some(layout) = raw {
-        return raw::open(path, layout);
+        return Ok(Box::new(raw::open(path, layout)?));
     }
-    match () {
+    if path.is_dir() || name.ends_with(".tif") || name.ends_with(".tiff") {
+        return Ok(Box::new(tiff_stack::TiffStack::open(path)?));
+    }
+    let stream = match () {
         _ if name.ends_with(".nrrd") || name.ends_with(".nhdr") => nrrd::open(path),
         _ if name.ends_with(".nii.gz") => nifti::open(path, true),
         _ if name.ends_with(".nii") => nifti::open(path, false),
@@ -48,8 +55,39 @@ pub fn open_volume(path: &Path, raw: Option<&RawLayout>) -> Result<SampleStream,
         _ => Err(StoreError::Unsupported {
             path: path.into(),
             message: "unknown format: expected .nrrd, .nhdr, .nii, .nii.gz, .mha, .mhd, .inr, .inr.gz, .npy or .vti, \
-                      or a raw file with --dims and --dtype"
+                      .tif/.tiff (or a folder of slices), or a raw file with --dims and --dtype"
                 .into(),
         }),
+    }?;
+    Ok(Box::new(stream))
+}
+
+/// A source whose spacing and origin are replaced (for formats that carry none, or a user's correction).
+pub struct WithGeometry {
+    inner: Box<dyn VolumeSource>,
+    info: VolumeInfo,
+}
+
+impl WithGeometry {
+    /// `inner` with `spacing` and `origin` where given.
+    pub fn new(inner: Box<dyn VolumeSource>, spacing: Option<[f64; 3]>, origin: Option<[f64; 3]>) -> WithGeometry {
+        let mut info = inner.info().clone();
+        if let Some(s) = spacing {
+            info.spacing = s;
+        }
+        if let Some(o) = origin {
+            info.origin = o;
+        }
+        WithGeometry { inner, info }
+    }
+}
+
+impl VolumeSource for WithGeometry {
+    fn info(&self) -> &VolumeInfo {
+        &self.info
+    }
+
+    fn read_slices(&mut self, count: usize, out: &mut Vec<f32>) -> Result<(), StoreError> {
+        self.inner.read_slices(count, out)
     }
 }
