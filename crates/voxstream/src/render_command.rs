@@ -29,7 +29,12 @@ struct Source<P> {
     camera: Camera,
     placement: VolumePlacement,
     value_range: [f64; 2],
+    /// Bytes of the budget taken by the producer's own cache (the rest goes to the pools).
+    producer_cache_bytes: u64,
 }
+
+/// Share of `--budget-mb` given to a store's host-side cache of compressed shards.
+pub const STORE_CACHE_SHARE: u64 = 8;
 
 /// Runs `voxstream render`.
 pub fn run(args: &RenderArgs) -> Result<()> {
@@ -43,12 +48,14 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             camera: scene.camera,
             placement: VolumePlacement::default(),
             value_range: [0.0, 1.0],
+            producer_cache_bytes: 0,
         };
         return render_source(args, source);
     }
     let path = Path::new(&args.source);
     if path.is_dir() || partial_path(path).is_dir() || path.join("zarr.json").exists() {
-        let reader = Arc::new(StoreReader::open(path)?);
+        let cache_bytes = (args.budget_mb << 20) / STORE_CACHE_SHARE;
+        let reader = Arc::new(StoreReader::open_with_cache(path, cache_bytes)?);
         let producer = StoreProducer::new(reader.clone())?;
         let attributes = reader.attributes().clone();
         let source = Source {
@@ -59,6 +66,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             camera: store_camera(reader.info()),
             placement: store_placement(&reader),
             value_range: attributes.value_range,
+            producer_cache_bytes: cache_bytes,
         };
         return render_source(args, source);
     }
@@ -184,7 +192,7 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>) -> Result<()
         source.producer,
         &transfer_function,
         settings,
-        budget_bytes,
+        budget_bytes - source.producer_cache_bytes,
         limits,
         source.value_range,
     )?;
