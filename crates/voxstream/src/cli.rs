@@ -84,7 +84,8 @@ pub struct RenderArgs {
     /// converged: iterate until exact; interactive: bounded production per frame.
     #[arg(long, value_enum, default_value_t = Mode::Converged)]
     pub mode: Mode,
-    /// Interactive mode with a single camera: frames to render (the last is written).
+    /// Interactive mode with a single camera: at most this many frames (stops once a frame is complete; the last
+    /// is written, and `frame_ms` in --stats has one entry per frame).
     #[arg(long, default_value_t = 1)]
     pub frames: u32,
     /// Interactive mode: requests served per frame.

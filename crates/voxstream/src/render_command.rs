@@ -11,7 +11,7 @@ use voxstream_store::{StoreProducer, StoreReader};
 
 use crate::camera_path::read_camera_path;
 use crate::cli::{RenderArgs, ShadingArg};
-use crate::memory::peak_rss_bytes;
+use crate::memory::{bytes_read, peak_rss_bytes};
 use crate::png_output::{numbered_path, write_png};
 use crate::scenes::{builtin, SCENE_NAMES};
 use crate::session::{LoopLimits, Mode, Session};
@@ -31,6 +31,8 @@ struct Source<P> {
     value_range: [f64; 2],
     /// Bytes of the budget taken by the producer's own cache (the rest goes to the pools).
     producer_cache_bytes: u64,
+    /// Bytes per sample of the source data.
+    sample_bytes: u64,
 }
 
 /// Share of `--budget-mb` given to a store's host-side cache of compressed shards.
@@ -49,6 +51,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             placement: VolumePlacement::default(),
             value_range: [0.0, 1.0],
             producer_cache_bytes: 0,
+            sample_bytes: 2,
         };
         return render_source(args, source);
     }
@@ -67,6 +70,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             placement: store_placement(&reader),
             value_range: attributes.value_range,
             producer_cache_bytes: cache_bytes,
+            sample_bytes: reader.info().dtype.size() as u64,
         };
         return render_source(args, source);
     }
@@ -203,6 +207,7 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>) -> Result<()
         threads: rayon::current_num_threads(),
         ..RunStats::default()
     };
+    let read_before = bytes_read();
     let sequence = args.path.is_some();
     let mut reported_failures = 0usize;
     for (index, camera) in cameras.iter().enumerate() {
@@ -223,10 +228,12 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>) -> Result<()
             stats.requests += result.requests;
             stats.bricks_produced += result.bricks_produced;
             stats.converged = result.is_converged();
-            if repeat + 1 == repeats {
+            // A single camera stops early once a frame needed nothing more: later frames would be identical.
+            if repeat + 1 == repeats || (!sequence && stats.converged) {
                 let out = if sequence { numbered_path(&args.out, index) } else { args.out.clone() };
                 write_png(&result.image, &out)?;
                 stats.frames += 1;
+                break;
             }
         }
     }
@@ -236,6 +243,14 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>) -> Result<()
     stats.resident_bytes_peak = session.peak_resident_bytes();
     stats.producer_failures = reported_failures;
     stats.peak_rss_bytes = peak_rss_bytes();
+    stats.first_frame_ms = stats.frame_ms.first().copied();
+    if let (Some(before), Some(after)) = (read_before, bytes_read()) {
+        if source.producer_cache_bytes > 0 {
+            stats.file_bytes_read = Some(after - before);
+            let m = session.cache().shape().brick_size as u64;
+            stats.brick_bytes_used = Some(residency.bricks as u64 * m * m * m * source.sample_bytes);
+        }
+    }
     if !stats.converged && args.mode == Mode::Converged {
         eprintln!(
             "warning: the last frame did not converge: the budget of {} MiB cannot hold what the view needs; \

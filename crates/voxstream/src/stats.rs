@@ -39,4 +39,10 @@ pub struct RunStats {
     pub producer_failures: usize,
     /// Worker threads used.
     pub threads: usize,
+    /// Bytes read from files while rendering (stores only: compressed shards and metadata).
+    pub file_bytes_read: Option<u64>,
+    /// Bytes of the bricks resident at the end (borders excluded, in the source's sample type): what the frame used.
+    pub brick_bytes_used: Option<u64>,
+    /// Milliseconds until the first image was complete enough to write (the first frame).
+    pub first_frame_ms: Option<f64>,
 }
