@@ -51,6 +51,7 @@ fi
 check "$out/frog_tissues.vti" 844e3e324548fcebab4e14fa30be1400d34fafa7a0a14030b643b38db89da66c
 
 # Independent decoders for the reference arrays.
-python3 -m pip install --quiet numpy==2.1.3 nibabel==5.3.2
+# zarr-python: a standard reader the tests open voxstream's stores with.
+python3 -m pip install --quiet numpy==2.1.3 nibabel==5.3.2 zarr==3.0.8
 python3 scripts/make_references.py "$out"
 echo "real data ready in $out"

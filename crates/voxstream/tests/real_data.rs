@@ -192,3 +192,27 @@ fn renders_match_a_brute_force_march_of_the_dense_array() {
         assert!(quality >= MIN_PSNR_DB, "{file}: PSNR {quality:.2} dB < {MIN_PSNR_DB}");
     }
 }
+
+#[test]
+fn a_standard_zarr_reader_opens_the_store() {
+    // zarr-python (installed by scripts/fetch-real-data.sh) reads the store: metadata, exact level 0, the pyramid.
+    let Some(dir) = data_dir() else { return };
+    let work = scratch("zarr-python");
+    for (file, name, raw) in volumes().into_iter().filter(|v| v.1 == "mni152_t1" || v.1 == "skull_2") {
+        let store = work.join(format!("{name}.zarr"));
+        import(&dir, file, raw.as_ref(), &store);
+        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/check_store_with_zarr_python.py");
+        let output = std::process::Command::new("python3")
+            .arg(&script)
+            .arg(&store)
+            .arg(dir.join(format!("{name}.reference.npy")))
+            .output()
+            .expect("python3");
+        assert!(
+            output.status.success(),
+            "{file}: zarr-python failed:\n{}{}",
+            String::from_utf8_lossy(&output.stdout),
+            String::from_utf8_lossy(&output.stderr)
+        );
+    }
+}
