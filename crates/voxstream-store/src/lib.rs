@@ -21,6 +21,6 @@ pub mod volume;
 pub use error::StoreError;
 pub use import::{import_volume, ImportOptions, ImportReport};
 pub use layout::PyramidLayout;
-pub use store_producer::StoreProducer;
+pub use store_producer::{BrickSource, InMemoryVolume, StoreProducer};
 pub use store_reader::StoreReader;
 pub use volume::{DType, VolumeInfo, VolumeSource};

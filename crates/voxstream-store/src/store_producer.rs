@@ -6,29 +6,138 @@
 //! from the per-brick min/max, which covers every full-resolution sample below a brick, so a brick with `min = max`
 //! is constant at every finer level too; bricks outside the volume are empty.
 
+use std::path::Path;
 use std::sync::Arc;
 
 use voxstream_core::{quantize, NodeContent, NodeKey, ProduceError, Produced, Producer, TreeShape};
 
 use crate::error::StoreError;
+use crate::layout::PyramidLayout;
 use crate::store_reader::StoreReader;
 
-/// Produces bricks from a store.
-#[derive(Clone)]
-pub struct StoreProducer {
-    reader: Arc<StoreReader>,
+/// Where a [`StoreProducer`] reads samples: the store on disk, or the same pyramid held in RAM.
+pub trait BrickSource: Send + Sync {
+    /// Name for error messages.
+    fn path(&self) -> &Path;
+    /// Levels and bricks.
+    fn layout(&self) -> &PyramidLayout;
+    /// Smallest and largest value at level 0.
+    fn value_range(&self) -> [f64; 2];
+    /// `[min, max]` of the full-resolution samples below brick `ijk` of `level`; `None` outside the grid.
+    fn brick_range(&self, level: usize, ijk: [u64; 3]) -> Option<[f32; 2]>;
+    /// Samples `[lower, lower + size)` (x, y, z) of `level`, x fastest.
+    fn read_region(&self, level: usize, lower: [u64; 3], size: [u64; 3]) -> Result<Vec<f32>, StoreError>;
+}
+
+impl BrickSource for StoreReader {
+    fn path(&self) -> &Path {
+        StoreReader::path(self)
+    }
+    fn layout(&self) -> &PyramidLayout {
+        StoreReader::layout(self)
+    }
+    fn value_range(&self) -> [f64; 2] {
+        self.attributes().value_range
+    }
+    fn brick_range(&self, level: usize, ijk: [u64; 3]) -> Option<[f32; 2]> {
+        StoreReader::brick_range(self, level, ijk)
+    }
+    fn read_region(&self, level: usize, lower: [u64; 3], size: [u64; 3]) -> Result<Vec<f32>, StoreError> {
+        StoreReader::read_region(self, level, lower, size)
+    }
+}
+
+/// Every level of a store decoded into RAM: the "fully in memory" baseline the streaming producer is measured
+/// against. It ignores the memory budget; use it only for volumes that fit.
+pub struct InMemoryVolume {
+    path: std::path::PathBuf,
+    layout: PyramidLayout,
+    value_range: [f64; 2],
+    levels: Vec<Vec<f32>>,
+    ranges: Vec<Vec<[f32; 2]>>,
+}
+
+impl InMemoryVolume {
+    /// Reads every level of `reader`.
+    pub fn load(reader: &StoreReader) -> Result<InMemoryVolume, StoreError> {
+        let layout = reader.layout().clone();
+        let mut levels = Vec::new();
+        let mut ranges = Vec::new();
+        for level in 0..layout.levels() {
+            levels.push(reader.read_region(level, [0; 3], layout.level_dims[level])?);
+            let b = layout.bricks(level);
+            let mut r = Vec::new();
+            for z in 0..b[2] {
+                for y in 0..b[1] {
+                    for x in 0..b[0] {
+                        r.push(reader.brick_range(level, [x, y, z]).unwrap_or([0.0, 0.0]));
+                    }
+                }
+            }
+            ranges.push(r);
+        }
+        Ok(InMemoryVolume {
+            path: reader.path().to_path_buf(),
+            layout,
+            value_range: reader.attributes().value_range,
+            levels,
+            ranges,
+        })
+    }
+}
+
+impl BrickSource for InMemoryVolume {
+    fn path(&self) -> &Path {
+        &self.path
+    }
+    fn layout(&self) -> &PyramidLayout {
+        &self.layout
+    }
+    fn value_range(&self) -> [f64; 2] {
+        self.value_range
+    }
+    fn brick_range(&self, level: usize, ijk: [u64; 3]) -> Option<[f32; 2]> {
+        let b = self.layout.bricks(level);
+        if (0..3).any(|a| ijk[a] >= b[a]) {
+            return None;
+        }
+        Some(self.ranges[level][((ijk[2] * b[1] + ijk[1]) * b[0] + ijk[0]) as usize])
+    }
+    fn read_region(&self, level: usize, lower: [u64; 3], size: [u64; 3]) -> Result<Vec<f32>, StoreError> {
+        let [nx, ny, _] = self.layout.level_dims[level];
+        let data = &self.levels[level];
+        let mut out = Vec::with_capacity((size[0] * size[1] * size[2]) as usize);
+        for z in lower[2]..lower[2] + size[2] {
+            for y in lower[1]..lower[1] + size[1] {
+                let start = ((z * ny + y) * nx + lower[0]) as usize;
+                out.extend_from_slice(&data[start..start + size[0] as usize]);
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// Produces bricks from a store (or its in-memory copy).
+pub struct StoreProducer<S: BrickSource = StoreReader> {
+    reader: Arc<S>,
     shape: TreeShape,
     lower: f32,
     inverse_span: f32,
 }
 
-impl StoreProducer {
+impl<S: BrickSource> Clone for StoreProducer<S> {
+    fn clone(&self) -> Self {
+        StoreProducer { reader: self.reader.clone(), shape: self.shape, lower: self.lower, inverse_span: self.inverse_span }
+    }
+}
+
+impl<S: BrickSource> StoreProducer<S> {
     /// A producer over an open store.
-    pub fn new(reader: Arc<StoreReader>) -> Result<StoreProducer, StoreError> {
+    pub fn new(reader: Arc<S>) -> Result<StoreProducer<S>, StoreError> {
         let layout = reader.layout();
         let shape = TreeShape::new(2, layout.brick_size as u32, layout.max_tree_level())
             .map_err(|e| StoreError::store(reader.path(), e.to_string()))?;
-        let [lower, upper] = reader.attributes().value_range;
+        let [lower, upper] = reader.value_range();
         let span = (upper - lower) as f32;
         Ok(StoreProducer {
             reader,
@@ -38,8 +147,8 @@ impl StoreProducer {
         })
     }
 
-    /// The store.
-    pub fn reader(&self) -> &StoreReader {
+    /// The source.
+    pub fn source(&self) -> &S {
         &self.reader
     }
 
@@ -52,7 +161,7 @@ impl StoreProducer {
     }
 }
 
-impl Producer for StoreProducer {
+impl<S: BrickSource> Producer for StoreProducer<S> {
     fn shape(&self) -> TreeShape {
         self.shape
     }

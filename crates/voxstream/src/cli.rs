@@ -100,6 +100,10 @@ pub struct RenderArgs {
     /// Ray-march step as a fraction of the sampled voxel.
     #[arg(long, default_value_t = 0.5)]
     pub step: f64,
+    /// Stores only: decode every level into RAM first and render from there (a baseline for benchmarks; ignores
+    /// --budget-mb for the volume itself).
+    #[arg(long)]
+    pub in_memory: bool,
     /// Level-of-detail bias (positive = finer than one voxel per pixel).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub lod_bias: f64,

@@ -74,6 +74,7 @@ fn unreachable_default() -> RenderArgs {
         path: None,
         stats: None,
         step: 0.5,
+        in_memory: false,
         lod_bias: 0.0,
     }
 }

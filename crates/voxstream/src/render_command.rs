@@ -7,7 +7,7 @@ use anyhow::{bail, Context, Result};
 use voxstream_core::Producer;
 use voxstream_render::{Camera, RenderSettings, Shading, TransferFunction, VolumePlacement};
 use voxstream_store::import::partial_path;
-use voxstream_store::{StoreProducer, StoreReader};
+use voxstream_store::{InMemoryVolume, StoreProducer, StoreReader};
 
 use crate::camera_path::read_camera_path;
 use crate::cli::{RenderArgs, ShadingArg};
@@ -59,19 +59,14 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     if path.is_dir() || partial_path(path).is_dir() || path.join("zarr.json").exists() {
         let cache_bytes = (args.budget_mb << 20) / STORE_CACHE_SHARE;
         let reader = Arc::new(StoreReader::open_with_cache(path, cache_bytes)?);
-        let producer = StoreProducer::new(reader.clone())?;
         let attributes = reader.attributes().clone();
-        let source = Source {
-            name: args.source.clone(),
-            producer,
-            transfer_function: default_store_transfer_function(attributes.value_range)?,
-            shading: Shading::None,
-            camera: store_camera(reader.info()),
-            placement: store_placement(&reader),
-            value_range: attributes.value_range,
-            producer_cache_bytes: cache_bytes,
-            sample_bytes: reader.info().dtype.size() as u64,
-        };
+        let transfer_function = default_store_transfer_function(attributes.value_range)?;
+        if args.in_memory {
+            let volume = Arc::new(InMemoryVolume::load(&reader)?);
+            let source = store_source(args, &reader, StoreProducer::new(volume)?, 0, transfer_function);
+            return render_source(args, source);
+        }
+        let source = store_source(args, &reader, StoreProducer::new(reader.clone())?, cache_bytes, transfer_function);
         return render_source(args, source);
     }
     bail!(
@@ -79,6 +74,26 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         args.source,
         SCENE_NAMES.join(", ")
     )
+}
+
+fn store_source<P>(
+    args: &RenderArgs,
+    reader: &StoreReader,
+    producer: P,
+    producer_cache_bytes: u64,
+    transfer_function: TransferFunction,
+) -> Source<P> {
+    Source {
+        name: args.source.clone(),
+        producer,
+        transfer_function,
+        shading: Shading::None,
+        camera: store_camera(reader.info()),
+        placement: store_placement(reader),
+        value_range: reader.attributes().value_range,
+        producer_cache_bytes,
+        sample_bytes: reader.info().dtype.size() as u64,
+    }
 }
 
 fn check_flags(args: &RenderArgs) -> Result<()> {

@@ -216,3 +216,27 @@ fn a_standard_zarr_reader_opens_the_store() {
         );
     }
 }
+
+#[test]
+fn streaming_and_in_memory_producers_give_the_same_image() {
+    let Some(dir) = data_dir() else { return };
+    let work = scratch("in-memory");
+    let reader = import(&dir, "mni152_t1.nii.gz", None, &work.join("mni.zarr"));
+    let range = reader.attributes().value_range;
+    let tf = default_store_transfer_function(range).unwrap();
+    let camera = store_camera(reader.info());
+    let settings = RenderSettings { width: 64, height: 64, placement: store_placement(&reader), ..RenderSettings::default() };
+    let streamed = {
+        let producer = StoreProducer::new(reader.clone()).unwrap();
+        let mut session = Session::with_value_range(producer, &tf, settings.clone(), 64 << 20, LoopLimits::default(), range).unwrap();
+        session.render(&camera, Mode::Converged).unwrap()
+    };
+    let in_memory = {
+        let volume = Arc::new(voxstream_store::InMemoryVolume::load(&reader).unwrap());
+        let producer = StoreProducer::new(volume).unwrap();
+        let mut session = Session::with_value_range(producer, &tf, settings, 64 << 20, LoopLimits::default(), range).unwrap();
+        session.render(&camera, Mode::Converged).unwrap()
+    };
+    assert!(streamed.is_converged() && in_memory.is_converged());
+    assert!(streamed.image.pixels == in_memory.image.pixels, "the two producers disagree");
+}
