@@ -3,15 +3,19 @@
 //! Stores written by voxstream carry `attributes.voxstream` (see [`crate::metadata`]). An import that did not finish
 //! leaves only `STORE.partial`, never a `STORE` that opens.
 //!
-//! Reads go through a host-side LRU cache of compressed shards (Reichl's host cache, seed 004 ch. 4): a shard read
-//! for one brick keeps its neighbours in RAM, which is the read-ahead of siblings, and the cache's size is part of
-//! the memory budget (see `voxstream render --budget-mb`).
+//! Reads go brick by brick (one inner chunk of a shard: the shard index, then only that chunk's bytes) through a
+//! host-side LRU cache of decoded bricks (Reichl's host cache, seed 004 ch. 4). A brick's one-voxel border comes from
+//! up to 26 neighbours, which the rays usually need next anyway, so the cache turns border reads into hits. The
+//! cache's size is part of the memory budget (see `voxstream render --budget-mb`).
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use zarrs::array::chunk_cache::{ChunkCache, ChunkCacheLruSizeLimit, ChunkCacheTypeEncoded};
-use zarrs::array::{Array, ArraySubset, CodecOptions};
+use std::num::NonZeroUsize;
+use std::sync::Mutex;
+
+use lru::LruCache;
+use zarrs::array::{Array, ArraySubset};
 use zarrs::filesystem::FilesystemStore;
 use zarrs::group::Group;
 use zarrs::storage::ReadableStorageTraits;
@@ -22,7 +26,7 @@ use crate::layout::PyramidLayout;
 use crate::metadata::{StoreAttributes, MINMAX_GROUP};
 use crate::volume::{DType, VolumeInfo};
 
-/// Default size of the host-side cache of compressed shards.
+/// Default size of the host-side brick cache.
 pub const DEFAULT_CACHE_BYTES: u64 = 64 << 20;
 
 /// An open store.
@@ -31,8 +35,10 @@ pub struct StoreReader {
     attributes: StoreAttributes,
     info: VolumeInfo,
     layout: PyramidLayout,
-    /// Per level, the array behind an LRU cache of encoded (compressed) shards held in RAM.
-    levels: Vec<ChunkCacheLruSizeLimit<ChunkCacheTypeEncoded>>,
+    /// Per level, the array (sharded; reads of one brick decode only that inner chunk).
+    levels: Vec<Array<dyn ReadableStorageTraits>>,
+    /// Decoded bricks (inner chunks) by level and brick index, least recently used first out.
+    brick_cache: Mutex<LruCache<(usize, [u64; 3]), Arc<Vec<f32>>>>,
     cache_bytes: u64,
     /// Per level, per brick (x fastest): `[min, max]` of the full-resolution samples below it.
     minmax: Vec<Vec<[f32; 2]>>,
@@ -44,8 +50,8 @@ impl StoreReader {
         StoreReader::open_with_cache(path, DEFAULT_CACHE_BYTES)
     }
 
-    /// Opens and validates the store at `path`; compressed shards read from disk are kept in RAM up to
-    /// `cache_bytes` (split evenly between levels), least recently used first out.
+    /// Opens and validates the store at `path`; bricks read from disk are kept decoded in RAM up to `cache_bytes`,
+    /// least recently used first out.
     pub fn open_with_cache(path: &Path, cache_bytes: u64) -> Result<StoreReader, StoreError> {
         if !path.is_dir() {
             if partial_path(path).is_dir() {
@@ -95,8 +101,7 @@ impl StoreReader {
                     format!("level {level} has shape {:?}, expected {:?}", array.shape(), [z, y, x]),
                 ));
             }
-            let per_level = (cache_bytes / layout.levels() as u64).max(1);
-            levels.push(ChunkCacheLruSizeLimit::new(Arc::new(array), per_level));
+            levels.push(array);
             let ranges = Array::open(store.clone(), &format!("/{MINMAX_GROUP}/{level}"))
                 .map_err(|e| StoreError::store(path, format!("min/max of level {level}: {e}")))?;
             let flat: Vec<f32> = ranges
@@ -108,7 +113,10 @@ impl StoreReader {
             }
             minmax.push(flat.chunks_exact(2).map(|c| [c[0], c[1]]).collect());
         }
-        Ok(StoreReader { path: path.into(), attributes, info, layout, levels, cache_bytes, minmax })
+        let brick_bytes = (attributes.brick_size.pow(3) * 4).max(1);
+        let capacity = NonZeroUsize::new((cache_bytes / brick_bytes).max(8) as usize).unwrap_or(NonZeroUsize::MIN);
+        let brick_cache = Mutex::new(LruCache::new(capacity));
+        Ok(StoreReader { path: path.into(), attributes, info, layout, levels, brick_cache, cache_bytes, minmax })
     }
 
     /// The store's folder.
@@ -140,34 +148,75 @@ impl StoreReader {
         Some(self.minmax[level][((ijk[2] * b[1] + ijk[1]) * b[0] + ijk[0]) as usize])
     }
 
-    /// Reads samples `[lower, lower + size)` (x, y, z) of `level` as `f32`, x fastest.
+    /// Reads samples `[lower, lower + size)` (x, y, z) of `level` as `f32`, x fastest, assembled from the bricks
+    /// that overlap it (each read once from disk, then from the brick cache).
     pub fn read_region(&self, level: usize, lower: [u64; 3], size: [u64; 3]) -> Result<Vec<f32>, StoreError> {
-        let subset = ArraySubset::new_with_ranges(&[
-            lower[2]..lower[2] + size[2],
-            lower[1]..lower[1] + size[1],
-            lower[0]..lower[0] + size[0],
-        ]);
-        let cache = &self.levels[level];
-        let corrupt = |e: zarrs::array::ArrayError| {
-            StoreError::store(&self.path, format!("level {level}, samples {lower:?}+{size:?}: {e}"))
-        };
-        let options = CodecOptions::default();
-        Ok(match self.info.dtype {
-            DType::U8 => cache.retrieve_array_subset::<Vec<u8>>(&subset, &options).map_err(corrupt)?.into_iter().map(f32::from).collect(),
-            DType::U16 => cache.retrieve_array_subset::<Vec<u16>>(&subset, &options).map_err(corrupt)?.into_iter().map(f32::from).collect(),
-            DType::I16 => cache.retrieve_array_subset::<Vec<i16>>(&subset, &options).map_err(corrupt)?.into_iter().map(f32::from).collect(),
-            DType::F32 => cache.retrieve_array_subset::<Vec<f32>>(&subset, &options).map_err(corrupt)?,
-        })
+        let b = self.layout.brick_size;
+        let dims = self.layout.level_dims[level];
+        let upper = [0, 1, 2].map(|a| lower[a] + size[a]);
+        if (0..3).any(|a| upper[a] > dims[a] || size[a] == 0) {
+            return Err(StoreError::store(&self.path, format!("region {lower:?}+{size:?} outside level {level}")));
+        }
+        let mut out = vec![0f32; (size[0] * size[1] * size[2]) as usize];
+        let first = lower.map(|v| v / b);
+        let last = [0, 1, 2].map(|a| (upper[a] - 1) / b);
+        for bz in first[2]..=last[2] {
+            for by in first[1]..=last[1] {
+                for bx in first[0]..=last[0] {
+                    let ijk = [bx, by, bz];
+                    let brick = self.brick(level, ijk)?;
+                    let origin = ijk.map(|v| v * b);
+                    let extent = [0, 1, 2].map(|a| (origin[a] + b).min(dims[a]) - origin[a]);
+                    let from = [0, 1, 2].map(|a| origin[a].max(lower[a]));
+                    let to = [0, 1, 2].map(|a| (origin[a] + extent[a]).min(upper[a]));
+                    let run = (to[0] - from[0]) as usize;
+                    for z in from[2]..to[2] {
+                        for y in from[1]..to[1] {
+                            let src = (((z - origin[2]) * extent[1] + (y - origin[1])) * extent[0] + (from[0] - origin[0])) as usize;
+                            let dst = (((z - lower[2]) * size[1] + (y - lower[1])) * size[0] + (from[0] - lower[0])) as usize;
+                            out[dst..dst + run].copy_from_slice(&brick[src..src + run]);
+                        }
+                    }
+                }
+            }
+        }
+        Ok(out)
     }
 
-    /// Capacity of the host-side cache of compressed shards.
+    /// The samples of brick `ijk` of `level` (clipped to the level), x fastest, from the cache or the disk.
+    fn brick(&self, level: usize, ijk: [u64; 3]) -> Result<Arc<Vec<f32>>, StoreError> {
+        let key = (level, ijk);
+        if let Some(brick) = self.brick_cache.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {
+            return Ok(brick.clone());
+        }
+        let b = self.layout.brick_size;
+        let dims = self.layout.level_dims[level];
+        let lower = ijk.map(|v| v * b);
+        let upper = [0, 1, 2].map(|a| (lower[a] + b).min(dims[a]));
+        let subset = ArraySubset::new_with_ranges(&[lower[2]..upper[2], lower[1]..upper[1], lower[0]..upper[0]]);
+        let array = &self.levels[level];
+        let corrupt = |e: zarrs::array::ArrayError| {
+            StoreError::store(&self.path, format!("level {level}, brick {ijk:?}: {e}"))
+        };
+        let samples: Vec<f32> = match self.info.dtype {
+            DType::U8 => array.retrieve_array_subset::<Vec<u8>>(&subset).map_err(corrupt)?.into_iter().map(f32::from).collect(),
+            DType::U16 => array.retrieve_array_subset::<Vec<u16>>(&subset).map_err(corrupt)?.into_iter().map(f32::from).collect(),
+            DType::I16 => array.retrieve_array_subset::<Vec<i16>>(&subset).map_err(corrupt)?.into_iter().map(f32::from).collect(),
+            DType::F32 => array.retrieve_array_subset::<Vec<f32>>(&subset).map_err(corrupt)?,
+        };
+        let brick = Arc::new(samples);
+        self.brick_cache.lock().unwrap_or_else(|p| p.into_inner()).put(key, brick.clone());
+        Ok(brick)
+    }
+
+    /// Capacity of the host-side brick cache, bytes.
     pub fn cache_capacity_bytes(&self) -> u64 {
         self.cache_bytes
     }
 
-    /// Compressed shards cached now.
-    pub fn cached_shards(&self) -> usize {
-        self.levels.iter().map(|c| c.len()).sum()
+    /// Bricks cached now.
+    pub fn cached_bricks(&self) -> usize {
+        self.brick_cache.lock().unwrap_or_else(|p| p.into_inner()).len()
     }
 
     /// Bytes the store occupies on disk.
