@@ -17,7 +17,8 @@
 //!   calling thread in queue order, so the final pools do not depend on scheduling.
 //! - **Failures.** A producer error is recorded once; the node stays missing, its ancestor stands in, and it is
 //!   not requested again.
-//! - **Brick analysis.** A produced brick whose voxels are all equal becomes a constant node (no brick slot).
+//! - **Brick analysis.** A produced terminal brick whose voxels are all equal becomes a constant node (no brick
+//!   slot). Non-terminal bricks stay bricks: only the producer knows whether finer levels are constant too.
 
 use std::collections::HashSet;
 
@@ -388,11 +389,13 @@ struct AnalysedBrick {
     voxels: Vec<u16>,
 }
 
-/// Brick analysis before upload ([R08] §4): a brick of equal voxels is a constant node.
+/// Brick analysis before upload ([R08] §4): a terminal brick of equal voxels is a constant node. A non-terminal one
+/// stays a brick: equal voxels at a coarse level (an average) say nothing of the finer levels, and a constant node
+/// is never subdivided; only the producer may declare a whole subtree constant.
 fn analyse(produced: Produced, voxels: Vec<u16>, key: NodeKey, shape: &TreeShape) -> AnalysedBrick {
     let is_terminal = produced.is_terminal || key.level >= shape.max_level;
     let content = match produced.content {
-        NodeContent::Brick if voxels.iter().all(|&v| v == voxels[0]) => {
+        NodeContent::Brick if is_terminal && voxels.iter().all(|&v| v == voxels[0]) => {
             if voxels[0] == 0 {
                 NodeContent::Empty
             } else {

@@ -29,6 +29,7 @@ pub struct StoreAttributes {
     /// Smallest and largest sample value at level 0.
     pub value_range: [f64; 2],
     /// The import finished: absent or false means an interrupted import.
+    #[serde(default)]
     pub complete: bool,
 }
 

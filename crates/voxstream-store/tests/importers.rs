@@ -423,3 +423,19 @@ fn tiff_multipage_and_folder_of_slices() {
     let e = import_error(&folder, None).to_string();
     assert!(e.contains("slice_999.tiff"), "{e}");
 }
+
+#[test]
+fn nifti_scaling_is_applied_as_float() {
+    let dir = scratch("nifti-scale");
+    let mut bytes = nifti(DType::I16, 4, 16);
+    bytes[112..116].copy_from_slice(&0.5f32.to_le_bytes());
+    bytes[116..120].copy_from_slice(&(-3.0f32).to_le_bytes());
+    std::fs::write(dir.join("s.nii"), bytes).unwrap();
+    let mut source = open_volume(&dir.join("s.nii"), None).unwrap();
+    assert_eq!(source.info().dtype, DType::F32);
+    let store = dir.join("s.zarr");
+    import_volume(source.as_mut(), &store, &ImportOptions::default(), &mut |_, _| {}).unwrap();
+    let level0 = StoreReader::open(&store).unwrap().read_region(0, [0, 0, 0], DIMS).unwrap();
+    let expected: Vec<f32> = samples(DType::I16).iter().map(|v| v * 0.5 - 3.0).collect();
+    assert!(level0 == expected);
+}

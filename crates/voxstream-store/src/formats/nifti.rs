@@ -2,7 +2,8 @@
 //!
 //! Spacing comes from `pixdim[1..3]`, the origin from the qform offsets (or the sform translation). Rotations in
 //! the qform/sform are not applied: the volume is axis-aligned in voxstream's world, as in VTK's image data. Values
-//! are kept as stored; a `scl_slope`/`scl_inter` scaling is reported, not applied.
+//! are kept as stored, unless the header sets a `scl_slope`/`scl_inter` scaling other than the identity: then the
+//! scaled values are imported, as f32.
 
 use std::io::Read;
 use std::path::Path;
@@ -74,10 +75,13 @@ pub fn open(path: &Path, is_gzip: bool) -> Result<SampleStream, StoreError> {
     if !(vox_offset >= 348.0) {
         return Err(StoreError::format(path, format!("vox_offset {vox_offset} is before the end of the header")));
     }
+    let (slope, intercept) = (f32_at(112), f32_at(116));
     let info = VolumeInfo { dims: dim.map(|d| d as u64), dtype, spacing, origin };
-    if is_gzip {
-        SampleStream::open(path, 0, Compression::Gzip, vox_offset as u64, info, endian)
+    let stream = if is_gzip {
+        SampleStream::open(path, 0, Compression::Gzip, vox_offset as u64, info, endian)?
     } else {
-        SampleStream::open(path, vox_offset as u64, Compression::None, 0, info, endian)
-    }
+        SampleStream::open(path, vox_offset as u64, Compression::None, 0, info, endian)?
+    };
+    let is_identity = slope == 0.0 || !slope.is_finite() || (slope == 1.0 && intercept == 0.0);
+    Ok(if is_identity { stream } else { stream.with_scaling(slope, intercept) })
 }

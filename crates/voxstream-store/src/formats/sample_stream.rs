@@ -31,6 +31,10 @@ pub enum Compression {
 /// Samples following a header, read slice by slice.
 pub struct SampleStream {
     info: VolumeInfo,
+    /// Sample type in the file (the reported type becomes f32 when a scaling applies).
+    file_dtype: DType,
+    /// `value · slope + intercept`, if the header asks for it.
+    scaling: Option<(f32, f32)>,
     endian: Endian,
     reader: Box<dyn Read + Send>,
     path: PathBuf,
@@ -80,7 +84,15 @@ impl SampleStream {
             file.seek(SeekFrom::Start(offset)).map_err(|e| StoreError::io(path, e))?;
             Box::new(BufReader::with_capacity(1 << 20, file))
         };
-        Ok(SampleStream { info, endian, reader, path: path.into(), consumed: 0, bytes: Vec::new() })
+        let file_dtype = info.dtype;
+        Ok(SampleStream { info, file_dtype, scaling: None, endian, reader, path: path.into(), consumed: 0, bytes: Vec::new() })
+    }
+
+    /// Applies `value · slope + intercept` to every sample; the volume is then reported (and stored) as f32.
+    pub fn with_scaling(mut self, slope: f32, intercept: f32) -> SampleStream {
+        self.scaling = Some((slope, intercept));
+        self.info.dtype = DType::F32;
+        self
     }
 }
 
@@ -88,7 +100,8 @@ impl SampleStream {
     /// Samples of `info` from any reader (a decoded in-memory buffer, say), reported under `path`.
     pub fn from_reader(path: &Path, reader: Box<dyn Read + Send>, info: VolumeInfo, endian: Endian) -> Result<SampleStream, StoreError> {
         info.validate(path)?;
-        Ok(SampleStream { info, endian, reader, path: path.into(), consumed: 0, bytes: Vec::new() })
+        let file_dtype = info.dtype;
+        Ok(SampleStream { info, file_dtype, scaling: None, endian, reader, path: path.into(), consumed: 0, bytes: Vec::new() })
     }
 }
 
@@ -103,7 +116,7 @@ impl VolumeSource for SampleStream {
 
     fn read_slices(&mut self, count: usize, out: &mut Vec<f32>) -> Result<(), StoreError> {
         let samples = count * self.info.slice_len();
-        let size = self.info.dtype.size();
+        let size = self.file_dtype.size();
         self.bytes.resize(samples * size, 0);
         let mut filled = 0;
         while filled < self.bytes.len() {
@@ -111,7 +124,7 @@ impl VolumeSource for SampleStream {
                 Ok(0) => {
                     return Err(StoreError::Truncated {
                         path: self.path.clone(),
-                        expected: self.info.byte_len(),
+                        expected: self.info.slice_len() as u64 * self.info.dims[2] * size as u64,
                         found: self.consumed + filled as u64,
                     })
                 }
@@ -125,8 +138,9 @@ impl VolumeSource for SampleStream {
         }
         self.consumed += filled as u64;
         out.reserve(samples);
+        let start = out.len();
         let big = self.endian == Endian::Big;
-        match self.info.dtype {
+        match self.file_dtype {
             DType::U8 => out.extend(self.bytes.iter().map(|&b| b as f32)),
             DType::U16 => out.extend(self.bytes.chunks_exact(2).map(|c| {
                 let a = [c[0], c[1]];
@@ -140,6 +154,9 @@ impl VolumeSource for SampleStream {
                 let a = [c[0], c[1], c[2], c[3]];
                 if big { f32::from_be_bytes(a) } else { f32::from_le_bytes(a) }
             })),
+        }
+        if let Some((slope, intercept)) = self.scaling {
+            out[start..].iter_mut().for_each(|v| *v = *v * slope + intercept);
         }
         Ok(())
     }
