@@ -11,8 +11,8 @@ use crate::key::TreeShape;
 use crate::lru::{Allocation, LruSlots};
 use crate::node::{BrickSlot, NodeId};
 
-/// Bytes of the per-slot record (the owning node), counted in the budget.
-pub const BRICK_RECORD_BYTES: usize = 4;
+/// Bytes of the per-slot records (the owning node, and the brick's value range), counted in the budget.
+pub const BRICK_RECORD_BYTES: usize = 4 + 4;
 
 /// Largest voxel value; stands for 1.0.
 pub const VOXEL_MAX: u16 = u16::MAX;
@@ -35,6 +35,8 @@ pub struct BrickPool {
     voxels_per_brick: usize,
     voxels: Vec<u16>,
     owners: Vec<u32>,
+    /// Per slot, `[min, max]` of its voxels: renderers skip bricks the transfer function makes invisible.
+    ranges: Vec<[u16; 2]>,
     lru: LruSlots,
 }
 
@@ -42,7 +44,13 @@ impl BrickPool {
     /// An empty pool of at most `capacity` bricks. Memory grows with use.
     pub fn new(shape: &TreeShape, capacity: u32) -> BrickPool {
         let voxels_per_brick = shape.voxels_per_brick();
-        BrickPool { voxels_per_brick, voxels: Vec::new(), owners: Vec::new(), lru: LruSlots::new(capacity) }
+        BrickPool {
+            voxels_per_brick,
+            voxels: Vec::new(),
+            owners: Vec::new(),
+            ranges: Vec::new(),
+            lru: LruSlots::new(capacity),
+        }
     }
 
     /// All voxels, brick after brick: the array renderers read.
@@ -54,6 +62,12 @@ impl BrickPool {
     /// Voxels per brick, borders included.
     pub fn voxels_per_brick(&self) -> usize {
         self.voxels_per_brick
+    }
+
+    /// `[min, max]` voxel of every slot, in slot order: the array renderers read for empty-space skipping.
+    #[inline]
+    pub fn ranges(&self) -> &[[u16; 2]] {
+        &self.ranges
     }
 
     /// The voxels of one brick.
@@ -104,12 +118,15 @@ impl BrickPool {
         let allocation = self.lru.allocate(frame)?;
         let slot = allocation.slot() as usize;
         let start = slot * self.voxels_per_brick;
+        let range = voxels.iter().fold([u16::MAX, 0], |[lo, hi], &v| [lo.min(v), hi.max(v)]);
         if start >= self.voxels.len() {
             self.voxels.extend_from_slice(voxels);
             self.owners.push(owner.0);
+            self.ranges.push(range);
             return Some((BrickSlot(slot as u32), None));
         }
         self.voxels[start..start + self.voxels_per_brick].copy_from_slice(voxels);
+        self.ranges[slot] = range;
         let previous = std::mem::replace(&mut self.owners[slot], owner.0);
         let evicted = match allocation {
             Allocation::Recycled(_) => Some(NodeId(previous)),

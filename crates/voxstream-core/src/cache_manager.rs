@@ -148,7 +148,12 @@ impl<P: Producer> CacheManager<P> {
 
     /// The pools as renderers read them.
     pub fn view(&self) -> TreeView<'_> {
-        TreeView { shape: self.shape, nodes: self.node_pool.nodes(), voxels: self.brick_pool.voxels() }
+        TreeView {
+            shape: self.shape,
+            nodes: self.node_pool.nodes(),
+            voxels: self.brick_pool.voxels(),
+            brick_ranges: self.brick_pool.ranges(),
+        }
     }
 
     /// The feedback buffer the renderer writes into.

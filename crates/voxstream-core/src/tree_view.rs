@@ -17,6 +17,8 @@ pub struct TreeView<'a> {
     pub nodes: &'a [Node],
     /// The brick pool, brick after brick, `(M+2)³` voxels each.
     pub voxels: &'a [u16],
+    /// `[min, max]` voxel of each brick slot (border included).
+    pub brick_ranges: &'a [[u16; 2]],
 }
 
 impl<'a> TreeView<'a> {
@@ -39,6 +41,13 @@ impl<'a> TreeView<'a> {
         let per_brick = self.shape.voxels_per_brick();
         let start = slot.0 as usize * per_brick;
         &self.voxels[start..start + per_brick]
+    }
+
+    /// `[min, max]` of a brick's voxels, normalised to `[0, 1]`.
+    #[inline]
+    pub fn brick_range(&self, slot: BrickSlot) -> [f32; 2] {
+        let [lo, hi] = self.brick_ranges[slot.0 as usize];
+        [dequantize(lo), dequantize(hi)]
     }
 
     /// Value of voxel `(i, j, k)` (border included, so indices run over `0..M+2`) of a brick.

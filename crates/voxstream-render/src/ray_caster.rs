@@ -10,7 +10,8 @@
 //!    (request production; the deepest ancestor with data stands in) or a node without children (request a
 //!    subdivision). A ray then goes on with the coarser data and may report further misses, up to
 //!    `max_requests_per_ray` per frame (GigaVoxels allowed one, which makes translucent scenes converge slowly).
-//! 3. March the node's box with steps of `step_factor` voxels of the sampled level, blending the trilinear samples
+//! 3. Skip the box at once if the transfer function makes every value of its bricks invisible (per-brick min/max).
+//!    Otherwise march the node's box with steps of `step_factor` voxels of the sampled level, blending the trilinear samples
 //!    of the two adjacent levels by `frac(ℓ)` (quadrilinear), correcting opacity for the step length, optionally
 //!    Phong-shading with the gradient, and stop once opaque.
 //! 4. Leave the box and descend again for the next point, from the deepest node of the previous path that still
@@ -231,6 +232,17 @@ impl<'a> RayCaster<'a> {
                     }
                 }
                 SegmentData::Bricks { fine, coarse, blend_level } => {
+                    // Empty-space skipping: nothing in the bricks (fine, and coarse if blended) is visible.
+                    let [mut lo, mut hi] = self.view.brick_range(fine.slot);
+                    if let (true, Some(c)) = (blend_level, coarse) {
+                        let [clo, chi] = self.view.brick_range(c.slot);
+                        lo = lo.min(clo);
+                        hi = hi.max(chi);
+                    }
+                    if !self.lut.is_visible_in(lo, hi) {
+                        t = t_exit;
+                        continue;
+                    }
                     let voxel = 1.0 / (self.scale[fine.level as usize] * self.brick_size);
                     let length = t_exit - t;
                     let steps = (length * speed / (voxel * self.step_factor)).ceil().max(1.0);

@@ -106,6 +106,8 @@ pub struct LutEntry {
 #[derive(Clone, Debug)]
 pub struct TransferLut {
     entries: Vec<LutEntry>,
+    /// `visible_before[i]`: entries with non-zero extinction among `entries[..i]` (O(1) range queries).
+    visible_before: Vec<u32>,
     lower: f32,
     scale: f32,
 }
@@ -117,7 +119,7 @@ impl TransferLut {
     /// Tabulates `tf` over data values `[lower, upper]`; `default_unit_distance` applies when the function names none.
     pub fn new(tf: &TransferFunction, lower: f32, upper: f32, default_unit_distance: f64) -> TransferLut {
         let unit = tf.unit_distance.unwrap_or(default_unit_distance);
-        let entries = (0..LUT_SIZE)
+        let entries: Vec<LutEntry> = (0..LUT_SIZE)
             .map(|i| {
                 let value = lower as f64 + (upper - lower) as f64 * i as f64 / (LUT_SIZE - 1) as f64;
                 let [r, g, b, alpha] = tf.evaluate(value);
@@ -125,7 +127,14 @@ impl TransferLut {
                 LutEntry { color: [r as f32, g as f32, b as f32], sigma: sigma as f32 }
             })
             .collect();
-        TransferLut { entries, lower: 0.0, scale: (LUT_SIZE - 1) as f32 }
+        let mut visible_before = Vec::with_capacity(LUT_SIZE + 1);
+        visible_before.push(0u32);
+        for entry in entries.iter() {
+            let entry: &LutEntry = entry;
+            let last = *visible_before.last().unwrap_or(&0);
+            visible_before.push(last + (entry.sigma > 0.0) as u32);
+        }
+        TransferLut { entries, visible_before, lower: 0.0, scale: (LUT_SIZE - 1) as f32 }
     }
 
     /// Colour and extinction at normalised `value` (linear between entries).
@@ -146,7 +155,7 @@ impl TransferLut {
     pub fn is_visible_in(&self, lower: f32, upper: f32) -> bool {
         let index = |v: f32| (((v - self.lower) * self.scale).clamp(0.0, (LUT_SIZE - 1) as f32)) as usize;
         let (a, b) = (index(lower), (index(upper) + 1).min(LUT_SIZE - 1));
-        self.entries[a..=b].iter().any(|e| e.sigma > 0.0)
+        self.visible_before[b + 1] > self.visible_before[a]
     }
 }
 
