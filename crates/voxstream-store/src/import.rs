@@ -2,8 +2,9 @@
 //! level keeps at most one slab of its own resolution, writes it as one row of shards, and passes the 2×2×2 average
 //! to the next level. Reichl (seed 004, ch. 4) calls this building the data pool once, offline.
 //!
-//! Memory: about `brick_size · X · Y · 4 bytes · 4/3` for the slabs of all levels (f32 samples), plus one shard row
-//! being encoded. An import writes into `STORE.partial` and renames it to `STORE` only when complete, so an
+//! Memory: about `brick_size · X · Y · 4 bytes · 4/3` for the slabs of all levels (f32 samples), plus the shard
+//! row being encoded (a u8/u16/i16/f32 copy of one row of level 0) — about 1 GiB for 2048² slices whatever the
+//! number of slices. The bound grows with the slice area, not the volume. An import writes into `STORE.partial` and renames it to `STORE` only when complete, so an
 //! interrupted import never leaves a store that looks complete; running it again restarts cleanly.
 
 use std::path::{Path, PathBuf};
@@ -99,17 +100,18 @@ fn import_into_partial(
     let total = info.byte_len();
     let slice_bytes = info.slice_len() as u64 * info.dtype.size() as u64;
     let mut value_range = [f64::INFINITY, f64::NEG_INFINITY];
-    let mut slab = Vec::new();
     let mut z = 0u64;
     while z < info.dims[2] {
         let count = (info.dims[2] - z).min(brick as u64) as usize;
-        slab.clear();
-        source.read_slices(count, &mut slab)?;
-        for &v in &slab {
-            value_range[0] = value_range[0].min(v as f64);
-            value_range[1] = value_range[1].max(v as f64);
-        }
-        push_planes(&mut levels, 0, &slab, count, false).map_err(|e| zarr(&e))?;
+        // Read straight into level 0's slab: the input is never held twice.
+        let start = levels[0].buffer.len();
+        source.read_slices(count, &mut levels[0].buffer)?;
+        let (lo, hi) = levels[0].buffer[start..]
+            .iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+        value_range[0] = value_range[0].min(lo as f64);
+        value_range[1] = value_range[1].max(hi as f64);
+        push_planes(&mut levels, 0, &[], count, false).map_err(|e| zarr(&e))?;
         z += count as u64;
         progress(z * slice_bytes, total);
     }
