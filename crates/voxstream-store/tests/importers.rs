@@ -439,3 +439,28 @@ fn nifti_scaling_is_applied_as_float() {
     let expected: Vec<f32> = samples(DType::I16).iter().map(|v| v * 0.5 - 3.0).collect();
     assert!(level0 == expected);
 }
+
+#[test]
+fn npz_stored_and_deflated() {
+    use std::io::Write;
+    let dir = scratch("npz");
+    let dict = format!("{{'descr': '<u2', 'fortran_order': False, 'shape': ({}, {}, {}), }}", DIMS[2], DIMS[1], DIMS[0]);
+    let mut header = dict.into_bytes();
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(b' ');
+    }
+    header.push(b'\n');
+    let mut npy = b"\x93NUMPY\x01\x00".to_vec();
+    npy.extend((header.len() as u16).to_le_bytes());
+    npy.extend(header);
+    npy.extend(encode(DType::U16, Endian::Little));
+    for (name, method) in [("stored.npz", zip::CompressionMethod::Stored), ("deflated.npz", zip::CompressionMethod::Deflated)] {
+        let file = std::fs::File::create(dir.join(name)).unwrap();
+        let mut writer = zip::ZipWriter::new(file);
+        let options = zip::write::SimpleFileOptions::default().compression_method(method);
+        writer.start_file("volume.npy", options).unwrap();
+        writer.write_all(&npy).unwrap();
+        writer.finish().unwrap();
+        check_import(&dir.join(name), None, DType::U16, [1.0; 3], [0.0; 3]);
+    }
+}

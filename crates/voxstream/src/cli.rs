@@ -121,7 +121,7 @@ pub enum EndianArg {
 /// `voxstream import`.
 #[derive(Args, Debug, Clone)]
 pub struct ImportArgs {
-    /// Input: .nrrd/.nhdr, .nii/.nii.gz, .mha/.mhd, .inr/.inr.gz, .vti, .npy, .tif/.tiff (or a folder of slices),
+    /// Input: .nrrd/.nhdr, .nii/.nii.gz, .mha/.mhd, .inr/.inr.gz, .vti, .npy, .npz, .tif/.tiff (or a folder of slices),
     /// or a raw file with --dims and --dtype.
     pub input: PathBuf,
     /// The store folder to create.

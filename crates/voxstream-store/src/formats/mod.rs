@@ -7,7 +7,7 @@
 //! | NIfTI-1 | `.nii`, `.nii.gz` | plain, gzip |
 //! | MetaImage | `.mha`, `.mhd` | plain, zlib |
 //! | INRIMAGE-4 | `.inr`, `.inr.gz` | plain, gzip |
-//! | NumPy | `.npy` | plain |
+//! | NumPy | `.npy`, `.npz` (first array) | plain; npz stored or deflated |
 //! | TIFF stack | `.tif`, `.tiff`, or a folder of them | as the tiff crate decodes |
 //! | VTK XML ImageData | `.vti` | inline binary/ascii, appended raw/base64, zlib |
 
@@ -51,10 +51,11 @@ pub fn open_volume(path: &Path, raw: Option<&RawLayout>) -> Result<Box<dyn Volum
         _ if name.ends_with(".inr.gz") => inr::open(path, true),
         _ if name.ends_with(".inr") => inr::open(path, false),
         _ if name.ends_with(".npy") => npy::open(path),
+        _ if name.ends_with(".npz") => npy::open_npz(path),
         _ if name.ends_with(".vti") => vti::open(path),
         _ => Err(StoreError::Unsupported {
             path: path.into(),
-            message: "unknown format: expected .nrrd, .nhdr, .nii, .nii.gz, .mha, .mhd, .inr, .inr.gz, .npy or .vti, \
+            message: "unknown format: expected .nrrd, .nhdr, .nii, .nii.gz, .mha, .mhd, .inr, .inr.gz, .npy, .npz or .vti, \
                       .tif/.tiff (or a folder of slices), or a raw file with --dims and --dtype"
                 .into(),
         }),

@@ -1,4 +1,5 @@
-//! NumPy `.npy` (format versions 1–3): a 3-D array of `u1`, `u2`, `i2` or `f4`, C or Fortran order.
+//! NumPy `.npy` (format versions 1–3) and `.npz` (its first array): a 3-D array of `u1`, `u2`, `i2` or `f4`, C or
+//! Fortran order.
 //!
 //! A C-order array of shape `(Z, Y, X)` (NumPy's usual `volume[z, y, x]`) and a Fortran-order array of shape
 //! `(X, Y, Z)` both have x fastest in the file, which is voxstream's order. Spacing 1, origin 0.
@@ -13,6 +14,41 @@ use crate::volume::{DType, VolumeInfo};
 /// Opens a `.npy` array.
 pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
     let mut file = std::fs::File::open(path).map_err(|e| StoreError::io(path, e))?;
+    let (info, endian, header_bytes) = parse_header(&mut file, path)?;
+    SampleStream::open(path, header_bytes, Compression::None, 0, info, endian)
+}
+
+/// Opens the first array of a `.npz` archive (stored or deflated), streaming it without extracting.
+pub fn open_npz(path: &Path) -> Result<SampleStream, StoreError> {
+    let file = std::fs::File::open(path).map_err(|e| StoreError::io(path, e))?;
+    let mut archive = zip::ZipArchive::new(file).map_err(|e| StoreError::format(path, format!("not a .npz (zip) archive: {e}")))?;
+    let (name, start, compressed, method) = {
+        let mut found = None;
+        for i in 0..archive.len() {
+            let entry = archive.by_index_raw(i).map_err(|e| StoreError::format(path, format!("corrupt archive: {e}")))?;
+            if entry.name().ends_with(".npy") {
+                found = Some((entry.name().to_string(), entry.data_start(), entry.compressed_size(), entry.compression()));
+                break;
+            }
+        }
+        found.ok_or_else(|| StoreError::format(path, "archive holds no .npy array"))?
+    };
+    let mut file = std::fs::File::open(path).map_err(|e| StoreError::io(path, e))?;
+    std::io::Seek::seek(&mut file, std::io::SeekFrom::Start(start)).map_err(|e| StoreError::io(path, e))?;
+    let raw = std::io::BufReader::new(file).take(compressed);
+    let mut reader: Box<dyn Read + Send> = match method {
+        zip::CompressionMethod::Stored => Box::new(raw),
+        zip::CompressionMethod::Deflated => Box::new(flate2::read::DeflateDecoder::new(raw)),
+        other => {
+            return Err(StoreError::Unsupported { path: path.into(), message: format!("{name} is compressed with {other:?}") })
+        }
+    };
+    let (info, endian, _) = parse_header(&mut reader, path)?;
+    SampleStream::from_reader(path, reader, info, endian)
+}
+
+/// Reads a `.npy` header; returns the geometry, the byte order and the header's length in bytes.
+fn parse_header(file: &mut dyn Read, path: &Path) -> Result<(VolumeInfo, Endian, u64), StoreError> {
     let mut magic = [0u8; 8];
     file.read_exact(&mut magic).map_err(|_| StoreError::format(path, "too short for a .npy file"))?;
     if &magic[..6] != b"\x93NUMPY" {
@@ -60,5 +96,5 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
     };
     let dims = if fortran { [shape[0], shape[1], shape[2]] } else { [shape[2], shape[1], shape[0]] };
     let info = VolumeInfo { dims, dtype, spacing: [1.0; 3], origin: [0.0; 3] };
-    SampleStream::open(path, prefix + header_len, Compression::None, 0, info, endian)
+    Ok((info, endian, prefix + header_len))
 }
