@@ -7,6 +7,8 @@
 #   CGAL skull CT        Debian libcgal-demo 5.5.1-2  INR, 64^3 f32
 #   volpack brainsmall   Debian libvolpack1-dev 1.0b3-9  62-byte header + 128x128x84 u8
 #   frog tissue labels   PyPI pyvista==0.49.1        VTK XML ImageData (zlib, inline base64), 500x470x136 u8
+#   bunny level set/fog  Debian libcgal-demo's bunny00.off mesh -> Debian libopenvdb-tools' vdb_tool (mesh2ls d=128,
+#                        ls2fog): OpenVDB files; needs the Debian packages libopenvdb-tools python3-openvdb python3-numpy
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 out=data/real
@@ -27,12 +29,14 @@ if [ ! -f "$out/mni152_t1.nii.gz" ]; then
 fi
 check "$out/mni152_t1.nii.gz" 421a10e872fd6cadae7f61d358dffbcc1795a497d61ee76c5dda2503e1a1e9e6
 
-if [ ! -f "$out/liver.inr.gz" ] || [ ! -f "$out/skull_2.9.inr" ]; then
+if [ ! -f "$out/liver.inr.gz" ] || [ ! -f "$out/skull_2.9.inr" ] || [ ! -f "$out/bunny00.off" ]; then
     (cd "$work" && apt-get download libcgal-demo=5.5.1-2 >/dev/null 2>&1)
     dpkg-deb -x "$work"/libcgal-demo_5.5.1-2_all.deb "$work/cgal"
-    tar xzf "$work/cgal/usr/share/doc/libcgal-dev/data.tar.gz" -C "$work" data/images/liver.inr.gz data/images/skull_2.9.inr
-    mv "$work/data/images/liver.inr.gz" "$work/data/images/skull_2.9.inr" "$out/"
+    tar xzf "$work/cgal/usr/share/doc/libcgal-dev/data.tar.gz" -C "$work" data/images/liver.inr.gz \
+        data/images/skull_2.9.inr data/meshes/bunny00.off
+    mv "$work/data/images/liver.inr.gz" "$work/data/images/skull_2.9.inr" "$work/data/meshes/bunny00.off" "$out/"
 fi
+check "$out/bunny00.off" ab651cb04955c161efaeb079035a1e5e1f0e0d1f816a2df67beaea68f393ff2b
 check "$out/liver.inr.gz" 8d585a21aaaa34ab62219fa3606541b73de22e25211f78180c625df341cc1991
 check "$out/skull_2.9.inr" 7a9147c819e426fbd7bf4f0ed5ddac799e54376f64260ef4f650f29e3aa5d4c4
 
@@ -49,6 +53,15 @@ if [ ! -f "$out/frog_tissues.vti" ]; then
     unzip -q -j -o "$work/pyvista-0.49.1-py3-none-any.whl" pyvista/examples/frog_tissues.vti -d "$out"
 fi
 check "$out/frog_tissues.vti" 844e3e324548fcebab4e14fa30be1400d34fafa7a0a14030b643b38db89da66c
+
+# OpenVDB files made from the real bunny mesh with OpenVDB's own tool, and their dense references (system python3
+# with Debian's python3-openvdb).
+if [ ! -f "$out/bunny_fog.vdb" ]; then
+    /usr/bin/python3 scripts/off_to_obj.py "$out/bunny00.off" "$work/bunny.obj"
+    vdb_tool -read "$work/bunny.obj" -mesh2ls d=128 -write "$out/bunny_ls.vdb" >/dev/null
+    vdb_tool -read "$out/bunny_ls.vdb" -ls2fog -write "$out/bunny_fog.vdb" >/dev/null
+fi
+/usr/bin/python3 scripts/make_vdb_references.py "$out"
 
 # Independent decoders for the reference arrays.
 # zarr-python: a standard reader the tests open voxstream's stores with.

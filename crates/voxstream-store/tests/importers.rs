@@ -295,6 +295,9 @@ fn bad_files_fail_naming_the_file_and_the_problem() {
     let zero = "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 0 4 4\nencoding: raw\n\n";
     std::fs::write(dir.join("zero.nrrd"), zero).unwrap();
     assert!(import_error(&dir.join("zero.nrrd"), None).to_string().contains("positive"));
+    std::fs::write(dir.join("garbage.vdb"), b"not a vdb at all").unwrap();
+    let e = import_error(&dir.join("garbage.vdb"), None).to_string();
+    assert!(e.contains("garbage.vdb") && e.contains("VDB"), "{e}");
     std::fs::write(dir.join("what.xyz"), b"hello").unwrap();
     assert!(import_error(&dir.join("what.xyz"), None).to_string().contains("unknown format"));
 }

@@ -19,6 +19,8 @@ fn volumes() -> Vec<(&'static str, &'static str, Option<RawLayout>)> {
         ("liver.inr.gz", "liver", None),
         ("skull_2.9.inr", "skull_2", None),
         ("frog_tissues.vti", "frog_tissues", None),
+        ("bunny_fog.vdb", "bunny_fog", None),
+        ("bunny_ls.vdb", "bunny_ls", None),
         (
             "brainsmall.den",
             "brainsmall",
@@ -33,7 +35,7 @@ fn volumes() -> Vec<(&'static str, &'static str, Option<RawLayout>)> {
 
 fn data_dir() -> Option<PathBuf> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/real");
-    if dir.join("frog_tissues.reference.npy").exists() {
+    if dir.join("bunny_ls.reference.npy").exists() {
         return Some(dir);
     }
     if std::env::var_os("VOXSTREAM_SKIP_REAL_DATA").is_some() {

@@ -9,6 +9,7 @@
 //! | INRIMAGE-4 | `.inr`, `.inr.gz` | plain, gzip |
 //! | NumPy | `.npy`, `.npz` (first array) | plain; npz stored or deflated |
 //! | TIFF stack | `.tif`, `.tiff`, or a folder of them | as the tiff crate decodes |
+//! | OpenVDB | `.vdb` (first float grid: fog volume or level set) | via Debian's python3-openvdb |
 //! | VTK XML ImageData | `.vti` | inline binary/ascii, appended raw/base64, zlib |
 
 pub mod header_text;
@@ -20,6 +21,7 @@ pub mod nrrd;
 pub mod raw;
 pub mod sample_stream;
 pub mod tiff_stack;
+pub mod vdb;
 pub mod vti;
 
 use std::path::Path;
@@ -53,9 +55,10 @@ pub fn open_volume(path: &Path, raw: Option<&RawLayout>) -> Result<Box<dyn Volum
         _ if name.ends_with(".npy") => npy::open(path),
         _ if name.ends_with(".npz") => npy::open_npz(path),
         _ if name.ends_with(".vti") => vti::open(path),
+        _ if name.ends_with(".vdb") => vdb::open(path),
         _ => Err(StoreError::Unsupported {
             path: path.into(),
-            message: "unknown format: expected .nrrd, .nhdr, .nii, .nii.gz, .mha, .mhd, .inr, .inr.gz, .npy, .npz or .vti, \
+            message: "unknown format: expected .nrrd, .nhdr, .nii, .nii.gz, .mha, .mhd, .inr, .inr.gz, .npy, .npz, .vti or .vdb, \
                       .tif/.tiff (or a folder of slices), or a raw file with --dims and --dtype"
                 .into(),
         }),
