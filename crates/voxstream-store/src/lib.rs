@@ -10,6 +10,7 @@
 //!   Reichl's streaming supplier, seed 004 ch. 4).
 
 pub mod error;
+pub mod foreign;
 pub mod formats;
 pub mod import;
 pub mod layout;

@@ -26,8 +26,58 @@ use crate::layout::PyramidLayout;
 use crate::metadata::{StoreAttributes, MINMAX_GROUP};
 use crate::volume::{DType, VolumeInfo};
 
+/// Extends `data` (dims `have`, x fastest) to dims `want` by repeating its last samples.
+fn pad_to(data: &[f32], have: [u64; 3], want: [u64; 3]) -> Vec<f32> {
+    if have == want {
+        return data.to_vec();
+    }
+    let mut out = Vec::with_capacity((want[0] * want[1] * want[2]) as usize);
+    for z in 0..want[2] {
+        for y in 0..want[1] {
+            for x in 0..want[0] {
+                let (sx, sy, sz) = (x.min(have[0] - 1), y.min(have[1] - 1), z.min(have[2] - 1));
+                out.push(data[((sz * have[1] + sy) * have[0] + sx) as usize]);
+            }
+        }
+    }
+    out
+}
+
+/// 2×2×2 means of `data` (dims `size`, x fastest); odd edges average the samples that exist.
+fn average_2x(data: &[f32], size: [u64; 3]) -> Vec<f32> {
+    let [nx, ny, nz] = size.map(|v| v as usize);
+    let [ox, oy, oz] = [nx.div_ceil(2), ny.div_ceil(2), nz.div_ceil(2)];
+    let mut out = Vec::with_capacity(ox * oy * oz);
+    for z in 0..oz {
+        for y in 0..oy {
+            for x in 0..ox {
+                let (mut sum, mut n) = (0f64, 0u32);
+                for (dx, dy, dz) in [(0, 0, 0), (1, 0, 0), (0, 1, 0), (1, 1, 0), (0, 0, 1), (1, 0, 1), (0, 1, 1), (1, 1, 1)] {
+                    let (sx, sy, sz) = (2 * x + dx, 2 * y + dy, 2 * z + dz);
+                    if sx < nx && sy < ny && sz < nz {
+                        sum += data[(sz * ny + sy) * nx + sx] as f64;
+                        n += 1;
+                    }
+                }
+                out.push((sum / n as f64) as f32);
+            }
+        }
+    }
+    out
+}
+
 /// Default size of the host-side brick cache.
 pub const DEFAULT_CACHE_BYTES: u64 = 64 << 20;
+
+/// Where the samples of one level come from.
+pub(crate) enum LevelSource {
+    /// An array of shape `[.., z, y, x]`; leading axes (time, channel) are read at index 0. Its last three
+    /// dimensions may differ from the level's by one sample (foreign pyramids that halve rounding down): missing
+    /// samples repeat the edge.
+    Array { array: Array<dyn ReadableStorageTraits>, leading: usize, shape: [u64; 3] },
+    /// Averaged from the level below.
+    Synthesized,
+}
 
 /// An open store.
 pub struct StoreReader {
@@ -35,13 +85,15 @@ pub struct StoreReader {
     attributes: StoreAttributes,
     info: VolumeInfo,
     layout: PyramidLayout,
-    /// Per level, the array (sharded; reads of one brick decode only that inner chunk).
-    levels: Vec<Array<dyn ReadableStorageTraits>>,
+    /// Per level, where its bricks come from: an array of the store, or (foreign stores whose pyramid lacks the
+    /// level) the 2×2×2 average of the level below.
+    levels: Vec<LevelSource>,
     /// Decoded bricks (inner chunks) by level and brick index, least recently used first out.
     brick_cache: Mutex<LruCache<(usize, [u64; 3]), Arc<Vec<f32>>>>,
     cache_bytes: u64,
-    /// Per level, per brick (x fastest): `[min, max]` of the full-resolution samples below it.
-    minmax: Vec<Vec<[f32; 2]>>,
+    /// Per level, per brick (x fastest): `[min, max]` of the full-resolution samples below it; `None` for foreign
+    /// stores, whose bricks' ranges are unknown until read (the brick pool computes them on upload).
+    minmax: Option<Vec<Vec<[f32; 2]>>>,
 }
 
 impl StoreReader {
@@ -66,11 +118,8 @@ impl StoreReader {
             Some(value) => serde_json::from_value(value.clone())
                 .map_err(|e| StoreError::store(path, format!("corrupt voxstream attributes: {e}")))?,
             None => {
-                return Err(StoreError::store(
-                    path,
-                    "not a voxstream store (no 'voxstream' attributes); rendering foreign OME-Zarr stores is not \
-                     supported yet: import the data with `voxstream import`",
-                ))
+                let (attributes, levels) = crate::foreign::open_foreign(path, &store, group.attributes())?;
+                return StoreReader::assemble(path, attributes, levels, None, cache_bytes);
             }
         };
         if !attributes.complete {
@@ -101,7 +150,7 @@ impl StoreReader {
                     format!("level {level} has shape {:?}, expected {:?}", array.shape(), [z, y, x]),
                 ));
             }
-            levels.push(array);
+            levels.push(LevelSource::Array { array, leading: 0, shape: [x, y, z] });
             let ranges = Array::open(store.clone(), &format!("/{MINMAX_GROUP}/{level}"))
                 .map_err(|e| StoreError::store(path, format!("min/max of level {level}: {e}")))?;
             let flat: Vec<f32> = ranges
@@ -113,8 +162,25 @@ impl StoreReader {
             }
             minmax.push(flat.chunks_exact(2).map(|c| [c[0], c[1]]).collect());
         }
+        StoreReader::assemble(path, attributes, levels, Some(minmax), cache_bytes)
+    }
+
+    /// A reader over validated parts; `minmax` is `None` when the store has no per-brick ranges (foreign stores).
+    pub(crate) fn assemble(
+        path: &Path,
+        attributes: StoreAttributes,
+        levels: Vec<LevelSource>,
+        minmax: Option<Vec<Vec<[f32; 2]>>>,
+        cache_bytes: u64,
+    ) -> Result<StoreReader, StoreError> {
+        let dtype = attributes
+            .dtype()
+            .ok_or_else(|| StoreError::store(path, format!("unknown sample type '{}'", attributes.dtype)))?;
+        let info = VolumeInfo { dims: attributes.dims, dtype, spacing: attributes.spacing, origin: attributes.origin };
+        info.validate(path)?;
+        let layout = PyramidLayout::new(attributes.dims, attributes.brick_size);
         let brick_bytes = (attributes.brick_size.pow(3) * 4).max(1);
-        let capacity = NonZeroUsize::new((cache_bytes / brick_bytes).max(8) as usize).unwrap_or(NonZeroUsize::MIN);
+        let capacity = NonZeroUsize::new((cache_bytes / brick_bytes).max(64) as usize).unwrap_or(NonZeroUsize::MIN);
         let brick_cache = Mutex::new(LruCache::new(capacity));
         Ok(StoreReader { path: path.into(), attributes, info, layout, levels, brick_cache, cache_bytes, minmax })
     }
@@ -139,13 +205,21 @@ impl StoreReader {
         &self.layout
     }
 
-    /// `[min, max]` of brick `ijk` of `level`, or `None` outside the grid.
+    /// `[min, max]` of brick `ijk` of `level` (`[-∞, +∞]` when unknown), or `None` outside the grid.
     pub fn brick_range(&self, level: usize, ijk: [u64; 3]) -> Option<[f32; 2]> {
         let b = self.layout.bricks(level);
         if (0..3).any(|a| ijk[a] >= b[a]) {
             return None;
         }
-        Some(self.minmax[level][((ijk[2] * b[1] + ijk[1]) * b[0] + ijk[0]) as usize])
+        Some(match &self.minmax {
+            Some(minmax) => minmax[level][((ijk[2] * b[1] + ijk[1]) * b[0] + ijk[0]) as usize],
+            None => [f32::NEG_INFINITY, f32::INFINITY],
+        })
+    }
+
+    /// Whether the store was written by voxstream (it has per-brick ranges and exact pyramid levels).
+    pub fn is_native(&self) -> bool {
+        self.minmax.is_some()
     }
 
     /// Reads samples `[lower, lower + size)` (x, y, z) of `level` as `f32`, x fastest, assembled from the bricks
@@ -193,20 +267,53 @@ impl StoreReader {
         let dims = self.layout.level_dims[level];
         let lower = ijk.map(|v| v * b);
         let upper = [0, 1, 2].map(|a| (lower[a] + b).min(dims[a]));
-        let subset = ArraySubset::new_with_ranges(&[lower[2]..upper[2], lower[1]..upper[1], lower[0]..upper[0]]);
-        let array = &self.levels[level];
-        let corrupt = |e: zarrs::array::ArrayError| {
-            StoreError::store(&self.path, format!("level {level}, brick {ijk:?}: {e}"))
-        };
-        let samples: Vec<f32> = match self.info.dtype {
-            DType::U8 => array.retrieve_array_subset::<Vec<u8>>(&subset).map_err(corrupt)?.into_iter().map(f32::from).collect(),
-            DType::U16 => array.retrieve_array_subset::<Vec<u16>>(&subset).map_err(corrupt)?.into_iter().map(f32::from).collect(),
-            DType::I16 => array.retrieve_array_subset::<Vec<i16>>(&subset).map_err(corrupt)?.into_iter().map(f32::from).collect(),
-            DType::F32 => array.retrieve_array_subset::<Vec<f32>>(&subset).map_err(corrupt)?,
+        let samples = match &self.levels[level] {
+            LevelSource::Array { array, leading, shape } => {
+                let read_upper = [0, 1, 2].map(|a| upper[a].min(shape[a]));
+                if (0..3).any(|a| read_upper[a] <= lower[a]) {
+                    // The foreign level is one sample short here: repeat its last samples.
+                    let inner = [0, 1, 2].map(|a| lower[a].min(shape[a] - 1));
+                    let got = self.read_array(level, array, *leading, inner, [0, 1, 2].map(|a| inner[a] + 1))?;
+                    vec![got[0]; ((upper[0] - lower[0]) * (upper[1] - lower[1]) * (upper[2] - lower[2])) as usize]
+                } else {
+                    let got = self.read_array(level, array, *leading, lower, read_upper)?;
+                    pad_to(&got, [0, 1, 2].map(|a| read_upper[a] - lower[a]), [0, 1, 2].map(|a| upper[a] - lower[a]))
+                }
+            }
+            LevelSource::Synthesized => {
+                let finer = self.layout.level_dims[level - 1];
+                let f_lower = lower.map(|v| 2 * v);
+                let f_upper = [0, 1, 2].map(|a| (2 * upper[a]).min(finer[a]));
+                let size = [0, 1, 2].map(|a| f_upper[a] - f_lower[a]);
+                let fine = self.read_region(level - 1, f_lower, size)?;
+                average_2x(&fine, size)
+            }
         };
         let brick = Arc::new(samples);
         self.brick_cache.lock().unwrap_or_else(|p| p.into_inner()).put(key, brick.clone());
         Ok(brick)
+    }
+
+    fn read_array(
+        &self,
+        level: usize,
+        array: &Array<dyn ReadableStorageTraits>,
+        leading: usize,
+        lower: [u64; 3],
+        upper: [u64; 3],
+    ) -> Result<Vec<f32>, StoreError> {
+        let mut ranges: Vec<std::ops::Range<u64>> = vec![0..1; leading];
+        ranges.extend([lower[2]..upper[2], lower[1]..upper[1], lower[0]..upper[0]]);
+        let subset = ArraySubset::new_with_ranges(&ranges);
+        let corrupt = |e: zarrs::array::ArrayError| {
+            StoreError::store(&self.path, format!("level {level}, samples {lower:?}..{upper:?}: {e}"))
+        };
+        Ok(match self.info.dtype {
+            DType::U8 => array.retrieve_array_subset::<Vec<u8>>(&subset).map_err(corrupt)?.into_iter().map(f32::from).collect(),
+            DType::U16 => array.retrieve_array_subset::<Vec<u16>>(&subset).map_err(corrupt)?.into_iter().map(f32::from).collect(),
+            DType::I16 => array.retrieve_array_subset::<Vec<i16>>(&subset).map_err(corrupt)?.into_iter().map(f32::from).collect(),
+            DType::F32 => array.retrieve_array_subset::<Vec<f32>>(&subset).map_err(corrupt)?,
+        })
     }
 
     /// Capacity of the host-side brick cache, bytes.
