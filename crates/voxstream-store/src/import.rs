@@ -2,9 +2,10 @@
 //! level keeps at most one slab of its own resolution, writes it as one row of shards, and passes the 2×2×2 average
 //! to the next level. Reichl (seed 004, ch. 4) calls this building the data pool once, offline.
 //!
-//! Memory: about `brick_size · X · Y · 4 bytes · 4/3` for the slabs of all levels (f32 samples), plus the shard
-//! row being encoded (a u8/u16/i16/f32 copy of one row of level 0) — about 1 GiB for 2048² slices whatever the
-//! number of slices. The bound grows with the slice area, not the volume. An import writes into `STORE.partial` and renames it to `STORE` only when complete, so an
+//! Memory: one slab of `brick_size` z slices per level — level 0 in the input's sample type, coarser levels in f32
+//! (`brick_size · X · Y · (s + 4/3)` bytes for `s`-byte samples), plus the shard being encoded on each core. For
+//! 2048² u8 slices that is about 0.3 GiB, for 4096² u16 slices about 1.8 GiB, whatever the number of slices: the
+//! bound grows with the slice area, not the volume. An import writes into `STORE.partial` and renames it to `STORE` only when complete, so an
 //! interrupted import never leaves a store that looks complete; running it again restarts cleanly.
 
 use std::path::{Path, PathBuf};
@@ -101,16 +102,18 @@ fn import_into_partial(
     let slice_bytes = info.slice_len() as u64 * info.dtype.size() as u64;
     let mut value_range = [f64::INFINITY, f64::NEG_INFINITY];
     let mut z = 0u64;
+    let mut slice = Vec::with_capacity(info.slice_len());
     while z < info.dims[2] {
         let count = (info.dims[2] - z).min(brick as u64) as usize;
-        // Read straight into level 0's slab: the input is never held twice.
-        let start = levels[0].buffer.len();
-        source.read_slices(count, &mut levels[0].buffer)?;
-        let (lo, hi) = levels[0].buffer[start..]
-            .iter()
-            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
-        value_range[0] = value_range[0].min(lo as f64);
-        value_range[1] = value_range[1].max(hi as f64);
+        // Read slice by slice into level 0's slab, which keeps the input's own sample type (1 byte per u8 sample).
+        for _ in 0..count {
+            slice.clear();
+            source.read_slices(1, &mut slice)?;
+            let (lo, hi) = slice.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+            value_range[0] = value_range[0].min(lo as f64);
+            value_range[1] = value_range[1].max(hi as f64);
+            levels[0].buffer.extend_from_f32(&slice);
+        }
         push_planes(&mut levels, 0, &[], count, false).map_err(|e| zarr(&e))?;
         z += count as u64;
         progress(z * slice_bytes, total);
@@ -207,8 +210,8 @@ struct LevelWriter {
     bricks: [u64; 3],
     brick: u64,
     dtype: DType,
-    /// Planes held (x fastest), `planes` of them.
-    buffer: Vec<f32>,
+    /// Planes held (x fastest), `planes` of them: level 0 in the input's type, coarser levels in f32.
+    buffer: Samples,
     planes: usize,
     /// Next z row of bricks to write.
     row: u64,
@@ -221,13 +224,14 @@ struct LevelWriter {
 impl LevelWriter {
     fn new(array: Array<FilesystemStore>, layout: &PyramidLayout, level: usize, dtype: DType) -> LevelWriter {
         let bricks = layout.bricks(level);
+        let buffer = if level == 0 { Samples::new(dtype) } else { Samples::new(DType::F32) };
         LevelWriter {
             array,
             dims: layout.level_dims[level],
             bricks,
             brick: layout.brick_size,
             dtype,
-            buffer: Vec::new(),
+            buffer,
             planes: 0,
             row: 0,
             minmax: vec![[f32::INFINITY, f32::NEG_INFINITY]; bricks.iter().product::<u64>() as usize],
@@ -280,7 +284,7 @@ impl LevelWriter {
                         let start = ((z * ny + gy) * nx + sx * shard_x) as usize;
                         let len = (shard_x).min(nx.saturating_sub(sx * shard_x)) as usize;
                         let dst = ((z * shard_y + y) * shard_x) as usize;
-                        elements[dst..dst + len].copy_from_slice(&buffer[start..start + len]);
+                        buffer.copy_to_f32(start, &mut elements[dst..dst + len]);
                     }
                 }
                 // Min/max of the valid samples of each brick of the shard.
@@ -350,7 +354,7 @@ fn push_planes(
     finish: bool,
 ) -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
     let writer = &mut levels[level];
-    writer.buffer.extend_from_slice(planes);
+    writer.buffer.extend_from_f32(planes);
     writer.planes += count;
     if writer.planes as u64 >= writer.brick || (finish && writer.planes > 0) {
         let (coarse, coarse_planes) = writer.flush()?;
@@ -361,8 +365,66 @@ fn push_planes(
     Ok(())
 }
 
+/// Samples of a slab, in the input's type at level 0 (so a u8 slab takes 1 byte per sample) or in f32.
+enum Samples {
+    U8(Vec<u8>),
+    U16(Vec<u16>),
+    I16(Vec<i16>),
+    F32(Vec<f32>),
+}
+
+impl Samples {
+    fn new(dtype: DType) -> Samples {
+        match dtype {
+            DType::U8 => Samples::U8(Vec::new()),
+            DType::U16 => Samples::U16(Vec::new()),
+            DType::I16 => Samples::I16(Vec::new()),
+            DType::F32 => Samples::F32(Vec::new()),
+        }
+    }
+
+    /// Appends values that are exact in this type (the importers' f32 holds integer inputs exactly).
+    fn extend_from_f32(&mut self, values: &[f32]) {
+        match self {
+            Samples::U8(v) => v.extend(values.iter().map(|&x| x.round() as u8)),
+            Samples::U16(v) => v.extend(values.iter().map(|&x| x.round() as u16)),
+            Samples::I16(v) => v.extend(values.iter().map(|&x| x.round() as i16)),
+            Samples::F32(v) => v.extend_from_slice(values),
+        }
+    }
+
+    fn copy_to_f32(&self, start: usize, out: &mut [f32]) {
+        let n = out.len();
+        match self {
+            Samples::U8(v) => out.iter_mut().zip(&v[start..start + n]).for_each(|(o, &x)| *o = x as f32),
+            Samples::U16(v) => out.iter_mut().zip(&v[start..start + n]).for_each(|(o, &x)| *o = x as f32),
+            Samples::I16(v) => out.iter_mut().zip(&v[start..start + n]).for_each(|(o, &x)| *o = x as f32),
+            Samples::F32(v) => out.copy_from_slice(&v[start..start + n]),
+        }
+    }
+
+    #[inline]
+    fn get(&self, i: usize) -> f32 {
+        match self {
+            Samples::U8(v) => v[i] as f32,
+            Samples::U16(v) => v[i] as f32,
+            Samples::I16(v) => v[i] as f32,
+            Samples::F32(v) => v[i],
+        }
+    }
+
+    fn clear(&mut self) {
+        match self {
+            Samples::U8(v) => v.clear(),
+            Samples::U16(v) => v.clear(),
+            Samples::I16(v) => v.clear(),
+            Samples::F32(v) => v.clear(),
+        }
+    }
+}
+
 /// Averages 2×2×2 blocks of `planes` (dims x, y, z); odd edges average the samples that exist.
-fn downsample(planes: &[f32], dims: [u64; 3]) -> Vec<f32> {
+fn downsample(planes: &Samples, dims: [u64; 3]) -> Vec<f32> {
     let [nx, ny, nz] = dims.map(|d| d as usize);
     let [ox, oy, oz] = [nx.div_ceil(2), ny.div_ceil(2), nz.div_ceil(2)];
     let mut out = vec![0f32; ox * oy * oz];
@@ -375,7 +437,7 @@ fn downsample(planes: &[f32], dims: [u64; 3]) -> Vec<f32> {
                         for dx in 0..2 {
                             let (sx, sy, sz) = (2 * x + dx, 2 * y + dy, 2 * z + dz);
                             if sx < nx && sy < ny && sz < nz {
-                                sum += planes[(sz * ny + sy) * nx + sx] as f64;
+                                sum += planes.get((sz * ny + sy) * nx + sx) as f64;
                                 n += 1;
                             }
                         }
@@ -421,8 +483,8 @@ mod tests {
     #[test]
     fn downsampling_averages_blocks_and_edges() {
         // 3×1×1 → 2×1×1: (a+b)/2 and c.
-        assert_eq!(downsample(&[1.0, 3.0, 10.0], [3, 1, 1]), vec![2.0, 10.0]);
-        let cube: Vec<f32> = (0..8).map(|i| i as f32).collect();
-        assert_eq!(downsample(&cube, [2, 2, 2]), vec![3.5]);
+        assert_eq!(downsample(&Samples::F32(vec![1.0, 3.0, 10.0]), [3, 1, 1]), vec![2.0, 10.0]);
+        let cube: Vec<u8> = (0..8).collect();
+        assert_eq!(downsample(&Samples::U8(cube), [2, 2, 2]), vec![3.5]);
     }
 }
