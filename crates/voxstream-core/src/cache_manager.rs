@@ -14,7 +14,9 @@
 //! - **Dedup and priority.** [`RequestQueue`]: duplicates merged, parents before children, then by how many rays
 //!   asked, bounded per frame in interactive mode.
 //! - **Threads.** Production runs on the rayon worker threads, outside any lock; results are applied by the
-//!   calling thread in queue order, so the final pools do not depend on scheduling.
+//!   calling thread in queue order, so the final pools do not depend on scheduling. Requests deferred past the
+//!   per-frame bound are handed to [`Producer::prefetch`], which may read ahead in the background while the next
+//!   frame renders (the store producer does); prefetching never changes what is produced.
 //! - **Failures.** A producer error is recorded once; the node stays missing, its ancestor stands in, and it is
 //!   not requested again.
 //! - **Brick analysis.** A produced terminal brick whose voxels are all equal becomes a constant node (no brick
@@ -34,6 +36,9 @@ use crate::node_pool::{NodePool, ROOT_TILE};
 use crate::producer::{NodeContent, Produced, Producer};
 use crate::request_queue::RequestQueue;
 use crate::tree_view::TreeView;
+
+/// Deferred requests passed to [`Producer::prefetch`] per frame.
+pub const PREFETCH_LIMIT: usize = 1024;
 
 /// Requests produced concurrently before their results are applied (bounds transient memory).
 pub const PRODUCTION_BATCH: usize = 256;
@@ -208,6 +213,17 @@ impl<P: Producer> CacheManager<P> {
         report.pending = work.len();
         if let Some(limit) = limit {
             report.deferred += work.len().saturating_sub(limit);
+            // Let the producer fetch the deferred bricks in the background while the next frame renders.
+            let deferred: Vec<NodeKey> = work
+                .iter()
+                .skip(limit)
+                .filter(|(request, _)| request.kind == RequestKind::Produce)
+                .take(PREFETCH_LIMIT)
+                .map(|&(_, key)| key)
+                .collect();
+            if !deferred.is_empty() {
+                self.producer.prefetch(&deferred);
+            }
             work.truncate(limit);
         }
 

@@ -43,4 +43,11 @@ pub trait Producer: Send + Sync {
     /// Produces the node `key`. For [`NodeContent::Brick`], `voxels` (length `(M+2)³`, x fastest) receives the
     /// brick with its border: voxel `(i, j, k)` of the array is centred at `lower + (i − 1 + ½, …)·voxel_size`.
     fn produce(&self, key: NodeKey, voxels: &mut [u16]) -> Result<Produced, ProduceError>;
+
+    /// A hint that these nodes will probably be requested soon (requests deferred past this frame's bound): a
+    /// producer that reads from slow storage may start fetching them in the background. It must not change what
+    /// `produce` returns. The default does nothing.
+    fn prefetch(&self, keys: &[NodeKey]) {
+        let _ = keys;
+    }
 }

@@ -27,6 +27,11 @@ pub trait BrickSource: Send + Sync {
     fn brick_range(&self, level: usize, ijk: [u64; 3]) -> Option<[f32; 2]>;
     /// Samples `[lower, lower + size)` (x, y, z) of `level`, x fastest.
     fn read_region(&self, level: usize, lower: [u64; 3], size: [u64; 3]) -> Result<Vec<f32>, StoreError>;
+
+    /// Starts reading these bricks `(level, ijk)` into a cache in the background; the default does nothing.
+    fn prefetch(self: &Arc<Self>, bricks: Vec<(usize, [u64; 3])>) {
+        let _ = bricks;
+    }
 }
 
 impl BrickSource for StoreReader {
@@ -44,6 +49,9 @@ impl BrickSource for StoreReader {
     }
     fn read_region(&self, level: usize, lower: [u64; 3], size: [u64; 3]) -> Result<Vec<f32>, StoreError> {
         StoreReader::read_region(self, level, lower, size)
+    }
+    fn prefetch(self: &Arc<Self>, bricks: Vec<(usize, [u64; 3])>) {
+        StoreReader::prefetch(self, bricks);
     }
 }
 
@@ -172,6 +180,11 @@ impl<S: BrickSource> Producer for StoreProducer<S> {
             Some([min, max]) if min == max => Some(self.normalise(min)),
             Some(_) => None,
         }
+    }
+
+    fn prefetch(&self, keys: &[NodeKey]) {
+        let bricks = keys.iter().map(|key| (self.store_level(key), key.ijk)).collect();
+        self.reader.prefetch(bricks);
     }
 
     fn produce(&self, key: NodeKey, voxels: &mut [u16]) -> Result<Produced, ProduceError> {

@@ -91,6 +91,8 @@ pub struct StoreReader {
     /// Decoded bricks (inner chunks) by level and brick index, least recently used first out.
     brick_cache: Mutex<LruCache<(usize, [u64; 3]), Arc<Vec<f32>>>>,
     cache_bytes: u64,
+    /// A background prefetch is running.
+    prefetching: std::sync::atomic::AtomicBool,
     /// Per level, per brick (x fastest): `[min, max]` of the full-resolution samples below it; `None` for foreign
     /// stores, whose bricks' ranges are unknown until read (the brick pool computes them on upload).
     minmax: Option<Vec<Vec<[f32; 2]>>>,
@@ -182,7 +184,17 @@ impl StoreReader {
         let brick_bytes = (attributes.brick_size.pow(3) * 4).max(1);
         let capacity = NonZeroUsize::new((cache_bytes / brick_bytes).max(64) as usize).unwrap_or(NonZeroUsize::MIN);
         let brick_cache = Mutex::new(LruCache::new(capacity));
-        Ok(StoreReader { path: path.into(), attributes, info, layout, levels, brick_cache, cache_bytes, minmax })
+        Ok(StoreReader {
+            path: path.into(),
+            attributes,
+            info,
+            layout,
+            levels,
+            brick_cache,
+            cache_bytes,
+            prefetching: std::sync::atomic::AtomicBool::new(false),
+            minmax,
+        })
     }
 
     /// The store's folder.
@@ -314,6 +326,26 @@ impl StoreReader {
             DType::I16 => array.retrieve_array_subset::<Vec<i16>>(&subset).map_err(corrupt)?.into_iter().map(f32::from).collect(),
             DType::F32 => array.retrieve_array_subset::<Vec<f32>>(&subset).map_err(corrupt)?,
         })
+    }
+
+    /// Reads `bricks` into the brick cache on a background worker (skipping those already cached or outside the
+    /// level), at most one prefetch batch at a time; errors are left for `produce` to report.
+    pub fn prefetch(self: &Arc<Self>, bricks: Vec<(usize, [u64; 3])>) {
+        use std::sync::atomic::Ordering;
+        if self.prefetching.swap(true, Ordering::AcqRel) {
+            return;
+        }
+        let reader = Arc::clone(self);
+        rayon::spawn(move || {
+            for (level, ijk) in bricks {
+                let b = reader.layout.bricks(level);
+                let cached = reader.brick_cache.lock().unwrap_or_else(|p| p.into_inner()).contains(&(level, ijk));
+                if !cached && (0..3).all(|a| ijk[a] < b[a]) {
+                    let _ = reader.brick(level, ijk);
+                }
+            }
+            reader.prefetching.store(false, Ordering::Release);
+        });
     }
 
     /// Capacity of the host-side brick cache, bytes.

@@ -126,3 +126,27 @@ fn bad_stores_and_inputs_fail_with_one_line() {
     assert!(!output.status.success() && text.contains("zarr.json"), "{text}");
     assert_eq!(text.trim_end().lines().count(), 1, "{text}");
 }
+
+#[test]
+fn store_renders_are_deterministic_with_background_prefetch() {
+    // Interactive frames with a small per-frame bound hand many deferred bricks to the background prefetch; the
+    // images must not depend on it, nor on the number of threads.
+    let dir = scratch("determinism");
+    write_ball(&dir.join("ball.nrrd"));
+    let output = voxstream(&["import", "ball.nrrd", "--out", "ball.zarr", "--brick-size", "8", "--quiet"], &dir);
+    assert!(output.status.success(), "{}", stderr(&output));
+    let mut images = Vec::new();
+    for (i, threads) in ["1", "2", "2"].iter().enumerate() {
+        let out = format!("f{i}.png");
+        let output = Command::new(env!("CARGO_BIN_EXE_voxstream"))
+            .args(["render", "ball.zarr", "--mode", "interactive", "--frames", "6", "--requests-per-frame", "20",
+                   "--width", "48", "--height", "48", "--out", &out])
+            .env("RAYON_NUM_THREADS", threads)
+            .current_dir(&dir)
+            .output()
+            .unwrap();
+        assert!(output.status.success(), "{}", stderr(&output));
+        images.push(std::fs::read(dir.join(&out)).unwrap());
+    }
+    assert!(images.windows(2).all(|w| w[0] == w[1]), "store renders differ between runs");
+}
