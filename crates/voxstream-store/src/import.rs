@@ -337,9 +337,10 @@ fn store_shard(
     dtype: DType,
 ) -> Result<(), Box<dyn std::error::Error>> {
     match dtype {
-        DType::U8 => array.store_chunk(indices, &elements.iter().map(|&v| v.round() as u8).collect::<Vec<_>>())?,
-        DType::U16 => array.store_chunk(indices, &elements.iter().map(|&v| v.round() as u16).collect::<Vec<_>>())?,
-        DType::I16 => array.store_chunk(indices, &elements.iter().map(|&v| v.round() as i16).collect::<Vec<_>>())?,
+        // Round half up: `(v + 0.5).floor()` compiles to one instruction, `round()` to a libm call.
+        DType::U8 => array.store_chunk(indices, &elements.iter().map(|&v| (v + 0.5).floor() as u8).collect::<Vec<_>>())?,
+        DType::U16 => array.store_chunk(indices, &elements.iter().map(|&v| (v + 0.5).floor() as u16).collect::<Vec<_>>())?,
+        DType::I16 => array.store_chunk(indices, &elements.iter().map(|&v| (v + 0.5).floor() as i16).collect::<Vec<_>>())?,
         DType::F32 => array.store_chunk(indices, elements)?,
     }
     Ok(())
@@ -386,9 +387,10 @@ impl Samples {
     /// Appends values that are exact in this type (the importers' f32 holds integer inputs exactly).
     fn extend_from_f32(&mut self, values: &[f32]) {
         match self {
-            Samples::U8(v) => v.extend(values.iter().map(|&x| x.round() as u8)),
-            Samples::U16(v) => v.extend(values.iter().map(|&x| x.round() as u16)),
-            Samples::I16(v) => v.extend(values.iter().map(|&x| x.round() as i16)),
+            // Integer inputs are exact in f32: a cast (no rounding call) restores them.
+            Samples::U8(v) => v.extend(values.iter().map(|&x| x as u8)),
+            Samples::U16(v) => v.extend(values.iter().map(|&x| x as u16)),
+            Samples::I16(v) => v.extend(values.iter().map(|&x| x as i16)),
             Samples::F32(v) => v.extend_from_slice(values),
         }
     }
