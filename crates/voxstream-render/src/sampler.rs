@@ -6,9 +6,9 @@
 
 use voxstream_core::dequantize;
 
-/// Samples a brick at continuous voxel index `x` (each axis clamped to `[0, B−1]`, `B = M + 2`).
+/// The cell holding continuous voxel index `x` (clamped to the brick): index of its first voxel, and the fractions.
 #[inline]
-pub fn trilinear(brick: &[u16], b: usize, x: [f32; 3]) -> f32 {
+fn cell(b: usize, x: [f32; 3]) -> (usize, [f32; 3]) {
     let max = (b - 1) as f32;
     let mut i0 = [0usize; 3];
     let mut f = [0f32; 3];
@@ -18,7 +18,13 @@ pub fn trilinear(brick: &[u16], b: usize, x: [f32; 3]) -> f32 {
         i0[a] = i;
         f[a] = c - i as f32;
     }
-    let base = (i0[2] * b + i0[1]) * b + i0[0];
+    ((i0[2] * b + i0[1]) * b + i0[0], f)
+}
+
+/// Samples a brick at continuous voxel index `x` (each axis clamped to `[0, B−1]`, `B = M + 2`).
+#[inline]
+pub fn trilinear(brick: &[u16], b: usize, x: [f32; 3]) -> f32 {
+    let (base, f) = cell(b, x);
     let row = b;
     let slab = b * b;
     let v = |o: usize| dequantize(brick[base + o]);
@@ -34,16 +40,7 @@ pub fn trilinear(brick: &[u16], b: usize, x: [f32; 3]) -> f32 {
 /// Value and analytic gradient (value per voxel) of the trilinear field at `x`: one read of the 8 corners.
 #[inline]
 pub fn trilinear_with_gradient(brick: &[u16], b: usize, x: [f32; 3]) -> (f32, [f32; 3]) {
-    let max = (b - 1) as f32;
-    let mut i0 = [0usize; 3];
-    let mut f = [0f32; 3];
-    for a in 0..3 {
-        let c = x[a].clamp(0.0, max);
-        let i = (c as usize).min(b - 2);
-        i0[a] = i;
-        f[a] = c - i as f32;
-    }
-    let base = (i0[2] * b + i0[1]) * b + i0[0];
+    let (base, f) = cell(b, x);
     let (row, slab) = (b, b * b);
     let v = |o: usize| dequantize(brick[base + o]);
     let (v000, v100, v010, v110) = (v(0), v(1), v(row), v(row + 1));

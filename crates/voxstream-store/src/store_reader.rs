@@ -26,6 +26,16 @@ use crate::layout::PyramidLayout;
 use crate::metadata::{StoreAttributes, MINMAX_GROUP};
 use crate::volume::{DType, VolumeInfo};
 
+/// The volume and pyramid the attributes describe, checked.
+fn validated_geometry(path: &Path, attributes: &StoreAttributes) -> Result<(VolumeInfo, PyramidLayout), StoreError> {
+    let dtype = attributes
+        .dtype()
+        .ok_or_else(|| StoreError::store(path, format!("unknown sample type '{}'", attributes.dtype)))?;
+    let info = VolumeInfo { dims: attributes.dims, dtype, spacing: attributes.spacing, origin: attributes.origin };
+    info.validate(path)?;
+    Ok((info, PyramidLayout::new(attributes.dims, attributes.brick_size)))
+}
+
 /// Extends `data` (dims `have`, x fastest) to dims `want` by repeating its last samples.
 fn pad_to(data: &[f32], have: [u64; 3], want: [u64; 3]) -> Vec<f32> {
     if have == want {
@@ -127,12 +137,7 @@ impl StoreReader {
         if !attributes.complete {
             return Err(StoreError::store(path, "incomplete store: its import was interrupted; run the import again"));
         }
-        let dtype = attributes
-            .dtype()
-            .ok_or_else(|| StoreError::store(path, format!("unknown sample type '{}'", attributes.dtype)))?;
-        let info = VolumeInfo { dims: attributes.dims, dtype, spacing: attributes.spacing, origin: attributes.origin };
-        info.validate(path)?;
-        let layout = PyramidLayout::new(attributes.dims, attributes.brick_size);
+        let (_, layout) = validated_geometry(path, &attributes)?;
         if layout.levels() != attributes.levels {
             return Err(StoreError::store(
                 path,
@@ -175,12 +180,7 @@ impl StoreReader {
         minmax: Option<Vec<Vec<[f32; 2]>>>,
         cache_bytes: u64,
     ) -> Result<StoreReader, StoreError> {
-        let dtype = attributes
-            .dtype()
-            .ok_or_else(|| StoreError::store(path, format!("unknown sample type '{}'", attributes.dtype)))?;
-        let info = VolumeInfo { dims: attributes.dims, dtype, spacing: attributes.spacing, origin: attributes.origin };
-        info.validate(path)?;
-        let layout = PyramidLayout::new(attributes.dims, attributes.brick_size);
+        let (info, layout) = validated_geometry(path, &attributes)?;
         let brick_bytes = (attributes.brick_size.pow(3) * 4).max(1);
         let capacity = NonZeroUsize::new((cache_bytes / brick_bytes).max(64) as usize).unwrap_or(NonZeroUsize::MIN);
         let brick_cache = Mutex::new(LruCache::new(capacity));
