@@ -94,7 +94,11 @@ impl NodeKey {
         let c = child_index as u64;
         NodeKey {
             level: self.level + 1,
-            ijk: [self.ijk[0] * n64 + c % n64, self.ijk[1] * n64 + (c / n64) % n64, self.ijk[2] * n64 + c / (n64 * n64)],
+            ijk: [
+                self.ijk[0] * n64 + c % n64,
+                self.ijk[1] * n64 + (c / n64) % n64,
+                self.ijk[2] * n64 + c / (n64 * n64),
+            ],
         }
     }
 

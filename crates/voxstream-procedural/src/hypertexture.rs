@@ -128,12 +128,19 @@ mod tests {
         for level in 2..4u32 {
             let per_axis = 1u64 << level;
             for index in 0..per_axis.pow(3) {
-                let key = NodeKey { level, ijk: [index % per_axis, (index / per_axis) % per_axis, index / per_axis / per_axis] };
+                let key = NodeKey {
+                    level,
+                    ijk: [index % per_axis, (index / per_axis) % per_axis, index / per_axis / per_axis],
+                };
                 if let Some(value) = h.oracle(key) {
                     h.produce(key, &mut voxels).unwrap();
                     let expected = voxstream_core::quantize(value);
                     assert!(voxels.iter().all(|&v| v == expected), "oracle wrong at {key:?}");
-                    if value == 0.0 { empty += 1 } else { solid += 1 }
+                    if value == 0.0 {
+                        empty += 1
+                    } else {
+                        solid += 1
+                    }
                 }
             }
         }

@@ -93,7 +93,10 @@ mod tests {
         for level in 1..4u32 {
             let per_axis = 1u64 << level;
             for index in 0..per_axis.pow(3) {
-                let key = NodeKey { level, ijk: [index % per_axis, (index / per_axis) % per_axis, index / per_axis / per_axis] };
+                let key = NodeKey {
+                    level,
+                    ijk: [index % per_axis, (index / per_axis) % per_axis, index / per_axis / per_axis],
+                };
                 if shell.oracle(key).is_some() {
                     shell.produce(key, &mut voxels).unwrap();
                     assert!(voxels.iter().all(|&v| v == 0), "oracle called {key:?} empty");

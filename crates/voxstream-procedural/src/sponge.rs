@@ -45,7 +45,10 @@ impl MengerSponge {
 
 impl Default for MengerSponge {
     fn default() -> Self {
-        MengerSponge { shape: TreeShape { n: 3, brick_size: SPONGE_BRICK_SIZE, max_level: SPONGE_MAX_LEVEL }, digits_per_brick: 2 }
+        MengerSponge {
+            shape: TreeShape { n: 3, brick_size: SPONGE_BRICK_SIZE, max_level: SPONGE_MAX_LEVEL },
+            digits_per_brick: 2,
+        }
     }
 }
 

@@ -92,7 +92,8 @@ pub fn render_pass(
     for (tile, result) in results.into_iter().enumerate() {
         let (x0, y0) = ((tile as u32 % tiles_x) * IMAGE_TILE, (tile as u32 / tiles_x) * IMAGE_TILE);
         let tile_width = IMAGE_TILE.min(width - x0) as usize;
-        for (row, (chunk, flags)) in result.pixels.chunks(tile_width).zip(result.pending.chunks(tile_width)).enumerate() {
+        for (row, (chunk, flags)) in result.pixels.chunks(tile_width).zip(result.pending.chunks(tile_width)).enumerate()
+        {
             let start = (y0 as usize + row) * width as usize + x0 as usize;
             for (offset, (pixel, still_pending)) in chunk.iter().zip(flags).enumerate() {
                 if let Some(pixel) = pixel {
@@ -152,7 +153,8 @@ fn render_tile(
             // In volume space, with t still measured in world units.
             let direction = frame.direction(x, y, width, height) / scale;
             let before = requests.len();
-            let (color, alpha) = caster.trace(origin, direction, frame.pixel_spread, &mut result.stats, &mut requests, &mut path);
+            let (color, alpha) =
+                caster.trace(origin, direction, frame.pixel_spread, &mut result.stats, &mut requests, &mut path);
             result.pending.push(requests.len() > before);
             let t = 1.0 - alpha;
             result.pixels.push(Some([

@@ -254,8 +254,10 @@ impl<'a> RayCaster<'a> {
                     let (fine_start, fine_rate) = self.brick_line(origin, direction, &fine);
                     // The level changes by ~1% of a level across one node: one blend weight per segment.
                     let coarse_brick = coarse.filter(|_| blend_level).and_then(|c| {
-                        let weight = (self.level_at(0.5 * (t + t_exit), spread) - c.level as f64).clamp(0.0, 1.0) as f32;
-                        (weight < 1.0).then(|| (self.view.brick(c.slot), self.brick_line(origin, direction, &c), weight))
+                        let weight =
+                            (self.level_at(0.5 * (t + t_exit), spread) - c.level as f64).clamp(0.0, 1.0) as f32;
+                        (weight < 1.0)
+                            .then(|| (self.view.brick(c.slot), self.brick_line(origin, direction, &c), weight))
                     });
                     let sigma_scale = -(dt_world as f32);
                     for step in 0..steps as u64 {
@@ -302,10 +304,7 @@ impl<'a> RayCaster<'a> {
         let s = self.scale[node.level as usize];
         let m = self.brick_size;
         let (o, d) = (origin.to_array(), direction.to_array());
-        (
-            std::array::from_fn(|a| (o[a] * s - node.ijk[a] as f64) * m + 0.5),
-            std::array::from_fn(|a| d[a] * s * m),
-        )
+        (std::array::from_fn(|a| (o[a] * s - node.ijk[a] as f64) * m + 0.5), std::array::from_fn(|a| d[a] * s * m))
     }
 
     /// Descends towards `target_level` at `p`, restarting from the deepest node of the previous descent that still
@@ -373,7 +372,11 @@ impl<'a> RayCaster<'a> {
         let deepest = path.len - 1;
         let last = path.entries[deepest];
         let brick_at = |level: usize| {
-            path.entries[level].node.brick().map(|slot| BrickRef { slot, level: level as u32, ijk: path.entries[level].ijk })
+            path.entries[level].node.brick().map(|slot| BrickRef {
+                slot,
+                level: level as u32,
+                ijk: path.entries[level].ijk,
+            })
         };
         let fine_level = if last.node.brick().is_some() { Some(deepest) } else { deepest.checked_sub(1) };
         let data = match fine_level.and_then(|l| brick_at(l).map(|b| (l, b))) {

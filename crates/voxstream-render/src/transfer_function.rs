@@ -47,7 +47,12 @@ impl TransferFunction {
             }
         }
         if let Some(i) = points.windows(2).position(|w| w[1][0] <= w[0][0]) {
-            return bad(format!("values must increase strictly: point {} ({}) follows {}", i + 1, points[i + 1][0], points[i][0]));
+            return bad(format!(
+                "values must increase strictly: point {} ({}) follows {}",
+                i + 1,
+                points[i + 1][0],
+                points[i][0]
+            ));
         }
         if let Some(u) = unit_distance {
             if !(u.is_finite() && u > 0.0) {
@@ -174,13 +179,17 @@ mod tests {
         // alpha 0.5 over 2 units: sigma = ln 2 / 2.
         assert!((e.sigma as f64 - std::f64::consts::LN_2 / 2.0).abs() < 1e-6);
         assert!(lut.is_visible_in(0.0, 0.01));
-        let gated = TransferFunction::new(vec![[0.0, 0.0, 0.0, 0.0, 0.0], [0.5, 0.0, 0.0, 0.0, 0.0], [1.0, 1.0, 1.0, 1.0, 1.0]], None)
-            .unwrap();
+        let gated = TransferFunction::new(
+            vec![[0.0, 0.0, 0.0, 0.0, 0.0], [0.5, 0.0, 0.0, 0.0, 0.0], [1.0, 1.0, 1.0, 1.0, 1.0]],
+            None,
+        )
+        .unwrap();
         let lut = TransferLut::new(&gated, 0.0, 1.0, 1.0);
         assert!(!lut.is_visible_in(0.0, 0.45));
         assert!(lut.is_visible_in(0.3, 0.6));
         // Data range 100..300: normalised 0.5 is the value 200.
-        let ranged = TransferFunction::new(vec![[100.0, 0.0, 0.0, 0.0, 0.0], [300.0, 1.0, 1.0, 1.0, 0.5]], Some(1.0)).unwrap();
+        let ranged =
+            TransferFunction::new(vec![[100.0, 0.0, 0.0, 0.0, 0.0], [300.0, 1.0, 1.0, 1.0, 0.5]], Some(1.0)).unwrap();
         let lut = TransferLut::new(&ranged, 100.0, 300.0, 1.0);
         assert!((lut.lookup(0.5).color[0] - 0.5).abs() < 1e-3);
     }

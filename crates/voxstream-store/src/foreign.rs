@@ -36,9 +36,18 @@ fn multiscales(attributes: &serde_json::Map<String, Value>) -> Option<&Value> {
 }
 
 fn transform(dataset: &Value, kind: &str) -> Option<Vec<f64>> {
-    dataset.get("coordinateTransformations")?.as_array()?.iter().find(|t| t.get("type").and_then(Value::as_str) == Some(kind)).and_then(
-        |t| t.get(if kind == "scale" { "scale" } else { "translation" })?.as_array()?.iter().map(Value::as_f64).collect(),
-    )
+    dataset
+        .get("coordinateTransformations")?
+        .as_array()?
+        .iter()
+        .find(|t| t.get("type").and_then(Value::as_str) == Some(kind))
+        .and_then(|t| {
+            t.get(if kind == "scale" { "scale" } else { "translation" })?
+                .as_array()?
+                .iter()
+                .map(Value::as_f64)
+                .collect()
+        })
 }
 
 /// Opens a foreign OME-Zarr image: voxstream's attributes for it, and where each level's bricks come from.
@@ -51,7 +60,11 @@ pub(crate) fn open_foreign(
     let ms = multiscales(attributes).ok_or_else(|| {
         bad("neither a voxstream store nor an OME-Zarr image (no 'voxstream' or 'multiscales' attributes)".into())
     })?;
-    let datasets = ms.get("datasets").and_then(Value::as_array).filter(|d| !d.is_empty()).ok_or_else(|| bad("multiscales has no datasets".into()))?;
+    let datasets = ms
+        .get("datasets")
+        .and_then(Value::as_array)
+        .filter(|d| !d.is_empty())
+        .ok_or_else(|| bad("multiscales has no datasets".into()))?;
     let readable: Arc<dyn ReadableStorageTraits> = store.clone();
     let mut arrays = Vec::new();
     for dataset in datasets {
@@ -60,7 +73,10 @@ pub(crate) fn open_foreign(
             .map_err(|e| bad(format!("dataset '{name}': {e}")))?;
         let shape = array.shape().to_vec();
         if shape.len() < 3 || shape[..shape.len() - 3].iter().any(|&d| d == 0) {
-            return Err(StoreError::Unsupported { path: path.into(), message: format!("dataset '{name}' has shape {shape:?} (needs ≥ 3 axes)") });
+            return Err(StoreError::Unsupported {
+                path: path.into(),
+                message: format!("dataset '{name}' has shape {shape:?} (needs ≥ 3 axes)"),
+            });
         }
         arrays.push((name.to_string(), array));
     }
@@ -75,12 +91,21 @@ pub(crate) fn open_foreign(
     .into_iter()
     .find(|(t, _)| *t == data_type)
     .map(|(_, d)| d)
-    .ok_or_else(|| StoreError::Unsupported { path: path.into(), message: "sample type (uint8, uint16, int16, float32 only)".into() })?;
-    let last3 = |shape: &[u64]| -> [u64; 3] { let n = shape.len(); [shape[n - 1], shape[n - 2], shape[n - 3]] };
+    .ok_or_else(|| StoreError::Unsupported {
+        path: path.into(),
+        message: "sample type (uint8, uint16, int16, float32 only)".into(),
+    })?;
+    let last3 = |shape: &[u64]| -> [u64; 3] {
+        let n = shape.len();
+        [shape[n - 1], shape[n - 2], shape[n - 3]]
+    };
     let dims = last3(first.shape());
     let tail3 = |v: Option<Vec<f64>>, default: f64| -> [f64; 3] {
         match v {
-            Some(v) if v.len() >= 3 => { let n = v.len(); [v[n - 1], v[n - 2], v[n - 3]] }
+            Some(v) if v.len() >= 3 => {
+                let n = v.len();
+                [v[n - 1], v[n - 2], v[n - 3]]
+            }
             _ => [default; 3],
         }
     };
@@ -100,7 +125,11 @@ pub(crate) fn open_foreign(
             Some((i, (_, array))) => {
                 used[i] = true;
                 let leading = array.shape().len() - 3;
-                levels.push(LevelSource::Array { array: Array::open(readable.clone(), array.path().as_str()).map_err(|e| bad(e.to_string()))?, leading, shape: last3(array.shape()) });
+                levels.push(LevelSource::Array {
+                    array: Array::open(readable.clone(), array.path().as_str()).map_err(|e| bad(e.to_string()))?,
+                    leading,
+                    shape: last3(array.shape()),
+                });
             }
             None if level == 0 => return Err(bad("level 0 does not match its own shape".into())),
             None => levels.push(LevelSource::Synthesized),
@@ -115,12 +144,21 @@ pub(crate) fn open_foreign(
     let subset = ArraySubset::new_with_ranges(&ranges);
     let read_err = |e: zarrs::array::ArrayError| bad(format!("coarsest dataset: {e}"));
     let values: Vec<f32> = match dtype {
-        DType::U8 => coarsest.retrieve_array_subset::<Vec<u8>>(&subset).map_err(read_err)?.into_iter().map(f32::from).collect(),
-        DType::U16 => coarsest.retrieve_array_subset::<Vec<u16>>(&subset).map_err(read_err)?.into_iter().map(f32::from).collect(),
-        DType::I16 => coarsest.retrieve_array_subset::<Vec<i16>>(&subset).map_err(read_err)?.into_iter().map(f32::from).collect(),
+        DType::U8 => {
+            coarsest.retrieve_array_subset::<Vec<u8>>(&subset).map_err(read_err)?.into_iter().map(f32::from).collect()
+        }
+        DType::U16 => {
+            coarsest.retrieve_array_subset::<Vec<u16>>(&subset).map_err(read_err)?.into_iter().map(f32::from).collect()
+        }
+        DType::I16 => {
+            coarsest.retrieve_array_subset::<Vec<i16>>(&subset).map_err(read_err)?.into_iter().map(f32::from).collect()
+        }
         DType::F32 => coarsest.retrieve_array_subset::<Vec<f32>>(&subset).map_err(read_err)?,
     };
-    let (lo, hi) = values.iter().filter(|v| v.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| (lo.min(v as f64), hi.max(v as f64)));
+    let (lo, hi) = values
+        .iter()
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| (lo.min(v as f64), hi.max(v as f64)));
     let (lo, hi) = if lo.is_finite() { (lo, hi) } else { (0.0, 1.0) };
     let margin = (hi - lo).max(1e-6) * 0.25;
     let (type_lo, type_hi) = match dtype {

@@ -75,7 +75,10 @@ fn import_into_partial(
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<ImportReport, StoreError> {
     if !(4..=256).contains(&options.brick_size) || options.brick_size % 2 != 0 {
-        return Err(StoreError::store(out, format!("brick size must be even and in 4..=256, got {}", options.brick_size)));
+        return Err(StoreError::store(
+            out,
+            format!("brick size must be even and in 4..=256, got {}", options.brick_size),
+        ));
     }
     if out.exists() && !options.overwrite {
         return Err(StoreError::store(out, "already exists (use --overwrite to replace it)"));
@@ -136,8 +139,11 @@ fn import_into_partial(
     for (level, writer) in levels.iter().enumerate() {
         write_minmax(&store, &layout, level, &writer.minmax).map_err(|e| zarr(&e))?;
     }
-    GroupBuilder::new().build(store.clone(), &format!("/{MINMAX_GROUP}")).map_err(|e| zarr(&e))?
-        .store_metadata().map_err(|e| zarr(&e))?;
+    GroupBuilder::new()
+        .build(store.clone(), &format!("/{MINMAX_GROUP}"))
+        .map_err(|e| zarr(&e))?
+        .store_metadata()
+        .map_err(|e| zarr(&e))?;
 
     let report = ImportReport {
         levels: layout.levels(),
@@ -312,7 +318,9 @@ impl LevelWriter {
             })
             .collect();
         for result in results {
-            for (index_in_row, range, is_empty) in result.map_err(|e| -> Box<dyn std::error::Error + Send + Sync> { e.into() })? {
+            for (index_in_row, range, is_empty) in
+                result.map_err(|e| -> Box<dyn std::error::Error + Send + Sync> { e.into() })?
+            {
                 let index = (row * self.bricks[0] * self.bricks[1] + index_in_row) as usize;
                 self.minmax[index] = range;
                 if is_empty {
@@ -338,9 +346,15 @@ fn store_shard(
 ) -> Result<(), Box<dyn std::error::Error>> {
     match dtype {
         // Round half up: `(v + 0.5).floor()` compiles to one instruction, `round()` to a libm call.
-        DType::U8 => array.store_chunk(indices, &elements.iter().map(|&v| (v + 0.5).floor() as u8).collect::<Vec<_>>())?,
-        DType::U16 => array.store_chunk(indices, &elements.iter().map(|&v| (v + 0.5).floor() as u16).collect::<Vec<_>>())?,
-        DType::I16 => array.store_chunk(indices, &elements.iter().map(|&v| (v + 0.5).floor() as i16).collect::<Vec<_>>())?,
+        DType::U8 => {
+            array.store_chunk(indices, &elements.iter().map(|&v| (v + 0.5).floor() as u8).collect::<Vec<_>>())?
+        }
+        DType::U16 => {
+            array.store_chunk(indices, &elements.iter().map(|&v| (v + 0.5).floor() as u16).collect::<Vec<_>>())?
+        }
+        DType::I16 => {
+            array.store_chunk(indices, &elements.iter().map(|&v| (v + 0.5).floor() as i16).collect::<Vec<_>>())?
+        }
         DType::F32 => array.store_chunk(indices, elements)?,
     }
     Ok(())
@@ -459,9 +473,14 @@ fn write_minmax(
     minmax: &[[f32; 2]],
 ) -> Result<(), Box<dyn std::error::Error>> {
     let [bx, by, bz] = layout.bricks(level);
-    let array = ArrayBuilder::new(vec![bz, by, bx, 2], vec![bz, by, bx, 2], zarrs::array::data_type::float32(), zarrs::array::FillValue::from(0f32))
-        .dimension_names(["z", "y", "x", "minmax"].into())
-        .build(store.clone(), &format!("/{MINMAX_GROUP}/{level}"))?;
+    let array = ArrayBuilder::new(
+        vec![bz, by, bx, 2],
+        vec![bz, by, bx, 2],
+        zarrs::array::data_type::float32(),
+        zarrs::array::FillValue::from(0f32),
+    )
+    .dimension_names(["z", "y", "x", "minmax"].into())
+    .build(store.clone(), &format!("/{MINMAX_GROUP}/{level}"))?;
     array.store_metadata()?;
     let flat: Vec<f32> = minmax.iter().flat_map(|r| if r[0] > r[1] { [0.0, 0.0] } else { *r }).collect();
     array.store_chunk(&[0, 0, 0, 0], &flat)?;

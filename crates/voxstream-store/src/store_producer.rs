@@ -135,7 +135,12 @@ pub struct StoreProducer<S: BrickSource = StoreReader> {
 
 impl<S: BrickSource> Clone for StoreProducer<S> {
     fn clone(&self) -> Self {
-        StoreProducer { reader: self.reader.clone(), shape: self.shape, lower: self.lower, inverse_span: self.inverse_span }
+        StoreProducer {
+            reader: self.reader.clone(),
+            shape: self.shape,
+            lower: self.lower,
+            inverse_span: self.inverse_span,
+        }
     }
 }
 
@@ -214,7 +219,8 @@ impl<S: BrickSource> Producer for StoreProducer<S> {
                 let y = (start[1] + j as i64).clamp(lower[1] as i64, upper[1] as i64 - 1) as usize - lower[1] as usize;
                 let row = (z * sy + y) * sx;
                 for i in 0..b {
-                    let x = (start[0] + i as i64).clamp(lower[0] as i64, upper[0] as i64 - 1) as usize - lower[0] as usize;
+                    let x =
+                        (start[0] + i as i64).clamp(lower[0] as i64, upper[0] as i64 - 1) as usize - lower[0] as usize;
                     voxels[index] = quantize(self.normalise(samples[row + x]));
                     index += 1;
                 }

@@ -62,7 +62,9 @@ fn average_2x(data: &[f32], size: [u64; 3]) -> Vec<f32> {
         for y in 0..oy {
             for x in 0..ox {
                 let (mut sum, mut n) = (0f64, 0u32);
-                for (dx, dy, dz) in [(0, 0, 0), (1, 0, 0), (0, 1, 0), (1, 1, 0), (0, 0, 1), (1, 0, 1), (0, 1, 1), (1, 1, 1)] {
+                for (dx, dy, dz) in
+                    [(0, 0, 0), (1, 0, 0), (0, 1, 0), (1, 1, 0), (0, 0, 1), (1, 0, 1), (0, 1, 1), (1, 1, 1)]
+                {
                     let (sx, sy, sz) = (2 * x + dx, 2 * y + dy, 2 * z + dz);
                     if sx < nx && sy < ny && sz < nz {
                         sum += data[(sz * ny + sy) * nx + sx] as f64;
@@ -119,7 +121,10 @@ impl StoreReader {
     pub fn open_with_cache(path: &Path, cache_bytes: u64) -> Result<StoreReader, StoreError> {
         if !path.is_dir() {
             if partial_path(path).is_dir() {
-                return Err(StoreError::store(path, "incomplete store: its import was interrupted; run the import again"));
+                return Err(StoreError::store(
+                    path,
+                    "incomplete store: its import was interrupted; run the import again",
+                ));
             }
             return Err(StoreError::store(path, "no such store (expected a folder holding zarr.json)"));
         }
@@ -258,8 +263,10 @@ impl StoreReader {
                     let run = (to[0] - from[0]) as usize;
                     for z in from[2]..to[2] {
                         for y in from[1]..to[1] {
-                            let src = (((z - origin[2]) * extent[1] + (y - origin[1])) * extent[0] + (from[0] - origin[0])) as usize;
-                            let dst = (((z - lower[2]) * size[1] + (y - lower[1])) * size[0] + (from[0] - lower[0])) as usize;
+                            let src = (((z - origin[2]) * extent[1] + (y - origin[1])) * extent[0]
+                                + (from[0] - origin[0])) as usize;
+                            let dst =
+                                (((z - lower[2]) * size[1] + (y - lower[1])) * size[0] + (from[0] - lower[0])) as usize;
                             out[dst..dst + run].copy_from_slice(&brick[src..src + run]);
                         }
                     }
@@ -321,9 +328,15 @@ impl StoreReader {
             StoreError::store(&self.path, format!("level {level}, samples {lower:?}..{upper:?}: {e}"))
         };
         Ok(match self.info.dtype {
-            DType::U8 => array.retrieve_array_subset::<Vec<u8>>(&subset).map_err(corrupt)?.into_iter().map(f32::from).collect(),
-            DType::U16 => array.retrieve_array_subset::<Vec<u16>>(&subset).map_err(corrupt)?.into_iter().map(f32::from).collect(),
-            DType::I16 => array.retrieve_array_subset::<Vec<i16>>(&subset).map_err(corrupt)?.into_iter().map(f32::from).collect(),
+            DType::U8 => {
+                array.retrieve_array_subset::<Vec<u8>>(&subset).map_err(corrupt)?.into_iter().map(f32::from).collect()
+            }
+            DType::U16 => {
+                array.retrieve_array_subset::<Vec<u16>>(&subset).map_err(corrupt)?.into_iter().map(f32::from).collect()
+            }
+            DType::I16 => {
+                array.retrieve_array_subset::<Vec<i16>>(&subset).map_err(corrupt)?.into_iter().map(f32::from).collect()
+            }
             DType::F32 => array.retrieve_array_subset::<Vec<f32>>(&subset).map_err(corrupt)?,
         })
     }
@@ -367,7 +380,11 @@ impl StoreReader {
                         .flatten()
                         .map(|e| {
                             let p = e.path();
-                            if p.is_dir() { walk(&p) } else { e.metadata().map(|m| m.len()).unwrap_or(0) }
+                            if p.is_dir() {
+                                walk(&p)
+                            } else {
+                                e.metadata().map(|m| m.len()).unwrap_or(0)
+                            }
                         })
                         .sum()
                 })

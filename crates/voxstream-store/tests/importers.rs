@@ -46,9 +46,27 @@ fn encode(dtype: DType, endian: Endian) -> Vec<u8> {
         .flat_map(|v| -> Vec<u8> {
             match dtype {
                 DType::U8 => vec![v as u8],
-                DType::U16 => if big { (v as u16).to_be_bytes().to_vec() } else { (v as u16).to_le_bytes().to_vec() },
-                DType::I16 => if big { (v as i16).to_be_bytes().to_vec() } else { (v as i16).to_le_bytes().to_vec() },
-                DType::F32 => if big { v.to_be_bytes().to_vec() } else { v.to_le_bytes().to_vec() },
+                DType::U16 => {
+                    if big {
+                        (v as u16).to_be_bytes().to_vec()
+                    } else {
+                        (v as u16).to_le_bytes().to_vec()
+                    }
+                }
+                DType::I16 => {
+                    if big {
+                        (v as i16).to_be_bytes().to_vec()
+                    } else {
+                        (v as i16).to_le_bytes().to_vec()
+                    }
+                }
+                DType::F32 => {
+                    if big {
+                        v.to_be_bytes().to_vec()
+                    } else {
+                        v.to_le_bytes().to_vec()
+                    }
+                }
             }
         })
         .collect()
@@ -79,8 +97,18 @@ fn check_import(path: &Path, raw: Option<&RawLayout>, dtype: DType, spacing: [f6
     let reader = StoreReader::open(&store).unwrap();
     assert_eq!(reader.info().dtype, dtype, "{}", path.display());
     for a in 0..3 {
-        assert!((reader.info().spacing[a] - spacing[a]).abs() < 1e-6, "{}: spacing {:?}", path.display(), reader.info().spacing);
-        assert!((reader.info().origin[a] - origin[a]).abs() < 1e-6, "{}: origin {:?}", path.display(), reader.info().origin);
+        assert!(
+            (reader.info().spacing[a] - spacing[a]).abs() < 1e-6,
+            "{}: spacing {:?}",
+            path.display(),
+            reader.info().spacing
+        );
+        assert!(
+            (reader.info().origin[a] - origin[a]).abs() < 1e-6,
+            "{}: origin {:?}",
+            path.display(),
+            reader.info().origin
+        );
     }
     let level0 = reader.read_region(0, [0, 0, 0], DIMS).unwrap();
     assert!(level0 == samples(dtype), "{}: level 0 differs from the source", path.display());
@@ -166,15 +194,16 @@ fn nifti_plain_and_gzip() {
 #[test]
 fn metaimage_local_compressed_and_detached() {
     let dir = scratch("mha");
-    let header = |element: &str, compressed: bool, file: &str| {
-        format!(
+    let header =
+        |element: &str, compressed: bool, file: &str| {
+            format!(
             "ObjectType = Image\nNDims = 3\nBinaryData = True\nBinaryDataByteOrderMSB = False\nCompressedData = {}\n\
              Offset = 1 2 3\nElementSpacing = 0.25 0.5 4\nDimSize = {} {} {}\nElementType = {element}\n\
              ElementDataFile = {file}\n",
             if compressed { "True" } else { "False" },
             DIMS[0], DIMS[1], DIMS[2]
         )
-    };
+        };
     let spacing = [0.25, 0.5, 4.0];
     let origin = [1.0, 2.0, 3.0];
     let mut local = header("MET_SHORT", false, "LOCAL").into_bytes();
@@ -218,7 +247,8 @@ fn inr_plain_and_gzip() {
 #[test]
 fn npy_and_raw() {
     let dir = scratch("npy");
-    let dict = format!("{{'descr': '<i2', 'fortran_order': False, 'shape': ({}, {}, {}), }}", DIMS[2], DIMS[1], DIMS[0]);
+    let dict =
+        format!("{{'descr': '<i2', 'fortran_order': False, 'shape': ({}, {}, {}), }}", DIMS[2], DIMS[1], DIMS[0]);
     let mut header = dict.into_bytes();
     while (10 + header.len() + 1) % 64 != 0 {
         header.push(b' ');
@@ -244,9 +274,8 @@ fn npy_and_raw() {
 
 fn import_error(path: &Path, raw: Option<&RawLayout>) -> StoreError {
     let store = path.with_extension("zarr");
-    let result = open_volume(path, raw).and_then(|mut source| {
-        import_volume(source.as_mut(), &store, &ImportOptions::default(), &mut |_, _| {})
-    });
+    let result = open_volume(path, raw)
+        .and_then(|mut source| import_volume(source.as_mut(), &store, &ImportOptions::default(), &mut |_, _| {}));
     let error = result.expect_err("bad input was accepted");
     assert!(!store.exists(), "a failed import left a store");
     assert!(!voxstream_store::import::partial_path(&store).exists(), "a failed import left a partial store");
@@ -447,7 +476,8 @@ fn nifti_scaling_is_applied_as_float() {
 fn npz_stored_and_deflated() {
     use std::io::Write;
     let dir = scratch("npz");
-    let dict = format!("{{'descr': '<u2', 'fortran_order': False, 'shape': ({}, {}, {}), }}", DIMS[2], DIMS[1], DIMS[0]);
+    let dict =
+        format!("{{'descr': '<u2', 'fortran_order': False, 'shape': ({}, {}, {}), }}", DIMS[2], DIMS[1], DIMS[0]);
     let mut header = dict.into_bytes();
     while (10 + header.len() + 1) % 64 != 0 {
         header.push(b' ');
@@ -457,7 +487,9 @@ fn npz_stored_and_deflated() {
     npy.extend((header.len() as u16).to_le_bytes());
     npy.extend(header);
     npy.extend(encode(DType::U16, Endian::Little));
-    for (name, method) in [("stored.npz", zip::CompressionMethod::Stored), ("deflated.npz", zip::CompressionMethod::Deflated)] {
+    for (name, method) in
+        [("stored.npz", zip::CompressionMethod::Stored), ("deflated.npz", zip::CompressionMethod::Deflated)]
+    {
         let file = std::fs::File::create(dir.join(name)).unwrap();
         let mut writer = zip::ZipWriter::new(file);
         let options = zip::write::SimpleFileOptions::default().compression_method(method);

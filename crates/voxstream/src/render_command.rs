@@ -281,7 +281,7 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>) -> Result<()
 }
 
 fn read_transfer_function(path: &Path) -> Result<TransferFunction> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read transfer function {}", path.display()))?;
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read transfer function {}", path.display()))?;
     TransferFunction::from_json(&text).with_context(|| format!("in {}", path.display()))
 }

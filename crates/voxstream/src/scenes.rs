@@ -87,7 +87,15 @@ pub fn builtin(name: &str) -> Option<Scene> {
             name: "sponge",
             description: "Menger sponge, N=3, bricks 9^3, 25 levels (virtual resolution 3^25*9 per axis)",
             producer: SceneProducer::Sponge(MengerSponge::default()),
-            transfer_function: tf(&[[0.0, 0.0, 0.0, 0.0, 0.0], [0.35, 0.0, 0.0, 0.0, 0.0], [0.5, 0.95, 0.82, 0.6, 1.0], [1.0, 0.95, 0.82, 0.6, 1.0]], None),
+            transfer_function: tf(
+                &[
+                    [0.0, 0.0, 0.0, 0.0, 0.0],
+                    [0.35, 0.0, 0.0, 0.0, 0.0],
+                    [0.5, 0.95, 0.82, 0.6, 1.0],
+                    [1.0, 0.95, 0.82, 0.6, 1.0],
+                ],
+                None,
+            ),
             shading: Shading::Phong,
             camera: default_camera(),
         },
@@ -96,7 +104,12 @@ pub fn builtin(name: &str) -> Option<Scene> {
             description: "torus amplified by 16 octaves of fBm, N=2, bricks 8^3, virtual resolution 131072^3",
             producer: SceneProducer::Hypertexture(Hypertexture::default()),
             transfer_function: tf(
-                &[[0.0, 0.0, 0.0, 0.0, 0.0], [0.2, 0.9, 0.45, 0.2, 0.0], [0.6, 0.95, 0.7, 0.4, 0.9], [1.0, 1.0, 0.95, 0.85, 1.0]],
+                &[
+                    [0.0, 0.0, 0.0, 0.0, 0.0],
+                    [0.2, 0.9, 0.45, 0.2, 0.0],
+                    [0.6, 0.95, 0.7, 0.4, 0.9],
+                    [1.0, 1.0, 0.95, 0.85, 1.0],
+                ],
                 Some(0.002),
             ),
             shading: Shading::Phong,

@@ -185,7 +185,11 @@ impl<P: Producer> Session<P> {
     }
 
     /// Renders `frames` interactive frames from `camera` (or until converged if `frames` is 0).
-    pub fn render_until_converged_interactively(&mut self, camera: &Camera, max_frames: u32) -> Result<(u32, FrameResult)> {
+    pub fn render_until_converged_interactively(
+        &mut self,
+        camera: &Camera,
+        max_frames: u32,
+    ) -> Result<(u32, FrameResult)> {
         if max_frames == 0 {
             bail!("at least one frame is needed");
         }

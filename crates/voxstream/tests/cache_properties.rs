@@ -82,7 +82,9 @@ fn interactive_frames_converge_to_the_converged_image() {
 }
 
 /// Keys of every resident brick of a session.
-fn resident_brick_bounds(session: &voxstream::session::Session<voxstream::scenes::SceneProducer>) -> Vec<(u32, [f64; 3], f64)> {
+fn resident_brick_bounds(
+    session: &voxstream::session::Session<voxstream::scenes::SceneProducer>,
+) -> Vec<(u32, [f64; 3], f64)> {
     let cache = session.cache();
     let shape = *cache.shape();
     (0..cache.brick_pool().allocated())
@@ -105,9 +107,10 @@ fn off_screen_data_is_never_loaded() {
     common::converged(&mut session, &camera);
     let bricks = resident_brick_bounds(&session);
     let outside = |lower: f64, size: f64| lower + size < 0.14 || lower > 0.86;
-    let off_screen = bricks.iter().filter(|(level, lower, size)| {
-        *level >= 2 && (outside(lower[0], *size) || outside(lower[1], *size))
-    }).count();
+    let off_screen = bricks
+        .iter()
+        .filter(|(level, lower, size)| *level >= 2 && (outside(lower[0], *size) || outside(lower[1], *size)))
+        .count();
     assert!(bricks.len() > 50);
     assert_eq!(off_screen, 0, "{off_screen} of {} bricks are off screen", bricks.len());
 }
@@ -119,10 +122,17 @@ fn occluded_data_is_never_loaded() {
     let mut session = common::scene_session("hypertexture", 64, 64 << 20);
     common::converged(&mut session, &camera);
     let bricks = resident_brick_bounds(&session);
-    let under = bricks.iter().filter(|(level, lower, size)| {
-        *level >= 4 && lower[2] + size < 0.42 && lower[0] > 0.74 && lower[0] + size < 0.82
-            && lower[1] > 0.46 && lower[1] + size < 0.54
-    }).count();
+    let under = bricks
+        .iter()
+        .filter(|(level, lower, size)| {
+            *level >= 4
+                && lower[2] + size < 0.42
+                && lower[0] > 0.74
+                && lower[0] + size < 0.82
+                && lower[1] > 0.46
+                && lower[1] + size < 0.54
+        })
+        .count();
     let above = bricks.iter().filter(|(level, lower, _)| *level >= 4 && lower[2] > 0.55).count();
     assert!(above > 20, "the visible top of the tube is loaded ({above} bricks)");
     assert_eq!(under, 0, "{under} bricks under the opaque tube were loaded");

@@ -62,17 +62,45 @@ fn interactive_path_writes_numbered_frames_and_stats() {
                    {"eye":[2.2,1.5,2.2],"target":[0.5,0.5,0.5],"up":[0,1,0],"fov":40}]"#;
     std::fs::write(dir.join("cameras.json"), path).unwrap();
     let output = run(
-        &["render", "hypertexture", "--mode", "interactive", "--path", "cameras.json", "--width", "64", "--height", "64",
-          "--out", "f.png", "--stats", "stats.json", "--budget-mb", "32"],
+        &[
+            "render",
+            "hypertexture",
+            "--mode",
+            "interactive",
+            "--path",
+            "cameras.json",
+            "--width",
+            "64",
+            "--height",
+            "64",
+            "--out",
+            "f.png",
+            "--stats",
+            "stats.json",
+            "--budget-mb",
+            "32",
+        ],
         &dir,
     );
     assert!(output.status.success(), "{}", stderr(&output));
     for i in 0..3 {
         assert!(dir.join(format!("f_{i:04}.png")).exists());
     }
-    let stats: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("stats.json")).unwrap()).unwrap();
-    for key in ["frames", "converged", "frame_ms", "rays", "samples", "requests", "bricks_produced", "bricks_resident",
-                "nodes_resident", "resident_bytes_peak", "budget_bytes"] {
+    let stats: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("stats.json")).unwrap()).unwrap();
+    for key in [
+        "frames",
+        "converged",
+        "frame_ms",
+        "rays",
+        "samples",
+        "requests",
+        "bricks_produced",
+        "bricks_resident",
+        "nodes_resident",
+        "resident_bytes_peak",
+        "budget_bytes",
+    ] {
         assert!(stats.get(key).is_some(), "stats lack {key}");
     }
     assert_eq!(stats["frames"], 3);
@@ -94,7 +122,10 @@ fn peak_rss_stays_within_the_budget_for_every_scene() {
         ("shell", &[]),
         // Deep views: the sponge 3^-12 below the surface, the hypertexture at its finest level.
         ("sponge", &["--eye", "0.0007,0.0009,1.001", "--target", "0.0007,0.0008,1"]),
-        ("hypertexture", &["--eye", "0.785,0.5,0.66", "--target", "0.78,0.5,0.6", "--mode", "interactive", "--frames", "30"]),
+        (
+            "hypertexture",
+            &["--eye", "0.785,0.5,0.66", "--target", "0.78,0.5,0.6", "--mode", "interactive", "--frames", "30"],
+        ),
     ];
     for (index, (scene, extra)) in cases.iter().enumerate() {
         let stats_file = format!("stats{index}.json");
@@ -106,7 +137,11 @@ fn peak_rss_stays_within_the_budget_for_every_scene() {
             serde_json::from_str(&std::fs::read_to_string(dir.join(&stats_file)).unwrap()).unwrap();
         let rss = stats["peak_rss_bytes"].as_u64().expect("peak RSS reported on Linux");
         let pools = stats["resident_bytes_peak"].as_u64().unwrap();
-        println!("{scene} {extra:?}: peak RSS {:.1} MiB, pools {:.1} MiB", rss as f64 / 1048576.0, pools as f64 / 1048576.0);
+        println!(
+            "{scene} {extra:?}: peak RSS {:.1} MiB, pools {:.1} MiB",
+            rss as f64 / 1048576.0,
+            pools as f64 / 1048576.0
+        );
         assert!(pools <= 64 << 20);
         assert!(rss <= (64 << 20) + RSS_OVERHEAD_BYTES, "{scene}: peak RSS {rss} bytes");
     }
@@ -133,7 +168,10 @@ fn bad_input_is_one_clear_line() {
     assert_fails(&["render", "--tf", "broken.json", "--out", "x.png"], "malformed");
     assert_fails(&["render", "--tf", "missing.json", "--out", "x.png"], "cannot read");
     assert_fails(&["render", "--eye", "0.5,0.5,0.5", "--target", "0.5,0.5,0.5", "--out", "x.png"], "degenerate camera");
-    assert_fails(&["render", "--up", "0,1,0", "--eye", "0.5,2,0.5", "--target", "0.5,0,0.5", "--out", "x.png"], "parallel");
+    assert_fails(
+        &["render", "--up", "0,1,0", "--eye", "0.5,2,0.5", "--target", "0.5,0,0.5", "--out", "x.png"],
+        "parallel",
+    );
     assert_fails(&["render", "--budget-mb", "0", "--out", "x.png"], "budget");
     assert_fails(&["render", "--width", "0", "--out", "x.png"], "size");
     assert_fails(&["render", "--fov", "180", "--out", "x.png"], "fov");

@@ -58,7 +58,8 @@ fn reference(dir: &Path, name: &str) -> (Vec<f32>, serde_json::Value) {
     } else {
         panic!("unexpected reference dtype in {header}");
     };
-    let meta = serde_json::from_str(&std::fs::read_to_string(dir.join(format!("{name}.reference.json"))).unwrap()).unwrap();
+    let meta =
+        serde_json::from_str(&std::fs::read_to_string(dir.join(format!("{name}.reference.json"))).unwrap()).unwrap();
     (values, meta)
 }
 
@@ -227,16 +228,19 @@ fn streaming_and_in_memory_producers_give_the_same_image() {
     let range = reader.attributes().value_range;
     let tf = default_store_transfer_function(range).unwrap();
     let camera = store_camera(reader.info());
-    let settings = RenderSettings { width: 64, height: 64, placement: store_placement(&reader), ..RenderSettings::default() };
+    let settings =
+        RenderSettings { width: 64, height: 64, placement: store_placement(&reader), ..RenderSettings::default() };
     let streamed = {
         let producer = StoreProducer::new(reader.clone()).unwrap();
-        let mut session = Session::with_value_range(producer, &tf, settings.clone(), 64 << 20, LoopLimits::default(), range).unwrap();
+        let mut session =
+            Session::with_value_range(producer, &tf, settings.clone(), 64 << 20, LoopLimits::default(), range).unwrap();
         session.render(&camera, Mode::Converged).unwrap()
     };
     let in_memory = {
         let volume = Arc::new(voxstream_store::InMemoryVolume::load(&reader).unwrap());
         let producer = StoreProducer::new(volume).unwrap();
-        let mut session = Session::with_value_range(producer, &tf, settings, 64 << 20, LoopLimits::default(), range).unwrap();
+        let mut session =
+            Session::with_value_range(producer, &tf, settings, 64 << 20, LoopLimits::default(), range).unwrap();
         session.render(&camera, Mode::Converged).unwrap()
     };
     assert!(streamed.is_converged() && in_memory.is_converged());
@@ -263,10 +267,12 @@ fn foreign_ome_zarr_v2_and_v3_render_like_the_native_store() {
     let render = |reader: Arc<StoreReader>| {
         let range = reader.attributes().value_range;
         let tf = default_store_transfer_function([0.0, 255.0]).unwrap();
-        let settings = RenderSettings { width: 96, height: 96, placement: store_placement(&reader), ..RenderSettings::default() };
+        let settings =
+            RenderSettings { width: 96, height: 96, placement: store_placement(&reader), ..RenderSettings::default() };
         let camera = store_camera(reader.info());
         let producer = StoreProducer::new(reader).unwrap();
-        let mut session = Session::with_value_range(producer, &tf, settings, 64 << 20, LoopLimits::default(), range).unwrap();
+        let mut session =
+            Session::with_value_range(producer, &tf, settings, 64 << 20, LoopLimits::default(), range).unwrap();
         let frame = session.render(&camera, Mode::Converged).unwrap();
         assert!(frame.is_converged());
         frame.image.to_rgb8()

@@ -96,7 +96,12 @@ fn zoom_to_features_of_three_to_the_minus_twenty() {
     // [3^-20, 2·3^-20]² on the z = 1 face near the corner; frame it from close by.
     let cell = 3f64.powi(-20);
     let target = [1.5 * cell, 1.5 * cell, 1.0];
-    let camera = Camera { eye: [target[0] + 0.6 * cell, target[1] + 0.8 * cell, 1.0 + 4.0 * cell], target, up: [0.0, 1.0, 0.0], fov: 50.0 };
+    let camera = Camera {
+        eye: [target[0] + 0.6 * cell, target[1] + 0.8 * cell, 1.0 + 4.0 * cell],
+        target,
+        up: [0.0, 1.0, 0.0],
+        fov: 50.0,
+    };
     let (wrong, covered) = mismatch(&camera, 96, 1.0);
     println!("deep zoom: {:.2}% of pixels differ, {covered} covered", wrong * 100.0);
     assert!(covered > 96 * 96 / 5 && covered < 96 * 96 * 95 / 100, "the view must show solid and holes");

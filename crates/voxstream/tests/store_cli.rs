@@ -24,7 +24,10 @@ fn write_ball(path: &Path) {
     for k in 0..nz {
         for j in 0..ny {
             for i in 0..nx {
-                let d = (((i as f64 - 48.0) / 30.0).powi(2) + ((j as f64 - 40.0) / 28.0).powi(2) + ((k as f64 - 36.0) / 25.0).powi(2)).sqrt();
+                let d = (((i as f64 - 48.0) / 30.0).powi(2)
+                    + ((j as f64 - 40.0) / 28.0).powi(2)
+                    + ((k as f64 - 36.0) / 25.0).powi(2))
+                .sqrt();
                 let v = if d < 1.0 { (4000.0 * (1.0 - d * d)) as u16 + 100 } else { 0 };
                 bytes.extend(v.to_le_bytes());
             }
@@ -55,7 +58,10 @@ fn import_info_render_and_survive_a_corrupt_brick() {
     assert!(level0["empty"].as_u64().unwrap() > 0 && level0["stored"].as_u64().unwrap() > 0);
     assert!(info["bytes_on_disk"].as_u64().unwrap() > 0);
 
-    let output = voxstream(&["render", "ball.zarr", "--width", "64", "--height", "64", "--out", "a.png", "--stats", "a.json"], &dir);
+    let output = voxstream(
+        &["render", "ball.zarr", "--width", "64", "--height", "64", "--out", "a.png", "--stats", "a.json"],
+        &dir,
+    );
     assert!(output.status.success(), "{}", stderr(&output));
     assert!(!stderr(&output).contains("warning"), "{}", stderr(&output));
     let stats: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("a.json")).unwrap()).unwrap();
@@ -72,7 +78,23 @@ fn import_info_render_and_survive_a_corrupt_brick() {
         }
     }
     assert!(corrupted > 0);
-    let output = voxstream(&["render", "ball.zarr", "--width", "64", "--height", "64", "--out", "b.png", "--stats", "b.json", "--lod-bias", "3"], &dir);
+    let output = voxstream(
+        &[
+            "render",
+            "ball.zarr",
+            "--width",
+            "64",
+            "--height",
+            "64",
+            "--out",
+            "b.png",
+            "--stats",
+            "b.json",
+            "--lod-bias",
+            "3",
+        ],
+        &dir,
+    );
     let text = stderr(&output);
     assert!(output.status.success(), "{text}");
     assert!(text.contains("warning") && text.contains("ball.zarr"), "{text}");
@@ -139,8 +161,22 @@ fn store_renders_are_deterministic_with_background_prefetch() {
     for (i, threads) in ["1", "2", "2"].iter().enumerate() {
         let out = format!("f{i}.png");
         let output = Command::new(env!("CARGO_BIN_EXE_voxstream"))
-            .args(["render", "ball.zarr", "--mode", "interactive", "--frames", "6", "--requests-per-frame", "20",
-                   "--width", "48", "--height", "48", "--out", &out])
+            .args([
+                "render",
+                "ball.zarr",
+                "--mode",
+                "interactive",
+                "--frames",
+                "6",
+                "--requests-per-frame",
+                "20",
+                "--width",
+                "48",
+                "--height",
+                "48",
+                "--out",
+                &out,
+            ])
             .env("RAYON_NUM_THREADS", threads)
             .current_dir(&dir)
             .output()

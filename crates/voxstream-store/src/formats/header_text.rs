@@ -6,8 +6,10 @@ use crate::error::StoreError;
 
 /// Parses `count` whitespace- or comma-separated numbers from `value`, naming `key` in errors.
 pub fn numbers<T: std::str::FromStr>(path: &Path, key: &str, value: &str, count: usize) -> Result<Vec<T>, StoreError> {
-    let parts: Vec<&str> =
-        value.split(|c: char| c.is_whitespace() || c == ',' || c == '(' || c == ')').filter(|s| !s.is_empty()).collect();
+    let parts: Vec<&str> = value
+        .split(|c: char| c.is_whitespace() || c == ',' || c == '(' || c == ')')
+        .filter(|s| !s.is_empty())
+        .collect();
     if parts.len() < count {
         return Err(StoreError::format(path, format!("'{key}' needs {count} numbers, got '{value}'")));
     }

@@ -16,10 +16,12 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
     let mut line = String::new();
     let mut header_bytes = 0u64;
     let (mut dims, mut dtype, mut data_file) = (None, None, None::<String>);
-    let (mut spacing, mut origin, mut endian, mut compression) = ([1.0; 3], [0.0; 3], Endian::Little, Compression::None);
+    let (mut spacing, mut origin, mut endian, mut compression) =
+        ([1.0; 3], [0.0; 3], Endian::Little, Compression::None);
     loop {
         line.clear();
-        let read = reader.read_line(&mut line).map_err(|e| StoreError::format(path, format!("unreadable header: {e}")))?;
+        let read =
+            reader.read_line(&mut line).map_err(|e| StoreError::format(path, format!("unreadable header: {e}")))?;
         if read == 0 {
             break;
         }

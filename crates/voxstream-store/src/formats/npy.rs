@@ -21,13 +21,16 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
 /// Opens the first array of a `.npz` archive (stored or deflated), streaming it without extracting.
 pub fn open_npz(path: &Path) -> Result<SampleStream, StoreError> {
     let file = std::fs::File::open(path).map_err(|e| StoreError::io(path, e))?;
-    let mut archive = zip::ZipArchive::new(file).map_err(|e| StoreError::format(path, format!("not a .npz (zip) archive: {e}")))?;
+    let mut archive =
+        zip::ZipArchive::new(file).map_err(|e| StoreError::format(path, format!("not a .npz (zip) archive: {e}")))?;
     let (name, start, compressed, method) = {
         let mut found = None;
         for i in 0..archive.len() {
-            let entry = archive.by_index_raw(i).map_err(|e| StoreError::format(path, format!("corrupt archive: {e}")))?;
+            let entry =
+                archive.by_index_raw(i).map_err(|e| StoreError::format(path, format!("corrupt archive: {e}")))?;
             if entry.name().ends_with(".npy") {
-                found = Some((entry.name().to_string(), entry.data_start(), entry.compressed_size(), entry.compression()));
+                found =
+                    Some((entry.name().to_string(), entry.data_start(), entry.compressed_size(), entry.compression()));
                 break;
             }
         }
@@ -40,7 +43,10 @@ pub fn open_npz(path: &Path) -> Result<SampleStream, StoreError> {
         zip::CompressionMethod::Stored => Box::new(raw),
         zip::CompressionMethod::Deflated => Box::new(flate2::read::DeflateDecoder::new(raw)),
         other => {
-            return Err(StoreError::Unsupported { path: path.into(), message: format!("{name} is compressed with {other:?}") })
+            return Err(StoreError::Unsupported {
+                path: path.into(),
+                message: format!("{name} is compressed with {other:?}"),
+            })
         }
     };
     let (info, endian, _) = parse_header(&mut reader, path)?;
@@ -72,7 +78,8 @@ fn parse_header(file: &mut dyn Read, path: &Path) -> Result<(VolumeInfo, Endian,
         Some(rest[..end].trim().trim_matches('\'').to_string())
     };
     let descr = field("descr").ok_or_else(|| StoreError::format(path, "header has no 'descr'"))?;
-    let fortran = field("fortran_order").ok_or_else(|| StoreError::format(path, "header has no 'fortran_order'"))? == "True";
+    let fortran =
+        field("fortran_order").ok_or_else(|| StoreError::format(path, "header has no 'fortran_order'"))? == "True";
     let shape_text = field("shape").ok_or_else(|| StoreError::format(path, "header has no 'shape'"))?;
     let shape: Vec<u64> = shape_text
         .trim_matches(['(', ')'])
@@ -82,7 +89,10 @@ fn parse_header(file: &mut dyn Read, path: &Path) -> Result<(VolumeInfo, Endian,
         .map(|s| s.parse().map_err(|_| StoreError::format(path, format!("bad shape '{shape_text}'"))))
         .collect::<Result<_, _>>()?;
     if shape.len() != 3 {
-        return Err(StoreError::Unsupported { path: path.into(), message: format!("{}-D array (only 3-D)", shape.len()) });
+        return Err(StoreError::Unsupported {
+            path: path.into(),
+            message: format!("{}-D array (only 3-D)", shape.len()),
+        });
     }
     let endian = if descr.starts_with('>') { Endian::Big } else { Endian::Little };
     let dtype = match descr.trim_start_matches(['<', '>', '|', '=']) {
@@ -91,7 +101,10 @@ fn parse_header(file: &mut dyn Read, path: &Path) -> Result<(VolumeInfo, Endian,
         "i2" => DType::I16,
         "f4" => DType::F32,
         other => {
-            return Err(StoreError::Unsupported { path: path.into(), message: format!("dtype '{other}' (u1, u2, i2, f4)") })
+            return Err(StoreError::Unsupported {
+                path: path.into(),
+                message: format!("dtype '{other}' (u1, u2, i2, f4)"),
+            })
         }
     };
     let dims = if fortran { [shape[0], shape[1], shape[2]] } else { [shape[2], shape[1], shape[0]] };

@@ -21,7 +21,8 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
     let (mut spacing, mut origin, mut data_file) = ([1.0; 3], [0.0; 3], None::<String>);
     loop {
         line.clear();
-        let read = reader.read_line(&mut line).map_err(|e| StoreError::format(path, format!("unreadable header: {e}")))?;
+        let read =
+            reader.read_line(&mut line).map_err(|e| StoreError::format(path, format!("unreadable header: {e}")))?;
         if read == 0 {
             if data_file.is_none() {
                 return Err(StoreError::format(path, "header ends without a blank line before the data"));
@@ -64,7 +65,10 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
             }
             "dimension" => {
                 if value != "3" {
-                    return Err(StoreError::Unsupported { path: path.into(), message: format!("dimension {value} (only 3)") });
+                    return Err(StoreError::Unsupported {
+                        path: path.into(),
+                        message: format!("dimension {value} (only 3)"),
+                    });
                 }
             }
             "sizes" => dims = Some(three::<u64>(path, "sizes", value)?),
@@ -86,7 +90,10 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
         Some("raw") => Compression::None,
         Some("gzip") | Some("gz") => Compression::Gzip,
         Some(other) => {
-            return Err(StoreError::Unsupported { path: path.into(), message: format!("encoding '{other}' (raw, gzip)") })
+            return Err(StoreError::Unsupported {
+                path: path.into(),
+                message: format!("encoding '{other}' (raw, gzip)"),
+            })
         }
         None => return Err(StoreError::format(path, "header has no 'encoding'")),
     };

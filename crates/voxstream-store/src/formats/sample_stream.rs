@@ -85,7 +85,16 @@ impl SampleStream {
             Box::new(BufReader::with_capacity(1 << 20, file))
         };
         let file_dtype = info.dtype;
-        Ok(SampleStream { info, file_dtype, scaling: None, endian, reader, path: path.into(), consumed: 0, bytes: Vec::new() })
+        Ok(SampleStream {
+            info,
+            file_dtype,
+            scaling: None,
+            endian,
+            reader,
+            path: path.into(),
+            consumed: 0,
+            bytes: Vec::new(),
+        })
     }
 
     /// Applies `value · slope + intercept` to every sample; the volume is then reported (and stored) as f32.
@@ -98,10 +107,24 @@ impl SampleStream {
 
 impl SampleStream {
     /// Samples of `info` from any reader (a decoded in-memory buffer, say), reported under `path`.
-    pub fn from_reader(path: &Path, reader: Box<dyn Read + Send>, info: VolumeInfo, endian: Endian) -> Result<SampleStream, StoreError> {
+    pub fn from_reader(
+        path: &Path,
+        reader: Box<dyn Read + Send>,
+        info: VolumeInfo,
+        endian: Endian,
+    ) -> Result<SampleStream, StoreError> {
         info.validate(path)?;
         let file_dtype = info.dtype;
-        Ok(SampleStream { info, file_dtype, scaling: None, endian, reader, path: path.into(), consumed: 0, bytes: Vec::new() })
+        Ok(SampleStream {
+            info,
+            file_dtype,
+            scaling: None,
+            endian,
+            reader,
+            path: path.into(),
+            consumed: 0,
+            bytes: Vec::new(),
+        })
     }
 }
 
@@ -130,7 +153,9 @@ impl VolumeSource for SampleStream {
                 }
                 Ok(n) => filled += n,
                 Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                Err(e) if e.kind() == std::io::ErrorKind::InvalidInput || e.kind() == std::io::ErrorKind::InvalidData => {
+                Err(e)
+                    if e.kind() == std::io::ErrorKind::InvalidInput || e.kind() == std::io::ErrorKind::InvalidData =>
+                {
                     return Err(gzip_error(&self.path, e))
                 }
                 Err(e) => return Err(StoreError::io(&self.path, e)),
@@ -152,7 +177,11 @@ impl VolumeSource for SampleStream {
             })),
             DType::F32 => out.extend(self.bytes.chunks_exact(4).map(|c| {
                 let a = [c[0], c[1], c[2], c[3]];
-                if big { f32::from_be_bytes(a) } else { f32::from_le_bytes(a) }
+                if big {
+                    f32::from_be_bytes(a)
+                } else {
+                    f32::from_le_bytes(a)
+                }
             })),
         }
         if let Some((slope, intercept)) = self.scaling {

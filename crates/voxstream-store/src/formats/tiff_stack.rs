@@ -42,17 +42,17 @@ fn dtype_of(path: &Path, color: ColorType, sample_format_float: bool, signed: bo
 
 fn open_decoder(path: &Path) -> Result<Decoder<BufReader<File>>, StoreError> {
     let file = File::open(path).map_err(|e| StoreError::io(path, e))?;
-    Decoder::new(BufReader::new(file)).map_err(|e| tiff_error(path, e)).map(|d| d.with_limits(tiff::decoder::Limits::unlimited()))
+    Decoder::new(BufReader::new(file))
+        .map_err(|e| tiff_error(path, e))
+        .map(|d| d.with_limits(tiff::decoder::Limits::unlimited()))
 }
 
 /// Page width, height and sample type of the decoder's current page.
 fn page_format(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Result<(u32, u32, DType), StoreError> {
     let (width, height) = decoder.dimensions().map_err(|e| tiff_error(path, e))?;
     let color = decoder.colortype().map_err(|e| tiff_error(path, e))?;
-    let format = decoder
-        .find_tag_unsigned::<u16>(tiff::tags::Tag::SampleFormat)
-        .map_err(|e| tiff_error(path, e))?
-        .unwrap_or(1);
+    let format =
+        decoder.find_tag_unsigned::<u16>(tiff::tags::Tag::SampleFormat).map_err(|e| tiff_error(path, e))?.unwrap_or(1);
     Ok((width, height, dtype_of(path, color, format == 3, format == 2)?))
 }
 
@@ -64,7 +64,9 @@ impl TiffStack {
                 .map_err(|e| StoreError::io(path, e))?
                 .flatten()
                 .map(|e| e.path())
-                .filter(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("tif") || e.eq_ignore_ascii_case("tiff")))
+                .filter(|p| {
+                    p.extension().is_some_and(|e| e.eq_ignore_ascii_case("tif") || e.eq_ignore_ascii_case("tiff"))
+                })
                 .collect();
             files.sort();
             if files.is_empty() {
@@ -82,7 +84,10 @@ impl TiffStack {
                 decoder.next_image().map_err(|e| tiff_error(&files[0], e))?;
                 let (w, h, t) = page_format(&files[0], &mut decoder)?;
                 if (w, h, t) != (width, height, dtype) {
-                    return Err(StoreError::format(&files[0], format!("page {pages} is {w}x{h} {t:?}, page 0 {width}x{height} {dtype:?}")));
+                    return Err(StoreError::format(
+                        &files[0],
+                        format!("page {pages} is {w}x{h} {t:?}, page 0 {width}x{height} {dtype:?}"),
+                    ));
                 }
                 pages += 1;
             }
@@ -90,7 +95,8 @@ impl TiffStack {
         } else {
             files.len() as u64
         };
-        let info = VolumeInfo { dims: [width as u64, height as u64, depth], dtype, spacing: [1.0; 3], origin: [0.0; 3] };
+        let info =
+            VolumeInfo { dims: [width as u64, height as u64, depth], dtype, spacing: [1.0; 3], origin: [0.0; 3] };
         info.validate(path)?;
         Ok(TiffStack { info, files, decoder: None, next_file: 0, pages_read: 0 })
     }
@@ -99,7 +105,10 @@ impl TiffStack {
         let multi_page = self.files.len() == 1;
         if self.decoder.is_none() || !multi_page {
             let index = if multi_page { 0 } else { self.next_file };
-            let path = self.files.get(index).ok_or_else(|| StoreError::format(&self.files[0], "fewer slices than expected"))?;
+            let path = self
+                .files
+                .get(index)
+                .ok_or_else(|| StoreError::format(&self.files[0], "fewer slices than expected"))?;
             self.decoder = Some((index, open_decoder(path)?));
             self.next_file += 1;
         } else if let Some((index, decoder)) = self.decoder.as_mut() {
@@ -109,7 +118,13 @@ impl TiffStack {
         let path = self.files[*index].clone();
         let (w, h, t) = page_format(&path, decoder)?;
         if [w as u64, h as u64] != [self.info.dims[0], self.info.dims[1]] || t != self.info.dtype {
-            return Err(StoreError::format(&path, format!("slice is {w}x{h} {t:?}, expected {}x{} {:?}", self.info.dims[0], self.info.dims[1], self.info.dtype)));
+            return Err(StoreError::format(
+                &path,
+                format!(
+                    "slice is {w}x{h} {t:?}, expected {}x{} {:?}",
+                    self.info.dims[0], self.info.dims[1], self.info.dtype
+                ),
+            ));
         }
         let image = decoder.read_image().map_err(|e| tiff_error(&path, e))?;
         let before = out.len();

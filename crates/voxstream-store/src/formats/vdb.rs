@@ -73,7 +73,10 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
     let meta: serde_json::Value =
         serde_json::from_str(line.trim()).map_err(|e| StoreError::format(path, format!("converter output: {e}")))?;
     let triple = |key: &str| -> Result<[f64; 3], StoreError> {
-        let v = meta[key].as_array().filter(|a| a.len() == 3).ok_or_else(|| StoreError::format(path, format!("no {key}")))?;
+        let v = meta[key]
+            .as_array()
+            .filter(|a| a.len() == 3)
+            .ok_or_else(|| StoreError::format(path, format!("no {key}")))?;
         Ok([0, 1, 2].map(|a| v[a].as_f64().unwrap_or(f64::NAN)))
     };
     let dims = triple("dims")?.map(|d| d as u64);

@@ -46,19 +46,30 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
         match event {
             Event::Start(ref e) | Event::Empty(ref e) => {
                 let attr = |name: &str| -> Option<String> {
-                    e.attributes().flatten().find(|a| a.key.as_ref() == name.as_bytes()).map(|a| String::from_utf8_lossy(&a.value).into_owned())
+                    e.attributes()
+                        .flatten()
+                        .find(|a| a.key.as_ref() == name.as_bytes())
+                        .map(|a| String::from_utf8_lossy(&a.value).into_owned())
                 };
                 match e.name().as_ref() {
                     b"VTKFile" => {
                         if attr("type").as_deref() != Some("ImageData") {
-                            return Err(StoreError::Unsupported { path: path.into(), message: "only VTK ImageData files".into() });
+                            return Err(StoreError::Unsupported {
+                                path: path.into(),
+                                message: "only VTK ImageData files".into(),
+                            });
                         }
                         h.big_endian = attr("byte_order").as_deref() == Some("BigEndian");
                         h.header_u64 = attr("header_type").as_deref() == Some("UInt64");
                         match attr("compressor").as_deref() {
                             None | Some("") => {}
                             Some("vtkZLibDataCompressor") => h.compressed = true,
-                            Some(other) => return Err(StoreError::Unsupported { path: path.into(), message: format!("compressor {other}") }),
+                            Some(other) => {
+                                return Err(StoreError::Unsupported {
+                                    path: path.into(),
+                                    message: format!("compressor {other}"),
+                                })
+                            }
                         }
                     }
                     b"ImageData" => {
@@ -89,7 +100,10 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
                         h.format = attr("format");
                         h.offset = attr("offset").and_then(|o| o.trim().parse().ok()).unwrap_or(0);
                         if attr("NumberOfComponents").is_some_and(|c| c.trim() != "1") {
-                            return Err(StoreError::Unsupported { path: path.into(), message: "multi-component arrays".into() });
+                            return Err(StoreError::Unsupported {
+                                path: path.into(),
+                                message: "multi-component arrays".into(),
+                            });
                         }
                         have_array = true;
                         in_array = matches!(event, Event::Start(_));
@@ -134,10 +148,13 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
             let underscore = find(&bytes[start..], b"_").ok_or_else(|| bad("AppendedData has no '_' marker".into()))?;
             let body = &bytes[start + underscore + 1..];
             if h.appended_encoding.as_deref() == Some("base64") {
-                let text: Vec<u8> = body.iter().copied().take_while(|&c| c != b'<').filter(|c| !c.is_ascii_whitespace()).collect();
-                decode_base64_array(text.get(h.offset..).ok_or_else(|| bad("offset beyond the data".into()))?, &h).map_err(bad)?
+                let text: Vec<u8> =
+                    body.iter().copied().take_while(|&c| c != b'<').filter(|c| !c.is_ascii_whitespace()).collect();
+                decode_base64_array(text.get(h.offset..).ok_or_else(|| bad("offset beyond the data".into()))?, &h)
+                    .map_err(bad)?
             } else {
-                decode_raw_array(body.get(h.offset..).ok_or_else(|| bad("offset beyond the data".into()))?, &h).map_err(bad)?
+                decode_raw_array(body.get(h.offset..).ok_or_else(|| bad("offset beyond the data".into()))?, &h)
+                    .map_err(bad)?
             }
         }
         other => return Err(bad(format!("unknown DataArray format {other:?}"))),
@@ -204,7 +221,9 @@ fn inflate_blocks(header: &[u8], data: &[u8], blocks: usize, h: &Header) -> Resu
     for block in 0..blocks {
         let size = read_uint(header, (3 + block) * hsize, h)?;
         let chunk = data.get(at..at + size).ok_or("truncated compressed block")?;
-        flate2::read::ZlibDecoder::new(chunk).read_to_end(&mut out).map_err(|e| format!("corrupt zlib block {block}: {e}"))?;
+        flate2::read::ZlibDecoder::new(chunk)
+            .read_to_end(&mut out)
+            .map_err(|e| format!("corrupt zlib block {block}: {e}"))?;
         at += size;
     }
     Ok(out)
