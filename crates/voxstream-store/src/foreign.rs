@@ -143,18 +143,7 @@ pub(crate) fn open_foreign(
     ranges.extend(shape[shape.len() - 3..].iter().map(|&d| 0..d));
     let subset = ArraySubset::new_with_ranges(&ranges);
     let read_err = |e: zarrs::array::ArrayError| bad(format!("coarsest dataset: {e}"));
-    let values: Vec<f32> = match dtype {
-        DType::U8 => {
-            coarsest.retrieve_array_subset::<Vec<u8>>(&subset).map_err(read_err)?.into_iter().map(f32::from).collect()
-        }
-        DType::U16 => {
-            coarsest.retrieve_array_subset::<Vec<u16>>(&subset).map_err(read_err)?.into_iter().map(f32::from).collect()
-        }
-        DType::I16 => {
-            coarsest.retrieve_array_subset::<Vec<i16>>(&subset).map_err(read_err)?.into_iter().map(f32::from).collect()
-        }
-        DType::F32 => coarsest.retrieve_array_subset::<Vec<f32>>(&subset).map_err(read_err)?,
-    };
+    let values = crate::store_reader::retrieve_f32(coarsest, &subset, dtype).map_err(read_err)?;
     let (lo, hi) = values
         .iter()
         .filter(|v| v.is_finite())

@@ -26,6 +26,20 @@ use crate::layout::PyramidLayout;
 use crate::metadata::{StoreAttributes, MINMAX_GROUP};
 use crate::volume::{DType, VolumeInfo};
 
+/// Reads `subset` of `array`, whose samples are of type `dtype`, as f32.
+pub(crate) fn retrieve_f32(
+    array: &Array<dyn ReadableStorageTraits>,
+    subset: &ArraySubset,
+    dtype: DType,
+) -> Result<Vec<f32>, zarrs::array::ArrayError> {
+    Ok(match dtype {
+        DType::U8 => array.retrieve_array_subset::<Vec<u8>>(subset)?.into_iter().map(f32::from).collect(),
+        DType::U16 => array.retrieve_array_subset::<Vec<u16>>(subset)?.into_iter().map(f32::from).collect(),
+        DType::I16 => array.retrieve_array_subset::<Vec<i16>>(subset)?.into_iter().map(f32::from).collect(),
+        DType::F32 => array.retrieve_array_subset::<Vec<f32>>(subset)?,
+    })
+}
+
 /// The volume and pyramid the attributes describe, checked.
 fn validated_geometry(path: &Path, attributes: &StoreAttributes) -> Result<(VolumeInfo, PyramidLayout), StoreError> {
     let dtype = attributes
@@ -327,18 +341,7 @@ impl StoreReader {
         let corrupt = |e: zarrs::array::ArrayError| {
             StoreError::store(&self.path, format!("level {level}, samples {lower:?}..{upper:?}: {e}"))
         };
-        Ok(match self.info.dtype {
-            DType::U8 => {
-                array.retrieve_array_subset::<Vec<u8>>(&subset).map_err(corrupt)?.into_iter().map(f32::from).collect()
-            }
-            DType::U16 => {
-                array.retrieve_array_subset::<Vec<u16>>(&subset).map_err(corrupt)?.into_iter().map(f32::from).collect()
-            }
-            DType::I16 => {
-                array.retrieve_array_subset::<Vec<i16>>(&subset).map_err(corrupt)?.into_iter().map(f32::from).collect()
-            }
-            DType::F32 => array.retrieve_array_subset::<Vec<f32>>(&subset).map_err(corrupt)?,
-        })
+        retrieve_f32(array, &subset, self.info.dtype).map_err(corrupt)
     }
 
     /// Reads `bricks` into the brick cache on a background worker (skipping those already cached or outside the

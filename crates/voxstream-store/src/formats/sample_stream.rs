@@ -84,17 +84,7 @@ impl SampleStream {
             file.seek(SeekFrom::Start(offset)).map_err(|e| StoreError::io(path, e))?;
             Box::new(BufReader::with_capacity(1 << 20, file))
         };
-        let file_dtype = info.dtype;
-        Ok(SampleStream {
-            info,
-            file_dtype,
-            scaling: None,
-            endian,
-            reader,
-            path: path.into(),
-            consumed: 0,
-            bytes: Vec::new(),
-        })
+        SampleStream::from_reader(path, reader, info, endian)
     }
 
     /// Applies `value · slope + intercept` to every sample; the volume is then reported (and stored) as f32.
