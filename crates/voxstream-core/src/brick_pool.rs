@@ -7,12 +7,15 @@
 //!
 //! Voxels are `u16`, the value normalised to `[0, 1]` (`value = voxel / 65535`).
 
-use crate::key::TreeShape;
+use crate::key::{TreeShape, BLOCK_CELLS};
 use crate::lru::{Allocation, LruSlots};
 use crate::node::{BrickSlot, NodeId};
 
-/// Bytes of the per-slot records (the owning node, and the brick's value range), counted in the budget.
-pub const BRICK_RECORD_BYTES: usize = 4 + 4;
+/// Bytes of the per-slot records (the owning node, the brick's value range and its blocks' ranges), counted in the
+/// budget.
+pub fn brick_record_bytes(shape: &TreeShape) -> usize {
+    4 + 4 + 4 * shape.blocks_per_brick()
+}
 
 /// Largest voxel value; stands for 1.0.
 pub const VOXEL_MAX: u16 = u16::MAX;
@@ -37,6 +40,10 @@ pub struct BrickPool {
     owners: Vec<u32>,
     /// Per slot, `[min, max]` of its voxels: renderers skip bricks the transfer function makes invisible.
     ranges: Vec<[u16; 2]>,
+    /// Per slot, `[min, max]` of each occupancy block ([`TreeShape::blocks_per_brick`] per slot, x fastest):
+    /// renderers skip the invisible parts of a visible brick ([`crate::key::BLOCK_CELLS`]).
+    block_ranges: Vec<[u16; 2]>,
+    shape: TreeShape,
     lru: LruSlots,
 }
 
@@ -49,6 +56,8 @@ impl BrickPool {
             voxels: Vec::new(),
             owners: Vec::new(),
             ranges: Vec::new(),
+            block_ranges: Vec::new(),
+            shape: *shape,
             lru: LruSlots::new(capacity),
         }
     }
@@ -68,6 +77,12 @@ impl BrickPool {
     #[inline]
     pub fn ranges(&self) -> &[[u16; 2]] {
         &self.ranges
+    }
+
+    /// `[min, max]` of every occupancy block, slot after slot.
+    #[inline]
+    pub fn block_ranges(&self) -> &[[u16; 2]] {
+        &self.block_ranges
     }
 
     /// The voxels of one brick.
@@ -119,14 +134,18 @@ impl BrickPool {
         let slot = allocation.slot() as usize;
         let start = slot * self.voxels_per_brick;
         let range = voxels.iter().fold([u16::MAX, 0], |[lo, hi], &v| [lo.min(v), hi.max(v)]);
+        let blocks = self.shape.blocks_per_brick();
         if start >= self.voxels.len() {
             self.voxels.extend_from_slice(voxels);
             self.owners.push(owner.0);
             self.ranges.push(range);
+            self.block_ranges.resize(self.block_ranges.len() + blocks, [0, 0]);
+            block_ranges(&self.shape, voxels, &mut self.block_ranges[slot * blocks..]);
             return Some((BrickSlot(slot as u32), None));
         }
         self.voxels[start..start + self.voxels_per_brick].copy_from_slice(voxels);
         self.ranges[slot] = range;
+        block_ranges(&self.shape, voxels, &mut self.block_ranges[slot * blocks..(slot + 1) * blocks]);
         let previous = std::mem::replace(&mut self.owners[slot], owner.0);
         let evicted = match allocation {
             Allocation::Recycled(_) => Some(NodeId(previous)),
@@ -138,6 +157,28 @@ impl BrickPool {
     /// Frees `slot`.
     pub fn release(&mut self, slot: BrickSlot) {
         self.lru.release(slot.0);
+    }
+}
+
+/// Writes `[min, max]` of each occupancy block of `voxels` (one brick) into `out`: block `(i, j, k)` covers the cells
+/// `i·E .. min((i+1)·E, B−1)` per axis, hence the voxels `i·E ..= min((i+1)·E, B−1)`, so every trilinear sample
+/// taken in one of its cells lies within its range.
+fn block_ranges(shape: &TreeShape, voxels: &[u16], out: &mut [[u16; 2]]) {
+    let b = shape.stored_brick_size() as usize;
+    let blocks = shape.blocks_per_axis();
+    let span = |i: usize| i * BLOCK_CELLS..=((i + 1) * BLOCK_CELLS).min(b - 1);
+    for (index, range) in out.iter_mut().take(blocks * blocks * blocks).enumerate() {
+        let (bi, bj, bk) = (index % blocks, index / blocks % blocks, index / (blocks * blocks));
+        let mut lo_hi = [u16::MAX, 0];
+        for k in span(bk) {
+            for j in span(bj) {
+                let row = &voxels[(k * b + j) * b..(k * b + j) * b + b];
+                for &v in &row[span(bi)] {
+                    lo_hi = [lo_hi[0].min(v), lo_hi[1].max(v)];
+                }
+            }
+        }
+        *range = lo_hi;
     }
 }
 
@@ -167,5 +208,24 @@ mod tests {
         assert_eq!(evicted, Some(NodeId(3)));
         assert_eq!(pool.owner(slot), NodeId(4));
         assert_eq!(pool.brick(slot)[0], 7);
+    }
+
+    #[test]
+    fn block_ranges_cover_their_cells_voxels() {
+        // M = 14: B = 16 stored voxels, 15 cells, blocks of 8 and 7 cells.
+        let shape = TreeShape::new(2, 14, 4).unwrap();
+        assert_eq!(shape.blocks_per_axis(), 2);
+        let b = shape.stored_brick_size() as usize;
+        let mut voxels = vec![100u16; shape.voxels_per_brick()];
+        // A voxel on the shared face x = 8 belongs to the cells of both x-blocks.
+        voxels[(3 * b + 2) * b + 8] = 5;
+        voxels[(15 * b + 15) * b + 15] = 900;
+        let mut pool = BrickPool::new(&shape, 1);
+        let (slot, _) = pool.insert(NodeId(1), &voxels, 1).unwrap();
+        let ranges = &pool.block_ranges()[slot.0 as usize * 8..][..8];
+        assert_eq!(ranges[0], [5, 100]);
+        assert_eq!(ranges[1], [5, 100]);
+        assert_eq!(ranges[7], [100, 900]);
+        assert_eq!(ranges[2], [100, 100]);
     }
 }

@@ -4,7 +4,7 @@
 //! pool). voxstream derives both capacities from one `--budget-mb`, counting every per-slot byte (nodes, voxels,
 //! bookkeeping, feedback flags), so the pools can never exceed it.
 
-use crate::brick_pool::BRICK_RECORD_BYTES;
+use crate::brick_pool::brick_record_bytes;
 use crate::error::CoreError;
 use crate::key::TreeShape;
 use crate::lru::LRU_BYTES_PER_SLOT;
@@ -40,7 +40,7 @@ impl PoolCapacities {
             + LRU_BYTES_PER_SLOT
             + 1) as u64;
         let bytes_per_brick =
-            (shape.voxels_per_brick() * VOXEL_BYTES + BRICK_RECORD_BYTES + LRU_BYTES_PER_SLOT + 1) as u64;
+            (shape.voxels_per_brick() * VOXEL_BYTES + brick_record_bytes(shape) + LRU_BYTES_PER_SLOT + 1) as u64;
         // The smallest useful cache: the root tile plus a few tiles, a parent brick and all its children.
         let min_tiles = 4u64;
         let min_bricks = 2 * shape.nodes_per_tile() as u64;

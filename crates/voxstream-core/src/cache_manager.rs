@@ -158,6 +158,7 @@ impl<P: Producer> CacheManager<P> {
             nodes: self.node_pool.nodes(),
             voxels: self.brick_pool.voxels(),
             brick_ranges: self.brick_pool.ranges(),
+            block_ranges: self.brick_pool.block_ranges(),
         }
     }
 

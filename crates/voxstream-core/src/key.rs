@@ -6,6 +6,9 @@
 
 use crate::error::CoreError;
 
+/// Cells per edge of a brick's occupancy block: the granularity at which rays skip invisible space inside a brick.
+pub const BLOCK_CELLS: usize = 8;
+
 /// Shape of an N³-tree and its bricks.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct TreeShape {
@@ -48,6 +51,17 @@ impl TreeShape {
     #[inline]
     pub fn stored_brick_size(&self) -> u32 {
         self.brick_size + 2 * BRICK_BORDER
+    }
+
+    /// Occupancy blocks per brick axis: the `B − 1` cells between the `B = M + 2` stored voxels, in blocks of
+    /// [`BLOCK_CELLS`] cells (the last block may be smaller).
+    pub fn blocks_per_axis(&self) -> usize {
+        (self.stored_brick_size() as usize - 1).div_ceil(BLOCK_CELLS)
+    }
+
+    /// Occupancy blocks per brick.
+    pub fn blocks_per_brick(&self) -> usize {
+        self.blocks_per_axis().pow(3)
     }
 
     /// Voxels stored per brick: `(M + 2)³`.

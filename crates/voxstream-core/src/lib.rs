@@ -55,7 +55,7 @@ pub use budget::PoolCapacities;
 pub use cache_manager::{CacheManager, Residency, ServeReport};
 pub use error::{CoreError, ProduceError};
 pub use feedback::{FeedbackBuffer, Request, RequestKind};
-pub use key::{NodeKey, TreeShape, BRICK_BORDER};
+pub use key::{NodeKey, TreeShape, BLOCK_CELLS, BRICK_BORDER};
 pub use node::{BrickSlot, Node, NodeData, NodeId, TileId};
 pub use node_pool::NodePool;
 pub use producer::{NodeContent, Produced, Producer};

@@ -19,6 +19,8 @@ pub struct TreeView<'a> {
     pub voxels: &'a [u16],
     /// `[min, max]` voxel of each brick slot (border included).
     pub brick_ranges: &'a [[u16; 2]],
+    /// `[min, max]` voxel of each occupancy block, [`TreeShape::blocks_per_brick`] per slot.
+    pub block_ranges: &'a [[u16; 2]],
 }
 
 impl<'a> TreeView<'a> {
@@ -47,6 +49,13 @@ impl<'a> TreeView<'a> {
     #[inline]
     pub fn brick_range(&self, slot: BrickSlot) -> [f32; 2] {
         let [lo, hi] = self.brick_ranges[slot.0 as usize];
+        [dequantize(lo), dequantize(hi)]
+    }
+
+    /// `[min, max]` of occupancy block `block` (x fastest) of a brick, normalised to `[0, 1]`.
+    #[inline]
+    pub fn block_range(&self, slot: BrickSlot, block: usize) -> [f32; 2] {
+        let [lo, hi] = self.block_ranges[slot.0 as usize * self.shape.blocks_per_brick() + block];
         [dequantize(lo), dequantize(hi)]
     }
 

@@ -21,9 +21,9 @@
 //! (GigaVoxels stopped at `2¹⁹` because of float32 precision).
 
 use glam::DVec3;
-use voxstream_core::{BrickSlot, FeedbackBuffer, Node, NodeData, NodeId, Request, RequestKind, TreeView};
+use voxstream_core::{BrickSlot, FeedbackBuffer, Node, NodeData, NodeId, Request, RequestKind, TreeView, BLOCK_CELLS};
 
-use crate::sampler::{trilinear, trilinear_with_gradient};
+use crate::sampler::{block_of, trilinear, trilinear_with_gradient};
 use crate::settings::{PhongCoefficients, RenderSettings, Shading};
 use crate::transfer_function::TransferLut;
 
@@ -260,16 +260,45 @@ impl<'a> RayCaster<'a> {
                             .then(|| (self.view.brick(c.slot), self.brick_line(origin, direction, &c), weight))
                     });
                     let sigma_scale = -(dt_world as f32);
-                    for step in 0..steps as u64 {
+                    let blocks = self.view.shape.blocks_per_axis();
+                    let mut block = usize::MAX;
+                    let mut step = 0u64;
+                    let steps = steps as u64;
+                    while step < steps {
                         let ts = t + (step as f64 + 0.5) * dt;
                         let x_fine = at(fine_start, fine_rate, ts);
+                        // Occupancy blocks: skip the run of samples inside a block the transfer function hides.
+                        let fine_block = block_of(self.stored, blocks, x_fine);
+                        let coarse_at = coarse_brick.map(|(_, (start, rate), _)| at(start, rate, ts));
+                        let coarse_block = coarse_at.map(|x| block_of(self.stored, blocks, x));
+                        let key = fine_block ^ coarse_block.map_or(0, |c| c << 32);
+                        if key != block {
+                            block = key;
+                            let [mut lo, mut hi] = self.view.block_range(fine.slot, fine_block);
+                            if let (Some(c), Some(cb)) = (coarse, coarse_block) {
+                                let [clo, chi] = self.view.block_range(c.slot, cb);
+                                lo = lo.min(clo);
+                                hi = hi.max(chi);
+                            }
+                            if !self.lut.is_visible_in(lo, hi) {
+                                let mut exit = block_exit(fine_start, fine_rate, fine_block, blocks);
+                                if let (Some((_, (start, rate), _)), Some(cb)) = (coarse_brick, coarse_block) {
+                                    exit = exit.min(block_exit(start, rate, cb, blocks));
+                                }
+                                // Every sample before `exit` (less a margin above f32 rounding) is in the block.
+                                let next = ((exit - 1e-3 * dt - t) / dt - 0.5).ceil();
+                                step = if next > step as f64 { (next as u64).min(steps) } else { step + 1 };
+                                continue;
+                            }
+                        }
+                        step += 1;
                         let (mut value, g) = if shaded {
                             trilinear_with_gradient(fine_brick, self.stored, x_fine)
                         } else {
                             (trilinear(fine_brick, self.stored, x_fine), [0.0; 3])
                         };
-                        if let Some((brick, (start, rate), weight)) = coarse_brick {
-                            let v_coarse = trilinear(brick, self.stored, at(start, rate, ts));
+                        if let (Some((brick, _, weight)), Some(x)) = (coarse_brick, coarse_at) {
+                            let v_coarse = trilinear(brick, self.stored, x);
                             value = v_coarse + (value - v_coarse) * weight;
                         }
                         stats.samples += 1;
@@ -447,6 +476,24 @@ impl RequestSink<'_> {
 #[inline]
 fn at(start: [f64; 3], rate: [f64; 3], t: f64) -> [f32; 3] {
     [(start[0] + rate[0] * t) as f32, (start[1] + rate[1] * t) as f32, (start[2] + rate[2] * t) as f32]
+}
+
+/// The `t` at which the line `start + t·rate` (continuous voxel index of a brick) leaves occupancy block `block`.
+#[inline]
+fn block_exit(start: [f64; 3], rate: [f64; 3], block: usize, blocks: usize) -> f64 {
+    let ijk = [block % blocks, block / blocks % blocks, block / (blocks * blocks)];
+    let mut exit = f64::INFINITY;
+    for a in 0..3 {
+        let edge = if rate[a] > 0.0 {
+            ((ijk[a] + 1) * BLOCK_CELLS) as f64
+        } else if rate[a] < 0.0 {
+            (ijk[a] * BLOCK_CELLS) as f64
+        } else {
+            continue;
+        };
+        exit = exit.min((edge - start[a]) / rate[a]);
+    }
+    exit
 }
 
 /// Distance at which a ray inside (or on) the cube `[lower, lower + size]` leaves it; `1/direction` precomputed.

@@ -4,10 +4,10 @@
 //! one-voxel border copied from the neighbours), so a position `u ∈ [0, 1]` of the node maps to the continuous index
 //! `u·M + ½`, and trilinear filtering never reads outside the brick (GigaVoxels [P09] §4).
 
-use voxstream_core::dequantize;
+use voxstream_core::{dequantize, BLOCK_CELLS};
 
 /// The cell holding continuous voxel index `x` (clamped to the brick): index of its first voxel, and the fractions.
-#[inline]
+#[inline(always)]
 fn cell(b: usize, x: [f32; 3]) -> (usize, [f32; 3]) {
     let max = (b - 1) as f32;
     let mut i0 = [0usize; 3];
@@ -21,8 +21,17 @@ fn cell(b: usize, x: [f32; 3]) -> (usize, [f32; 3]) {
     ((i0[2] * b + i0[1]) * b + i0[0], f)
 }
 
+/// The occupancy block (x fastest, `blocks` per axis, [`BLOCK_CELLS`] cells each) holding the cell that
+/// [`trilinear`] reads for `x`: the block's value range bounds the sample.
+#[inline(always)]
+pub fn block_of(b: usize, blocks: usize, x: [f32; 3]) -> usize {
+    let max = (b - 1) as f32;
+    let axis = |v: f32| (v.clamp(0.0, max) as usize).min(b - 2) / BLOCK_CELLS;
+    (axis(x[2]) * blocks + axis(x[1])) * blocks + axis(x[0])
+}
+
 /// Samples a brick at continuous voxel index `x` (each axis clamped to `[0, B−1]`, `B = M + 2`).
-#[inline]
+#[inline(always)]
 pub fn trilinear(brick: &[u16], b: usize, x: [f32; 3]) -> f32 {
     let (base, f) = cell(b, x);
     let row = b;
@@ -38,7 +47,7 @@ pub fn trilinear(brick: &[u16], b: usize, x: [f32; 3]) -> f32 {
 }
 
 /// Value and analytic gradient (value per voxel) of the trilinear field at `x`: one read of the 8 corners.
-#[inline]
+#[inline(always)]
 pub fn trilinear_with_gradient(brick: &[u16], b: usize, x: [f32; 3]) -> (f32, [f32; 3]) {
     let (base, f) = cell(b, x);
     let (row, slab) = (b, b * b);

@@ -143,7 +143,7 @@ impl TransferLut {
     }
 
     /// Colour and extinction at normalised `value` (linear between entries).
-    #[inline]
+    #[inline(always)]
     pub fn lookup(&self, value: f32) -> LutEntry {
         let x = ((value - self.lower) * self.scale).clamp(0.0, (LUT_SIZE - 1) as f32);
         let i = (x as usize).min(LUT_SIZE - 2);
@@ -158,8 +158,13 @@ impl TransferLut {
     /// Whether some normalised value in `[lower, upper]` has non-zero extinction (conservative, for empty-space
     /// skipping).
     pub fn is_visible_in(&self, lower: f32, upper: f32) -> bool {
-        let index = |v: f32| (((v - self.lower) * self.scale).clamp(0.0, (LUT_SIZE - 1) as f32)) as usize;
-        let (a, b) = (index(lower), (index(upper) + 1).min(LUT_SIZE - 1));
+        let position = |v: f32| ((v - self.lower) * self.scale).clamp(0.0, (LUT_SIZE - 1) as f32);
+        // `lookup` reads entries ⌊x⌋ and ⌊x⌋+1, the latter with weight x − ⌊x⌋. A constant range is sampled exactly
+        // (interpolating equal values returns them); otherwise allow samples a rounding error outside the range.
+        let slack = if lower == upper { 0.0 } else { 1e-3 };
+        let first = (position(lower) - slack).max(0.0) as usize;
+        let last = ((position(upper) + slack).ceil() as usize).min(LUT_SIZE - 1);
+        let (a, b) = (first, last);
         self.visible_before[b + 1] > self.visible_before[a]
     }
 }
@@ -179,6 +184,9 @@ mod tests {
         // alpha 0.5 over 2 units: sigma = ln 2 / 2.
         assert!((e.sigma as f64 - std::f64::consts::LN_2 / 2.0).abs() < 1e-6);
         assert!(lut.is_visible_in(0.0, 0.01));
+        // A block of zeros is invisible when the opacity only starts rising at zero (a fog's transfer function).
+        assert!(!lut.is_visible_in(0.0, 0.0));
+        assert!(lut.is_visible_in(0.0, 1e-6));
         let gated = TransferFunction::new(
             vec![[0.0, 0.0, 0.0, 0.0, 0.0], [0.5, 0.0, 0.0, 0.0, 0.0], [1.0, 1.0, 1.0, 1.0, 1.0]],
             None,
@@ -192,6 +200,41 @@ mod tests {
             TransferFunction::new(vec![[100.0, 0.0, 0.0, 0.0, 0.0], [300.0, 1.0, 1.0, 1.0, 0.5]], Some(1.0)).unwrap();
         let lut = TransferLut::new(&ranged, 100.0, 300.0, 1.0);
         assert!((lut.lookup(0.5).color[0] - 0.5).abs() < 1e-3);
+    }
+
+    #[test]
+    fn invisible_ranges_hold_no_visible_sample() {
+        let tf = TransferFunction::new(
+            vec![
+                [0.0, 1.0, 1.0, 1.0, 0.0],
+                [0.3, 1.0, 1.0, 1.0, 0.0],
+                [0.31, 1.0, 1.0, 1.0, 0.2],
+                [1.0, 1.0, 1.0, 1.0, 0.0],
+            ],
+            Some(1.0),
+        )
+        .unwrap();
+        let lut = TransferLut::new(&tf, 0.0, 1.0, 1.0);
+        let mut state = 12345u64;
+        let mut random = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let mut invisible = 0;
+        for _ in 0..20000 {
+            let (a, b) = (random(), random());
+            let (lo, hi) = if random() < 0.2 { (a, a) } else { (a.min(b), a.max(b)) };
+            if lut.is_visible_in(lo, hi) {
+                continue;
+            }
+            invisible += 1;
+            for i in 0..=16 {
+                // Interpolated samples, as trilinear filtering computes them.
+                let v = lo + (hi - lo) * (i as f32 / 16.0);
+                assert_eq!(lut.lookup(v).sigma, 0.0, "value {v} in the invisible range [{lo}, {hi}]");
+            }
+        }
+        assert!(invisible > 1000);
     }
 
     #[test]
