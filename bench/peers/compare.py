@@ -45,7 +45,9 @@ def run(command, **kwargs):
 
 
 def volume_meta(data: Path, name: str):
+    """The raw volume's description as the reference and the VTK runner read it."""
     meta = json.loads((data / f"{name}.json").read_text())
+    meta.pop("density_scale", None)
     meta["path"] = str(data / f"{name}.raw")
     return meta
 
@@ -59,7 +61,7 @@ def reference(scene, size, data: Path, out: Path):
     spec = {"volume": volume_meta(data, scene["reference_volume"]), "camera": scene["camera"], "width": size,
             "height": size, "mode": scene["mode"], "shading": scene["shading"], "phong": scene_list.PHONG,
             "light": scene_list.headlight(scene["camera"]), "background": [0, 0, 0],
-            "supersample": 3 if size <= 512 else 2, "step_voxels": 0.125}
+            "supersample": 3 if size <= 512 else 2, "step_voxels": 0.125 if size <= 512 else 0.25}
     if scene["mode"] == "volume":
         spec["tf"] = scene["tf"]
     else:
@@ -71,7 +73,7 @@ def reference(scene, size, data: Path, out: Path):
     return png
 
 
-def render_voxstream(scene, size, runs, data: Path, out: Path):
+def render_voxstream(scene, size, runs, data: Path, out: Path, step=0.5):
     meta = volume_meta(data, scene["volume"])
     store = out / "stores" / scene["volume"]
     import_s = None
@@ -80,7 +82,7 @@ def render_voxstream(scene, size, runs, data: Path, out: Path):
         _, _, import_s, _ = run([VOXSTREAM, "import", meta["path"], "--dims", ",".join(map(str, meta["dims"])),
                                  "--dtype", meta["dtype"], "--spacing", ",".join(map(str, meta["spacing"])),
                                  "--out", store, "--quiet"])
-    work = out / "voxstream" / f"{scene['name']}-{size}"
+    work = out / f"voxstream-step{step:g}" / f"{scene['name']}-{size}"
     work.mkdir(parents=True, exist_ok=True)
     tf = scene["tf"] if scene["mode"] == "volume" else scene_list.steep_tf(scene["iso"])
     (work / "tf.json").write_text(json.dumps(tf))
@@ -89,7 +91,7 @@ def render_voxstream(scene, size, runs, data: Path, out: Path):
                             "--shading", scene["shading"], "--light",
                             ",".join(map(str, scene_list.headlight(scene["camera"]))),
                             "--path", work / "path.json", "--stats", work / "stats.json", "--out", work / "frame.png",
-                            "--budget-mb", BUDGET_MB])
+                            "--budget-mb", BUDGET_MB, "--step", step])
     stats = json.loads((work / "stats.json").read_text())
     frames = [ms / 1000 for ms in stats["frame_ms"]]
     image = work / f"frame_{runs:04d}.png"
@@ -128,8 +130,8 @@ def render_vdb(scene, size, runs, data: Path, out: Path):
                "-absorb", vec(absorb), "-light", vec(scene_list.headlight(cam) + [1, 1, 1]), "-cpus", "0", "-v"]
     frames, peak, first = [], 0, None
     for i in range(runs + 1):
-        _, stderr, wall, rss = run(command)
-        log = stderr
+        stdout, stderr, wall, rss = run(command)
+        log = stdout + stderr
         match = re.search(r"ray-tracing.*?\n.*?completed in ([0-9.e+-]+) sec", log, re.S)
         if not match:
             raise RuntimeError(f"no timing in vdb_render output:\n{log[-1000:]}")
@@ -185,6 +187,8 @@ def main():
                     continue
                 if tool == "voxstream":
                     r = render_voxstream(scene, size, args.runs, args.data, args.out)
+                elif tool == "voxstream-step1":
+                    r = render_voxstream(scene, size, args.runs, args.data, args.out, step=1.0)
                 elif tool == "vdb_render":
                     r = render_vdb(scene, size, args.runs, args.data, args.out)
                 else:

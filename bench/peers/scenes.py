@@ -65,18 +65,18 @@ def scenes(data: Path):
         result += [
             {"name": f"mni-soft{label}", "volume": f"mni{suffix}", "reference_volume": "mni", "mode": "volume",
              "tf": MNI_SOFT, "shading": "none", "camera": mni_camera, "fog": MNI_FOG,
-             "tools": ["voxstream", "vtk-fixed-point", "vdb_render"]},
+             "tools": ["voxstream", "voxstream-step1", "vtk-fixed-point", "vdb_render"]},
             {"name": f"frog{label}", "volume": f"frog{suffix}", "reference_volume": "frog", "mode": "volume",
-             "tf": FROG, "shading": "none", "camera": frog_camera, "tools": ["voxstream", "vtk-fixed-point"]},
+             "tf": FROG, "shading": "none", "camera": frog_camera, "tools": ["voxstream", "voxstream-step1", "vtk-fixed-point"]},
             {"name": f"dragon{label}", "volume": f"dragon{suffix}", "reference_volume": "dragon", "mode": "volume",
              "tf": DRAGON, "shading": "none", "camera": dragon_camera,
-             "fog": DRAGON_FOG, "tools": ["voxstream", "vtk-fixed-point", "vdb_render"]},
+             "fog": DRAGON_FOG, "tools": ["voxstream", "voxstream-step1", "vtk-fixed-point", "vdb_render"]},
         ]
         if not x4:
             result += [
                 {"name": "mni-shaded", "volume": "mni", "reference_volume": "mni", "mode": "volume",
                  "tf": MNI_SHADED, "shading": "phong", "camera": mni_camera,
-                 "tools": ["voxstream", "vtk-fixed-point"]},
+                 "tools": ["voxstream", "voxstream-step1", "vtk-fixed-point"]},
                 {"name": "mni-iso", "volume": "mni", "reference_volume": "mni", "mode": "isosurface",
                  "iso": MNI_ISO, "shading": "phong", "camera": mni_camera,
                  "tools": ["voxstream", "vtk-marching-cubes"]},

@@ -23,7 +23,7 @@
 use glam::DVec3;
 use voxstream_core::{BrickSlot, FeedbackBuffer, Node, NodeData, NodeId, Request, RequestKind, TreeView, BLOCK_CELLS};
 
-use crate::sampler::{block_of, trilinear, trilinear_with_gradient};
+use crate::sampler::Cell;
 use crate::settings::{PhongCoefficients, RenderSettings, Shading};
 use crate::transfer_function::TransferLut;
 
@@ -268,9 +268,11 @@ impl<'a> RayCaster<'a> {
                         let ts = t + (step as f64 + 0.5) * dt;
                         let x_fine = at(fine_start, fine_rate, ts);
                         // Occupancy blocks: skip the run of samples inside a block the transfer function hides.
-                        let fine_block = block_of(self.stored, blocks, x_fine);
-                        let coarse_at = coarse_brick.map(|(_, (start, rate), _)| at(start, rate, ts));
-                        let coarse_block = coarse_at.map(|x| block_of(self.stored, blocks, x));
+                        let fine_cell = Cell::locate(self.stored, x_fine);
+                        let fine_block = fine_cell.block(blocks);
+                        let coarse_cell =
+                            coarse_brick.map(|(_, (start, rate), _)| Cell::locate(self.stored, at(start, rate, ts)));
+                        let coarse_block = coarse_cell.map(|c| c.block(blocks));
                         let key = fine_block ^ coarse_block.map_or(0, |c| c << 32);
                         if key != block {
                             block = key;
@@ -293,12 +295,12 @@ impl<'a> RayCaster<'a> {
                         }
                         step += 1;
                         let (mut value, g) = if shaded {
-                            trilinear_with_gradient(fine_brick, self.stored, x_fine)
+                            fine_cell.value_and_gradient(fine_brick, self.stored)
                         } else {
-                            (trilinear(fine_brick, self.stored, x_fine), [0.0; 3])
+                            (fine_cell.value(fine_brick, self.stored), [0.0; 3])
                         };
-                        if let (Some((brick, _, weight)), Some(x)) = (coarse_brick, coarse_at) {
-                            let v_coarse = trilinear(brick, self.stored, x);
+                        if let (Some((brick, _, weight)), Some(cell)) = (coarse_brick, coarse_cell) {
+                            let v_coarse = cell.value(brick, self.stored);
                             value = v_coarse + (value - v_coarse) * weight;
                         }
                         stats.samples += 1;

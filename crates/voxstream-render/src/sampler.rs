@@ -4,72 +4,100 @@
 //! one-voxel border copied from the neighbours), so a position `u ∈ [0, 1]` of the node maps to the continuous index
 //! `u·M + ½`, and trilinear filtering never reads outside the brick (GigaVoxels [P09] §4).
 
-use voxstream_core::{dequantize, BLOCK_CELLS};
+use voxstream_core::{BLOCK_CELLS, VOXEL_MAX};
 
-/// The cell holding continuous voxel index `x` (clamped to the brick): index of its first voxel, and the fractions.
-#[inline(always)]
-fn cell(b: usize, x: [f32; 3]) -> (usize, [f32; 3]) {
-    let max = (b - 1) as f32;
-    let mut i0 = [0usize; 3];
-    let mut f = [0f32; 3];
-    for a in 0..3 {
-        let c = x[a].clamp(0.0, max);
-        let i = (c as usize).min(b - 2);
-        i0[a] = i;
-        f[a] = c - i as f32;
-    }
-    ((i0[2] * b + i0[1]) * b + i0[0], f)
+/// The cell of a brick that trilinear filtering reads for a continuous voxel index (clamped to the brick).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Cell {
+    /// Index of the cell's first voxel in the brick.
+    base: usize,
+    /// Position inside the cell, per axis in `[0, 1]`.
+    fraction: [f32; 3],
+    /// Integer coordinates of the cell.
+    ijk: [usize; 3],
 }
 
-/// The occupancy block (x fastest, `blocks` per axis, [`BLOCK_CELLS`] cells each) holding the cell that
-/// [`trilinear`] reads for `x`: the block's value range bounds the sample.
+impl Cell {
+    /// The cell holding continuous voxel index `x`, each axis clamped to `[0, B−1]` (`B = M + 2` stored voxels).
+    #[inline(always)]
+    pub fn locate(b: usize, x: [f32; 3]) -> Cell {
+        let max = (b - 1) as f32;
+        let mut ijk = [0usize; 3];
+        let mut fraction = [0f32; 3];
+        for a in 0..3 {
+            let c = x[a].clamp(0.0, max);
+            let i = (c as usize).min(b - 2);
+            ijk[a] = i;
+            fraction[a] = c - i as f32;
+        }
+        Cell { base: (ijk[2] * b + ijk[1]) * b + ijk[0], fraction, ijk }
+    }
+
+    /// The occupancy block (x fastest, `blocks` per axis, [`BLOCK_CELLS`] cells each) holding this cell: the
+    /// block's value range bounds every sample taken in the cell.
+    #[inline(always)]
+    pub fn block(&self, blocks: usize) -> usize {
+        let [i, j, k] = self.ijk.map(|v| v / BLOCK_CELLS);
+        (k * blocks + j) * blocks + i
+    }
+
+    /// The trilinear value in the cell (of a brick with `b` voxels per axis).
+    #[inline(always)]
+    pub fn value(&self, brick: &[u16], b: usize) -> f32 {
+        let (row, slab) = (b, b * b);
+        let f = self.fraction;
+        let corners = &brick[self.base..self.base + slab + row + 2];
+        // Interpolate the stored integers and normalise once.
+        let v = |o: usize| corners[o] as f32;
+        let c00 = v(0) + (v(1) - v(0)) * f[0];
+        let c10 = v(row) + (v(row + 1) - v(row)) * f[0];
+        let c01 = v(slab) + (v(slab + 1) - v(slab)) * f[0];
+        let c11 = v(slab + row) + (v(slab + row + 1) - v(slab + row)) * f[0];
+        let c0 = c00 + (c10 - c00) * f[1];
+        let c1 = c01 + (c11 - c01) * f[1];
+        dequantize_scale(c0 + (c1 - c0) * f[2])
+    }
+
+    /// Value and analytic gradient (value per voxel) of the trilinear field in the cell: one read of the 8 corners.
+    #[inline(always)]
+    pub fn value_and_gradient(&self, brick: &[u16], b: usize) -> (f32, [f32; 3]) {
+        let (row, slab) = (b, b * b);
+        let f = self.fraction;
+        let corners = &brick[self.base..self.base + slab + row + 2];
+        let v = |o: usize| corners[o] as f32;
+        let (v000, v100, v010, v110) = (v(0), v(1), v(row), v(row + 1));
+        let (v001, v101, v011, v111) = (v(slab), v(slab + 1), v(slab + row), v(slab + row + 1));
+        let lerp = |a: f32, b: f32, t: f32| a + (b - a) * t;
+        let c00 = lerp(v000, v100, f[0]);
+        let c10 = lerp(v010, v110, f[0]);
+        let c01 = lerp(v001, v101, f[0]);
+        let c11 = lerp(v011, v111, f[0]);
+        let c0 = lerp(c00, c10, f[1]);
+        let c1 = lerp(c01, c11, f[1]);
+        let value = lerp(c0, c1, f[2]);
+        let gz = c1 - c0;
+        let gy = lerp(c10 - c00, c11 - c01, f[2]);
+        let gx = lerp(lerp(v100 - v000, v110 - v010, f[1]), lerp(v101 - v001, v111 - v011, f[1]), f[2]);
+        (dequantize_scale(value), [gx, gy, gz].map(dequantize_scale))
+    }
+}
+
+/// A value interpolated from stored voxels, normalised like [`voxstream_core::dequantize`].
 #[inline(always)]
-pub fn block_of(b: usize, blocks: usize, x: [f32; 3]) -> usize {
-    let max = (b - 1) as f32;
-    let axis = |v: f32| (v.clamp(0.0, max) as usize).min(b - 2) / BLOCK_CELLS;
-    (axis(x[2]) * blocks + axis(x[1])) * blocks + axis(x[0])
+fn dequantize_scale(stored: f32) -> f32 {
+    stored * (1.0 / VOXEL_MAX as f32)
 }
 
 /// Samples a brick at continuous voxel index `x` (each axis clamped to `[0, B−1]`, `B = M + 2`).
 #[inline(always)]
 pub fn trilinear(brick: &[u16], b: usize, x: [f32; 3]) -> f32 {
-    let (base, f) = cell(b, x);
-    let row = b;
-    let slab = b * b;
-    let v = |o: usize| dequantize(brick[base + o]);
-    let c00 = v(0) + (v(1) - v(0)) * f[0];
-    let c10 = v(row) + (v(row + 1) - v(row)) * f[0];
-    let c01 = v(slab) + (v(slab + 1) - v(slab)) * f[0];
-    let c11 = v(slab + row) + (v(slab + row + 1) - v(slab + row)) * f[0];
-    let c0 = c00 + (c10 - c00) * f[1];
-    let c1 = c01 + (c11 - c01) * f[1];
-    c0 + (c1 - c0) * f[2]
+    Cell::locate(b, x).value(brick, b)
 }
 
 /// Value and analytic gradient (value per voxel) of the trilinear field at `x`: one read of the 8 corners.
 #[inline(always)]
 pub fn trilinear_with_gradient(brick: &[u16], b: usize, x: [f32; 3]) -> (f32, [f32; 3]) {
-    let (base, f) = cell(b, x);
-    let (row, slab) = (b, b * b);
-    let v = |o: usize| dequantize(brick[base + o]);
-    let (v000, v100, v010, v110) = (v(0), v(1), v(row), v(row + 1));
-    let (v001, v101, v011, v111) = (v(slab), v(slab + 1), v(slab + row), v(slab + row + 1));
-    let lerp = |a: f32, b: f32, t: f32| a + (b - a) * t;
-    let c00 = lerp(v000, v100, f[0]);
-    let c10 = lerp(v010, v110, f[0]);
-    let c01 = lerp(v001, v101, f[0]);
-    let c11 = lerp(v011, v111, f[0]);
-    let c0 = lerp(c00, c10, f[1]);
-    let c1 = lerp(c01, c11, f[1]);
-    let value = lerp(c0, c1, f[2]);
-    let gz = c1 - c0;
-    let gy = lerp(c10 - c00, c11 - c01, f[2]);
-    let dx00 = v100 - v000;
-    let dx10 = v110 - v010;
-    let dx01 = v101 - v001;
-    let dx11 = v111 - v011;
-    let gx = lerp(lerp(dx00, dx10, f[1]), lerp(dx01, dx11, f[1]), f[2]);
-    (value, [gx, gy, gz])
+    Cell::locate(b, x).value_and_gradient(brick, b)
 }
 
 /// Central-difference gradient of the trilinear field at `x`, in value per voxel.
