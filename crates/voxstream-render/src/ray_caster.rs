@@ -11,7 +11,8 @@
 //!    subdivision). A ray then goes on with the coarser data and may report further misses, up to
 //!    `max_requests_per_ray` per frame (GigaVoxels allowed one, which makes translucent scenes converge slowly).
 //! 3. Skip the box at once if the transfer function makes every value of its bricks invisible (per-brick min/max).
-//!    Otherwise march the node's box with steps of `step_factor` voxels of the sampled level, blending the trilinear samples
+//!    Otherwise march the node's box with steps of `step_factor` voxels of level `ℓ` (the cone's footprint; of the
+//!    sampled level where only coarser data exists), blending the trilinear samples
 //!    of the two adjacent levels by `frac(ℓ)` (quadrilinear), correcting opacity for the step length, optionally
 //!    Phong-shading with the gradient, and stop once opaque.
 //! 4. Leave the box and descend again for the next point, from the deepest node of the previous path that still
@@ -125,6 +126,7 @@ pub struct RayCaster<'a> {
     brick_size: f64,
     stored: usize,
     inv_ln_n: f64,
+    ln_n: f64,
 }
 
 impl<'a> RayCaster<'a> {
@@ -160,6 +162,7 @@ impl<'a> RayCaster<'a> {
             brick_size: shape.brick_size as f64,
             stored: shape.stored_brick_size() as usize,
             inv_ln_n: 1.0 / (shape.n as f64).ln(),
+            ln_n: (shape.n as f64).ln(),
         }
     }
 
@@ -243,7 +246,12 @@ impl<'a> RayCaster<'a> {
                         t = t_exit;
                         continue;
                     }
-                    let voxel = 1.0 / (self.scale[fine.level as usize] * self.brick_size);
+                    // Step by the cone's footprint (the voxel of the continuous level ℓ), or by the sampled voxel
+                    // where the data is coarser: a quadrilinear sample is filtered at the footprint, so finer steps
+                    // would only re-sample the same filtered signal (GigaVoxels [P09] §6, cone tracing).
+                    let sampled_voxel = 1.0 / (self.scale[fine.level as usize] * self.brick_size);
+                    let footprint_voxel = (-level * self.ln_n).exp() / self.brick_size;
+                    let voxel = sampled_voxel.max(footprint_voxel);
                     let length = t_exit - t;
                     let steps = (length * speed / (voxel * self.step_factor)).ceil().max(1.0);
                     let dt = length / steps;
