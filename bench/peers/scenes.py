@@ -50,7 +50,8 @@ MNI_ISO = {"value": 70.0, "color": [0.9, 0.75, 0.65]}
 
 
 def scenes(data: Path):
-    """Every scene; `volume` names data/NAME.json, `reference_volume` the base volume the reference samples."""
+    """Every scene; `volume` names data/NAME.json; `upsampled` scenes use the 4x volume (so the reference, which
+    samples the scene's own volume, steps in 4x smaller voxels: `reference_step_scale`)."""
     def meta(name):
         return json.loads((data / f"{name}.json").read_text())
 
@@ -62,24 +63,26 @@ def scenes(data: Path):
     for x4 in (False, True):
         suffix = "_x4" if x4 else ""
         label = "-x4" if x4 else ""
+        upsampled = {"reference_step_scale": 4.0 if x4 else 1.0}
         result += [
-            {"name": f"mni-soft{label}", "volume": f"mni{suffix}", "reference_volume": "mni", "mode": "volume",
+            {"name": f"mni-soft{label}", "volume": f"mni{suffix}", "mode": "volume",
              "tf": MNI_SOFT, "shading": "none", "camera": mni_camera, "fog": MNI_FOG,
-             "tools": ["voxstream", "voxstream-step1", "vtk-fixed-point", "vdb_render"]},
-            {"name": f"frog{label}", "volume": f"frog{suffix}", "reference_volume": "frog", "mode": "volume",
-             "tf": FROG, "shading": "none", "camera": frog_camera, "tools": ["voxstream", "voxstream-step1", "vtk-fixed-point"]},
-            {"name": f"dragon{label}", "volume": f"dragon{suffix}", "reference_volume": "dragon", "mode": "volume",
+             "tools": ["voxstream", "voxstream-step1", "vtk-fixed-point", "vdb_render"], **upsampled},
+            {"name": f"frog{label}", "volume": f"frog{suffix}", "mode": "volume",
+             "tf": FROG, "shading": "none", "camera": frog_camera,
+             "tools": ["voxstream", "voxstream-step1", "vtk-fixed-point"], **upsampled},
+            {"name": f"dragon{label}", "volume": f"dragon{suffix}", "mode": "volume",
              "tf": DRAGON, "shading": "none", "camera": dragon_camera,
-             "fog": DRAGON_FOG, "tools": ["voxstream", "voxstream-step1", "vtk-fixed-point", "vdb_render"]},
+             "fog": DRAGON_FOG, "tools": ["voxstream", "voxstream-step1", "vtk-fixed-point", "vdb_render"], **upsampled},
         ]
         if not x4:
             result += [
-                {"name": "mni-shaded", "volume": "mni", "reference_volume": "mni", "mode": "volume",
+                {"name": "mni-shaded", "volume": "mni", "mode": "volume",
                  "tf": MNI_SHADED, "shading": "phong", "camera": mni_camera,
-                 "tools": ["voxstream", "voxstream-step1", "vtk-fixed-point"]},
-                {"name": "mni-iso", "volume": "mni", "reference_volume": "mni", "mode": "isosurface",
+                 "tools": ["voxstream", "voxstream-step1", "vtk-fixed-point"], "reference_step_scale": 1.0},
+                {"name": "mni-iso", "volume": "mni", "mode": "isosurface",
                  "iso": MNI_ISO, "shading": "phong", "camera": mni_camera,
-                 "tools": ["voxstream", "vtk-marching-cubes"]},
+                 "tools": ["voxstream", "vtk-marching-cubes"], "reference_step_scale": 1.0},
             ]
     return result
 
