@@ -2,11 +2,10 @@
 reference, and writes the table (results.md, results.json) and one side-by-side PNG per scene and size.
 
 Run through bench/peers/run.sh, which installs the peers and prepares the data. Times are medians of RUNS timed
-frames after one warm-up frame, all tools on both cores; peak memory is each tool process's peak RSS (wait4).
+frames after one warm-up frame, all tools on both cores; peak memory is each tool process's peak RSS (GNU time).
 """
 import argparse
 import json
-import os
 import re
 import statistics
 import subprocess
@@ -31,19 +30,24 @@ SLOW_FRAME_S = 60.0
 
 
 def run(command, **kwargs):
-    """Runs a command; returns (stdout, stderr, wall seconds, peak RSS bytes of the child). Fails loudly."""
-    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
+    """Runs a command; returns (stdout, stderr, wall seconds, peak RSS bytes of the command).
+
+    The peak comes from GNU time (`%M`): a child forked from this Python process would inherit its resident set as
+    the starting high-water mark of `ru_maxrss` (it survives exec), so wait4's figure has this process's size as a
+    floor; GNU time is small, so the floor it passes on is negligible. Fails loudly."""
+    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err, \
+            tempfile.NamedTemporaryFile("r") as peak_file:
         start = time.perf_counter()
-        process = subprocess.Popen([str(c) for c in command], stdout=out, stderr=err, **kwargs)
-        _, status, usage = os.wait4(process.pid, 0)
+        process = subprocess.run(["/usr/bin/time", "-f", "%M", "-o", peak_file.name] + [str(c) for c in command],
+                                 stdout=out, stderr=err, **kwargs)
         wall = time.perf_counter() - start
-        process.returncode = os.waitstatus_to_exitcode(status)
         out.seek(0)
         err.seek(0)
         stdout, stderr = out.read().decode(), err.read().decode()
+        peak_text = peak_file.read().strip().splitlines()
     if process.returncode != 0:
         raise RuntimeError(f"{' '.join(map(str, command))} failed ({process.returncode}):\n{stderr[-2000:]}")
-    return stdout, stderr, wall, usage.ru_maxrss * 1024
+    return stdout, stderr, wall, int(peak_text[-1]) * 1024
 
 
 def volume_meta(data: Path, name: str):
