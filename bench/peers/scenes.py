@@ -42,8 +42,7 @@ MNI_FOG = {"colour": [1.0, 0.8, 0.65], "k": 0.025, "vmax": 255.0}
 MNI_SOFT = fog_tf(**MNI_FOG)
 MNI_SHADED = {"points": [[0, 0, 0, 0, 0], [60, 0.75, 0.55, 0.45, 0.0], [100, 0.9, 0.75, 0.65, 0.08],
                          [160, 1.0, 0.95, 0.9, 0.3], [255, 1.0, 1.0, 1.0, 0.5]], "unit_distance": 1.0}
-FROG = {"points": [[0, 0, 0, 0, 0], [0.5, 0, 0, 0, 0], [1, 0.9, 0.4, 0.3, 0.3], [6, 0.9, 0.8, 0.5, 0.3],
-                   [14, 0.4, 0.8, 0.4, 0.4], [29, 0.9, 0.9, 0.9, 0.6]], "unit_distance": 2.0}
+FROG = json.loads((Path(__file__).resolve().parents[2] / "docs/examples/frog-tf.json").read_text())
 DRAGON_FOG = {"colour": [0.9, 0.75, 0.55], "k": 0.03, "vmax": 1.0}
 DRAGON = fog_tf(**DRAGON_FOG)
 MNI_ISO = {"value": 70.0, "color": [0.9, 0.75, 0.65]}
@@ -88,7 +87,8 @@ def scenes(data: Path):
 
 
 def steep_tf(iso):
-    """voxstream's stand-in for an isosurface: opaque above the isovalue, within a hundredth of a voxel."""
+    """voxstream's stand-in for an isosurface: transparent below isovalue − ½, opaque (alpha 1 per 0.01 world units)
+    from isovalue + ½."""
     c = iso["color"]
     return {"points": [[iso["value"] - 0.5, *c, 0.0], [iso["value"] + 0.5, *c, 1.0]], "unit_distance": 0.01}
 
