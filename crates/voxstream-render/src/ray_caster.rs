@@ -269,7 +269,8 @@ impl<'a> RayCaster<'a> {
                     });
                     let sigma_scale = -(dt_world as f32);
                     let blocks = self.view.shape.blocks_per_axis();
-                    let mut block = usize::MAX;
+                    // The (fine, coarse) occupancy blocks of the previous sample, packed; visibility is checked on change.
+                    let mut last_blocks = usize::MAX;
                     let mut step = 0u64;
                     let steps = steps as u64;
                     while step < steps {
@@ -281,9 +282,9 @@ impl<'a> RayCaster<'a> {
                         let coarse_cell =
                             coarse_brick.map(|(_, (start, rate), _)| Cell::locate(self.stored, at(start, rate, ts)));
                         let coarse_block = coarse_cell.map(|c| c.block(blocks));
-                        let key = fine_block ^ coarse_block.map_or(0, |c| c << 32);
-                        if key != block {
-                            block = key;
+                        let blocks_here = fine_block ^ coarse_block.map_or(0, |c| c << 32);
+                        if blocks_here != last_blocks {
+                            last_blocks = blocks_here;
                             let [mut lo, mut hi] = self.view.block_range(fine.slot, fine_block);
                             if let (Some(c), Some(cb)) = (coarse, coarse_block) {
                                 let [clo, chi] = self.view.block_range(c.slot, cb);
