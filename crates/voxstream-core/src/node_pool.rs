@@ -44,13 +44,12 @@ pub struct NodePool {
 }
 
 impl NodePool {
-    /// A pool of at most `capacity_tiles` tiles (root tile included), holding only the root.
+    /// A pool of at most `capacity_tiles` tiles (root tile included), holding only the root. Memory grows with use.
     pub fn new(shape: TreeShape, capacity_tiles: u32) -> NodePool {
         let per_tile = shape.nodes_per_tile() as usize;
-        let capacity = capacity_tiles.max(1) as usize;
-        let mut nodes = Vec::with_capacity(capacity * per_tile);
-        nodes.resize(per_tile, Node::MISSING);
-        let mut records = Vec::with_capacity(capacity);
+        // Memory grows with use: a large budget reserves nothing up front.
+        let nodes = vec![Node::MISSING; per_tile];
+        let mut records = Vec::new();
         records.push(TileRecord { parent: u32::MAX, level: 0, parent_ijk: [0; 3] });
         NodePool { shape, nodes, records, lru: LruSlots::new(capacity_tiles.saturating_sub(1)) }
     }

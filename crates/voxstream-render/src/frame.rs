@@ -17,6 +17,17 @@ use crate::transfer_function::TransferLut;
 /// Edge of the square image tiles handed to worker threads.
 pub const IMAGE_TILE: u32 = 16;
 
+/// Bytes one pixel costs while a frame is rendered and written, counted in the memory budget: the progressive
+/// image (16 bytes of RGBA f32 and 1 pending flag), the pass's per-tile results (an `Option<[f32; 4]>` of 20 bytes
+/// and 1 flag), and, once rendering is done, the 8-bit copy and the PNG encoder's filtered rows (3 + 3 bytes),
+/// rounded up.
+pub const FRAME_BYTES_PER_PIXEL: u64 = 40;
+
+/// Bytes a `width`×`height` frame costs ([`FRAME_BYTES_PER_PIXEL`] per pixel).
+pub fn frame_buffer_bytes(width: u32, height: u32) -> u64 {
+    width as u64 * height as u64 * FRAME_BYTES_PER_PIXEL
+}
+
 /// A rendered frame and its counters.
 #[derive(Clone, Debug)]
 pub struct RenderedFrame {

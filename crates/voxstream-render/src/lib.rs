@@ -31,7 +31,9 @@ pub mod transfer_function;
 
 pub use camera::{Camera, CameraFrame};
 pub use error::RenderError;
-pub use frame::{render_frame, render_pass, ProgressiveImage, RenderedFrame, IMAGE_TILE};
+pub use frame::{
+    frame_buffer_bytes, render_frame, render_pass, ProgressiveImage, RenderedFrame, FRAME_BYTES_PER_PIXEL, IMAGE_TILE,
+};
 pub use image::{psnr, Image};
 pub use ray_caster::{DescentPath, RayCaster, RayStats};
 pub use settings::{PhongCoefficients, RenderSettings, Shading, VolumePlacement};

@@ -49,6 +49,16 @@ pub enum StoreError {
         /// What is wrong.
         message: String,
     },
+    /// A field of the store's metadata is out of range or disagrees with the rest of the store.
+    #[error("{path}: invalid store metadata: {field} {problem}")]
+    Metadata {
+        /// The store.
+        path: PathBuf,
+        /// The field, as named in `zarr.json` (`brick_size`, `value_range`, …).
+        field: String,
+        /// What is wrong with it, and the fix where there is one.
+        problem: String,
+    },
 }
 
 impl StoreError {
@@ -60,6 +70,11 @@ impl StoreError {
     /// An I/O error for `path`.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> StoreError {
         StoreError::Io { path: path.into(), source }
+    }
+
+    /// An invalid metadata `field` of the store at `path`.
+    pub fn metadata(path: impl Into<PathBuf>, field: impl Into<String>, problem: impl Into<String>) -> StoreError {
+        StoreError::Metadata { path: path.into(), field: field.into(), problem: problem.into() }
     }
 
     /// A store error for `path`.

@@ -7,8 +7,12 @@
 //! sample per axis (pyramids that round down); levels with no such dataset are averaged from the level below when a
 //! brick is read. Per-brick min/max are unknown: the oracle never claims a region constant, and the brick pool
 //! computes each brick's range when it arrives (for empty-space skipping). The value range used to normalise bricks
-//! and for the default transfer function is that of the coarsest dataset, widened by a quarter of its span on each
-//! side (clamped to the type's range); samples beyond it saturate.
+//! and for the default transfer function is that of the coarsest dataset (of a central block of at most
+//! [`VALUE_RANGE_WINDOW`]³ samples when it is larger), widened by a quarter of its span on each side (clamped to the
+//! type's range); samples beyond it saturate.
+//!
+//! Everything read from the metadata is checked before it sizes anything: dimensions, spacing and origin as for a
+//! voxstream store, and every dataset's declared chunks against [`crate::metadata_check::MAX_CHUNK_SAMPLES`].
 
 use std::path::Path;
 use std::sync::Arc;
@@ -21,11 +25,15 @@ use zarrs::storage::ReadableStorageTraits;
 use crate::error::StoreError;
 use crate::layout::PyramidLayout;
 use crate::metadata::StoreAttributes;
+use crate::metadata_check::{check_chunk_sizes, dtype_range, validate_attributes};
 use crate::store_reader::LevelSource;
 use crate::volume::DType;
 
 /// Brick edge used for foreign stores.
 pub const FOREIGN_BRICK_SIZE: u64 = 32;
+
+/// Edge of the largest block of the coarsest dataset read to estimate the value range.
+pub const VALUE_RANGE_WINDOW: u64 = 256;
 
 fn multiscales(attributes: &serde_json::Map<String, Value>) -> Option<&Value> {
     attributes
@@ -78,6 +86,8 @@ pub(crate) fn open_foreign(
                 message: format!("dataset '{name}' has shape {shape:?} (needs ≥ 3 axes)"),
             });
         }
+        let metadata = serde_json::to_value(array.metadata()).unwrap_or(Value::Null);
+        check_chunk_sizes(path, name, &metadata)?;
         arrays.push((name.to_string(), array));
     }
     let (_, first) = &arrays[0];
@@ -112,7 +122,9 @@ pub(crate) fn open_foreign(
     let spacing = tail3(transform(&datasets[0], "scale"), 1.0);
     let origin = tail3(transform(&datasets[0], "translation"), 0.0);
 
-    let layout = PyramidLayout::new(dims, FOREIGN_BRICK_SIZE);
+    let info = crate::volume::VolumeInfo { dims, dtype, spacing, origin };
+    info.validate(path)?;
+    let layout = PyramidLayout::new(dims, FOREIGN_BRICK_SIZE).map_err(|e| bad(e.to_string()))?;
     let mut levels = Vec::new();
     let mut used = vec![false; arrays.len()];
     for level in 0..layout.levels() {
@@ -136,11 +148,17 @@ pub(crate) fn open_foreign(
         }
     }
 
-    // The value range, from the coarsest dataset (read whole: the smallest array).
-    let (_, coarsest) = arrays.iter().min_by_key(|(_, a)| a.shape().iter().product::<u64>()).unwrap_or(&arrays[0]);
+    // The value range, from the coarsest dataset (read whole when small, else a central block of it).
+    let samples_of =
+        |a: &Array<dyn ReadableStorageTraits>| last3(a.shape()).iter().fold(1u64, |n, &d| n.saturating_mul(d));
+    let (_, coarsest) = arrays.iter().min_by_key(|(_, a)| samples_of(a)).unwrap_or(&arrays[0]);
     let shape = coarsest.shape().to_vec();
     let mut ranges: Vec<std::ops::Range<u64>> = shape[..shape.len() - 3].iter().map(|_| 0..1).collect();
-    ranges.extend(shape[shape.len() - 3..].iter().map(|&d| 0..d));
+    ranges.extend(shape[shape.len() - 3..].iter().map(|&d| {
+        let take = d.min(VALUE_RANGE_WINDOW);
+        let start = (d - take) / 2;
+        start..start + take
+    }));
     let subset = ArraySubset::new_with_ranges(&ranges);
     let read_err = |e: zarrs::array::ArrayError| bad(format!("coarsest dataset: {e}"));
     let values = crate::store_reader::retrieve_f32(coarsest, &subset, dtype).map_err(read_err)?;
@@ -150,14 +168,9 @@ pub(crate) fn open_foreign(
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| (lo.min(v as f64), hi.max(v as f64)));
     let (lo, hi) = if lo.is_finite() { (lo, hi) } else { (0.0, 1.0) };
     let margin = (hi - lo).max(1e-6) * 0.25;
-    let (type_lo, type_hi) = match dtype {
-        DType::U8 => (0.0, 255.0),
-        DType::U16 => (0.0, 65535.0),
-        DType::I16 => (-32768.0, 32767.0),
-        DType::F32 => (f64::NEG_INFINITY, f64::INFINITY),
-    };
+    let [type_lo, type_hi] = dtype_range(dtype);
     let value_range = [(lo - margin).max(type_lo), (hi + margin).min(type_hi)];
-    let info = crate::volume::VolumeInfo { dims, dtype, spacing, origin };
     let attributes = StoreAttributes::new(&info, &layout, value_range, true);
+    validate_attributes(path, &attributes)?;
     Ok((attributes, levels))
 }

@@ -6,7 +6,8 @@
 //! (`brick_size · X · Y · (s + 4/3)` bytes for `s`-byte samples), plus the shard being encoded on each core. For
 //! 2048² u8 slices that is about 0.3 GiB, for 4096² u16 slices about 1.8 GiB, whatever the number of slices: the
 //! bound grows with the slice area, not the volume. An import writes into `STORE.partial` and renames it to `STORE` only when complete, so an
-//! interrupted import never leaves a store that looks complete; running it again restarts cleanly.
+//! interrupted import never leaves a store that looks complete; running it again restarts cleanly. `--overwrite`
+//! swaps by renames (the old store aside, the new one in, then the old one deleted), never deleting file by file.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -84,7 +85,8 @@ fn import_into_partial(
         return Err(StoreError::store(out, "already exists (use --overwrite to replace it)"));
     }
     let info = source.info().clone();
-    let layout = PyramidLayout::new(info.dims, options.brick_size);
+    let layout =
+        PyramidLayout::new(info.dims, options.brick_size).map_err(|e| StoreError::store(out, e.to_string()))?;
     let partial = partial_path(out);
     if partial.exists() {
         std::fs::remove_dir_all(&partial).map_err(|e| StoreError::io(&partial, e))?;
@@ -158,11 +160,69 @@ fn import_into_partial(
     group.attributes_mut().insert("voxstream".into(), serde_json::to_value(&attributes).map_err(|e| zarr(&e))?);
     group.store_metadata().map_err(|e| zarr(&e))?;
     drop(store);
-    if out.exists() {
-        std::fs::remove_dir_all(out).map_err(|e| StoreError::io(out, e))?;
-    }
-    std::fs::rename(&partial, out).map_err(|e| StoreError::io(out, e))?;
+    commit(&partial, out)?;
     Ok(report)
+}
+
+/// Puts the complete store `partial` at `out`. An existing store is first renamed aside (`STORE.old-<pid>`), the
+/// new one renamed in, then the old one deleted: at every instant either `out` is a complete store, or (killed
+/// between the two renames) the old store is whole in the aside folder, which `StoreReader::open` names. Aside
+/// folders left by interrupted swaps are deleted once a new store is in place.
+fn commit(partial: &Path, out: &Path) -> Result<(), StoreError> {
+    if out.exists() {
+        let aside = aside_path(out, std::process::id());
+        std::fs::rename(out, &aside).map_err(|e| StoreError::io(out, e))?;
+        if let Err(error) = std::fs::rename(partial, out) {
+            // Put the old store back; the new one stays in STORE.partial for the caller to delete.
+            let _ = std::fs::rename(&aside, out);
+            return Err(StoreError::io(out, error));
+        }
+    } else {
+        std::fs::rename(partial, out).map_err(|e| StoreError::io(out, e))?;
+    }
+    for stale in aside_paths(out) {
+        std::fs::remove_dir_all(&stale).map_err(|e| {
+            StoreError::store(
+                out,
+                format!("replaced, but the previous store {} could not be deleted: {e}", stale.display()),
+            )
+        })?;
+    }
+    Ok(())
+}
+
+/// Where `import --overwrite` run by process `pid` moves the store it replaces.
+pub fn aside_path(out: &Path, pid: u32) -> PathBuf {
+    let mut name = out.file_name().map(|n| n.to_os_string()).unwrap_or_default();
+    name.push(format!(".old-{pid}"));
+    out.with_file_name(name)
+}
+
+/// Folders `STORE.old-<pid>` next to `out`: previous stores that an interrupted `--overwrite` moved aside.
+pub fn aside_paths(out: &Path) -> Vec<PathBuf> {
+    let Some(name) = out.file_name().map(|n| n.to_string_lossy().into_owned()) else {
+        return Vec::new();
+    };
+    let prefix = format!("{name}.old-");
+    let parent = match out.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let mut found: Vec<PathBuf> = std::fs::read_dir(&parent)
+        .map(|entries| {
+            entries
+                .flatten()
+                .filter(|e| {
+                    let n = e.file_name().to_string_lossy().into_owned();
+                    n.strip_prefix(&prefix)
+                        .is_some_and(|pid| !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit()))
+                })
+                .map(|e| out.with_file_name(e.file_name()))
+                .collect()
+        })
+        .unwrap_or_default();
+    found.sort();
+    found
 }
 
 /// Where an import in progress writes.

@@ -3,6 +3,25 @@
 //! Level 0 is the full resolution; level `l + 1` halves every axis (rounding up) by averaging 2×2×2 blocks; the
 //! last level fits in one brick. Tree level `d` (root 0) reads store level `L − d`, brick `ijk` = chunk `ijk`.
 
+use thiserror::Error;
+
+/// Smallest brick edge a store may have (the importer's rule, `docs/STORE_FORMAT.md` §3.2).
+pub const MIN_BRICK_SIZE: u64 = 4;
+
+/// Largest brick edge a store may have.
+pub const MAX_BRICK_SIZE: u64 = 256;
+
+/// Why a pyramid cannot be laid out.
+#[derive(Clone, Debug, Error, PartialEq, Eq)]
+pub enum LayoutError {
+    /// A brick edge below 2 would never reach one brick (0) or is degenerate (1).
+    #[error("brick size must be at least 2, got {0}")]
+    BrickSize(u64),
+    /// Some axis has no samples.
+    #[error("dimensions must be positive, got {0:?}")]
+    Dims([u64; 3]),
+}
+
 /// Geometry of a multiscale brick store.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct PyramidLayout {
@@ -13,14 +32,22 @@ pub struct PyramidLayout {
 }
 
 impl PyramidLayout {
-    /// Levels for a volume of `dims` with bricks of `brick_size`, down to one brick.
-    pub fn new(dims: [u64; 3], brick_size: u64) -> PyramidLayout {
-        let mut level_dims = vec![dims];
-        while level_dims.last().is_some_and(|d| d.iter().any(|&v| v > brick_size)) {
-            let d = *level_dims.last().unwrap_or(&dims);
-            level_dims.push(d.map(|v| v.div_ceil(2)));
+    /// Levels for a volume of `dims` with bricks of `brick_size`, down to one brick. Each level halves the largest
+    /// axis, so there are at most 64 levels whatever the input; a brick size below 2 or an empty axis is refused.
+    pub fn new(dims: [u64; 3], brick_size: u64) -> Result<PyramidLayout, LayoutError> {
+        if brick_size < 2 {
+            return Err(LayoutError::BrickSize(brick_size));
         }
-        PyramidLayout { level_dims, brick_size }
+        if dims.contains(&0) {
+            return Err(LayoutError::Dims(dims));
+        }
+        let mut level_dims = vec![dims];
+        let mut last = dims;
+        while last.iter().any(|&v| v > brick_size) {
+            last = last.map(|v| v.div_ceil(2));
+            level_dims.push(last);
+        }
+        Ok(PyramidLayout { level_dims, brick_size })
     }
 
     /// Number of levels.
@@ -51,13 +78,22 @@ mod tests {
 
     #[test]
     fn pyramid_ends_in_one_brick() {
-        let layout = PyramidLayout::new([197, 233, 189], 32);
+        let layout = PyramidLayout::new([197, 233, 189], 32).unwrap();
         assert_eq!(layout.levels(), 4);
         assert_eq!(layout.level_dims[3], [25, 30, 24]);
         assert_eq!(layout.bricks(0), [7, 8, 6]);
         assert_eq!(layout.bricks(3), [1, 1, 1]);
         let extent = layout.extent();
         assert!((extent[1] - 233.0 / 256.0).abs() < 1e-12);
-        assert_eq!(PyramidLayout::new([10, 10, 10], 32).levels(), 1);
+        assert_eq!(PyramidLayout::new([10, 10, 10], 32).unwrap().levels(), 1);
+    }
+
+    #[test]
+    fn degenerate_input_is_refused_not_looped_on() {
+        // Regression (issue 9): brick size 0 used to loop forever, growing memory.
+        assert_eq!(PyramidLayout::new([10, 10, 10], 0), Err(LayoutError::BrickSize(0)));
+        assert_eq!(PyramidLayout::new([10, 10, 10], 1), Err(LayoutError::BrickSize(1)));
+        assert_eq!(PyramidLayout::new([0, 10, 10], 32), Err(LayoutError::Dims([0, 10, 10])));
+        assert_eq!(PyramidLayout::new([u64::MAX; 3], 2).unwrap().levels(), 64);
     }
 }

@@ -9,6 +9,9 @@ use crate::volume::{DType, VolumeInfo};
 /// Path of the per-brick min/max arrays under the store root (`minmax/0`, `minmax/1`, …).
 pub const MINMAX_GROUP: &str = "voxstream_minmax";
 
+/// The `format_version` this voxstream writes and reads; a store with a larger one was written by a newer voxstream.
+pub const FORMAT_VERSION: u32 = 1;
+
 /// voxstream's attributes, under `attributes.voxstream` of the root group.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct StoreAttributes {
@@ -37,7 +40,7 @@ impl StoreAttributes {
     /// Attributes for a volume and layout.
     pub fn new(info: &VolumeInfo, layout: &PyramidLayout, value_range: [f64; 2], complete: bool) -> StoreAttributes {
         StoreAttributes {
-            format_version: 1,
+            format_version: FORMAT_VERSION,
             dims: info.dims,
             dtype: info.dtype.name().into(),
             spacing: info.spacing,

@@ -21,9 +21,10 @@ use zarrs::group::Group;
 use zarrs::storage::ReadableStorageTraits;
 
 use crate::error::StoreError;
-use crate::import::partial_path;
+use crate::import::{aside_paths, partial_path};
 use crate::layout::PyramidLayout;
 use crate::metadata::{StoreAttributes, MINMAX_GROUP};
+use crate::metadata_check::{check_chunk_sizes, validate_attributes};
 use crate::volume::{DType, VolumeInfo};
 
 /// Reads `subset` of `array`, whose samples are of type `dtype`, as f32.
@@ -38,16 +39,6 @@ pub(crate) fn retrieve_f32(
         DType::I16 => array.retrieve_array_subset::<Vec<i16>>(subset)?.into_iter().map(f32::from).collect(),
         DType::F32 => array.retrieve_array_subset::<Vec<f32>>(subset)?,
     })
-}
-
-/// The volume and pyramid the attributes describe, checked.
-fn validated_geometry(path: &Path, attributes: &StoreAttributes) -> Result<(VolumeInfo, PyramidLayout), StoreError> {
-    let dtype = attributes
-        .dtype()
-        .ok_or_else(|| StoreError::store(path, format!("unknown sample type '{}'", attributes.dtype)))?;
-    let info = VolumeInfo { dims: attributes.dims, dtype, spacing: attributes.spacing, origin: attributes.origin };
-    info.validate(path)?;
-    Ok((info, PyramidLayout::new(attributes.dims, attributes.brick_size)))
 }
 
 /// Extends `data` (dims `have`, x fastest) to dims `want` by repeating its last samples.
@@ -92,6 +83,51 @@ fn average_2x(data: &[f32], size: [u64; 3]) -> Vec<f32> {
     out
 }
 
+/// An array's `zarr.json` as JSON (for the checks zarrs does not make).
+fn metadata_json(array: &Array<dyn ReadableStorageTraits>) -> serde_json::Value {
+    serde_json::to_value(array.metadata()).unwrap_or(serde_json::Value::Null)
+}
+
+/// Reads and checks the per-brick `[min, max]` of `level`: the array must be there, its one chunk file must hold
+/// exactly `8 ·` bricks bytes (checked before reading, so a forged brick count allocates nothing), and every entry
+/// must be finite with `min ≤ max`. The chunk may be absent only when the whole volume is 0 (the Zarr fill value):
+/// otherwise a missing file would read as empty space.
+fn read_minmax(
+    path: &Path,
+    store: &Arc<FilesystemStore>,
+    layout: &PyramidLayout,
+    level: usize,
+    volume_is_zero: bool,
+) -> Result<Vec<[f32; 2]>, StoreError> {
+    let name = format!("{MINMAX_GROUP}/{level}");
+    let bad = |problem: String| StoreError::store(path, format!("min/max of level {level} ({name}): {problem}"));
+    let ranges = Array::open(store.clone(), &format!("/{name}")).map_err(|e| bad(e.to_string()))?;
+    let [bx, by, bz] = layout.bricks(level);
+    if ranges.shape() != [bz, by, bx, 2] {
+        return Err(bad(format!("shape {:?}, expected {:?}", ranges.shape(), [bz, by, bx, 2])));
+    }
+    if ranges.chunk_grid_shape() != [1, 1, 1, 1] {
+        return Err(bad("expected one chunk holding the whole array".into()));
+    }
+    let expected_bytes = bx * by * bz * 8;
+    let key = ranges.chunk_key(&[0, 0, 0, 0]);
+    let stored_bytes = store.size_key(&key).map_err(|e| bad(e.to_string()))?;
+    match stored_bytes {
+        Some(bytes) if bytes != expected_bytes => {
+            return Err(bad(format!("{key} holds {bytes} bytes, expected {expected_bytes} (truncated or corrupt)")));
+        }
+        Some(_) => {}
+        None if volume_is_zero => {}
+        None => return Err(bad(format!("{key} is missing; import the volume again"))),
+    }
+    let flat: Vec<f32> = ranges.retrieve_array_subset(&ranges.subset_all()).map_err(|e| bad(e.to_string()))?;
+    let entries: Vec<[f32; 2]> = flat.chunks_exact(2).map(|c| [c[0], c[1]]).collect();
+    if let Some(index) = entries.iter().position(|[min, max]| !(min.is_finite() && max.is_finite() && min <= max)) {
+        return Err(bad(format!("entry {index} is {:?}, expected finite min ≤ max", entries[index])));
+    }
+    Ok(entries)
+}
+
 /// Default size of the host-side brick cache.
 pub const DEFAULT_CACHE_BYTES: u64 = 64 << 20;
 
@@ -134,6 +170,16 @@ impl StoreReader {
     /// least recently used first out.
     pub fn open_with_cache(path: &Path, cache_bytes: u64) -> Result<StoreReader, StoreError> {
         if !path.is_dir() {
+            if let Some(aside) = aside_paths(path).first() {
+                return Err(StoreError::store(
+                    path,
+                    format!(
+                        "missing: an `import --overwrite` was interrupted while swapping stores; the previous store \
+                         is whole at {} (rename it back), or run the import again",
+                        aside.display()
+                    ),
+                ));
+            }
             if partial_path(path).is_dir() {
                 return Err(StoreError::store(
                     path,
@@ -156,13 +202,7 @@ impl StoreReader {
         if !attributes.complete {
             return Err(StoreError::store(path, "incomplete store: its import was interrupted; run the import again"));
         }
-        let (_, layout) = validated_geometry(path, &attributes)?;
-        if layout.levels() != attributes.levels {
-            return Err(StoreError::store(
-                path,
-                format!("metadata names {} levels, the dimensions imply {}", attributes.levels, layout.levels()),
-            ));
-        }
+        let (_, layout) = validate_attributes(path, &attributes)?;
         let mut levels = Vec::new();
         let mut minmax = Vec::new();
         for level in 0..layout.levels() {
@@ -176,17 +216,22 @@ impl StoreReader {
                     format!("level {level} has shape {:?}, expected {:?}", array.shape(), [z, y, x]),
                 ));
             }
+            check_chunk_sizes(path, &level.to_string(), &metadata_json(&array))?;
             levels.push(LevelSource::Array { array, leading: 0, shape: [x, y, z] });
-            let ranges = Array::open(store.clone(), &format!("/{MINMAX_GROUP}/{level}"))
-                .map_err(|e| StoreError::store(path, format!("min/max of level {level}: {e}")))?;
-            let flat: Vec<f32> = ranges
-                .retrieve_array_subset(&ranges.subset_all())
-                .map_err(|e| StoreError::store(path, format!("min/max of level {level}: {e}")))?;
-            let expected = layout.bricks(level).iter().product::<u64>() as usize;
-            if flat.len() != expected * 2 {
-                return Err(StoreError::store(path, format!("min/max of level {level} has the wrong size")));
-            }
-            minmax.push(flat.chunks_exact(2).map(|c| [c[0], c[1]]).collect());
+            minmax.push(read_minmax(path, &store, &layout, level, attributes.value_range == [0.0, 0.0])?);
+        }
+        // The coarsest level's one brick covers every sample: its range is the volume's.
+        let root = minmax.last().and_then(|m| m.first()).copied().unwrap_or([0.0, 0.0]);
+        let [lo, hi] = attributes.value_range;
+        if root != [lo as f32, hi as f32] {
+            return Err(StoreError::metadata(
+                path,
+                "value_range",
+                format!(
+                    "{:?} disagrees with the per-brick min/max of the whole volume {root:?}",
+                    attributes.value_range
+                ),
+            ));
         }
         StoreReader::assemble(path, attributes, levels, Some(minmax), cache_bytes)
     }
@@ -199,9 +244,10 @@ impl StoreReader {
         minmax: Option<Vec<Vec<[f32; 2]>>>,
         cache_bytes: u64,
     ) -> Result<StoreReader, StoreError> {
-        let (info, layout) = validated_geometry(path, &attributes)?;
-        let brick_bytes = (attributes.brick_size.pow(3) * 4).max(1);
-        let capacity = NonZeroUsize::new((cache_bytes / brick_bytes).max(64) as usize).unwrap_or(NonZeroUsize::MIN);
+        let (info, layout) = validate_attributes(path, &attributes)?;
+        // The cache holds at most `cache_bytes` of decoded bricks (each at most brick_size³ f32), at least one.
+        let brick_bytes = attributes.brick_size.pow(3) * 4;
+        let capacity = NonZeroUsize::new((cache_bytes / brick_bytes) as usize).unwrap_or(NonZeroUsize::MIN);
         let brick_cache = Mutex::new(LruCache::new(capacity));
         Ok(StoreReader {
             path: path.into(),
@@ -310,6 +356,7 @@ impl StoreReader {
                     vec![got[0]; ((upper[0] - lower[0]) * (upper[1] - lower[1]) * (upper[2] - lower[2])) as usize]
                 } else {
                     let got = self.read_array(level, array, *leading, lower, read_upper)?;
+                    self.check_brick(level, ijk, array, &got)?;
                     pad_to(&got, [0, 1, 2].map(|a| read_upper[a] - lower[a]), [0, 1, 2].map(|a| upper[a] - lower[a]))
                 }
             }
@@ -325,6 +372,49 @@ impl StoreReader {
         let brick = Arc::new(samples);
         self.brick_cache.lock().unwrap_or_else(|p| p.into_inner()).put(key, brick.clone());
         Ok(brick)
+    }
+
+    /// Native stores: a brick read from disk must agree with its min/max, else it is a failure, never empty space.
+    /// A brick whose min/max says it holds data needs its shard file (zarrs would read a missing one as zeros); at
+    /// level 0 the samples' range must equal the recorded one exactly (it was computed from these very samples), at
+    /// coarser levels lie within it (a mean stays within what it averages).
+    fn check_brick(
+        &self,
+        level: usize,
+        ijk: [u64; 3],
+        array: &Array<dyn ReadableStorageTraits>,
+        samples: &[f32],
+    ) -> Result<(), StoreError> {
+        let Some(minmax) = &self.minmax else {
+            return Ok(());
+        };
+        let b = self.layout.bricks(level);
+        let [min, max] = minmax[level][((ijk[2] * b[1] + ijk[1]) * b[0] + ijk[0]) as usize];
+        let failure =
+            |problem: String| StoreError::store(&self.path, format!("level {level}, brick {ijk:?}: {problem}"));
+        if [min, max] != [0.0, 0.0] {
+            let lower = ijk.map(|v| v * self.layout.brick_size);
+            let shard = array.chunk_shape(&[0, 0, 0]).map_err(|e| failure(e.to_string()))?;
+            let indices = [lower[2] / shard[0].get(), lower[1] / shard[1].get(), lower[0] / shard[2].get()];
+            let key = array.chunk_key(&indices);
+            match array.storage().size_key(&key) {
+                Ok(Some(_)) => {}
+                Ok(None) => {
+                    return Err(failure(format!(
+                        "shard {key} is missing, but the brick's min/max says it holds values {min} to {max}"
+                    )))
+                }
+                Err(e) => return Err(failure(e.to_string())),
+            }
+        }
+        let (lo, hi) = samples.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+        let agrees = if level == 0 { lo == min && hi == max } else { lo >= min && hi <= max };
+        if !agrees {
+            return Err(failure(format!(
+                "reads as values {lo} to {hi}, but its min/max says {min} to {max}: the shard is corrupt"
+            )));
+        }
+        Ok(())
     }
 
     fn read_array(

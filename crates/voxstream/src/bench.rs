@@ -10,6 +10,7 @@ use voxstream_render::RenderSettings;
 use crate::camera_path::orbit;
 use crate::cli::BenchArgs;
 use crate::memory::peak_rss_bytes;
+use crate::render_budget::RenderBudget;
 use crate::scenes::{builtin, Scene, SCENE_NAMES};
 use crate::session::{LoopLimits, Mode, Session};
 
@@ -87,7 +88,9 @@ pub fn run(args: &BenchArgs) -> Result<()> {
 fn new_session(scene: &Scene, args: &BenchArgs) -> Result<Session<crate::scenes::SceneProducer>> {
     let settings =
         RenderSettings { width: args.size, height: args.size, shading: scene.shading, ..RenderSettings::default() };
-    Session::new(scene.producer, &scene.transfer_function, settings, args.budget_mb * 1048576, LoopLimits::default())
+    // The same split as `render`: the frame's buffers count, and a budget beyond the machine is refused.
+    let pool_bytes = RenderBudget::plan(args.budget_mb, args.size, args.size, "--size")?.pool_bytes(0);
+    Session::new(scene.producer, &scene.transfer_function, settings, pool_bytes, LoopLimits::default())
 }
 
 fn bench_scene(scene: &Scene, args: &BenchArgs) -> Result<SceneFigures> {

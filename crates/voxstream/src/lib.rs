@@ -9,10 +9,13 @@
 pub mod bench;
 pub mod camera_path;
 pub mod cli;
+pub mod exit_status;
 pub mod import_command;
 pub mod info_command;
 pub mod memory;
+pub mod output_file;
 pub mod png_output;
+pub mod render_budget;
 pub mod render_command;
 pub mod scenes;
 pub mod session;

@@ -1,5 +1,6 @@
-//! The `voxstream` binary: parses the command line and reports errors as one line (exit 2 for bad flags, 1 for
-//! everything else). The work is in the `voxstream` library.
+//! The `voxstream` binary: parses the command line and reports errors as one line (exit codes in
+//! [`voxstream::exit_status`]: 2 for bad flags, 3 for an incomplete image, 1 for everything else). The work is in
+//! the `voxstream` library.
 
 use std::process::ExitCode;
 
@@ -47,7 +48,7 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(error) => {
             eprintln!("error: {error:#}");
-            ExitCode::from(1)
+            ExitCode::from(voxstream::exit_status::exit_code(&error))
         }
     }
 }

@@ -1,36 +1,23 @@
-//! Writing frames as PNG: to a temporary file first, then renamed, so an interrupted run never leaves a truncated
-//! image under the final name.
+//! Writing frames as PNG, through a uniquely named temporary file that is then renamed ([`crate::output_file`]),
+//! so an interrupted run never leaves a truncated image under the final name.
 
-use std::fs::File;
-use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use voxstream_render::Image;
 
+use crate::output_file::write_atomically;
+
 /// Writes `image` as 8-bit RGB PNG at `path`.
 pub fn write_png(image: &Image, path: &Path) -> Result<()> {
-    let temporary = temporary_path(path);
-    let result = (|| -> Result<()> {
-        let file = File::create(&temporary).with_context(|| format!("cannot create {}", temporary.display()))?;
-        let mut encoder = png::Encoder::new(BufWriter::new(file), image.width, image.height);
+    write_atomically(path, |file| {
+        let mut encoder = png::Encoder::new(file, image.width, image.height);
         encoder.set_color(png::ColorType::Rgb);
         encoder.set_depth(png::BitDepth::Eight);
         let mut writer = encoder.write_header().with_context(|| format!("cannot write {}", path.display()))?;
         writer.write_image_data(&image.to_rgb8()).with_context(|| format!("cannot write {}", path.display()))?;
-        writer.finish().with_context(|| format!("cannot write {}", path.display()))?;
-        std::fs::rename(&temporary, path).with_context(|| format!("cannot move the image to {}", path.display()))
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&temporary);
-    }
-    result
-}
-
-fn temporary_path(path: &Path) -> PathBuf {
-    let mut name = path.file_name().map(|n| n.to_os_string()).unwrap_or_default();
-    name.push(".partial");
-    path.with_file_name(name)
+        writer.finish().with_context(|| format!("cannot write {}", path.display()))
+    })
 }
 
 /// `frame.png` → `frame_0007.png` for the 8th frame of a sequence.

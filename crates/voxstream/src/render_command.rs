@@ -1,24 +1,25 @@
 //! `voxstream render`: builds the session from the flags, renders a frame or a camera path, writes PNGs and stats.
 
+use std::io::Write;
 use std::path::Path;
 use std::sync::Arc;
 
 use anyhow::{bail, Context, Result};
 use voxstream_core::Producer;
 use voxstream_render::{Camera, RenderSettings, Shading, TransferFunction, VolumePlacement};
-use voxstream_store::import::partial_path;
+use voxstream_store::import::{aside_paths, partial_path};
 use voxstream_store::{InMemoryVolume, StoreProducer, StoreReader};
 
 use crate::camera_path::read_camera_path;
 use crate::cli::{RenderArgs, ShadingArg};
+use crate::exit_status::IncompleteImage;
 use crate::memory::{bytes_read, peak_rss_bytes};
+use crate::output_file::write_atomically;
 use crate::png_output::{numbered_path, write_png};
+use crate::render_budget::{RenderBudget, MAX_BUDGET_MB};
 use crate::scenes::{builtin, SCENE_NAMES};
 use crate::session::{LoopLimits, Mode, Session};
 use crate::stats::RunStats;
-
-/// Largest accepted budget (1 TiB): guards against typos that would overflow.
-const MAX_BUDGET_MB: u64 = 1 << 20;
 
 /// What `voxstream render` draws: a built-in scene or a store, with its defaults.
 struct Source<P> {
@@ -35,12 +36,10 @@ struct Source<P> {
     sample_bytes: u64,
 }
 
-/// Share of `--budget-mb` given to a store's host-side cache of compressed shards.
-pub const STORE_CACHE_SHARE: u64 = 8;
-
 /// Runs `voxstream render`.
 pub fn run(args: &RenderArgs) -> Result<()> {
     check_flags(args)?;
+    let budget = RenderBudget::plan(args.budget_mb, args.width, args.height, "--width/--height")?;
     if let Some(scene) = builtin(&args.source) {
         let source = Source {
             name: scene.name.to_string(),
@@ -53,21 +52,21 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             producer_cache_bytes: 0,
             sample_bytes: 2,
         };
-        return render_source(args, source);
+        return render_source(args, source, &budget);
     }
     let path = Path::new(&args.source);
-    if path.is_dir() || partial_path(path).is_dir() || path.join("zarr.json").exists() {
-        let cache_bytes = (args.budget_mb << 20) / STORE_CACHE_SHARE;
+    if path.is_dir() || partial_path(path).is_dir() || !aside_paths(path).is_empty() {
+        let cache_bytes = budget.store_cache_bytes();
         let reader = Arc::new(StoreReader::open_with_cache(path, cache_bytes)?);
         let attributes = reader.attributes().clone();
         let transfer_function = default_store_transfer_function(attributes.value_range)?;
         if args.in_memory {
             let volume = Arc::new(InMemoryVolume::load(&reader)?);
             let source = store_source(args, &reader, StoreProducer::new(volume)?, 0, transfer_function);
-            return render_source(args, source);
+            return render_source(args, source, &budget);
         }
         let source = store_source(args, &reader, StoreProducer::new(reader.clone())?, cache_bytes, transfer_function);
-        return render_source(args, source);
+        return render_source(args, source, &budget);
     }
     bail!(
         "unknown source '{}': expected a built-in scene ({}) or a store folder made by `voxstream import`",
@@ -158,7 +157,7 @@ pub fn default_store_transfer_function(range: [f64; 2]) -> Result<TransferFuncti
     )?)
 }
 
-fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>) -> Result<()> {
+fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &RenderBudget) -> Result<()> {
     let transfer_function = match &args.tf {
         Some(path) => read_transfer_function(path)?,
         None => source.transfer_function.clone(),
@@ -205,13 +204,13 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>) -> Result<()
         }
     }
 
-    let budget_bytes = args.budget_mb * 1024 * 1024;
+    let budget_bytes = budget.total_bytes;
     let limits = LoopLimits { requests_per_frame: args.requests_per_frame, ..LoopLimits::default() };
     let mut session = Session::with_value_range(
         source.producer,
         &transfer_function,
         settings,
-        budget_bytes - source.producer_cache_bytes,
+        budget.pool_bytes(source.producer_cache_bytes),
         limits,
         source.value_range,
     )?;
@@ -275,7 +274,11 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>) -> Result<()
     }
     if let Some(path) = &args.stats {
         let text = serde_json::to_string_pretty(&stats)?;
-        std::fs::write(path, text).with_context(|| format!("cannot write stats to {}", path.display()))?;
+        write_atomically(path, |file| Ok(file.write_all(text.as_bytes())?))
+            .with_context(|| format!("cannot write stats to {}", path.display()))?;
+    }
+    if reported_failures > 0 {
+        return Err(IncompleteImage { failed_bricks: reported_failures }.into());
     }
     Ok(())
 }
