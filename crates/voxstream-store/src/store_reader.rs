@@ -83,6 +83,15 @@ fn average_2x(data: &[f32], size: [u64; 3]) -> Vec<f32> {
     out
 }
 
+/// The first attribute that is, or holds, a JSON null.
+fn null_field(attributes: &serde_json::Value) -> Option<String> {
+    let object = attributes.as_object()?;
+    object
+        .iter()
+        .find(|(_, v)| v.is_null() || v.as_array().is_some_and(|items| items.iter().any(serde_json::Value::is_null)))
+        .map(|(k, _)| k.clone())
+}
+
 /// An array's `zarr.json` as JSON (for the checks zarrs does not make).
 fn metadata_json(array: &Array<dyn ReadableStorageTraits>) -> serde_json::Value {
     serde_json::to_value(array.metadata()).unwrap_or(serde_json::Value::Null)
@@ -192,8 +201,13 @@ impl StoreReader {
         let group = Group::open(store.clone(), "/")
             .map_err(|e| StoreError::store(path, format!("missing or corrupt zarr.json: {e}")))?;
         let attributes: StoreAttributes = match group.attributes().get("voxstream") {
-            Some(value) => serde_json::from_value(value.clone())
-                .map_err(|e| StoreError::store(path, format!("corrupt voxstream attributes: {e}")))?,
+            Some(value) => serde_json::from_value(value.clone()).map_err(|e| match null_field(value) {
+                // serde_json writes a non-finite number as null: name the field.
+                Some(field) => {
+                    StoreError::metadata(path, field, "is null (a non-finite number?); import the volume again")
+                }
+                None => StoreError::store(path, format!("corrupt voxstream attributes: {e}")),
+            })?,
             None => {
                 let (attributes, levels) = crate::foreign::open_foreign(path, &store, group.attributes())?;
                 return StoreReader::assemble(path, attributes, levels, None, cache_bytes);

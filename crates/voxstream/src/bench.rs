@@ -49,6 +49,7 @@ pub struct SceneFigures {
 pub fn run(args: &BenchArgs) -> Result<()> {
     let names: Vec<String> =
         if args.scenes.is_empty() { SCENE_NAMES.iter().map(|s| s.to_string()).collect() } else { args.scenes.clone() };
+    RenderBudget::plan(args.budget_mb, args.size, args.size, "--size")?;
     let mut figures = Vec::new();
     for name in &names {
         let scene = builtin(name).with_context(|| format!("unknown scene '{name}'"))?;

@@ -68,8 +68,8 @@ fn import_info_render_and_survive_a_corrupt_brick() {
     assert_eq!(stats["converged"], true);
     assert!(stats["bricks_produced"].as_u64().unwrap() > 0);
 
-    // Corrupt every shard of level 0: the render completes, each failed brick is reported once (as a warning), and
-    // coarser levels stand in.
+    // Corrupt every shard of level 0: the render completes, each failed brick is reported once (as a warning),
+    // coarser levels stand in, and the exit code (3) says the image is incomplete.
     let mut corrupted = 0;
     for entry in walk(&dir.join("ball.zarr/0")) {
         if entry.file_name().is_some_and(|n| n != "zarr.json") {
@@ -96,7 +96,7 @@ fn import_info_render_and_survive_a_corrupt_brick() {
         &dir,
     );
     let text = stderr(&output);
-    assert!(output.status.success(), "{text}");
+    assert_eq!(output.status.code(), Some(3), "{text}");
     assert!(text.contains("warning") && text.contains("ball.zarr"), "{text}");
     assert!(!text.contains("panicked"), "{text}");
     let stats: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("b.json")).unwrap()).unwrap();

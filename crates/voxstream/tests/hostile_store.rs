@@ -1,0 +1,370 @@
+//! Regression corpus for hostile stores and render flags (issue 9): stores made by importing a small volume, then
+//! edited (zarr.json attributes, deleted shards, deleted or truncated min/max arrays), and flags asking for more
+//! memory than the machine or the budget holds.
+//!
+//! Every case runs the binary under a time bound (killed and failed past [`TIME_BOUND`]; never asserted as a speed
+//! limit) and measures its peak resident set size (GNU time's `%M`, else `VmHWM` polled), asserted under
+//! [`MEMORY_BOUND`].
+//! An invalid store gives one line naming the store and the field, exit 1; a brick the store says exists but cannot
+//! be read gives warnings, the image, and exit 3.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// A case still running after this long is a hang: it is killed and the test fails.
+const TIME_BOUND: Duration = Duration::from_secs(120);
+
+/// Peak resident set size allowed to any case (the small store renders with the default 256 MiB budget, of which
+/// little is touched; an error must come before any large allocation).
+const MEMORY_BOUND: u64 = 320 << 20;
+
+/// What one run of the binary did.
+struct Run {
+    code: i32,
+    stderr: String,
+    peak_rss_bytes: u64,
+}
+
+/// GNU time, which reports the peak RSS of the command it runs (`%M`, KiB).
+const GNU_TIME: &str = "/usr/bin/time";
+
+/// Runs `voxstream args` in `dir`, killing it past [`TIME_BOUND`]. Peak RSS comes from GNU time where installed,
+/// else from polling `VmHWM` in `/proc/<pid>/status` (a lower bound between polls, but never skipped).
+fn run(args: &[&str], dir: &Path) -> Run {
+    let tag = format!("{}-{:?}", std::process::id(), std::thread::current().id()).replace(['(', ')'], "");
+    let stderr_path = dir.join(format!(".stderr-{tag}"));
+    let rss_path = dir.join(format!(".rss-{tag}"));
+    let binary = env!("CARGO_BIN_EXE_voxstream");
+    let has_time = Path::new(GNU_TIME).exists();
+    let mut command = if has_time {
+        let mut c = Command::new(GNU_TIME);
+        c.arg("-f").arg("%M").arg("-o").arg(&rss_path).arg(binary);
+        c
+    } else {
+        Command::new(binary)
+    };
+    let mut child = command
+        .args(args)
+        .current_dir(dir)
+        .stdout(Stdio::null())
+        .stderr(std::fs::File::create(&stderr_path).unwrap())
+        .spawn()
+        .expect("run voxstream");
+    let start = Instant::now();
+    let mut polled_hwm_kib = 0u64;
+    let status = loop {
+        if let Some(status) = child.try_wait().expect("wait") {
+            break status;
+        }
+        // The process whose memory counts: the binary itself (GNU time's child, or our own).
+        let target = if has_time { children_of(child.id()).first().copied() } else { Some(child.id()) };
+        if let Some(kib) = target.and_then(vm_hwm_kib) {
+            polled_hwm_kib = polled_hwm_kib.max(kib);
+        }
+        if start.elapsed() > TIME_BOUND {
+            if let Some(pid) = target.filter(|_| has_time) {
+                let _ = Command::new("kill").arg("-KILL").arg(pid.to_string()).status();
+            }
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("{args:?} hung: killed after {TIME_BOUND:?}");
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    };
+    let stderr = std::fs::read_to_string(&stderr_path).unwrap_or_default();
+    let _ = std::fs::remove_file(&stderr_path);
+    let time_kib = if has_time {
+        let text = std::fs::read_to_string(&rss_path).expect("GNU time wrote no report");
+        let _ = std::fs::remove_file(&rss_path);
+        // The last line is %M (a line before it names a fatal signal, if any).
+        Some(text.lines().last().and_then(|l| l.trim().parse::<u64>().ok()).expect("GNU time's %M"))
+    } else {
+        None
+    };
+    let peak_rss_bytes = time_kib.unwrap_or(0).max(polled_hwm_kib) * 1024;
+    assert!(peak_rss_bytes > 0, "{args:?}: peak memory not measured");
+    let code = status.code().unwrap_or(-1);
+    Run { code, stderr, peak_rss_bytes }
+}
+
+/// Child processes of `pid` (Linux).
+fn children_of(pid: u32) -> Vec<u32> {
+    std::fs::read_to_string(format!("/proc/{pid}/task/{pid}/children"))
+        .map(|t| t.split_whitespace().filter_map(|p| p.parse().ok()).collect())
+        .unwrap_or_default()
+}
+
+/// `VmHWM` of `pid` in KiB.
+fn vm_hwm_kib(pid: u32) -> Option<u64> {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    status.lines().find(|l| l.starts_with("VmHWM:"))?.split_whitespace().nth(1)?.parse().ok()
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("voxstream-hostile-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Imports a 48×40×36 u16 ball (bricks of 16: levels of 48, 24 and 12 samples) into `dir/NAME`.
+fn import_ball(dir: &Path, name: &str) {
+    let (nx, ny, nz) = (48usize, 40usize, 36usize);
+    let mut bytes = format!(
+        "NRRD0004\ntype: ushort\ndimension: 3\nsizes: {nx} {ny} {nz}\nspacings: 1 1 1\nencoding: raw\nendian: little\n\n"
+    )
+    .into_bytes();
+    for k in 0..nz {
+        for j in 0..ny {
+            for i in 0..nx {
+                let d = (((i as f64 - 24.0) / 18.0).powi(2)
+                    + ((j as f64 - 20.0) / 16.0).powi(2)
+                    + ((k as f64 - 18.0) / 14.0).powi(2))
+                .sqrt();
+                let v = if d < 1.0 { (3000.0 * (1.0 - d * d)) as u16 + 50 } else { 0 };
+                bytes.extend(v.to_le_bytes());
+            }
+        }
+    }
+    std::fs::write(dir.join("ball.nrrd"), bytes).unwrap();
+    let out = run(&["import", "ball.nrrd", "--out", name, "--brick-size", "16", "--quiet"], dir);
+    assert_eq!(out.code, 0, "import: {}", out.stderr);
+}
+
+/// Rewrites `attributes.voxstream.FIELD` of the store's root zarr.json as raw JSON text.
+fn set_attribute(store: &Path, field: &str, json: &str) {
+    let path = store.join("zarr.json");
+    let mut root: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    root["attributes"]["voxstream"][field] = serde_json::from_str(json).unwrap();
+    std::fs::write(&path, serde_json::to_string_pretty(&root).unwrap()).unwrap();
+}
+
+/// Asserts the common properties, then returns the run.
+fn checked(args: &[&str], dir: &Path) -> Run {
+    let out = run(args, dir);
+    assert!(!out.stderr.contains("panicked"), "{args:?} panicked: {}", out.stderr);
+    assert!(out.peak_rss_bytes <= MEMORY_BOUND, "{args:?}: peak RSS {} MiB over the bound", out.peak_rss_bytes >> 20);
+    out
+}
+
+/// Asserts a one-line error (exit 1) containing every needle, for `render` and `info`.
+fn assert_refused(dir: &Path, store: &str, needles: &[&str]) {
+    for args in [vec!["render", store, "--out", "x.png", "--width", "32", "--height", "32"], vec!["info", store]] {
+        let out = checked(&args, dir);
+        assert_eq!(out.code, 1, "{args:?}: exit {}, {}", out.code, out.stderr);
+        assert_eq!(out.stderr.trim_end().lines().count(), 1, "{args:?}: not one line:\n{}", out.stderr);
+        for needle in needles.iter().chain([&store]) {
+            assert!(out.stderr.contains(needle), "{args:?}: '{}' lacks '{needle}'", out.stderr.trim_end());
+        }
+    }
+    assert!(!dir.join("x.png").exists(), "a refused store rendered an image");
+}
+
+#[test]
+fn corrupt_store_metadata_is_one_line_naming_the_field() {
+    let dir = scratch("metadata");
+    import_ball(&dir, "base.zarr");
+    let cases: &[(&str, &str, &[&str])] = &[
+        ("brick_size", "0", &["brick_size"]),
+        ("brick_size", "7", &["brick_size"]),
+        ("levels", "1", &["levels"]),
+        ("levels", "40", &["levels"]),
+        ("value_range", "[3050, 0]", &["value_range", "reversed"]),
+        ("value_range", "[-1e308, 1e308]", &["value_range"]),
+        ("value_range", "[0, 9000]", &["value_range", "min/max"]),
+        ("format_version", "99", &["format_version", "newer voxstream"]),
+        ("spacing", "[null, 1, 1]", &["spacing"]),
+        ("spacing", "[0, 1, 1]", &["spacing"]),
+        ("origin", "\"ORIGIN\"", &["zarr.json"]),
+        ("dims", "[1099511627776, 40, 36]", &["dims"]),
+        ("dims", "[1048576, 1048576, 1048576]", &["levels"]),
+        ("dtype", "\"u64\"", &["dtype"]),
+    ];
+    for (index, (field, value, needles)) in cases.iter().enumerate() {
+        let name = format!("s{index}.zarr");
+        copy_dir(&dir.join("base.zarr"), &dir.join(&name));
+        set_attribute(&dir.join(&name), field, value);
+        if value.contains("ORIGIN") {
+            // Beyond f64: JSON can write it, no parser reads it as a finite number.
+            let path = dir.join(&name).join("zarr.json");
+            let text = std::fs::read_to_string(&path).unwrap().replace("\"ORIGIN\"", "[1e400, 0, 0]");
+            std::fs::write(&path, text).unwrap();
+        }
+        assert_refused(&dir, &name, needles);
+    }
+    // brick_size 0 with levels 1 (the combination that used to loop in PyramidLayout::new, growing memory).
+    copy_dir(&dir.join("base.zarr"), &dir.join("zero.zarr"));
+    set_attribute(&dir.join("zero.zarr"), "brick_size", "0");
+    set_attribute(&dir.join("zero.zarr"), "levels", "1");
+    assert_refused(&dir, "zero.zarr", &["brick_size"]);
+    // Huge dims with the matching level count: refused by the level arrays' shapes, nothing sized from the dims.
+    copy_dir(&dir.join("base.zarr"), &dir.join("huge.zarr"));
+    set_attribute(&dir.join("huge.zarr"), "dims", "[1048576, 1048576, 1048576]");
+    set_attribute(&dir.join("huge.zarr"), "levels", "17");
+    assert_refused(&dir, "huge.zarr", &["level 0 has shape"]);
+}
+
+#[test]
+fn missing_or_truncated_min_max_is_a_store_error_not_empty_space() {
+    let dir = scratch("minmax");
+    import_ball(&dir, "base.zarr");
+    // The chunk of a level deleted, truncated, or the whole array gone.
+    copy_dir(&dir.join("base.zarr"), &dir.join("deleted.zarr"));
+    std::fs::remove_file(dir.join("deleted.zarr/voxstream_minmax/1/c/0/0/0/0")).unwrap();
+    assert_refused(&dir, "deleted.zarr", &["min/max of level 1", "missing"]);
+
+    copy_dir(&dir.join("base.zarr"), &dir.join("truncated.zarr"));
+    let chunk = dir.join("truncated.zarr/voxstream_minmax/0/c/0/0/0/0");
+    let bytes = std::fs::read(&chunk).unwrap();
+    std::fs::write(&chunk, &bytes[..bytes.len() / 2]).unwrap();
+    assert_refused(&dir, "truncated.zarr", &["min/max of level 0", "truncated"]);
+
+    copy_dir(&dir.join("base.zarr"), &dir.join("gone.zarr"));
+    std::fs::remove_dir_all(dir.join("gone.zarr/voxstream_minmax/2")).unwrap();
+    assert_refused(&dir, "gone.zarr", &["min/max of level 2"]);
+}
+
+#[test]
+fn unreadable_bricks_warn_count_and_exit_3() {
+    let dir = scratch("bricks");
+    import_ball(&dir, "base.zarr");
+    let level0 = |store: &str| dir.join(store).join("0/c/1/0/0");
+    // A missing shard (level 0, the middle row of z: inside the ball), a truncated one, a corrupt one.
+    let edits: [(&str, fn(&Path)); 3] = [
+        ("missing.zarr", |p| std::fs::remove_file(p).unwrap()),
+        ("truncated.zarr", |p| {
+            let bytes = std::fs::read(p).unwrap();
+            std::fs::write(p, &bytes[..bytes.len() / 3]).unwrap();
+        }),
+        ("corrupt.zarr", |p| {
+            let mut bytes = std::fs::read(p).unwrap();
+            let middle = bytes.len() / 2;
+            bytes[middle..middle + 64].iter_mut().for_each(|b| *b = !*b);
+            std::fs::write(p, bytes).unwrap();
+        }),
+    ];
+    for (store, edit) in edits {
+        copy_dir(&dir.join("base.zarr"), &dir.join(store));
+        assert!(level0(store).exists(), "the test store lacks the shard it damages");
+        edit(&level0(store));
+        let png = format!("{store}.png");
+        let stats = format!("{store}.json");
+        let args =
+            ["render", store, "--out", &png, "--stats", &stats, "--width", "64", "--height", "64", "--lod-bias", "3"];
+        let out = checked(&args, &dir);
+        assert_eq!(out.code, 3, "{store}: exit {}: {}", out.code, out.stderr);
+        let warnings = out.stderr.lines().filter(|l| l.starts_with("warning:")).count();
+        assert!(warnings > 0, "{store}: no warning: {}", out.stderr);
+        assert!(out.stderr.contains("incomplete"), "{store}: {}", out.stderr);
+        let stats: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join(&stats)).unwrap()).unwrap();
+        let failures = stats["producer_failures"].as_u64().unwrap();
+        assert!(failures > 0, "{store}: producer_failures 0");
+        assert!(dir.join(&png).exists(), "{store}: no image");
+    }
+    // The undamaged store: exit 0, no warning.
+    let out = checked(
+        &["render", "base.zarr", "--out", "ok.png", "--width", "64", "--height", "64", "--lod-bias", "3"],
+        &dir,
+    );
+    assert_eq!(out.code, 0, "{}", out.stderr);
+    assert!(!out.stderr.contains("warning"), "{}", out.stderr);
+}
+
+#[test]
+fn budgets_and_image_sizes_beyond_memory_are_refused_before_allocating() {
+    let dir = scratch("budget");
+    let physical_mb = std::fs::read_to_string("/proc/meminfo")
+        .ok()
+        .and_then(|t| t.lines().find(|l| l.starts_with("MemTotal:"))?.split_whitespace().nth(1)?.parse::<u64>().ok())
+        .map(|kib| kib / 1024)
+        .expect("MemTotal in /proc/meminfo");
+    let out = checked(&["render", "--budget-mb", "1048576", "--out", "x.png", "--width", "32", "--height", "32"], &dir);
+    if physical_mb < 1048576 {
+        assert_eq!(out.code, 1, "{}", out.stderr);
+        assert!(out.stderr.contains("machine's memory") && out.stderr.contains("--budget-mb"), "{}", out.stderr);
+        assert_eq!(out.stderr.trim_end().lines().count(), 1, "{}", out.stderr);
+    }
+    let cases: &[(&[&str], &str)] = &[
+        (&["render", "--width", "16384", "--height", "16384", "--out", "x.png"], "--width/--height"),
+        (&["render", "--width", "4000000000", "--height", "2", "--out", "x.png"], "--width"),
+        (&["render", "--width", "100000", "--height", "100000", "--budget-mb", "1000", "--out", "x.png"], "--width"),
+        (&["bench", "--size", "16384", "--scenes", "shell", "--budget-mb", "64"], "--size"),
+        (&["bench", "--budget-mb", "1048576", "--scenes", "shell", "--size", "32"], "--budget-mb"),
+    ];
+    for (args, needle) in cases {
+        let out = checked(args, &dir);
+        assert!(out.code == 1 || out.code == 2, "{args:?}: exit {}: {}", out.code, out.stderr);
+        assert_eq!(out.stderr.trim_end().lines().count(), 1, "{args:?}: {}", out.stderr);
+        assert!(out.stderr.contains(needle), "{args:?}: '{}' lacks '{needle}'", out.stderr.trim_end());
+    }
+    assert!(!dir.join("x.png").exists());
+}
+
+#[test]
+fn overwrite_swaps_stores_and_an_interrupted_swap_is_named_then_cleaned() {
+    let dir = scratch("overwrite");
+    import_ball(&dir, "ball.zarr");
+    let out =
+        checked(&["import", "ball.nrrd", "--out", "ball.zarr", "--brick-size", "16", "--overwrite", "--quiet"], &dir);
+    assert_eq!(out.code, 0, "{}", out.stderr);
+    let leftovers: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with("ball.zarr."))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+    // Killed between the two renames: the old store aside, the new one still partial.
+    std::fs::rename(dir.join("ball.zarr"), dir.join("ball.zarr.old-4242")).unwrap();
+    for args in [vec!["info", "ball.zarr"], vec!["render", "ball.zarr", "--out", "x.png"]] {
+        let out = checked(&args, &dir);
+        assert_eq!(out.code, 1, "{}", out.stderr);
+        assert!(out.stderr.contains("ball.zarr.old-4242"), "{args:?}: {}", out.stderr);
+        assert_eq!(out.stderr.trim_end().lines().count(), 1, "{}", out.stderr);
+    }
+    // The next import puts a store in place and removes the aside folder.
+    let out = checked(&["import", "ball.nrrd", "--out", "ball.zarr", "--brick-size", "16", "--quiet"], &dir);
+    assert_eq!(out.code, 0, "{}", out.stderr);
+    assert!(!dir.join("ball.zarr.old-4242").exists());
+    assert_eq!(checked(&["info", "ball.zarr"], &dir).code, 0);
+}
+
+#[test]
+fn concurrent_renders_to_one_output_never_share_a_temporary_file() {
+    let dir = scratch("concurrent");
+    let args = ["render", "shell", "--width", "96", "--height", "96", "--out", "same.png", "--stats", "same.json"];
+    let children: Vec<_> = (0..4)
+        .map(|_| {
+            Command::new(env!("CARGO_BIN_EXE_voxstream"))
+                .args(args)
+                .current_dir(&dir)
+                .stderr(Stdio::piped())
+                .spawn()
+                .expect("run voxstream")
+        })
+        .collect();
+    for child in children {
+        let output = child.wait_with_output().unwrap();
+        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    }
+    let png = std::fs::read(dir.join("same.png")).unwrap();
+    assert_eq!(&png[1..4], b"PNG");
+    serde_json::from_str::<serde_json::Value>(&std::fs::read_to_string(dir.join("same.json")).unwrap()).unwrap();
+    let names: Vec<_> = std::fs::read_dir(&dir).unwrap().flatten().map(|e| e.file_name()).collect();
+    assert_eq!(names.len(), 2, "temporary files left: {names:?}");
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    let _ = std::fs::remove_dir_all(to);
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap().flatten() {
+        let target = to.join(entry.file_name());
+        if entry.path().is_dir() {
+            copy_dir(&entry.path(), &target);
+        } else {
+            std::fs::copy(entry.path(), &target).unwrap();
+        }
+    }
+}
