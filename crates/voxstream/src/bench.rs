@@ -85,8 +85,13 @@ pub fn run(args: &BenchArgs) -> Result<()> {
 }
 
 fn new_session(scene: &Scene, args: &BenchArgs) -> Result<Session<crate::scenes::SceneProducer>> {
-    let settings =
-        RenderSettings { width: args.size, height: args.size, shading: scene.shading, ..RenderSettings::default() };
+    let settings = RenderSettings {
+        width: args.size,
+        height: args.size,
+        shading: scene.shading,
+        light_direction: scene.light,
+        ..RenderSettings::default()
+    };
     Session::new(scene.producer, &scene.transfer_function, settings, args.budget_mb * 1048576, LoopLimits::default())
 }
 

@@ -14,6 +14,8 @@ pub mod info_command;
 pub mod memory;
 pub mod png_output;
 pub mod render_command;
+pub mod render_progress;
 pub mod scenes;
 pub mod session;
+pub mod source_path;
 pub mod stats;

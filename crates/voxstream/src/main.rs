@@ -1,5 +1,5 @@
-//! The `voxstream` binary: parses the command line and reports errors as one line (exit 2 for bad flags, 1 for
-//! everything else). The work is in the `voxstream` library.
+//! The `voxstream` binary: parses the command line and reports errors (exit 2 for bad flags, with clap's valid
+//! values, suggestions and usage; one line and exit 1 for everything else). The work is in the `voxstream` library.
 
 use std::process::ExitCode;
 
@@ -16,9 +16,9 @@ fn main() -> ExitCode {
                 let _ = error.print();
                 return ExitCode::SUCCESS;
             }
-            // One line: clap's first line names the flag and the problem.
+            // clap's whole message: the problem, then the valid values, a "did you mean" and the usage line.
             let text = error.render().to_string();
-            eprintln!("{}", text.lines().next().unwrap_or("error: invalid arguments"));
+            eprintln!("{}", text.trim_end());
             return ExitCode::from(2);
         }
     };
@@ -76,5 +76,6 @@ fn unreachable_default() -> RenderArgs {
         step: 0.5,
         in_memory: false,
         lod_bias: 0.0,
+        quiet: false,
     }
 }
