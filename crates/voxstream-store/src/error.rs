@@ -8,12 +8,12 @@ use thiserror::Error;
 #[derive(Debug, Error)]
 pub enum StoreError {
     /// The file could not be read or written.
-    #[error("{path}: {source}")]
+    #[error("{path}: {}", describe_io(.error))]
     Io {
         /// The file.
         path: PathBuf,
-        /// The I/O error.
-        source: std::io::Error,
+        /// The I/O error (in the message, not a `source`, so that a chain of contexts does not print it twice).
+        error: std::io::Error,
     },
     /// The header is malformed or inconsistent.
     #[error("{path}: {message}")]
@@ -69,7 +69,7 @@ impl StoreError {
 
     /// An I/O error for `path`.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> StoreError {
-        StoreError::Io { path: path.into(), source }
+        StoreError::Io { path: path.into(), error: source }
     }
 
     /// An invalid metadata `field` of the store at `path`.
@@ -80,5 +80,38 @@ impl StoreError {
     /// A store error for `path`.
     pub fn store(path: impl Into<PathBuf>, message: impl Into<String>) -> StoreError {
         StoreError::Store { path: path.into(), message: message.into() }
+    }
+}
+
+/// An I/O error as a user reads it: "not found", "permission denied", … without the OS error number.
+pub fn describe_io(error: &std::io::Error) -> String {
+    use std::io::ErrorKind;
+    match error.kind() {
+        ErrorKind::NotFound => "not found".into(),
+        ErrorKind::PermissionDenied => "permission denied".into(),
+        ErrorKind::AlreadyExists => "already exists".into(),
+        ErrorKind::UnexpectedEof => "ends too early (truncated)".into(),
+        _ => {
+            let text = error.to_string();
+            // std appends " (os error N)" to OS errors: the number says nothing more to a user.
+            match text.find(" (os error ") {
+                Some(at) => text[..at].to_string(),
+                None => text,
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn io_errors_read_once_and_without_os_numbers() {
+        let error = StoreError::io("/x/y", std::io::Error::from_raw_os_error(20));
+        assert_eq!(error.to_string(), "/x/y: Not a directory");
+        assert!(std::error::Error::source(&error).is_none(), "the message already holds the cause");
+        let missing = StoreError::io("/x/y", std::io::Error::from(std::io::ErrorKind::NotFound));
+        assert_eq!(missing.to_string(), "/x/y: not found");
     }
 }

@@ -87,8 +87,13 @@ pub fn run(args: &BenchArgs) -> Result<()> {
 }
 
 fn new_session(scene: &Scene, args: &BenchArgs) -> Result<Session<crate::scenes::SceneProducer>> {
-    let settings =
-        RenderSettings { width: args.size, height: args.size, shading: scene.shading, ..RenderSettings::default() };
+    let settings = RenderSettings {
+        width: args.size,
+        height: args.size,
+        shading: scene.shading,
+        light_direction: scene.light,
+        ..RenderSettings::default()
+    };
     // The same split as `render`: the frame's buffers count, and a budget beyond the machine is refused.
     let pool_bytes = RenderBudget::plan(args.budget_mb, args.size, args.size, "--size")?.pool_bytes(0);
     Session::new(scene.producer, &scene.transfer_function, settings, pool_bytes, LoopLimits::default())

@@ -4,16 +4,9 @@
 
 use std::path::Path;
 
-use anyhow::{bail, Context, Result};
-use serde::Deserialize;
+use anyhow::{anyhow, bail, Context, Result};
+use serde_json::Value;
 use voxstream_render::Camera;
-
-#[derive(Deserialize)]
-#[serde(untagged)]
-enum PathFile {
-    List(Vec<Camera>),
-    Object { cameras: Vec<Camera> },
-}
 
 /// Reads and validates a camera path.
 pub fn read_camera_path(path: &Path) -> Result<Vec<Camera>> {
@@ -21,13 +14,23 @@ pub fn read_camera_path(path: &Path) -> Result<Vec<Camera>> {
     parse_camera_path(&text).with_context(|| format!("invalid camera path {}", path.display()))
 }
 
-/// Parses a camera path.
+/// Parses a camera path: each camera on its own, so that an error names the camera and the field.
 pub fn parse_camera_path(text: &str) -> Result<Vec<Camera>> {
-    let file: PathFile = serde_json::from_str(text)
-        .map_err(|e| anyhow::anyhow!("expected a list of {{eye, target, up, fov}} cameras ({e})"))?;
-    let cameras = match file {
-        PathFile::List(c) | PathFile::Object { cameras: c } => c,
+    const EXPECTED: &str = r#"expected a list of cameras [{"eye": [x,y,z], "target": [x,y,z], "up": [x,y,z], "fov": 40}, …] or {"cameras": [...]}"#;
+    let file: Value = serde_json::from_str(text).map_err(|e| anyhow!("not valid JSON ({e}): {EXPECTED}"))?;
+    let list = match file {
+        Value::Array(list) => list,
+        Value::Object(mut object) => match object.remove("cameras") {
+            Some(Value::Array(list)) => list,
+            _ => bail!("{EXPECTED}"),
+        },
+        _ => bail!("{EXPECTED}"),
     };
+    let cameras = list
+        .iter()
+        .enumerate()
+        .map(|(i, camera)| parse_camera(camera).with_context(|| format!("camera {i}")))
+        .collect::<Result<Vec<Camera>>>()?;
     if cameras.is_empty() {
         bail!("the path holds no camera");
     }
@@ -35,6 +38,31 @@ pub fn parse_camera_path(text: &str) -> Result<Vec<Camera>> {
         camera.frame(2, 2).with_context(|| format!("camera {i}"))?;
     }
     Ok(cameras)
+}
+
+/// One camera object: `eye`, `target` and `up` required, `fov` optional, nothing else.
+fn parse_camera(value: &Value) -> Result<Camera> {
+    let Value::Object(fields) = value else {
+        bail!("expected an object {{\"eye\": …, \"target\": …, \"up\": …}}")
+    };
+    if let Some(unknown) = fields.keys().find(|k| !["eye", "target", "up", "fov"].contains(&k.as_str())) {
+        bail!("unknown field `{unknown}` (expected eye, target, up, fov)");
+    }
+    let vector = |name: &str| -> Result<[f64; 3]> {
+        let value = fields.get(name).ok_or_else(|| anyhow!("missing field `{name}`"))?;
+        let numbers: Option<Vec<f64>> = value.as_array().map(|a| a.iter().filter_map(Value::as_f64).collect());
+        match numbers {
+            Some(numbers) if numbers.len() == 3 && value.as_array().is_some_and(|a| a.len() == 3) => {
+                Ok([numbers[0], numbers[1], numbers[2]])
+            }
+            _ => bail!("`{name}` must be three numbers [x, y, z], got {value}"),
+        }
+    };
+    let fov = match fields.get("fov") {
+        None => Camera::DEFAULT_FOV,
+        Some(value) => value.as_f64().ok_or_else(|| anyhow!("`fov` must be a number of degrees, got {value}"))?,
+    };
+    Ok(Camera { eye: vector("eye")?, target: vector("target")?, up: vector("up")?, fov })
 }
 
 /// An orbit of `frames` cameras around `target` at `distance`, `elevation` above the horizontal plane.
@@ -64,5 +92,15 @@ mod tests {
         assert!(parse_camera_path("[]").is_err());
         assert!(parse_camera_path(r#"[{"eye":[0,0,0],"target":[0,0,0],"up":[0,1,0]}]"#).is_err());
         assert!(parse_camera_path("{").is_err());
+        let missing_up = r#"[{"eye":[0,0,3],"target":[0,0,0]}]"#;
+        assert_eq!(format!("{:#}", parse_camera_path(missing_up).unwrap_err()), "camera 0: missing field `up`");
+        let wrong_type = r#"{"cameras":[{"eye":[0,0,3],"target":[0,0,0],"up":[0,1,0]},{"eye":"x"}]}"#;
+        let message = format!("{:#}", parse_camera_path(wrong_type).unwrap_err());
+        assert_eq!(message, "camera 1: `eye` must be three numbers [x, y, z], got \"x\"");
+        let extra = r#"[{"eye":[0,0,3],"target":[0,0,0],"up":[0,1,0],"fvo":3}]"#;
+        assert_eq!(
+            format!("{:#}", parse_camera_path(extra).unwrap_err()),
+            "camera 0: unknown field `fvo` (expected eye, target, up, fov)"
+        );
     }
 }

@@ -107,6 +107,9 @@ pub struct RenderArgs {
     /// Level-of-detail bias (positive = finer than one voxel per pixel).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub lod_bias: f64,
+    /// No progress bar, no list of files written and no summary line (warnings and errors are still printed).
+    #[arg(long)]
+    pub quiet: bool,
 }
 
 /// Byte order of a raw file.

@@ -5,6 +5,7 @@ use serde::Serialize;
 use voxstream_store::StoreReader;
 
 use crate::cli::InfoArgs;
+use crate::source_path::check_store_path;
 
 /// Bricks of one level.
 #[derive(Serialize)]
@@ -33,6 +34,7 @@ struct StoreInfo {
 
 /// Runs `voxstream info`.
 pub fn run(args: &InfoArgs) -> Result<()> {
+    check_store_path(&args.store, "info")?;
     let reader = StoreReader::open(&args.store)?;
     let layout = reader.layout();
     let attributes = reader.attributes();

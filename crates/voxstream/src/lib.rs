@@ -17,6 +17,8 @@ pub mod output_file;
 pub mod png_output;
 pub mod render_budget;
 pub mod render_command;
+pub mod render_progress;
 pub mod scenes;
 pub mod session;
+pub mod source_path;
 pub mod stats;

@@ -1,6 +1,6 @@
-//! The `voxstream` binary: parses the command line and reports errors as one line (exit codes in
-//! [`voxstream::exit_status`]: 2 for bad flags, 3 for an incomplete image, 1 for everything else). The work is in
-//! the `voxstream` library.
+//! The `voxstream` binary: parses the command line and reports errors (exit 2 for bad flags, with clap's valid
+//! values, suggestions and usage; one line and exit 1 for everything else; exit 3 when `render` wrote an image some
+//! of whose bricks could not be read: [`voxstream::exit_status`]). The work is in the `voxstream` library.
 
 use std::process::ExitCode;
 
@@ -17,9 +17,9 @@ fn main() -> ExitCode {
                 let _ = error.print();
                 return ExitCode::SUCCESS;
             }
-            // One line: clap's first line names the flag and the problem.
+            // clap's whole message: the problem, then the valid values, a "did you mean" and the usage line.
             let text = error.render().to_string();
-            eprintln!("{}", text.lines().next().unwrap_or("error: invalid arguments"));
+            eprintln!("{}", text.trim_end());
             return ExitCode::from(2);
         }
     };
@@ -77,5 +77,6 @@ fn unreachable_default() -> RenderArgs {
         step: 0.5,
         in_memory: false,
         lod_bias: 0.0,
+        quiet: false,
     }
 }

@@ -7,7 +7,6 @@ use std::sync::Arc;
 use anyhow::{bail, Context, Result};
 use voxstream_core::Producer;
 use voxstream_render::{Camera, RenderSettings, Shading, TransferFunction, VolumePlacement};
-use voxstream_store::import::{aside_paths, partial_path};
 use voxstream_store::{InMemoryVolume, StoreProducer, StoreReader};
 
 use crate::camera_path::read_camera_path;
@@ -17,8 +16,10 @@ use crate::memory::{bytes_read, peak_rss_bytes};
 use crate::output_file::write_atomically;
 use crate::png_output::{numbered_path, write_png};
 use crate::render_budget::{RenderBudget, MAX_BUDGET_MB};
-use crate::scenes::{builtin, SCENE_NAMES};
+use crate::render_progress::RenderProgress;
+use crate::scenes::builtin;
 use crate::session::{LoopLimits, Mode, Session};
+use crate::source_path::check_store_path;
 use crate::stats::RunStats;
 
 /// What `voxstream render` draws: a built-in scene or a store, with its defaults.
@@ -34,6 +35,8 @@ struct Source<P> {
     producer_cache_bytes: u64,
     /// Bytes per sample of the source data.
     sample_bytes: u64,
+    /// Direction towards the light unless `--light` is given (`None`: a headlight).
+    light: Option<[f64; 3]>,
 }
 
 /// Runs `voxstream render`.
@@ -47,6 +50,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             transfer_function: scene.transfer_function,
             shading: scene.shading,
             camera: scene.camera,
+            light: scene.light,
             placement: VolumePlacement::default(),
             value_range: [0.0, 1.0],
             producer_cache_bytes: 0,
@@ -55,24 +59,18 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         return render_source(args, source, &budget);
     }
     let path = Path::new(&args.source);
-    if path.is_dir() || partial_path(path).is_dir() || !aside_paths(path).is_empty() {
-        let cache_bytes = budget.store_cache_bytes();
-        let reader = Arc::new(StoreReader::open_with_cache(path, cache_bytes)?);
-        let attributes = reader.attributes().clone();
-        let transfer_function = default_store_transfer_function(attributes.value_range)?;
-        if args.in_memory {
-            let volume = Arc::new(InMemoryVolume::load(&reader)?);
-            let source = store_source(args, &reader, StoreProducer::new(volume)?, 0, transfer_function);
-            return render_source(args, source, &budget);
-        }
-        let source = store_source(args, &reader, StoreProducer::new(reader.clone())?, cache_bytes, transfer_function);
+    check_store_path(path, "render")?;
+    let cache_bytes = budget.store_cache_bytes();
+    let reader = Arc::new(StoreReader::open_with_cache(path, cache_bytes)?);
+    let attributes = reader.attributes().clone();
+    let transfer_function = default_store_transfer_function(attributes.value_range)?;
+    if args.in_memory {
+        let volume = Arc::new(InMemoryVolume::load(&reader)?);
+        let source = store_source(args, &reader, StoreProducer::new(volume)?, 0, transfer_function);
         return render_source(args, source, &budget);
     }
-    bail!(
-        "unknown source '{}': expected a built-in scene ({}) or a store folder made by `voxstream import`",
-        args.source,
-        SCENE_NAMES.join(", ")
-    )
+    let source = store_source(args, &reader, StoreProducer::new(reader.clone())?, cache_bytes, transfer_function);
+    render_source(args, source, &budget)
 }
 
 fn store_source<P>(
@@ -92,6 +90,7 @@ fn store_source<P>(
         value_range: reader.attributes().value_range,
         producer_cache_bytes,
         sample_bytes: reader.info().dtype.size() as u64,
+        light: None,
     }
 }
 
@@ -170,7 +169,7 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Ren
             Some(ShadingArg::Phong) => Shading::Phong,
             None => source.shading,
         },
-        light_direction: args.light,
+        light_direction: args.light.or(source.light),
         background: args.background.map(|c| c as f32),
         step_factor: args.step,
         lod_bias: args.lod_bias,
@@ -223,15 +222,17 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Ren
     };
     let read_before = bytes_read();
     let sequence = args.path.is_some();
+    let repeats = if sequence || args.mode == Mode::Converged { 1 } else { args.frames };
+    let progress = RenderProgress::new(cameras.len() as u64 * u64::from(repeats), args.quiet);
     let mut reported_failures = 0usize;
+    let mut written = Vec::new();
     for (index, camera) in cameras.iter().enumerate() {
-        let repeats = if sequence || args.mode == Mode::Converged { 1 } else { args.frames };
         for repeat in 0..repeats {
-            let result = session.render(camera, args.mode)?;
+            let result = session.render_observed(camera, args.mode, &mut |pass| progress.pass(pass))?;
             for failure in &result.failures {
                 // Each failed brick is reported once; its ancestor stands in.
                 if reported_failures < 20 {
-                    eprintln!("warning: {failure}; drawing its coarser ancestor instead");
+                    progress.warn(&format!("{failure}; drawing its coarser ancestor instead"));
                 }
                 reported_failures += 1;
             }
@@ -247,8 +248,12 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Ren
                 let out = if sequence { numbered_path(&args.out, index) } else { args.out.clone() };
                 write_png(&result.image, &out)?;
                 stats.frames += 1;
+                // A sequence lists each file as it is written; a single image is named in the summary.
+                progress.frame_done(sequence.then_some(out.as_path()));
+                written.push(out);
                 break;
             }
+            progress.frame_done(None);
         }
     }
     let residency = session.residency();
@@ -266,21 +271,43 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Ren
         }
     }
     if !stats.converged && args.mode == Mode::Converged {
-        eprintln!(
-            "warning: the last frame did not converge: the budget of {} MiB cannot hold what the view needs; \
-             coarser data stands in",
+        progress.warn(&format!(
+            "the last frame did not converge: the budget of {} MiB cannot hold what the view needs; coarser data \
+             stands in (raise --budget-mb)",
             args.budget_mb
-        );
+        ));
     }
     if let Some(path) = &args.stats {
         let text = serde_json::to_string_pretty(&stats)?;
         write_atomically(path, |file| Ok(file.write_all(text.as_bytes())?))
             .with_context(|| format!("cannot write stats to {}", path.display()))?;
     }
+    progress.finish(&summary_line(&written, args, &stats));
     if reported_failures > 0 {
         return Err(IncompleteImage { failed_bricks: reported_failures }.into());
     }
     Ok(())
+}
+
+/// `wrote frame.png (512x512, converged, 10 passes, 6198 bricks loaded)`, or for a sequence the first and last file.
+fn summary_line(written: &[std::path::PathBuf], args: &RenderArgs, stats: &RunStats) -> String {
+    let files = match written {
+        [one] => one.display().to_string(),
+        [first, .., last] => format!("{} frames, {} … {}", written.len(), first.display(), last.display()),
+        [] => "nothing".into(),
+    };
+    let state = if stats.producer_failures > 0 {
+        format!("incomplete: {} bricks unreadable, coarser data stands in", stats.producer_failures)
+    } else if stats.converged {
+        "complete".into()
+    } else {
+        "incomplete: coarser data stands in".into()
+    };
+    let passes: u32 = stats.passes.iter().sum();
+    format!(
+        "wrote {files} ({}x{}, {state}, {passes} passes, {} bricks loaded)",
+        args.width, args.height, stats.bricks_produced
+    )
 }
 
 fn read_transfer_function(path: &Path) -> Result<TransferFunction> {

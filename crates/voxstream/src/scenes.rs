@@ -64,12 +64,24 @@ pub struct Scene {
     pub shading: Shading,
     /// Default camera.
     pub camera: Camera,
+    /// Default direction towards the light (`None`: a headlight).
+    pub light: Option<[f64; 3]>,
 }
 
 /// The default camera: a three-quarter view of the unit cube, framed whole with a 40° field of view.
 pub fn default_camera() -> Camera {
     Camera { eye: [1.95, 1.55, 2.35], target: [0.5, 0.5, 0.5], up: [0.0, 1.0, 0.0], fov: 40.0 }
 }
+
+/// The sponge's view: nearly facing its z = 1 face, so that the face's carpet of square tunnels shows (the central one
+/// open to the background), with the top and right faces in view; lit from near the view direction but tilted, so
+/// that the tunnels' walls are darker than the faces.
+pub fn sponge_camera() -> Camera {
+    Camera { eye: [1.2, 1.05, 3.1], target: [0.5, 0.5, 0.5], up: [0.0, 1.0, 0.0], fov: 30.0 }
+}
+
+/// The sponge's light: towards +z, tilted up and right.
+pub const SPONGE_LIGHT: [f64; 3] = [0.2, 0.3, 0.93];
 
 /// A closer three-quarter view for objects that do not fill the cube.
 pub fn close_camera() -> Camera {
@@ -97,7 +109,8 @@ pub fn builtin(name: &str) -> Option<Scene> {
                 None,
             ),
             shading: Shading::Phong,
-            camera: default_camera(),
+            camera: sponge_camera(),
+            light: Some(SPONGE_LIGHT),
         },
         "hypertexture" => Scene {
             name: "hypertexture",
@@ -114,6 +127,7 @@ pub fn builtin(name: &str) -> Option<Scene> {
             ),
             shading: Shading::Phong,
             camera: close_camera(),
+            light: None,
         },
         "shell" => Scene {
             name: "shell",
@@ -122,6 +136,7 @@ pub fn builtin(name: &str) -> Option<Scene> {
             transfer_function: shell_transfer_function(),
             shading: Shading::None,
             camera: close_camera(),
+            light: None,
         },
         _ => return None,
     };

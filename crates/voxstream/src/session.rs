@@ -74,6 +74,19 @@ impl FrameResult {
     }
 }
 
+/// Where a frame stands after one of its passes, for progress displays.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PassProgress {
+    /// Passes done in this frame (1 after the first).
+    pub pass: u32,
+    /// Pixels whose rays still miss data (they are traced again in the next pass; 0 = the frame is complete).
+    pub pixels_pending: usize,
+    /// Pixels of the image.
+    pub pixels: usize,
+    /// Bricks produced so far in this frame.
+    pub bricks_produced: u64,
+}
+
 /// A producer, its cache, and the render state shared by consecutive frames.
 pub struct Session<P: Producer> {
     cache: CacheManager<P>,
@@ -136,6 +149,16 @@ impl<P: Producer> Session<P> {
 
     /// Renders one output frame from `camera`.
     pub fn render(&mut self, camera: &Camera, mode: Mode) -> Result<FrameResult> {
+        self.render_observed(camera, mode, &mut |_| {})
+    }
+
+    /// Renders one output frame from `camera`, telling `observe` where the frame stands after each pass.
+    pub fn render_observed(
+        &mut self,
+        camera: &Camera,
+        mode: Mode,
+        observe: &mut dyn FnMut(&PassProgress),
+    ) -> Result<FrameResult> {
         let start = Instant::now();
         let mut result = FrameResult {
             image: Image::new(0, 0),
@@ -174,6 +197,12 @@ impl<P: Producer> Session<P> {
             result.bricks_produced += report.bricks_produced as u64;
             result.pending = report.pending;
             result.failures.extend(report.failures);
+            observe(&PassProgress {
+                pass: result.passes,
+                pixels_pending: progressive.pending_count(),
+                pixels: progressive.pending.len(),
+                bricks_produced: result.bricks_produced,
+            });
             let stalled = report.pending > 0 && report.served == 0;
             if mode == Mode::Interactive || report.pending == 0 || stalled || result.passes >= self.limits.max_passes {
                 break;

@@ -175,10 +175,50 @@ fn bad_input_is_one_clear_line() {
     assert_fails(&["render", "--budget-mb", "0", "--out", "x.png"], "budget");
     assert_fails(&["render", "--width", "0", "--out", "x.png"], "size");
     assert_fails(&["render", "--fov", "180", "--out", "x.png"], "fov");
-    assert_fails(&["render", "--eye", "1,2", "--out", "x.png"], "three");
-    assert_fails(&["render", "--mode", "fast", "--out", "x.png"], "mode");
     assert_fails(&["render", "--path", "broken.json", "--out", "x.png"], "camera path");
     assert_fails(&["render", "--out", "no/such/folder/x.png"], "does not exist");
     assert_fails(&["render", "--background", "2,0,0", "--out", "x.png"], "background");
-    assert_fails(&["--frobnicate"], "frobnicate");
+}
+
+/// Runs a command line clap rejects: exit 2, clap's whole message (the problem, then valid values, a suggestion or
+/// the usage line), no panic, no output written.
+fn assert_usage_error(args: &[&str], first_line: &str, then: &str) {
+    let dir = scratch("usage");
+    let output = run(args, &dir);
+    let text = stderr(&output);
+    assert_eq!(output.status.code(), Some(2), "{args:?}: {text}");
+    assert_eq!(text.lines().next(), Some(first_line), "{args:?}:\n{text}");
+    assert!(text.contains(then), "{args:?}: '{text}' does not say '{then}'");
+    assert!(!text.contains("panicked"), "{args:?} panicked: {text}");
+    assert!(!dir.join("x.png").exists(), "{args:?} wrote an image");
+}
+
+#[test]
+fn bad_flags_keep_clap_s_valid_values_suggestions_and_usage() {
+    assert_usage_error(
+        &["render", "--eye", "1,2", "--out", "x.png"],
+        "error: invalid value '1,2' for '--eye <EYE>': expected three comma-separated numbers x,y,z, got '1,2'",
+        "For more information, try '--help'.",
+    );
+    assert_usage_error(
+        &["render", "--mode", "fast", "--out", "x.png"],
+        "error: invalid value 'fast' for '--mode <MODE>'",
+        "[possible values: converged, interactive]",
+    );
+    assert_usage_error(
+        &["render", "--shading", "Phong", "--out", "x.png"],
+        "error: invalid value 'Phong' for '--shading <SHADING>'",
+        "tip: a similar value exists: 'phong'",
+    );
+    assert_usage_error(
+        &["render", "--widht", "3", "--out", "x.png"],
+        "error: unexpected argument '--widht' found",
+        "tip: a similar argument exists: '--width'",
+    );
+    assert_usage_error(
+        &["render", "--widht", "3"],
+        "error: unexpected argument '--widht' found",
+        "Usage: voxstream render",
+    );
+    assert_usage_error(&["--frobnicate"], "error: unexpected argument '--frobnicate' found", "Usage: voxstream");
 }

@@ -45,6 +45,14 @@ fn data_dir() -> Option<PathBuf> {
     panic!("real data missing: run scripts/fetch-real-data.sh (or set VOXSTREAM_SKIP_REAL_DATA=1)");
 }
 
+/// The Python of the project's virtual environment (`data/venv`, made by `scripts/fetch-real-data.sh`), which has
+/// zarr-python and numpy.
+fn venv_python() -> PathBuf {
+    let python = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/venv/bin/python");
+    assert!(python.exists(), "{} missing: run scripts/fetch-real-data.sh", python.display());
+    python
+}
+
 /// Reads a reference `.npy` (C order) as f32, with its JSON geometry.
 fn reference(dir: &Path, name: &str) -> (Vec<f32>, serde_json::Value) {
     let bytes = std::fs::read(dir.join(format!("{name}.reference.npy"))).unwrap();
@@ -205,7 +213,7 @@ fn a_standard_zarr_reader_opens_the_store() {
         let store = work.join(format!("{name}.zarr"));
         import(&dir, file, raw.as_ref(), &store);
         let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/check_store_with_zarr_python.py");
-        let output = std::process::Command::new("python3")
+        let output = std::process::Command::new(venv_python())
             .arg(&script)
             .arg(&store)
             .arg(dir.join(format!("{name}.reference.npy")))
@@ -255,7 +263,7 @@ fn foreign_ome_zarr_v2_and_v3_render_like_the_native_store() {
     let work = scratch("foreign");
     let native = import(&dir, "mni152_t1.nii.gz", None, &work.join("native.zarr"));
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/make_foreign_ome_zarr.py");
-    let output = std::process::Command::new("python3")
+    let output = std::process::Command::new(venv_python())
         .arg(&script)
         .arg(dir.join("mni152_t1.reference.npy"))
         .arg(work.join("v3.zarr"))
