@@ -203,6 +203,45 @@ fn corrupt_store_metadata_is_one_line_naming_the_field() {
     set_attribute(&dir.join("huge.zarr"), "dims", "[1048576, 1048576, 1048576]");
     set_attribute(&dir.join("huge.zarr"), "levels", "17");
     assert_refused(&dir, "huge.zarr", &["level 0 has shape"]);
+    // A level array declaring shards of 2^60 samples (decoding one would allocate that): refused at open.
+    copy_dir(&dir.join("base.zarr"), &dir.join("shards.zarr"));
+    let level_path = dir.join("shards.zarr/0/zarr.json");
+    let mut level: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&level_path).unwrap()).unwrap();
+    level["chunk_grid"]["configuration"]["chunk_shape"] = serde_json::json!([1 << 20, 1 << 20, 1 << 20]);
+    std::fs::write(&level_path, level.to_string()).unwrap();
+    assert_refused(&dir, "shards.zarr", &["0/zarr.json chunk_shape"]);
+}
+
+/// Turns a copy of a native store into a foreign OME-Zarr image (drops `attributes.voxstream`), then edits it.
+fn foreign_copy(dir: &Path, name: &str, edit: impl Fn(&mut serde_json::Value, &mut serde_json::Value)) {
+    copy_dir(&dir.join("base.zarr"), &dir.join(name));
+    let root_path = dir.join(name).join("zarr.json");
+    let level_path = dir.join(name).join("0/zarr.json");
+    let mut root: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&root_path).unwrap()).unwrap();
+    let mut level: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&level_path).unwrap()).unwrap();
+    root["attributes"].as_object_mut().unwrap().remove("voxstream");
+    edit(&mut root, &mut level);
+    std::fs::write(&root_path, serde_json::to_string_pretty(&root).unwrap()).unwrap();
+    std::fs::write(&level_path, serde_json::to_string_pretty(&level).unwrap()).unwrap();
+}
+
+#[test]
+fn foreign_ome_zarr_metadata_is_checked_before_it_sizes_anything() {
+    let dir = scratch("foreign");
+    import_ball(&dir, "base.zarr");
+    // Unedited, the OME metadata alone renders.
+    foreign_copy(&dir, "plain.zarr", |_, _| {});
+    let out = checked(&["render", "plain.zarr", "--out", "p.png", "--width", "32", "--height", "32"], &dir);
+    assert_eq!(out.code, 0, "{}", out.stderr);
+    foreign_copy(&dir, "scale.zarr", |root, _| {
+        root["attributes"]["ome"]["multiscales"][0]["datasets"][0]["coordinateTransformations"][0]["scale"] =
+            serde_json::json!([1.0, 1.0, 0.0]);
+    });
+    assert_refused(&dir, "scale.zarr", &["spacing"]);
+    foreign_copy(&dir, "chunks.zarr", |_, level| {
+        level["codecs"][0]["configuration"]["chunk_shape"] = serde_json::json!([4096, 4096, 4096]);
+    });
+    assert_refused(&dir, "chunks.zarr", &[]);
 }
 
 #[test]
