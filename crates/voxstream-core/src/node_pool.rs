@@ -49,8 +49,7 @@ impl NodePool {
         let per_tile = shape.nodes_per_tile() as usize;
         // Memory grows with use: a large budget reserves nothing up front.
         let nodes = vec![Node::MISSING; per_tile];
-        let mut records = Vec::new();
-        records.push(TileRecord { parent: u32::MAX, level: 0, parent_ijk: [0; 3] });
+        let records = vec![TileRecord { parent: u32::MAX, level: 0, parent_ijk: [0; 3] }];
         NodePool { shape, nodes, records, lru: LruSlots::new(capacity_tiles.saturating_sub(1)) }
     }
 

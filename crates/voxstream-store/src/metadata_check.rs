@@ -64,7 +64,7 @@ pub fn validate_attributes(
         return bad("origin", format!("{:?} must be finite", attributes.origin));
     }
     let brick_size = attributes.brick_size;
-    if !(MIN_BRICK_SIZE..=MAX_BRICK_SIZE).contains(&brick_size) || brick_size % 2 != 0 {
+    if !(MIN_BRICK_SIZE..=MAX_BRICK_SIZE).contains(&brick_size) || !brick_size.is_multiple_of(2) {
         return bad(
             "brick_size",
             format!("is {brick_size}, expected an even size in {MIN_BRICK_SIZE}..={MAX_BRICK_SIZE}"),
@@ -167,7 +167,8 @@ mod tests {
     #[test]
     fn each_bad_attribute_is_named() {
         assert!(validate_attributes(Path::new("s.zarr"), &good()).is_ok());
-        let cases: Vec<(&str, Box<dyn Fn(&mut StoreAttributes)>)> = vec![
+        type Edit = Box<dyn Fn(&mut StoreAttributes)>;
+        let cases: Vec<(&str, Edit)> = vec![
             ("format_version", Box::new(|a| a.format_version = 99)),
             ("format_version", Box::new(|a| a.format_version = 0)),
             ("dtype", Box::new(|a| a.dtype = "u64".into())),

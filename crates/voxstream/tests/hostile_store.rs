@@ -270,7 +270,8 @@ fn unreadable_bricks_warn_count_and_exit_3() {
     import_ball(&dir, "base.zarr");
     let level0 = |store: &str| dir.join(store).join("0/c/1/0/0");
     // A missing shard (level 0, the middle row of z: inside the ball), a truncated one, a corrupt one.
-    let edits: [(&str, fn(&Path)); 3] = [
+    type Damage = fn(&Path);
+    let edits: [(&str, Damage); 3] = [
         ("missing.zarr", |p| std::fs::remove_file(p).unwrap()),
         ("truncated.zarr", |p| {
             let bytes = std::fs::read(p).unwrap();
