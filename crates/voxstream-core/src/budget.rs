@@ -2,9 +2,11 @@
 //!
 //! GigaVoxels [P09] §5: both pools are caches of fixed size (their paper: a 4 MB node pool beside a 430 MB brick
 //! pool). voxstream derives both capacities from one `--budget-mb`, counting every per-slot byte (nodes, voxels,
-//! bookkeeping, feedback flags), so the pools can never exceed it.
+//! bookkeeping, feedback flags), so the pools can never exceed it. The bricks produced but not yet copied into the
+//! pool (one production batch) are counted too: the batch is sized from the budget (at most a sixteenth of it).
 
 use crate::brick_pool::brick_record_bytes;
+use crate::cache_manager::PRODUCTION_BATCH;
 use crate::error::CoreError;
 use crate::key::TreeShape;
 use crate::lru::LRU_BYTES_PER_SLOT;
@@ -28,6 +30,8 @@ pub struct PoolCapacities {
     pub bytes_per_tile: u64,
     /// Bytes per brick, all bookkeeping included.
     pub bytes_per_brick: u64,
+    /// Bricks produced concurrently before they are copied into the pool (a transient outside the pools).
+    pub production_batch: u32,
     /// The budget these capacities respect.
     pub budget_bytes: u64,
 }
@@ -44,17 +48,27 @@ impl PoolCapacities {
         // The smallest useful cache: the root tile plus a few tiles, a parent brick and all its children.
         let min_tiles = 4u64;
         let min_bricks = 2 * shape.nodes_per_tile() as u64;
-        let minimum_bytes = min_tiles * bytes_per_tile + min_bricks * bytes_per_brick;
+        let produced_brick_bytes = (shape.voxels_per_brick() * VOXEL_BYTES) as u64;
+        let minimum_bytes = min_tiles * bytes_per_tile + min_bricks * bytes_per_brick + produced_brick_bytes;
         if budget_bytes < minimum_bytes {
             return Err(CoreError::BudgetTooSmall { budget_bytes, minimum_bytes });
         }
-        let node_bytes = ((budget_bytes as f64 * NODE_POOL_SHARE) as u64).max(min_tiles * bytes_per_tile);
+        let production_batch = (budget_bytes / 16 / produced_brick_bytes).clamp(1, PRODUCTION_BATCH as u64);
+        let pool_bytes = budget_bytes - production_batch * produced_brick_bytes;
+        let node_bytes = ((pool_bytes as f64 * NODE_POOL_SHARE) as u64).max(min_tiles * bytes_per_tile);
         let tiles = (node_bytes / bytes_per_tile).min(crate::node::MAX_TILE_INDEX as u64);
-        let bricks = ((budget_bytes - tiles * bytes_per_tile) / bytes_per_brick).min(u32::MAX as u64 - 1);
+        let bricks = (pool_bytes.saturating_sub(tiles * bytes_per_tile) / bytes_per_brick).min(u32::MAX as u64 - 1);
         if bricks < min_bricks {
             return Err(CoreError::BudgetTooSmall { budget_bytes, minimum_bytes });
         }
-        Ok(PoolCapacities { tiles: tiles as u32, bricks: bricks as u32, bytes_per_tile, bytes_per_brick, budget_bytes })
+        Ok(PoolCapacities {
+            tiles: tiles as u32,
+            bricks: bricks as u32,
+            bytes_per_tile,
+            bytes_per_brick,
+            production_batch: production_batch as u32,
+            budget_bytes,
+        })
     }
 
     /// Bytes used by `tiles` tiles and `bricks` bricks.
@@ -79,7 +93,9 @@ mod tests {
         fn plan_never_exceeds_the_budget(budget in 0u64..(1 << 34), n in 2u32..4, m in 2u32..33) {
             let shape = TreeShape::new(n, m, 8).unwrap();
             if let Ok(caps) = PoolCapacities::plan(&shape, budget) {
-                prop_assert!(caps.bytes_for(caps.tiles, caps.bricks) <= budget);
+                let batch_bytes = caps.production_batch as u64 * (shape.voxels_per_brick() * VOXEL_BYTES) as u64;
+                prop_assert!(caps.bytes_for(caps.tiles, caps.bricks) + batch_bytes <= budget);
+                prop_assert!(caps.production_batch >= 1);
                 prop_assert!(caps.tiles >= 4);
                 prop_assert!(caps.bricks >= 2 * shape.nodes_per_tile());
             }

@@ -40,7 +40,8 @@ use crate::tree_view::TreeView;
 /// Deferred requests passed to [`Producer::prefetch`] per frame.
 pub const PREFETCH_LIMIT: usize = 1024;
 
-/// Requests produced concurrently before their results are applied (bounds transient memory).
+/// Most requests produced concurrently before their results are applied (bounds transient memory; a small budget
+/// gets smaller batches, [`PoolCapacities::production_batch`]).
 pub const PRODUCTION_BATCH: usize = 256;
 
 /// What serving one frame's requests did.
@@ -230,7 +231,7 @@ impl<P: Producer> CacheManager<P> {
 
         // Produce on worker threads, with no lock held, a batch at a time so that produced-but-unapplied bricks
         // stay a bounded transient; then apply each batch in queue order.
-        for batch in work.chunks(PRODUCTION_BATCH) {
+        for batch in work.chunks(self.capacities.production_batch.max(1) as usize) {
             let producer = &self.producer;
             let shape = self.shape;
             let per_brick = shape.voxels_per_brick();
