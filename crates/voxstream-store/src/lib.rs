@@ -17,6 +17,7 @@ pub mod layout;
 pub mod metadata;
 pub mod store_producer;
 pub mod store_reader;
+pub mod value_histogram;
 pub mod volume;
 
 pub use error::StoreError;

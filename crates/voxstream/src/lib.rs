@@ -15,6 +15,7 @@ pub mod memory;
 pub mod png_output;
 pub mod render_command;
 pub mod render_progress;
+pub mod render_warnings;
 pub mod scenes;
 pub mod session;
 pub mod source_path;
