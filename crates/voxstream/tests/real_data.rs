@@ -179,7 +179,8 @@ fn renders_match_a_brute_force_march_of_the_dense_array() {
     for (file, name, raw) in volumes().into_iter().filter(|v| v.1 != "liver") {
         let reader = import(&dir, file, raw.as_ref(), &work.join(format!("{name}.zarr")));
         let range = reader.attributes().value_range;
-        let tf = default_store_transfer_function(range).unwrap();
+        // The default transfer function of `render`, over the bulk of the values.
+        let tf = default_store_transfer_function(reader.attributes().typical_range()).unwrap();
         let camera = store_camera(reader.info(), size, size);
         // Sample the finest level everywhere, as the dense reference does.
         let settings = RenderSettings {
