@@ -125,8 +125,8 @@ fn bad_stores_and_inputs_fail_with_one_line() {
     let dir = scratch("bad");
     write_ball(&dir.join("ball.nrrd"));
     let cases: Vec<(Vec<&str>, &str)> = vec![
-        (vec!["render", "missing.zarr", "--out", "x.png"], "unknown source"),
-        (vec!["info", "missing.zarr"], "no such store"),
+        (vec!["render", "missing.zarr", "--out", "x.png"], "not found"),
+        (vec!["info", "missing.zarr"], "not found"),
         (vec!["import", "missing.nrrd", "--out", "m.zarr"], "missing.nrrd"),
         (vec!["import", "ball.nrrd", "--out", "b.zarr", "--brick-size", "7"], "brick size"),
         (vec!["import", "ball.nrrd", "--out", "b.zarr", "--dims", "4,4,4"], "--dtype"),
