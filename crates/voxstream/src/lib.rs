@@ -20,3 +20,4 @@ pub mod scenes;
 pub mod session;
 pub mod source_path;
 pub mod stats;
+pub mod trilinear_bound;
