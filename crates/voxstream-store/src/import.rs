@@ -20,6 +20,7 @@ use zarrs::group::GroupBuilder;
 use crate::error::StoreError;
 use crate::layout::PyramidLayout;
 use crate::metadata::{ome_multiscales, StoreAttributes, MINMAX_GROUP};
+use crate::value_histogram::ValueHistogram;
 use crate::volume::{DType, VolumeInfo, VolumeSource};
 
 /// Choices of an import.
@@ -48,6 +49,8 @@ pub struct ImportReport {
     pub levels: usize,
     /// Smallest and largest value.
     pub value_range: [f64; 2],
+    /// `[percent, value]` pairs of the level-0 samples (see [`crate::value_histogram`]).
+    pub value_percentiles: Vec<[f64; 2]>,
     /// Bricks per level that hold data (written).
     pub bricks_written: Vec<u64>,
     /// Bricks per level skipped because all their samples are 0 (the fill value).
@@ -106,6 +109,7 @@ fn import_into_partial(
     let total = info.byte_len();
     let slice_bytes = info.slice_len() as u64 * info.dtype.size() as u64;
     let mut value_range = [f64::INFINITY, f64::NEG_INFINITY];
+    let mut histogram = ValueHistogram::new(info.dtype);
     let mut z = 0u64;
     let mut slice = Vec::with_capacity(info.slice_len());
     while z < info.dims[2] {
@@ -117,6 +121,7 @@ fn import_into_partial(
             let (lo, hi) = slice.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
             value_range[0] = value_range[0].min(lo as f64);
             value_range[1] = value_range[1].max(hi as f64);
+            histogram.add(&slice);
             levels[0].buffer.extend_from_f32(&slice);
         }
         push_planes(&mut levels, 0, &[], count, false).map_err(|e| zarr(&e))?;
@@ -150,11 +155,13 @@ fn import_into_partial(
     let report = ImportReport {
         levels: layout.levels(),
         value_range,
+        value_percentiles: histogram.stored_percentiles(),
         bricks_written: levels.iter().map(|l| l.written).collect(),
         bricks_empty: levels.iter().map(|l| l.empty).collect(),
     };
     let name = out.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let attributes = StoreAttributes::new(&info, &layout, value_range, true);
+    let mut attributes = StoreAttributes::new(&info, &layout, value_range, true);
+    attributes.value_percentiles = Some(histogram.stored_percentiles());
     let mut group = GroupBuilder::new().build(store.clone(), "/").map_err(|e| zarr(&e))?;
     group.attributes_mut().insert("ome".into(), ome_multiscales(&name, &info, &layout));
     group.attributes_mut().insert("voxstream".into(), serde_json::to_value(&attributes).map_err(|e| zarr(&e))?);

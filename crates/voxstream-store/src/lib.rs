@@ -18,6 +18,7 @@ pub mod metadata;
 pub mod metadata_check;
 pub mod store_producer;
 pub mod store_reader;
+pub mod value_histogram;
 pub mod volume;
 
 pub use error::StoreError;

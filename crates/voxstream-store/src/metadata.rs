@@ -34,6 +34,11 @@ pub struct StoreAttributes {
     /// The import finished: absent or false means an interrupted import.
     #[serde(default)]
     pub complete: bool,
+    /// `[percent, value]` pairs of the level-0 samples, percents increasing (see
+    /// [`crate::value_histogram::STORED_PERCENTILES`]); absent in stores written before they were kept, and for
+    /// foreign OME-Zarr images.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub value_percentiles: Option<Vec<[f64; 2]>>,
 }
 
 impl StoreAttributes {
@@ -49,6 +54,21 @@ impl StoreAttributes {
             levels: layout.levels(),
             value_range,
             complete,
+            value_percentiles: None,
+        }
+    }
+
+    /// The value at `percent` of the stored percentiles, if kept.
+    pub fn percentile(&self, percent: f64) -> Option<f64> {
+        self.value_percentiles.as_ref()?.iter().find(|p| p[0] == percent).map(|p| p[1])
+    }
+
+    /// The values that the bulk of the data spans: from the 0.5th to the 99.5th percentile when the store keeps
+    /// them and they differ, otherwise the value range. Default transfer functions are placed over it.
+    pub fn typical_range(&self) -> [f64; 2] {
+        match (self.percentile(0.5), self.percentile(99.5)) {
+            (Some(low), Some(high)) if high > low => [low, high],
+            _ => self.value_range,
         }
     }
 

@@ -103,6 +103,20 @@ pub fn validate_attributes(
     if !((hi - lo) as f32).is_finite() {
         return bad("value_range", format!("{:?} spans more than an f32 holds", attributes.value_range));
     }
+    if let Some(percentiles) = &attributes.value_percentiles {
+        let in_range = |[percent, value]: [f64; 2]| (0.0..=100.0).contains(&percent) && value >= lo && value <= hi;
+        let increasing = percentiles.windows(2).all(|w| w[0][0] < w[1][0] && w[0][1] <= w[1][1]);
+        if !(percentiles.iter().all(|&p| in_range(p)) && increasing) {
+            return bad(
+                "value_percentiles",
+                format!(
+                    "must be [percent, value] pairs with percents in 0..=100 increasing and values within \
+                     value_range {:?}, non-decreasing",
+                    attributes.value_range
+                ),
+            );
+        }
+    }
     let info = VolumeInfo { dims, dtype, spacing: attributes.spacing, origin: attributes.origin };
     Ok((info, layout))
 }
@@ -154,6 +168,7 @@ mod tests {
             levels: 3,
             value_range: [0.0, 4000.0],
             complete: true,
+            value_percentiles: Some(vec![[0.5, 10.0], [99.5, 3900.0]]),
         }
     }
 
@@ -185,6 +200,9 @@ mod tests {
             ("value_range", Box::new(|a| a.value_range = [-1e308, 1e308])),
             ("value_range", Box::new(|a| a.value_range = [0.0, 70000.0])),
             ("value_range", Box::new(|a| a.value_range = [f64::NAN, 1.0])),
+            ("value_percentiles", Box::new(|a| a.value_percentiles = Some(vec![[0.5, 10.0], [99.5, 1e9]]))),
+            ("value_percentiles", Box::new(|a| a.value_percentiles = Some(vec![[99.5, 3900.0], [0.5, 10.0]]))),
+            ("value_percentiles", Box::new(|a| a.value_percentiles = Some(vec![[f64::NAN, 10.0]]))),
         ];
         for (field, edit) in cases {
             let mut attributes = good();

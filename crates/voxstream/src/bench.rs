@@ -1,5 +1,6 @@
 //! `voxstream bench`: per built-in scene, converged time from a cold cache, frames to converge interactively,
-//! warm frame time once resident (frames/s, rays/s, samples/s), and frame times along an interactive camera path.
+//! warm frame time once resident (frames/s, rays/s, samples/s, ns per sample and core next to a scalar trilinear
+//! bound measured in the same run), and frame times along an interactive camera path.
 
 use std::time::Instant;
 
@@ -13,6 +14,10 @@ use crate::memory::peak_rss_bytes;
 use crate::render_budget::RenderBudget;
 use crate::scenes::{builtin, Scene, SCENE_NAMES};
 use crate::session::{LoopLimits, Mode, Session};
+use crate::trilinear_bound::scalar_trilinear_ns_per_sample;
+
+/// How long the scalar trilinear bound is measured.
+const BOUND_DURATION: std::time::Duration = std::time::Duration::from_millis(500);
 
 /// Figures for one scene.
 #[derive(Clone, Debug, Serialize)]
@@ -35,6 +40,10 @@ pub struct SceneFigures {
     pub rays_per_second: f64,
     /// Warm samples per second.
     pub samples_per_second: f64,
+    /// Warm: wall time per sample multiplied by the worker threads, ns (the cost of a sample on one core).
+    pub ns_per_sample_per_core: f64,
+    /// The scalar trilinear bound measured in the same run (see [`crate::trilinear_bound`]), ns per sample.
+    pub trilinear_bound_ns: f64,
     /// Interactive camera path: median frame ms (render + bounded production).
     pub path_median_ms: f64,
     /// Interactive camera path: 95th percentile frame ms.
@@ -50,22 +59,24 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let names: Vec<String> =
         if args.scenes.is_empty() { SCENE_NAMES.iter().map(|s| s.to_string()).collect() } else { args.scenes.clone() };
     RenderBudget::plan(args.budget_mb, args.size, args.size, "--size")?;
+    eprintln!("bench: the scalar trilinear bound …");
+    let bound_ns = scalar_trilinear_ns_per_sample(BOUND_DURATION);
     let mut figures = Vec::new();
     for name in &names {
         let scene = builtin(name).with_context(|| format!("unknown scene '{name}'"))?;
         eprintln!("bench: {name} at {0}x{0} …", args.size);
-        figures.push(bench_scene(&scene, args)?);
+        figures.push(bench_scene(&scene, args, bound_ns)?);
     }
     println!(
-        "threads: {}, peak RSS: {:.0} MiB\n",
+        "threads: {}, peak RSS: {:.0} MiB, scalar trilinear bound: {bound_ns:.1} ns per sample on one core\n",
         rayon::current_num_threads(),
         peak_rss_bytes().unwrap_or(0) as f64 / 1048576.0
     );
-    println!("| scene | size | converged (cold) | passes | frames to converge (interactive) | warm frame | warm fps | rays/s | samples/s | path median | path p95 |");
-    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("| scene | size | converged (cold) | passes | frames to converge (interactive) | warm frame | warm fps | rays/s | samples/s | ns/sample/core (bound) | path median | path p95 |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
     for f in &figures {
         println!(
-            "| {} | {}² | {:.0} ms | {} | {} | {:.1} ms | {:.1} | {:.2} M | {:.1} M | {:.1} ms | {:.1} ms |",
+            "| {} | {}² | {:.0} ms | {} | {} | {:.1} ms | {:.1} | {:.2} M | {:.1} M | {:.1} ({:.1}) | {:.1} ms | {:.1} ms |",
             f.scene,
             f.size,
             f.converged_ms,
@@ -75,6 +86,8 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             f.warm_fps,
             f.rays_per_second / 1e6,
             f.samples_per_second / 1e6,
+            f.ns_per_sample_per_core,
+            f.trilinear_bound_ns,
             f.path_median_ms,
             f.path_p95_ms
         );
@@ -99,7 +112,7 @@ fn new_session(scene: &Scene, args: &BenchArgs) -> Result<Session<crate::scenes:
     Session::new(scene.producer, &scene.transfer_function, settings, pool_bytes, LoopLimits::default())
 }
 
-fn bench_scene(scene: &Scene, args: &BenchArgs) -> Result<SceneFigures> {
+fn bench_scene(scene: &Scene, args: &BenchArgs, bound_ns: f64) -> Result<SceneFigures> {
     // Cold, converged.
     let mut session = new_session(scene, args)?;
     let cold = session.render(&scene.camera, Mode::Converged)?;
@@ -141,6 +154,8 @@ fn bench_scene(scene: &Scene, args: &BenchArgs) -> Result<SceneFigures> {
         warm_fps: 1e3 / warm_frame_ms,
         rays_per_second: rays as f64 / warm_seconds,
         samples_per_second: samples as f64 / warm_seconds,
+        ns_per_sample_per_core: warm_seconds * 1e9 * rayon::current_num_threads() as f64 / samples.max(1) as f64,
+        trilinear_bound_ns: bound_ns,
         path_median_ms,
         path_p95_ms,
         bricks_resident: session.residency().bricks,

@@ -130,7 +130,8 @@ pub struct ImportArgs {
     /// The store folder to create.
     #[arg(long)]
     pub out: PathBuf,
-    /// Raw input: samples along x,y,z.
+    /// Raw input: samples along x,y,z, x varying fastest in the file (numpy's shape reversed: an array of shape
+    /// (z, y, x) in C order is --dims x,y,z).
     #[arg(long, value_parser = parse_dims)]
     pub dims: Option<[u64; 3]>,
     /// Raw input: sample type u8, u16, i16 or f32.

@@ -27,6 +27,9 @@ pub fn run(args: &ImportArgs) -> Result<()> {
         (None, None) => None,
         _ => bail!("a raw input needs both --dims and --dtype"),
     };
+    if let (Some(layout), Some(dims)) = (&raw, args.dims) {
+        check_raw_dims_against_header(&args.input, dims, layout.header_bytes)?;
+    }
     let mut source: Box<dyn VolumeSource> =
         Box::new(WithGeometry::new(open_volume(&args.input, raw.as_ref())?, args.spacing, args.origin));
     if let Some(s) = args.spacing.filter(|s| s.iter().any(|v| *v <= 0.0)) {
@@ -58,6 +61,59 @@ pub fn run(args: &ImportArgs) -> Result<()> {
             report.bricks_empty.iter().sum::<u64>(),
             report.value_range[0],
             report.value_range[1]
+        );
+    }
+    Ok(())
+}
+
+/// Formats whose header is cheap to read (the samples are streamed later), with their names.
+const HEADER_FORMATS: [(&str, &str); 9] = [
+    (".npy", "NumPy"),
+    (".npz", "NumPy"),
+    (".nii", "NIfTI"),
+    (".nii.gz", "NIfTI"),
+    (".nrrd", "NRRD"),
+    (".nhdr", "NRRD"),
+    (".mha", "MetaImage"),
+    (".mhd", "MetaImage"),
+    (".inr", "INRIMAGE"),
+];
+
+/// `--dims`/`--dtype` read any file as raw. When the file is in fact a format with a header (by its name, or NumPy's
+/// magic bytes), the header knows the dimensions: refuse, and say when `--dims` is the header's dimensions reversed
+/// (numpy's shape order z,y,x), the mistake that otherwise imports striped garbage. With `--header-bytes`, reading
+/// such a file as raw on purpose is allowed, unless the dimensions are reversed.
+fn check_raw_dims_against_header(input: &std::path::Path, dims: [u64; 3], header_bytes: u64) -> Result<()> {
+    let name = input.file_name().map(|n| n.to_string_lossy().to_lowercase()).unwrap_or_default();
+    let mut magic = [0u8; 6];
+    let is_numpy_by_magic = std::fs::File::open(input)
+        .and_then(|mut file| std::io::Read::read_exact(&mut file, &mut magic))
+        .is_ok_and(|()| &magic == b"\x93NUMPY");
+    let format = HEADER_FORMATS.iter().find(|(ending, _)| name.ends_with(ending)).map(|(_, format)| *format);
+    let (format, opened) = match (format, is_numpy_by_magic) {
+        (Some(format), _) => (format, open_volume(input, None)),
+        (None, true) => {
+            ("NumPy", voxstream_store::formats::npy::open(input).map(|s| Box::new(s) as Box<dyn VolumeSource>))
+        }
+        (None, false) => return Ok(()),
+    };
+    let Ok(source) = opened else { return Ok(()) };
+    let own = source.info().dims;
+    let shown = input.display();
+    let [x, y, z] = own;
+    if dims != own && dims == [z, y, x] {
+        bail!(
+            "--dims {},{},{} is {shown}'s dimensions reversed (numpy's shape order z,y,x): voxstream's --dims is x,y,z, \
+             i.e. --dims {x},{y},{z}; better, drop --dims and --dtype: the {format} header gives them",
+            dims[0],
+            dims[1],
+            dims[2]
+        );
+    }
+    if header_bytes == 0 {
+        bail!(
+            "{shown} is a {format} file ({x}x{y}x{z}): import it without --dims and --dtype, which read a file as raw \
+             samples"
         );
     }
     Ok(())

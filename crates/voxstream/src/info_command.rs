@@ -28,6 +28,9 @@ struct StoreInfo {
     origin: [f64; 3],
     brick_size: u64,
     value_range: [f64; 2],
+    /// `[percent, value]` pairs; absent for stores that do not keep them.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    value_percentiles: Option<Vec<[f64; 2]>>,
     bytes_on_disk: u64,
     levels: Vec<LevelInfo>,
 }
@@ -64,6 +67,7 @@ pub fn run(args: &InfoArgs) -> Result<()> {
         origin: attributes.origin,
         brick_size: attributes.brick_size,
         value_range: attributes.value_range,
+        value_percentiles: attributes.value_percentiles.clone(),
         bytes_on_disk: reader.bytes_on_disk(),
         levels,
     };
@@ -77,6 +81,10 @@ pub fn run(args: &InfoArgs) -> Result<()> {
     println!("spacing      {} {} {}", info.spacing[0], info.spacing[1], info.spacing[2]);
     println!("origin       {} {} {}", info.origin[0], info.origin[1], info.origin[2]);
     println!("value range  {} to {}", info.value_range[0], info.value_range[1]);
+    if let Some(percentiles) = &info.value_percentiles {
+        let text: Vec<String> = percentiles.iter().map(|[p, v]| format!("{p}%: {v}")).collect();
+        println!("percentiles  {}", text.join(", "));
+    }
     println!("brick        {}^3", info.brick_size);
     println!("on disk      {:.2} MiB", info.bytes_on_disk as f64 / 1048576.0);
     println!("level  dimensions          bricks   stored  constant  empty");

@@ -17,6 +17,7 @@ use crate::output_file::write_atomically;
 use crate::png_output::{numbered_path, write_png};
 use crate::render_budget::{RenderBudget, MAX_BUDGET_MB};
 use crate::render_progress::RenderProgress;
+use crate::render_warnings::{empty_image, transfer_function_mismatch};
 use crate::scenes::builtin;
 use crate::session::{LoopLimits, Mode, Session};
 use crate::source_path::check_store_path;
@@ -31,6 +32,8 @@ struct Source<P> {
     camera: Camera,
     placement: VolumePlacement,
     value_range: [f64; 2],
+    /// Span of the bulk of the values (0.5th to 99.5th percentile where the store keeps them).
+    typical_range: [f64; 2],
     /// Bytes of the budget taken by the producer's own cache (the rest goes to the pools).
     producer_cache_bytes: u64,
     /// Bytes per sample of the source data.
@@ -53,6 +56,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             light: scene.light,
             placement: VolumePlacement::default(),
             value_range: [0.0, 1.0],
+            typical_range: [0.0, 1.0],
             producer_cache_bytes: 0,
             sample_bytes: 2,
         };
@@ -63,7 +67,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let cache_bytes = budget.store_cache_bytes();
     let reader = Arc::new(StoreReader::open_with_cache(path, cache_bytes)?);
     let attributes = reader.attributes().clone();
-    let transfer_function = default_store_transfer_function(attributes.value_range)?;
+    let transfer_function = default_store_transfer_function(attributes.typical_range())?;
     if args.in_memory {
         let volume = Arc::new(InMemoryVolume::load(&reader)?);
         let source = store_source(args, &reader, StoreProducer::new(volume)?, 0, transfer_function);
@@ -85,9 +89,10 @@ fn store_source<P>(
         producer,
         transfer_function,
         shading: Shading::None,
-        camera: store_camera(reader.info()),
+        camera: store_camera(reader.info(), args.width, args.height),
         placement: store_placement(reader),
         value_range: reader.attributes().value_range,
+        typical_range: reader.attributes().typical_range(),
         producer_cache_bytes,
         sample_bytes: reader.info().dtype.size() as u64,
         light: None,
@@ -127,17 +132,41 @@ pub fn store_placement(reader: &StoreReader) -> VolumePlacement {
     }
 }
 
-/// A three-quarter view framing the whole volume with a 30° field of view.
-pub fn store_camera(info: &voxstream_store::VolumeInfo) -> Camera {
-    let lower = glam::DVec3::from(info.origin);
-    let upper = lower + glam::DVec3::from([0, 1, 2].map(|a| (info.dims[a] as f64 - 1.0) * info.spacing[a]));
+/// Direction from a store's centre towards the default eye: a three-quarter view from the front (−y), right (+x)
+/// and above (+z).
+pub const STORE_VIEW_DIRECTION: [f64; 3] = [0.55, -0.65, 0.52];
+
+/// Fraction of the image's half-width and half-height the volume's box may fill in the default store view.
+const STORE_FRAME_FILL: f64 = 0.95;
+
+/// A three-quarter view of the volume's centre, `+z` up, 30° vertical field of view, just far enough that all eight
+/// corners of the volume's box (the sample centres) fall inside a `width × height` image.
+pub fn store_camera(info: &voxstream_store::VolumeInfo, width: u32, height: u32) -> Camera {
+    use glam::DVec3;
+    let lower = DVec3::from(info.origin);
+    let upper = lower + DVec3::from([0, 1, 2].map(|a| (info.dims[a] as f64 - 1.0) * info.spacing[a]));
     let centre = (lower + upper) * 0.5;
-    let radius = ((upper - lower).length() * 0.5).max(1e-9);
     let fov: f64 = 30.0;
-    // The bounding sphere is loose for most scans: frame 80% of it.
-    let distance = radius / (fov.to_radians() * 0.5).sin() * 0.8;
-    let eye = centre + glam::DVec3::new(0.55, -0.65, 0.52).normalize() * distance;
-    Camera { eye: eye.to_array(), target: centre.to_array(), up: [0.0, 0.0, 1.0], fov }
+    let up_hint = DVec3::Z;
+    let towards_eye = DVec3::from(STORE_VIEW_DIRECTION).normalize();
+    // The camera's basis (as `Camera::frame` builds it): forward = −towards_eye, right = forward × up.
+    let forward = -towards_eye;
+    let right = forward.cross(up_hint).normalize();
+    let up = right.cross(forward);
+    let tan_vertical = (fov.to_radians() * 0.5).tan() * STORE_FRAME_FILL;
+    let tan_horizontal = tan_vertical * width.max(1) as f64 / height.max(1) as f64;
+    // A corner at offset r from the centre lies at depth D − r·towards_eye from an eye at distance D; it is inside
+    // the image when |r·right| ≤ tan_h·depth and |r·up| ≤ tan_v·depth.
+    let mut distance: f64 = 1e-9;
+    for corner in 0..8 {
+        let pick = |axis: usize| if corner >> axis & 1 == 1 { upper[axis] } else { lower[axis] };
+        let r = DVec3::new(pick(0), pick(1), pick(2)) - centre;
+        let along = r.dot(towards_eye);
+        distance =
+            distance.max(r.dot(right).abs() / tan_horizontal + along).max(r.dot(up).abs() / tan_vertical + along);
+    }
+    let eye = centre + towards_eye * distance;
+    Camera { eye: eye.to_array(), target: centre.to_array(), up: up_hint.to_array(), fov }
 }
 
 /// A soft ramp over the upper 80% of the value range, reaching opacity 0.05 per voxel (one sample spacing).
@@ -205,14 +234,16 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Ren
 
     let budget_bytes = budget.total_bytes;
     let limits = LoopLimits { requests_per_frame: args.requests_per_frame, ..LoopLimits::default() };
+    let pool_bytes = budget.pool_bytes(source.producer_cache_bytes);
     let mut session = Session::with_value_range(
         source.producer,
         &transfer_function,
         settings,
-        budget.pool_bytes(source.producer_cache_bytes),
+        pool_bytes,
         limits,
         source.value_range,
-    )?;
+    )
+    .map_err(|error| budget_in_user_units(error, args.budget_mb, budget_bytes, pool_bytes))?;
     let mut stats = RunStats {
         source: source.name.clone(),
         mode: format!("{:?}", args.mode).to_lowercase(),
@@ -224,6 +255,10 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Ren
     let sequence = args.path.is_some();
     let repeats = if sequence || args.mode == Mode::Converged { 1 } else { args.frames };
     let progress = RenderProgress::new(cameras.len() as u64 * u64::from(repeats), args.quiet);
+    if let Some(warning) = transfer_function_mismatch(&transfer_function, source.typical_range, source.value_range) {
+        progress.warn(&warning);
+    }
+    let mut empty_images = 0usize;
     let mut reported_failures = 0usize;
     let mut written = Vec::new();
     for (index, camera) in cameras.iter().enumerate() {
@@ -247,6 +282,12 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Ren
             if repeat + 1 == repeats || (!sequence && stats.converged) {
                 let out = if sequence { numbered_path(&args.out, index) } else { args.out.clone() };
                 write_png(&result.image, &out)?;
+                if let Some(warning) = empty_image(&result.image) {
+                    if empty_images == 0 {
+                        progress.warn(&format!("{}: {warning}", out.display()));
+                    }
+                    empty_images += 1;
+                }
                 stats.frames += 1;
                 // A sequence lists each file as it is written; a single image is named in the summary.
                 progress.frame_done(sequence.then_some(out.as_path()));
@@ -276,6 +317,9 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Ren
              stands in (raise --budget-mb)",
             args.budget_mb
         ));
+    }
+    if empty_images > 1 {
+        progress.warn(&format!("{empty_images} of the {} images written are empty", written.len()));
     }
     if let Some(path) = &args.stats {
         let text = serde_json::to_string_pretty(&stats)?;
@@ -307,6 +351,22 @@ fn summary_line(written: &[std::path::PathBuf], args: &RenderArgs, stats: &RunSt
     format!(
         "wrote {files} ({}x{}, {state}, {passes} passes, {} bricks loaded)",
         args.width, args.height, stats.bricks_produced
+    )
+}
+
+/// The pools' "budget too small" in `--budget-mb`'s units: the smallest `--budget-mb` that works, counting the share
+/// of the budget that goes to a store's brick cache.
+fn budget_in_user_units(error: anyhow::Error, budget_mb: u64, budget_bytes: u64, pool_bytes: u64) -> anyhow::Error {
+    let Some(voxstream_core::CoreError::BudgetTooSmall { minimum_bytes, .. }) = error.downcast_ref() else {
+        return error;
+    };
+    // The pools get `pool_bytes` of `budget_bytes`; scale the minimum up by the same share, round up to whole MiB.
+    let share = pool_bytes.max(1) as f64 / budget_bytes.max(1) as f64;
+    let minimum_mb = ((*minimum_bytes as f64 / share) / 1048576.0).ceil().max(1.0) as u64;
+    let minimum_mb = if minimum_mb <= budget_mb { budget_mb + 1 } else { minimum_mb };
+    anyhow::anyhow!(
+        "--budget-mb {budget_mb} is too small for this source: the node and brick pools need at least {minimum_mb} \
+         MiB (use --budget-mb {minimum_mb} or more)"
     )
 }
 

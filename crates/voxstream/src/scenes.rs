@@ -77,7 +77,7 @@ pub fn default_camera() -> Camera {
 /// open to the background), with the top and right faces in view; lit from near the view direction but tilted, so
 /// that the tunnels' walls are darker than the faces.
 pub fn sponge_camera() -> Camera {
-    Camera { eye: [1.2, 1.05, 3.1], target: [0.5, 0.5, 0.5], up: [0.0, 1.0, 0.0], fov: 30.0 }
+    Camera { eye: [1.0, 0.9, 3.2], target: [0.5, 0.5, 0.5], up: [0.0, 1.0, 0.0], fov: 30.0 }
 }
 
 /// The sponge's light: towards +z, tilted up and right.

@@ -179,8 +179,9 @@ fn renders_match_a_brute_force_march_of_the_dense_array() {
     for (file, name, raw) in volumes().into_iter().filter(|v| v.1 != "liver") {
         let reader = import(&dir, file, raw.as_ref(), &work.join(format!("{name}.zarr")));
         let range = reader.attributes().value_range;
-        let tf = default_store_transfer_function(range).unwrap();
-        let camera = store_camera(reader.info());
+        // The default transfer function of `render`, over the bulk of the values.
+        let tf = default_store_transfer_function(reader.attributes().typical_range()).unwrap();
+        let camera = store_camera(reader.info(), size, size);
         // Sample the finest level everywhere, as the dense reference does.
         let settings = RenderSettings {
             width: size,
@@ -235,7 +236,7 @@ fn streaming_and_in_memory_producers_give_the_same_image() {
     let reader = import(&dir, "mni152_t1.nii.gz", None, &work.join("mni.zarr"));
     let range = reader.attributes().value_range;
     let tf = default_store_transfer_function(range).unwrap();
-    let camera = store_camera(reader.info());
+    let camera = store_camera(reader.info(), 64, 64);
     let settings =
         RenderSettings { width: 64, height: 64, placement: store_placement(&reader), ..RenderSettings::default() };
     let streamed = {
@@ -277,7 +278,7 @@ fn foreign_ome_zarr_v2_and_v3_render_like_the_native_store() {
         let tf = default_store_transfer_function([0.0, 255.0]).unwrap();
         let settings =
             RenderSettings { width: 96, height: 96, placement: store_placement(&reader), ..RenderSettings::default() };
-        let camera = store_camera(reader.info());
+        let camera = store_camera(reader.info(), 96, 96);
         let producer = StoreProducer::new(reader).unwrap();
         let mut session =
             Session::with_value_range(producer, &tf, settings, 64 << 20, LoopLimits::default(), range).unwrap();

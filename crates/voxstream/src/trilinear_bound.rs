@@ -1,0 +1,87 @@
+//! A bound for the ray caster's cost per sample, measured on the machine the benchmark runs on: a plain scalar loop
+//! that marches straight rays through one cache-resident brick and takes a trilinear sample every half voxel (no
+//! tree, no transfer function, no compositing). `voxstream bench` reports the ray caster's nanoseconds per sample
+//! and core next to it, so that the gap is read on one machine in one run rather than across machines and days.
+
+use std::hint::black_box;
+use std::time::{Duration, Instant};
+
+/// Brick edge including its one-voxel border, as the brick pool stores a 32³ brick.
+const EDGE: usize = 34;
+/// March step, in voxels (the ray caster's default `--step`).
+const STEP: f32 = 0.5;
+
+/// Nanoseconds per trilinear sample on one core, measured for about `duration`.
+pub fn scalar_trilinear_ns_per_sample(duration: Duration) -> f64 {
+    let brick = brick();
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let mut random = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let (mut samples, mut sum) = (0u64, 0.0f32);
+    let start = Instant::now();
+    while start.elapsed() < duration {
+        for _ in 0..256 {
+            // A chord of the brick: from a random interior point in a random direction, until it leaves.
+            let limit = (EDGE - 1) as f32;
+            let mut p = [random() * limit, random() * limit, random() * limit];
+            let d = normalised([random() - 0.5, random() - 0.5, random() - 0.5]);
+            let advance = d.map(|c| c * STEP);
+            while p.iter().all(|&c| (0.0..limit).contains(&c)) {
+                sum += trilinear(&brick, p);
+                samples += 1;
+                p = [p[0] + advance[0], p[1] + advance[1], p[2] + advance[2]];
+            }
+        }
+    }
+    black_box(sum);
+    start.elapsed().as_secs_f64() * 1e9 / samples.max(1) as f64
+}
+
+fn brick() -> Vec<u16> {
+    (0..EDGE * EDGE * EDGE).map(|i| (i as u32).wrapping_mul(2_654_435_761) as u16).collect()
+}
+
+fn normalised(v: [f32; 3]) -> [f32; 3] {
+    let length = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt().max(1e-6);
+    v.map(|c| c / length)
+}
+
+/// The trilinear interpolation of `brick` at `p` (voxel units, inside `[0, EDGE − 1)³`).
+#[inline]
+fn trilinear(brick: &[u16], p: [f32; 3]) -> f32 {
+    let cell = p.map(|c| c.floor());
+    let f = [p[0] - cell[0], p[1] - cell[1], p[2] - cell[2]];
+    let [x, y, z] = cell.map(|c| c as usize);
+    let at = |dx: usize, dy: usize, dz: usize| f32::from(brick[((z + dz) * EDGE + y + dy) * EDGE + x + dx]);
+    let lerp = |a: f32, b: f32, t: f32| a + (b - a) * t;
+    let x00 = lerp(at(0, 0, 0), at(1, 0, 0), f[0]);
+    let x10 = lerp(at(0, 1, 0), at(1, 1, 0), f[0]);
+    let x01 = lerp(at(0, 0, 1), at(1, 0, 1), f[0]);
+    let x11 = lerp(at(0, 1, 1), at(1, 1, 1), f[0]);
+    lerp(lerp(x00, x10, f[1]), lerp(x01, x11, f[1]), f[2])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn trilinear_interpolates_the_corners_and_a_linear_field() {
+        let linear: Vec<u16> = (0..EDGE * EDGE * EDGE)
+            .map(|i| (i % EDGE + 2 * (i / EDGE % EDGE) + 3 * (i / EDGE / EDGE)) as u16)
+            .collect();
+        assert_eq!(trilinear(&linear, [2.0, 3.0, 4.0]), 2.0 + 6.0 + 12.0);
+        let value = trilinear(&linear, [2.25, 3.5, 4.75]);
+        assert!((value - (2.25 + 7.0 + 14.25)).abs() < 1e-4, "{value}");
+    }
+
+    #[test]
+    fn the_bound_is_a_positive_time() {
+        let ns = scalar_trilinear_ns_per_sample(Duration::from_millis(20));
+        assert!(ns.is_finite() && ns > 0.0, "{ns}");
+    }
+}

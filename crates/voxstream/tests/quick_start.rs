@@ -1,0 +1,82 @@
+//! README.md's main command, exactly as written in its "Quick start", works in a clean checkout: it builds and
+//! renders the default scene to `frame.png`. (It once stopped with "could not determine which binary to run" when a
+//! second binary joined the workspace, and nothing noticed; `.ci/run` also runs it from CI's clean clone.)
+//!
+//! The checkout is a copy of the files git tracks, in `target/quick-start/checkout`; it builds into
+//! `target/quick-start`, seeded from this build's dependencies the first time so that only voxstream's own crates
+//! are compiled.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn repository() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").canonicalize().unwrap()
+}
+
+/// The first `cargo run` line of README.md's "Quick start" code block, without its comment.
+fn main_command(readme: &str) -> String {
+    let section = readme.split("## Quick start").nth(1).expect("README.md has a Quick start section");
+    let block = section.split("```sh").nth(1).expect("the Quick start has a sh block").split("```").next().unwrap();
+    let line = block.lines().find(|l| l.trim_start().starts_with("cargo run")).expect("a `cargo run` line");
+    line.split('#').next().unwrap().trim().to_string()
+}
+
+/// The files git tracks, copied to `checkout`.
+fn clean_checkout(root: &Path, checkout: &Path) {
+    let listed = Command::new("git").args(["ls-files", "-z"]).current_dir(root).output().expect("git");
+    assert!(listed.status.success(), "git ls-files failed: {}", String::from_utf8_lossy(&listed.stderr));
+    let mut copied = 0;
+    for name in listed.stdout.split(|&b| b == 0).filter(|n| !n.is_empty()) {
+        let relative = Path::new(std::str::from_utf8(name).unwrap());
+        let source = root.join(relative);
+        if !source.is_file() {
+            continue; // deleted in the working tree, not yet committed
+        }
+        let destination = checkout.join(relative);
+        std::fs::create_dir_all(destination.parent().unwrap()).unwrap();
+        std::fs::copy(&source, &destination).unwrap();
+        // Keep the modification time, so that cargo finds the previous run's build of this checkout fresh.
+        let modified = std::fs::metadata(&source).and_then(|m| m.modified()).unwrap();
+        std::fs::File::options().write(true).open(&destination).and_then(|f| f.set_modified(modified)).unwrap();
+        copied += 1;
+    }
+    assert!(copied > 20, "only {copied} tracked files");
+}
+
+#[test]
+fn readme_main_command_renders_the_default_scene_in_a_clean_checkout() {
+    let root = repository();
+    let command = main_command(&std::fs::read_to_string(root.join("README.md")).unwrap());
+    assert!(command.starts_with("cargo run"), "{command}");
+
+    // A fixed place (with the sources' times kept) lets a later run reuse this one's build.
+    let target = root.join("target/quick-start");
+    let checkout = target.join("checkout");
+    let _ = std::fs::remove_dir_all(&checkout);
+    clean_checkout(&root, &checkout);
+    if !target.join("release").exists() {
+        // Seed with this build's compiled dependencies (a copy: cargo rewrites its files in place).
+        std::fs::create_dir_all(target.join("release")).unwrap();
+        for part in ["deps", "build", ".fingerprint"] {
+            let status = Command::new("cp")
+                .arg("-a")
+                .arg(root.join("target/release").join(part))
+                .arg(target.join("release"))
+                .status();
+            assert!(status.is_ok_and(|s| s.success()), "cannot seed {}", target.display());
+        }
+    }
+    let output = Command::new("bash")
+        .args(["-c", &command])
+        .current_dir(&checkout)
+        .env("CARGO_TARGET_DIR", &target)
+        .env_remove("RUSTFLAGS")
+        .output()
+        .expect("bash");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "`{command}` failed in a clean checkout:\n{stderr}");
+    assert!(stderr.contains("wrote frame.png (512x512, complete"), "no summary line:\n{stderr}");
+    let bytes = std::fs::read(checkout.join("frame.png")).expect("frame.png written");
+    let reader = png::Decoder::new(std::io::Cursor::new(bytes)).read_info().unwrap();
+    assert_eq!((reader.info().width, reader.info().height), (512, 512));
+}
