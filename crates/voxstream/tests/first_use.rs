@@ -292,7 +292,8 @@ fn mistakes_in_flags_and_files_are_named_in_the_user_s_terms() {
             format!("error: invalid camera path {}: camera 0: missing field `up`", Path::new("path.json").display()),
         ),
         (
-            vec!["render", "ball.zarr", "--budget-mb", "1", "--out", "f.png"],
+            // A 64x64 image (160 KiB of the budget): the pools are what does not fit.
+            vec!["render", "ball.zarr", "--budget-mb", "1", "--width", "64", "--height", "64", "--out", "f.png"],
             "error: --budget-mb 1 is too small for this source: the node and brick pools need at least 2 MiB (use \
              --budget-mb 2 or more)"
                 .into(),
