@@ -40,11 +40,22 @@ fn dtype_of(path: &Path, color: ColorType, sample_format_float: bool, signed: bo
     }
 }
 
+/// The most a decoded TIFF page may hold: a 32768² f32 slice.
+pub const MAX_TIFF_PAGE_BYTES: u64 = 4 << 30;
+
+/// The most a TIFF page may expand over its file's size (LZW, the most expansive of the codecs read, reaches ~2730:1).
+pub const MAX_TIFF_EXPANSION: u64 = 4096;
+
+/// A decoder whose buffers are bounded by the file: a page may decode to at most [`MAX_TIFF_EXPANSION`] times the
+/// file's size and [`MAX_TIFF_PAGE_BYTES`], so a header cannot make it allocate for data that is not there.
 fn open_decoder(path: &Path) -> Result<Decoder<BufReader<File>>, StoreError> {
     let file = File::open(path).map_err(|e| StoreError::io(path, e))?;
-    Decoder::new(BufReader::new(file))
-        .map_err(|e| tiff_error(path, e))
-        .map(|d| d.with_limits(tiff::decoder::Limits::unlimited()))
+    let file_len = file.metadata().map_err(|e| StoreError::io(path, e))?.len();
+    let page_bytes = file_len.saturating_mul(MAX_TIFF_EXPANSION).min(MAX_TIFF_PAGE_BYTES);
+    let mut limits = tiff::decoder::Limits::default();
+    limits.decoding_buffer_size = usize::try_from(page_bytes).unwrap_or(usize::MAX);
+    limits.intermediate_buffer_size = limits.decoding_buffer_size;
+    Decoder::new(BufReader::new(file)).map_err(|e| tiff_error(path, e)).map(|d| d.with_limits(limits))
 }
 
 /// Page width, height and sample type of the decoder's current page.
