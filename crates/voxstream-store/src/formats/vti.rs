@@ -331,12 +331,10 @@ fn inflate_blocks(header: &[u8], data: &[u8], blocks: usize, h: &Header, expecte
 fn ascii(text: &str, dtype: DType, count: usize, big_endian: bool) -> Result<Vec<u8>, String> {
     // Each value takes at least two characters (a digit and a separator), so the text bounds what to reserve.
     let mut out = Vec::with_capacity(count.min(text.len() / 2 + 1) * dtype.size());
-    let mut n = 0usize;
-    for token in text.split_whitespace() {
+    for (n, token) in text.split_whitespace().enumerate() {
         if n == count {
             return Err(format!("more than the {count} values the extent needs"));
         }
-        n += 1;
         let integer = |lo: f64, hi: f64| -> Result<f64, String> {
             let v: f64 = token.parse().map_err(|_| format!("'{token}' is not a number"))?;
             if v.fract() != 0.0 || !(lo..=hi).contains(&v) {
