@@ -2,7 +2,7 @@
 # Fuzzes every parser voxstream reads untrusted input with (the fuzz targets of fuzz/) for SECONDS each (default 60),
 # after building them once. Prints, per target, how long it ran and libFuzzer's last coverage line (cov: edges,
 # ft: features, corp: corpus size). A crash stops the script with libFuzzer's report; the input that crashed is in
-# fuzz/artifacts/TARGET/ and belongs, once fixed, under crates/voxstream-store/tests/fuzz_regressions/TARGET/.
+# fuzz/artifacts/TARGET/ and belongs, once fixed, under crates/voxstream/tests/fuzz_regressions/TARGET/.
 #
 # cargo-fuzz needs nightly features (-Z flags, sanitizer coverage); on the stable toolchain RUSTC_BOOTSTRAP=1 unlocks
 # them. Targets are built without a sanitizer (-s none): the workspace forbids unsafe code, so AddressSanitizer adds

@@ -178,6 +178,33 @@ fn vti_ascii(extent: [u64; 3], kind: &str, values: &str) -> Vec<u8> {
     .into_bytes()
 }
 
+/// A little-endian TIFF of one 8-bit greyscale uncompressed page claiming `width × height` samples, holding 12 bytes.
+fn tiff(width: u32, height: u32) -> Vec<u8> {
+    let mut out = b"II*\0".to_vec();
+    out.extend(20u32.to_le_bytes());
+    out.extend([7u8; 12]);
+    let tags: [(u16, u16, u32); 9] = [
+        (256, 4, width),
+        (257, 4, height),
+        (258, 3, 8),
+        (259, 3, 1),
+        (262, 3, 1),
+        (273, 4, 8),
+        (277, 3, 1),
+        (278, 4, height),
+        (279, 4, 12),
+    ];
+    out.extend((tags.len() as u16).to_le_bytes());
+    for (tag, kind, value) in tags {
+        out.extend(tag.to_le_bytes());
+        out.extend(kind.to_le_bytes());
+        out.extend(1u32.to_le_bytes());
+        out.extend(value.to_le_bytes());
+    }
+    out.extend(0u32.to_le_bytes());
+    out
+}
+
 /// `bytes` with the byte at `at` (negative: from the end) inverted.
 fn flipped(mut bytes: Vec<u8>, at: isize) -> Vec<u8> {
     let index = if at < 0 { bytes.len() - at.unsigned_abs() } else { at as usize };
@@ -217,6 +244,7 @@ fn corpus() -> Vec<Case> {
             name: "huge-shape-deflated.npz",
             bytes: npz(&npy("<f4", [1000, 250_000, 250_000], &ramp()), zip::CompressionMethod::Deflated),
         },
+        Case { name: "huge-page.tif", bytes: tiff(1 << 20, 1 << 20) },
         Case { name: "huge-extent-ascii.vti", bytes: vti_ascii([100_000, 100_000, 1000], "Float32", "1 2 3 4") },
         // 1.5 MB inflating to 1.5 GiB; and one block whose data inflates far past what its header says.
         Case { name: "zlib-bomb.vti", bytes: vti_zlib([1024, 1024, 1536], 1 << 20, 1536, 1536, &zlib_zeros_1mib) },

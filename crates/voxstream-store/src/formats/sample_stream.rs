@@ -219,7 +219,7 @@ impl SampleStream {
                     return Err(StoreError::format(
                         &self.path,
                         format!(
-                            "corrupt {} data after the last sample: {e} (a damaged trailer, or bytes after the stream)",
+                            "corrupt {} data: {e} (at the end of the stream: a damaged file, or bytes after the stream)",
                             compression_name(&self.reader)
                         ),
                     ))
