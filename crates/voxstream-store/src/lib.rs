@@ -15,6 +15,7 @@ pub mod formats;
 pub mod import;
 pub mod layout;
 pub mod metadata;
+pub mod non_finite;
 pub mod store_producer;
 pub mod store_reader;
 pub mod value_histogram;
