@@ -79,12 +79,12 @@ impl TransferFunction {
         TransferFunction::new(points, file.unit_distance)
     }
 
-    /// `[r, g, b, alpha]` at `value`, linear between points, clamped outside.
+    /// `[r, g, b, alpha]` at `value`, linear between points, clamped outside; NaN maps as the first point.
     pub fn evaluate(&self, value: f64) -> [f64; 4] {
         let first = &self.points[0];
         let last = &self.points[self.points.len() - 1];
         let pick = |p: &[f64; 5]| [p[1], p[2], p[3], p[4]];
-        if value <= first[0] {
+        if value.is_nan() || value <= first[0] {
             return pick(first);
         }
         if value >= last[0] {
@@ -179,6 +179,7 @@ mod tests {
             .unwrap();
         assert_eq!(tf.evaluate(0.5), [0.5, 0.25, 0.0, 0.25]);
         assert_eq!(tf.evaluate(-3.0), [0.0; 4]);
+        assert_eq!(tf.evaluate(f64::NAN), [0.0; 4]);
         let lut = TransferLut::new(&tf, 0.0, 1.0, 1.0);
         let e = lut.lookup(1.0);
         // alpha 0.5 over 2 units: sigma = ln 2 / 2.

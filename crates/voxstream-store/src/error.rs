@@ -41,6 +41,19 @@ pub enum StoreError {
         /// What is not supported.
         message: String,
     },
+    /// A sample is NaN or ±inf: stores hold finite values only (the value range and per-brick min/max depend on it).
+    #[error(
+        "sample ({x}, {y}, {z}) is {value}: stores hold finite values only (--nan-as VALUE replaces NaN and ±inf)",
+        x = position[0],
+        y = position[1],
+        z = position[2]
+    )]
+    NonFinite {
+        /// The offending value (NaN, inf or -inf).
+        value: f32,
+        /// Its sample position (x, y, z) at level 0.
+        position: [u64; 3],
+    },
     /// The Zarr store is missing, incomplete or corrupt.
     #[error("{path}: {message}")]
     Store {

@@ -20,6 +20,7 @@ use zarrs::group::GroupBuilder;
 use crate::error::StoreError;
 use crate::layout::PyramidLayout;
 use crate::metadata::{ome_multiscales, StoreAttributes, MINMAX_GROUP};
+use crate::non_finite;
 use crate::value_histogram::ValueHistogram;
 use crate::volume::{DType, VolumeInfo, VolumeSource};
 
@@ -34,11 +35,13 @@ pub struct ImportOptions {
     pub zstd_level: i32,
     /// Replace an existing store.
     pub overwrite: bool,
+    /// Replaces NaN and ±inf samples; `None` refuses them (see [`crate::non_finite`]).
+    pub nan_as: Option<f32>,
 }
 
 impl Default for ImportOptions {
     fn default() -> Self {
-        ImportOptions { brick_size: 32, shard_bricks: 8, zstd_level: 3, overwrite: false }
+        ImportOptions { brick_size: 32, shard_bricks: 8, zstd_level: 3, overwrite: false, nan_as: None }
     }
 }
 
@@ -84,6 +87,9 @@ fn import_into_partial(
             format!("brick size must be even and in 4..=256, got {}", options.brick_size),
         ));
     }
+    if options.nan_as.is_some_and(|v| !v.is_finite()) {
+        return Err(StoreError::store(out, "the replacement for NaN and ±inf must itself be finite"));
+    }
     if out.exists() && !options.overwrite {
         return Err(StoreError::store(out, "already exists (use --overwrite to replace it)"));
     }
@@ -115,9 +121,10 @@ fn import_into_partial(
     while z < info.dims[2] {
         let count = (info.dims[2] - z).min(brick as u64) as usize;
         // Read slice by slice into level 0's slab, which keeps the input's own sample type (1 byte per u8 sample).
-        for _ in 0..count {
+        for k in 0..count {
             slice.clear();
             source.read_slices(1, &mut slice)?;
+            non_finite::check_slice(&mut slice, info.dims[0], z + k as u64, options.nan_as)?;
             let (lo, hi) = slice.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
             value_range[0] = value_range[0].min(lo as f64);
             value_range[1] = value_range[1].max(hi as f64);

@@ -16,6 +16,7 @@ pub mod import;
 pub mod layout;
 pub mod metadata;
 pub mod metadata_check;
+pub mod non_finite;
 pub mod store_producer;
 pub mod store_reader;
 pub mod value_histogram;

@@ -499,3 +499,56 @@ fn npz_stored_and_deflated() {
         check_import(&dir.join(name), None, DType::U16, [1.0; 3], [0.0; 3]);
     }
 }
+
+#[test]
+fn multi_member_gzip_imports_and_every_member_is_checked() {
+    let dir = scratch("members");
+    // Two gzip members (as pigz or bgzip write them) hold one volume.
+    let data = encode(DType::U16, Endian::Little);
+    let (first, second) = data.split_at(data.len() / 3);
+    let mut file = nrrd_header("ushort", "gzip", None).into_bytes();
+    file.extend(gzip(first));
+    let second_at = file.len();
+    file.extend(gzip(second));
+    std::fs::write(dir.join("members.nrrd"), &file).unwrap();
+    check_import(&dir.join("members.nrrd"), None, DType::U16, [0.5, 0.75, 2.0], [-1.0, 2.5, 3.0]);
+
+    // The first member's CRC is checked too, not only the last one's.
+    let mut bad = file.clone();
+    bad[second_at - 8] ^= 0x55;
+    std::fs::write(dir.join("badfirst.nrrd"), &bad).unwrap();
+    let e = import_error(&dir.join("badfirst.nrrd"), None).to_string();
+    assert!(e.contains("badfirst.nrrd") && e.contains("checksum"), "{e}");
+}
+
+#[test]
+fn vti_block_sizes_must_add_up_before_anything_inflates() {
+    let dir = scratch("vti-blocks");
+    let data = encode(DType::U8, Endian::Little);
+    let block = zlib(&data);
+    let vti = |blocks: u64, block_size: u64, last: u64| {
+        let mut bytes = format!(
+            "<?xml version=\"1.0\"?>\n<VTKFile type=\"ImageData\" byte_order=\"LittleEndian\" \
+             compressor=\"vtkZLibDataCompressor\">\n<ImageData WholeExtent=\"0 {} 0 {} 0 {}\">\n<Piece>\n<PointData>\n\
+             <DataArray type=\"UInt8\" format=\"appended\" offset=\"0\"/>\n</PointData>\n</Piece>\n</ImageData>\n\
+             <AppendedData encoding=\"raw\">\n_",
+            DIMS[0] - 1,
+            DIMS[1] - 1,
+            DIMS[2] - 1
+        )
+        .into_bytes();
+        for v in [blocks as u32, block_size as u32, last as u32, block.len() as u32] {
+            bytes.extend(v.to_le_bytes());
+        }
+        bytes.extend(&block);
+        bytes.extend(b"\n</AppendedData>\n</VTKFile>\n");
+        bytes
+    };
+    let n = data.len() as u64;
+    std::fs::write(dir.join("good.vti"), vti(1, n, n)).unwrap();
+    check_import(&dir.join("good.vti"), None, DType::U8, [1.0; 3], [0.0; 3]);
+    // The header claims a block smaller than what the extent needs: refused before inflating.
+    std::fs::write(dir.join("short.vti"), vti(1, n - 1, n - 1)).unwrap();
+    let e = import_error(&dir.join("short.vti"), None).to_string();
+    assert!(e.contains("short.vti") && e.contains("does not add up"), "{e}");
+}

@@ -155,6 +155,9 @@ pub struct ImportArgs {
     /// Replace an existing store.
     #[arg(long)]
     pub overwrite: bool,
+    /// Store NaN, +inf and -inf samples as this finite value (without it they are refused, naming the first one).
+    #[arg(long, value_name = "VALUE", allow_negative_numbers = true)]
+    pub nan_as: Option<f32>,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,

@@ -1,9 +1,9 @@
 //! `voxstream import`: a volume file into a store, with a progress bar (throughput and ETA).
 
-use anyhow::{bail, Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use voxstream_store::formats::{open_volume, Endian, RawLayout, WithGeometry};
-use voxstream_store::{import_volume, DType, ImportOptions, VolumeInfo, VolumeSource};
+use voxstream_store::{import_volume, DType, ImportOptions, StoreError, VolumeInfo, VolumeSource};
 
 use crate::cli::{EndianArg, ImportArgs};
 
@@ -35,8 +35,16 @@ pub fn run(args: &ImportArgs) -> Result<()> {
     if let Some(s) = args.spacing.filter(|s| s.iter().any(|v| *v <= 0.0)) {
         bail!("--spacing must be positive, got {s:?}");
     }
+    if let Some(v) = args.nan_as.filter(|v| !v.is_finite()) {
+        bail!("--nan-as must be a finite number, got {v}");
+    }
     let info = source.info().clone();
-    let options = ImportOptions { brick_size: args.brick_size, overwrite: args.overwrite, ..ImportOptions::default() };
+    let options = ImportOptions {
+        brick_size: args.brick_size,
+        overwrite: args.overwrite,
+        nan_as: args.nan_as,
+        ..ImportOptions::default()
+    };
     let bar = if args.quiet { ProgressBar::hidden() } else { ProgressBar::new(info.byte_len()) };
     bar.set_style(
         ProgressStyle::with_template("{msg} [{bar:30}] {bytes}/{total_bytes} {binary_bytes_per_sec} ETA {eta}")
@@ -45,7 +53,11 @@ pub fn run(args: &ImportArgs) -> Result<()> {
     );
     bar.set_message(format!("importing {}", args.input.display()));
     let mut progress = |done: u64, _total: u64| bar.set_position(done);
-    let report = import_volume(source.as_mut(), &args.out, &options, &mut progress)?;
+    let report = import_volume(source.as_mut(), &args.out, &options, &mut progress).map_err(|error| match error {
+        // The only error that does not name a file already.
+        StoreError::NonFinite { .. } => anyhow!("{}: {error}", args.input.display()),
+        error => error.into(),
+    })?;
     bar.finish_and_clear();
     if !args.quiet {
         eprintln!(

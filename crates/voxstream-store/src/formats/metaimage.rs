@@ -1,10 +1,10 @@
 //! MetaImage (`.mha` with local data, `.mhd` with a data file), ITK's text-header format, raw or zlib-compressed.
 
 use std::fs::File;
-use std::io::{BufRead, BufReader};
+use std::io::BufReader;
 use std::path::Path;
 
-use super::header_text::three;
+use super::header_text::{read_line, three};
 use super::sample_stream::{Compression, Endian, SampleStream};
 use crate::error::StoreError;
 use crate::volume::{DType, VolumeInfo};
@@ -19,13 +19,10 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
     let (mut spacing, mut origin, mut endian, mut compression) =
         ([1.0; 3], [0.0; 3], Endian::Little, Compression::None);
     loop {
-        line.clear();
-        let read =
-            reader.read_line(&mut line).map_err(|e| StoreError::format(path, format!("unreadable header: {e}")))?;
+        let read = read_line(path, &mut reader, &mut line, &mut header_bytes)?;
         if read == 0 {
             break;
         }
-        header_bytes += read as u64;
         let Some((key, value)) = line.split_once('=') else {
             return Err(StoreError::format(path, format!("malformed header line '{}'", line.trim())));
         };

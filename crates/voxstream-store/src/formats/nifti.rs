@@ -82,6 +82,10 @@ pub fn open(path: &Path, is_gzip: bool) -> Result<SampleStream, StoreError> {
     } else {
         SampleStream::open(path, vox_offset as u64, Compression::None, 0, info, endian)?
     };
+    // As nibabel: a zero or non-finite slope means "not scaled".
     let is_identity = slope == 0.0 || !slope.is_finite() || (slope == 1.0 && intercept == 0.0);
+    if !is_identity && !intercept.is_finite() {
+        return Err(StoreError::format(path, format!("scl_inter is {intercept} with scl_slope {slope}")));
+    }
     Ok(if is_identity { stream } else { stream.with_scaling(slope, intercept) })
 }

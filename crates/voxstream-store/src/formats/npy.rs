@@ -7,7 +7,7 @@
 use std::io::Read;
 use std::path::Path;
 
-use super::sample_stream::{Compression, Endian, SampleStream};
+use super::sample_stream::{check_deflate_capacity, Compression, Endian, SampleStream};
 use crate::error::StoreError;
 use crate::volume::{DType, VolumeInfo};
 
@@ -19,29 +19,60 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
 }
 
 /// Opens the first array of a `.npz` archive (stored or deflated), streaming it without extracting.
+///
+/// The entry's sizes come from the archive's central directory and are checked before anything is read: its
+/// compressed bytes must lie inside the file, a stored entry's two sizes must agree, a deflated one cannot expand more
+/// than deflate can, and the array header's shape must account for exactly the entry's uncompressed size. While
+/// streaming, the entry's CRC32 and length are verified at its end.
 pub fn open_npz(path: &Path) -> Result<SampleStream, StoreError> {
     let file = std::fs::File::open(path).map_err(|e| StoreError::io(path, e))?;
+    let file_len = file.metadata().map_err(|e| StoreError::io(path, e))?.len();
     let mut archive =
         zip::ZipArchive::new(file).map_err(|e| StoreError::format(path, format!("not a .npz (zip) archive: {e}")))?;
-    let (name, start, compressed, method) = {
+    let entry = {
         let mut found = None;
         for i in 0..archive.len() {
             let entry =
                 archive.by_index_raw(i).map_err(|e| StoreError::format(path, format!("corrupt archive: {e}")))?;
             if entry.name().ends_with(".npy") {
-                found =
-                    Some((entry.name().to_string(), entry.data_start(), entry.compressed_size(), entry.compression()));
+                found = Some(NpzEntry {
+                    name: entry.name().to_string(),
+                    start: entry.data_start(),
+                    compressed: entry.compressed_size(),
+                    size: entry.size(),
+                    crc32: entry.crc32(),
+                    method: entry.compression(),
+                });
                 break;
             }
         }
         found.ok_or_else(|| StoreError::format(path, "archive holds no .npy array"))?
     };
+    let name = &entry.name;
+    if entry.start.checked_add(entry.compressed).is_none_or(|end| end > file_len) {
+        return Err(StoreError::format(
+            path,
+            format!(
+                "{name}: {} compressed bytes at byte {} run past the end of the archive",
+                entry.compressed, entry.start
+            ),
+        ));
+    }
     let mut file = std::fs::File::open(path).map_err(|e| StoreError::io(path, e))?;
-    std::io::Seek::seek(&mut file, std::io::SeekFrom::Start(start)).map_err(|e| StoreError::io(path, e))?;
-    let raw = std::io::BufReader::new(file).take(compressed);
-    let mut reader: Box<dyn Read + Send> = match method {
-        zip::CompressionMethod::Stored => Box::new(raw),
-        zip::CompressionMethod::Deflated => Box::new(flate2::read::DeflateDecoder::new(raw)),
+    std::io::Seek::seek(&mut file, std::io::SeekFrom::Start(entry.start)).map_err(|e| StoreError::io(path, e))?;
+    let raw = std::io::BufReader::new(file).take(entry.compressed);
+    let decoded: Box<dyn Read + Send> = match entry.method {
+        zip::CompressionMethod::Stored if entry.size == entry.compressed => Box::new(raw),
+        zip::CompressionMethod::Stored => {
+            return Err(StoreError::format(
+                path,
+                format!("{name} is stored but its sizes differ ({} and {} bytes)", entry.compressed, entry.size),
+            ))
+        }
+        zip::CompressionMethod::Deflated => {
+            check_deflate_capacity(path, entry.compressed, entry.size)?;
+            Box::new(flate2::bufread::DeflateDecoder::new(raw))
+        }
         other => {
             return Err(StoreError::Unsupported {
                 path: path.into(),
@@ -49,9 +80,72 @@ pub fn open_npz(path: &Path) -> Result<SampleStream, StoreError> {
             })
         }
     };
-    let (info, endian, _) = parse_header(&mut reader, path)?;
-    SampleStream::from_reader(path, reader, info, endian)
+    let mut reader = Crc32Checked::new(decoded, entry.crc32, entry.size);
+    let (info, endian, header_bytes) = parse_header(&mut reader, path)?;
+    if header_bytes.checked_add(info.byte_len()) != Some(entry.size) {
+        return Err(StoreError::format(
+            path,
+            format!(
+                "{name}: the array header's shape {:?} needs {} bytes after its {header_bytes}-byte header, but the \
+                 entry holds {} bytes",
+                info.dims,
+                info.byte_len(),
+                entry.size
+            ),
+        ));
+    }
+    SampleStream::from_reader(path, Box::new(reader), info, endian)
 }
+
+/// Where the first array of a `.npz` lies, as the central directory says.
+struct NpzEntry {
+    name: String,
+    start: u64,
+    compressed: u64,
+    size: u64,
+    crc32: u32,
+    method: zip::CompressionMethod,
+}
+
+/// A reader that checks, at its end, that it delivered exactly `size` bytes whose CRC32 is `crc32` (a zip entry's).
+struct Crc32Checked {
+    inner: Box<dyn Read + Send>,
+    hasher: crc32fast::Hasher,
+    crc32: u32,
+    size: u64,
+    read: u64,
+}
+
+impl Crc32Checked {
+    fn new(inner: Box<dyn Read + Send>, crc32: u32, size: u64) -> Crc32Checked {
+        Crc32Checked { inner, hasher: crc32fast::Hasher::new(), crc32, size, read: 0 }
+    }
+}
+
+impl Read for Crc32Checked {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        self.hasher.update(&buf[..n]);
+        self.read += n as u64;
+        let invalid = |m: String| Err(std::io::Error::new(std::io::ErrorKind::InvalidData, m));
+        if self.read > self.size {
+            return invalid(format!("the zip entry holds more than its stated {} bytes", self.size));
+        }
+        if n == 0 && !buf.is_empty() {
+            if self.read < self.size {
+                return invalid(format!("the zip entry ends after {} of its {} bytes", self.read, self.size));
+            }
+            let crc = self.hasher.clone().finalize();
+            if crc != self.crc32 {
+                return invalid(format!("zip CRC32 mismatch (stored {:08x}, data {crc:08x})", self.crc32));
+            }
+        }
+        Ok(n)
+    }
+}
+
+/// The longest `.npy` header read: NumPy itself refuses headers over 10,000 bytes unless told otherwise.
+pub const MAX_NPY_HEADER_BYTES: u64 = 1 << 16;
 
 /// Reads a `.npy` header; returns the geometry, the byte order and the header's length in bytes.
 fn parse_header(file: &mut dyn Read, path: &Path) -> Result<(VolumeInfo, Endian, u64), StoreError> {
@@ -68,6 +162,12 @@ fn parse_header(file: &mut dyn Read, path: &Path) -> Result<(VolumeInfo, Endian,
     let mut length = [0u8; 4];
     file.read_exact(&mut length[..length_bytes]).map_err(|_| StoreError::format(path, "truncated .npy header"))?;
     let header_len = u32::from_le_bytes(length) as u64;
+    if header_len > MAX_NPY_HEADER_BYTES {
+        return Err(StoreError::format(
+            path,
+            format!("the .npy header claims {header_len} bytes (at most {MAX_NPY_HEADER_BYTES} are read)"),
+        ));
+    }
     let mut header = vec![0u8; header_len as usize];
     file.read_exact(&mut header).map_err(|_| StoreError::format(path, "truncated .npy header"))?;
     let header = String::from_utf8_lossy(&header).into_owned();

@@ -2,10 +2,10 @@
 //! (http://teem.sourceforge.net/nrrd/format.html).
 
 use std::fs::File;
-use std::io::{BufRead, BufReader};
+use std::io::BufReader;
 use std::path::Path;
 
-use super::header_text::{numbers, three};
+use super::header_text::{numbers, read_line, three};
 use super::sample_stream::{Compression, Endian, SampleStream};
 use crate::error::StoreError;
 use crate::volume::{DType, VolumeInfo};
@@ -20,16 +20,13 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
     let (mut dtype, mut dims, mut encoding, mut endian) = (None, None, None, Endian::Little);
     let (mut spacing, mut origin, mut data_file) = ([1.0; 3], [0.0; 3], None::<String>);
     loop {
-        line.clear();
-        let read =
-            reader.read_line(&mut line).map_err(|e| StoreError::format(path, format!("unreadable header: {e}")))?;
+        let read = read_line(path, &mut reader, &mut line, &mut header_bytes)?;
         if read == 0 {
             if data_file.is_none() {
                 return Err(StoreError::format(path, "header ends without a blank line before the data"));
             }
             break;
         }
-        header_bytes += read as u64;
         let text = line.trim_end_matches(['\n', '\r']);
         if first {
             if !text.starts_with("NRRD000") {

@@ -40,11 +40,27 @@ fn dtype_of(path: &Path, color: ColorType, sample_format_float: bool, signed: bo
     }
 }
 
+/// The most a decoded TIFF page may hold: a 32768² f32 slice.
+pub const MAX_TIFF_PAGE_BYTES: u64 = 4 << 30;
+
+/// The most a TIFF page may expand over its file's size (LZW, the most expansive of the codecs read, reaches ~2730:1).
+pub const MAX_TIFF_EXPANSION: u64 = 4096;
+
+/// The most bytes a page of `path` may decode to.
+fn page_limit(path: &Path) -> Result<u64, StoreError> {
+    let file_len = std::fs::metadata(path).map_err(|e| StoreError::io(path, e))?.len();
+    Ok(file_len.saturating_mul(MAX_TIFF_EXPANSION).min(MAX_TIFF_PAGE_BYTES))
+}
+
+/// A decoder whose buffers are bounded by the file: a page may decode to at most [`MAX_TIFF_EXPANSION`] times the
+/// file's size and [`MAX_TIFF_PAGE_BYTES`], so a header cannot make it allocate for data that is not there.
 fn open_decoder(path: &Path) -> Result<Decoder<BufReader<File>>, StoreError> {
     let file = File::open(path).map_err(|e| StoreError::io(path, e))?;
-    Decoder::new(BufReader::new(file))
-        .map_err(|e| tiff_error(path, e))
-        .map(|d| d.with_limits(tiff::decoder::Limits::unlimited()))
+    let page_bytes = page_limit(path)?;
+    let mut limits = tiff::decoder::Limits::default();
+    limits.decoding_buffer_size = usize::try_from(page_bytes).unwrap_or(usize::MAX);
+    limits.intermediate_buffer_size = limits.decoding_buffer_size;
+    Decoder::new(BufReader::new(file)).map_err(|e| tiff_error(path, e)).map(|d| d.with_limits(limits))
 }
 
 /// Page width, height and sample type of the decoder's current page.
@@ -98,6 +114,19 @@ impl TiffStack {
         let info =
             VolumeInfo { dims: [width as u64, height as u64, depth], dtype, spacing: [1.0; 3], origin: [0.0; 3] };
         info.validate(path)?;
+        // The page size is checked now, not when the first page is decoded: the importer sizes its slabs by it.
+        let page_bytes = width as u64 * height as u64 * dtype.size() as u64;
+        let limit = page_limit(&files[0])?;
+        if page_bytes > limit {
+            return Err(StoreError::format(
+                &files[0],
+                format!(
+                    "pages of {width}x{height} {} samples need {page_bytes} bytes, more than the file can hold ({limit} \
+                     bytes: {MAX_TIFF_EXPANSION} times its size, at most {MAX_TIFF_PAGE_BYTES})",
+                    dtype.name()
+                ),
+            ));
+        }
         Ok(TiffStack { info, files, decoder: None, next_file: 0, pages_read: 0 })
     }
 

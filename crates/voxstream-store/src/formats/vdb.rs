@@ -41,6 +41,48 @@ for k in range(dims[2]):
 out.flush()
 "#;
 
+/// The most samples a `.vdb`'s dense bounding box may hold: the converter streams it without a length known
+/// beforehand, so the importer's per-brick tables are bounded by this rather than by a file size (a 4096² × 1024 box).
+pub const MAX_VDB_SAMPLES: u64 = 1 << 34;
+
+/// The most samples one z slice of a `.vdb`'s box may hold (16384²).
+pub const MAX_VDB_SLICE_SAMPLES: u64 = 1 << 28;
+
+/// Parses the converter's first line: `{"dims": [x, y, z], "spacing": [..], "origin": [..], ...}`, with the box
+/// bounded by [`MAX_VDB_SAMPLES`] and [`MAX_VDB_SLICE_SAMPLES`].
+pub fn parse_converter_header(path: &Path, line: &str) -> Result<VolumeInfo, StoreError> {
+    let meta: serde_json::Value =
+        serde_json::from_str(line.trim()).map_err(|e| StoreError::format(path, format!("converter output: {e}")))?;
+    let triple = |key: &str| -> Result<[f64; 3], StoreError> {
+        let v = meta[key]
+            .as_array()
+            .filter(|a| a.len() == 3)
+            .ok_or_else(|| StoreError::format(path, format!("converter output has no {key}")))?;
+        Ok([0, 1, 2].map(|a| v[a].as_f64().unwrap_or(f64::NAN)))
+    };
+    let dims = triple("dims")?;
+    if dims.iter().any(|d| d.fract() != 0.0 || !(1.0..=(1u64 << 20) as f64).contains(d)) {
+        return Err(StoreError::format(
+            path,
+            format!("the grid's active box {dims:?} is not 1 to 2^20 voxels per axis"),
+        ));
+    }
+    let dims = dims.map(|d| d as u64);
+    let (slice, volume) = (dims[0] * dims[1], dims[0] * dims[1] * dims[2]);
+    if slice > MAX_VDB_SLICE_SAMPLES || volume > MAX_VDB_SAMPLES {
+        return Err(StoreError::Unsupported {
+            path: path.into(),
+            message: format!(
+                "the grid's active box {dims:?} is larger than a .vdb import allows ({MAX_VDB_SLICE_SAMPLES} samples \
+                 per slice, {MAX_VDB_SAMPLES} in all)"
+            ),
+        });
+    }
+    let info = VolumeInfo { dims, dtype: DType::F32, spacing: triple("spacing")?, origin: triple("origin")? };
+    info.validate(path)?;
+    Ok(info)
+}
+
 /// Opens a `.vdb` file's first float grid.
 pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
     let python = std::env::var("VOXSTREAM_PYTHON").unwrap_or_else(|_| "/usr/bin/python3".into());
@@ -70,17 +112,14 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
         let hint = if last.contains("No module named") { " (install Debian python3-openvdb)" } else { "" };
         return Err(StoreError::format(path, format!("cannot read the VDB: {last}{hint}")));
     }
-    let meta: serde_json::Value =
-        serde_json::from_str(line.trim()).map_err(|e| StoreError::format(path, format!("converter output: {e}")))?;
-    let triple = |key: &str| -> Result<[f64; 3], StoreError> {
-        let v = meta[key]
-            .as_array()
-            .filter(|a| a.len() == 3)
-            .ok_or_else(|| StoreError::format(path, format!("no {key}")))?;
-        Ok([0, 1, 2].map(|a| v[a].as_f64().unwrap_or(f64::NAN)))
+    let info = match parse_converter_header(path, &line) {
+        Ok(info) => info,
+        Err(error) => {
+            let _ = child.kill();
+            let _ = child.wait();
+            return Err(error);
+        }
     };
-    let dims = triple("dims")?.map(|d| d as u64);
-    let info = VolumeInfo { dims, dtype: DType::F32, spacing: triple("spacing")?, origin: triple("origin")? };
     // The child is reaped when its output ends; a failure mid-stream shows as a truncated volume.
     std::thread::spawn(move || {
         let _ = child.wait();
