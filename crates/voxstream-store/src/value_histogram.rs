@@ -21,12 +21,16 @@ pub struct ValueHistogram {
     dtype: DType,
     counts: Vec<u64>,
     total: u64,
+    /// Smallest and largest sample counted: percentiles are clamped to them (an f32 bin's lower edge may lie below
+    /// the smallest sample).
+    low: f32,
+    high: f32,
 }
 
 impl ValueHistogram {
     /// An empty histogram for samples of `dtype`.
     pub fn new(dtype: DType) -> ValueHistogram {
-        ValueHistogram { dtype, counts: vec![0; BINS], total: 0 }
+        ValueHistogram { dtype, counts: vec![0; BINS], total: 0, low: f32::INFINITY, high: f32::NEG_INFINITY }
     }
 
     /// Counts `samples` (the source's values as f32; non-finite ones are skipped).
@@ -36,6 +40,8 @@ impl ValueHistogram {
                 let key = self.key(value);
                 self.counts[key] += 1;
                 self.total += 1;
+                self.low = self.low.min(value);
+                self.high = self.high.max(value);
             }
         }
     }
@@ -45,8 +51,8 @@ impl ValueHistogram {
         self.total
     }
 
-    /// The value below which `percent` % of the samples lie (the lower edge of the bin that holds that rank; exact
-    /// for integer samples), or `None` when nothing was counted.
+    /// The value below which `percent` % of the samples lie (the lower edge of the bin that holds that rank, clamped
+    /// to the samples' range; exact for integer samples), or `None` when nothing was counted.
     pub fn percentile(&self, percent: f64) -> Option<f64> {
         if self.total == 0 {
             return None;
@@ -56,7 +62,7 @@ impl ValueHistogram {
         for (key, &count) in self.counts.iter().enumerate() {
             seen += count;
             if seen > rank {
-                return Some(self.value(key));
+                return Some(self.value(key).clamp(f64::from(self.low), f64::from(self.high)));
             }
         }
         None
@@ -134,6 +140,8 @@ mod tests {
         let values: Vec<f64> =
             [0.0, 20.0, 40.0, 60.0, 80.0, 100.0].iter().map(|&p| histogram.percentile(p).unwrap()).collect();
         assert!(values.windows(2).all(|w| w[0] <= w[1]), "{values:?}");
+        assert_eq!(values[0], -2.5e6, "clamped to the smallest sample, not its bin's lower edge");
+        assert!(values[5] <= f64::from(7.0e20f32), "never above the largest sample");
         for (got, want) in values.iter().zip([-2.5e6, -0.001, 0.0, 3.75e-3, 1.0, 7.0e20]) {
             // The lower edge of its bin (towards −∞): within 2^-7 of the value.
             assert!((got - want).abs() <= want.abs() / 128.0 + 1e-30, "{got} for {want}");
