@@ -10,9 +10,10 @@ use voxstream_core::{FeedbackBuffer, Request, TreeView};
 use crate::camera::{Camera, CameraFrame};
 use crate::error::RenderError;
 use crate::image::Image;
-use crate::ray_caster::{DescentPath, RayCaster, RayStats};
+use crate::ray_caster::RayCaster;
 use crate::settings::RenderSettings;
 use crate::transfer_function::TransferLut;
+use crate::traversal::{DescentPath, RayStats};
 
 /// Edge of the square image tiles handed to worker threads.
 pub const IMAGE_TILE: u32 = 16;

@@ -11,6 +11,9 @@
 //!
 //! - [`Camera`]: eye/target/up/fov, right-handed like `vtkCamera`.
 //! - [`TransferFunction`] / [`TransferLut`]: piecewise-linear 1-D transfer function, VTK's opacity unit distance.
+//! - [`Traversal`]: one ray through the tree (descent, cone LOD, skipping, samples), handing samples to an
+//!   [`Integrand`]; [`emission_absorption`] is the volume-rendering integrand, with tables pre-corrected for the
+//!   step ([`step_table`]).
 //! - [`render_frame`]: rayon over 16×16 image tiles, one [`RayCaster`] ray per pixel.
 //!
 //! ```
@@ -21,13 +24,17 @@
 //! ```
 
 pub mod camera;
+pub mod emission_absorption;
 pub mod error;
 pub mod frame;
 pub mod image;
+pub mod integrand;
 pub mod ray_caster;
 pub mod sampler;
 pub mod settings;
+pub mod step_table;
 pub mod transfer_function;
+pub mod traversal;
 
 pub use camera::{Camera, CameraFrame};
 pub use error::RenderError;
@@ -35,6 +42,8 @@ pub use frame::{
     frame_buffer_bytes, render_frame, render_pass, ProgressiveImage, RenderedFrame, FRAME_BYTES_PER_PIXEL, IMAGE_TILE,
 };
 pub use image::{psnr, Image};
-pub use ray_caster::{DescentPath, RayCaster, RayStats};
+pub use integrand::{Integrand, Sample};
+pub use ray_caster::RayCaster;
 pub use settings::{PhongCoefficients, RenderSettings, Shading, VolumePlacement};
 pub use transfer_function::{TransferFunction, TransferLut};
+pub use traversal::{DescentPath, Ray, RayStats, Traversal};

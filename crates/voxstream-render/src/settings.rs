@@ -90,6 +90,9 @@ pub struct RenderSettings {
     pub opacity_cutoff: f32,
     /// Requests a ray may report per frame (GigaVoxels: 1).
     pub max_requests_per_ray: u32,
+    /// Skip bricks and occupancy blocks the transfer function hides (exact: the image is the same bit for bit;
+    /// off only to test that).
+    pub skip_empty_space: bool,
 }
 
 impl Default for RenderSettings {
@@ -106,6 +109,7 @@ impl Default for RenderSettings {
             placement: VolumePlacement::default(),
             opacity_cutoff: 0.998,
             max_requests_per_ray: 4,
+            skip_empty_space: true,
         }
     }
 }

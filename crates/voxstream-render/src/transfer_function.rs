@@ -10,6 +10,7 @@
 use serde::Deserialize;
 
 use crate::error::RenderError;
+use crate::step_table::{StepLength, StepTable, StepTables};
 
 /// A parsed, validated transfer function.
 #[derive(Clone, Debug, PartialEq)]
@@ -115,6 +116,8 @@ pub struct TransferLut {
     visible_before: Vec<u32>,
     lower: f32,
     scale: f32,
+    /// The same table pre-corrected for each ray-march step used so far.
+    step_tables: StepTables,
 }
 
 /// Entries in the table.
@@ -139,7 +142,19 @@ impl TransferLut {
             let last = *visible_before.last().unwrap_or(&0);
             visible_before.push(last + (entry.sigma > 0.0) as u32);
         }
-        TransferLut { entries, visible_before, lower: 0.0, scale: (LUT_SIZE - 1) as f32 }
+        TransferLut {
+            entries,
+            visible_before,
+            lower: 0.0,
+            scale: (LUT_SIZE - 1) as f32,
+            step_tables: StepTables::default(),
+        }
+    }
+
+    /// The table of premultiplied colour and opacity for steps of `step` (built on first use, then shared).
+    #[inline]
+    pub fn step_table(&self, step: StepLength) -> &StepTable {
+        self.step_tables.get(&self.entries, step)
     }
 
     /// Colour and extinction at normalised `value` (linear between entries).

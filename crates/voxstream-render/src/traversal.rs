@@ -1,0 +1,641 @@
+//! One ray through the N³-tree: cone-traced level of detail, kd-restart descent, empty-space skipping, samples.
+//!
+//! Implements GigaVoxels [P09] §6 ("Rendering": stackless descent from the root at every new segment, cone tracing
+//! with quadrilinear mip filtering) and §5 (the ray's feedback). What the samples are used for is an
+//! [`Integrand`]'s business (see [`crate::integrand`]); the traversal does not know what is computed.
+//!
+//! 1. At the current distance `t`, the cone's footprint `w = t·spread` gives the continuous level
+//!    `ℓ = log_N(1 / (M·w))`: the level whose voxel matches the pixel. It is computed once per segment.
+//! 2. Descend from the root to the node containing the point at level `⌈ℓ⌉`, marking each tile and brick used.
+//!    Stop early at a constant node, a terminal node, a node whose data is missing (request production; the deepest
+//!    ancestor with data stands in) or a node without children (request a subdivision), reporting at most
+//!    `max_requests_per_ray` misses per ray and pass.
+//! 3. The node's box is one segment. A constant node is handed over whole (the integrand integrates it
+//!    analytically). In bricks, each sample stands for one step `Δt` around it and the next sample starts where the
+//!    last one's step ended, so the samples tile the ray without gap or overlap even where `Δt` changes. `Δt` is the
+//!    cone's footprint voxel (or the sampled level's voxel where only coarser data exists) times the step factor,
+//!    rounded down to the ladder of [`StepLength`] so that the integrand's pre-corrected tables apply exactly. A
+//!    sample belongs to the segment its centre lies in; skipping never moves a sample.
+//! 4. Skip the segment at once if the integrand says no value of its bricks can contribute (per-brick min/max), and
+//!    within a brick the runs of samples inside an occupancy block that cannot contribute (per-block min/max, of the
+//!    finer and, when blended, the coarser brick). Other samples are trilinear in the finer brick, blended with the
+//!    coarser by `frac(ℓ)` (quadrilinear), positions stepped in `f32` brick coordinates.
+//! 5. Leave the box and descend again for the next point, from the deepest node of the previous path that still
+//!    contains it (kd-restart from the root, shortened by keeping the path).
+//!
+//! Positions between segments are `f64` in the unit cube and node coordinates are integers, so zooms far below
+//! `2⁻²⁰` stay exact (GigaVoxels stopped at `2¹⁹` because of float32 precision); inside a brick, `f32` brick
+//! coordinates are exact to ~10⁻⁵ voxel.
+
+use std::ops::ControlFlow;
+
+use glam::DVec3;
+use voxstream_core::{BrickSlot, FeedbackBuffer, Node, NodeData, NodeId, Request, RequestKind, TreeView, BLOCK_CELLS};
+
+use crate::integrand::{Integrand, Sample};
+use crate::sampler::Cell;
+use crate::settings::RenderSettings;
+use crate::step_table::StepLength;
+
+/// Deepest level the precomputed scale table covers.
+const MAX_TABLE_LEVELS: usize = 64;
+/// A ray may not cross more segments than this (guards against any numerical stall).
+const MAX_SEGMENTS: u32 = 1 << 20;
+
+/// Counters of one ray batch.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RayStats {
+    /// Rays traced.
+    pub rays: u64,
+    /// Brick samples taken plus constant segments integrated.
+    pub samples: u64,
+    /// Descents from the root.
+    pub descents: u64,
+}
+
+impl RayStats {
+    /// Adds another batch's counters.
+    pub fn add(&mut self, other: &RayStats) {
+        self.rays += other.rays;
+        self.samples += other.samples;
+        self.descents += other.descents;
+    }
+}
+
+/// Deepest level a descent path can hold.
+const MAX_PATH: usize = MAX_TABLE_LEVELS;
+
+/// One node of the current descent.
+#[derive(Clone, Copy, Debug)]
+struct PathEntry {
+    id: NodeId,
+    node: Node,
+    ijk: [u64; 3],
+}
+
+/// The nodes from the root to the last node reached, reused between segments so that a new descent restarts from
+/// the deepest ancestor that still contains the point (a short-stack variant of kd-restart). One per thread, reused
+/// from ray to ray.
+pub struct DescentPath {
+    entries: [PathEntry; MAX_PATH],
+    len: usize,
+}
+
+impl DescentPath {
+    /// A path holding only the root of `view`.
+    pub fn new(view: TreeView<'_>) -> DescentPath {
+        let root = PathEntry { id: NodeId::ROOT, node: view.root(), ijk: [0; 3] };
+        DescentPath { entries: [root; MAX_PATH], len: 1 }
+    }
+
+    /// Back to the root, for a new ray.
+    fn reset(&mut self, view: TreeView<'_>) {
+        self.entries[0] = PathEntry { id: NodeId::ROOT, node: view.root(), ijk: [0; 3] };
+        self.len = 1;
+    }
+}
+
+/// A ray in volume space: `origin` in unit-cube coordinates, `direction` = the unit world direction divided by the
+/// placement's scale (so `t` stays in world units), and the cone's `spread` (footprint per unit distance).
+#[derive(Clone, Copy, Debug)]
+pub struct Ray {
+    /// Origin, unit-cube coordinates.
+    pub origin: DVec3,
+    /// Unit-cube units per world unit of `t`.
+    pub direction: DVec3,
+    /// Cone footprint per unit distance (world units).
+    pub spread: f64,
+}
+
+/// A brick found on the descent: which slot and which node it belongs to.
+#[derive(Clone, Copy, Debug)]
+struct BrickRef {
+    slot: BrickSlot,
+    level: u32,
+    ijk: [u64; 3],
+}
+
+/// What the descent found for the current segment.
+enum SegmentData {
+    /// Nothing resident at all (the root is missing): the segment is skipped.
+    Nothing,
+    /// A constant node: its samples are all the same value.
+    Constant(f32),
+    /// Bricks: the finest with data, and its parent for level blending.
+    Bricks { fine: BrickRef, coarse: Option<BrickRef>, blend_level: bool },
+}
+
+/// A brick sampled along a segment: its voxels and the ray's continuous voxel index there, `x_k = start + k·delta`
+/// for sample `k` of the segment.
+#[derive(Clone, Copy)]
+struct BrickLine<'v> {
+    voxels: &'v [u16],
+    slot: BrickSlot,
+    start: [f32; 3],
+    delta: [f32; 3],
+    /// The same line in `f64` over `t`, for block exits: `x(t) = origin + t·rate`.
+    origin: [f64; 3],
+    rate: [f64; 3],
+}
+
+impl BrickLine<'_> {
+    #[inline(always)]
+    fn at(&self, k: f32) -> [f32; 3] {
+        [self.start[0] + k * self.delta[0], self.start[1] + k * self.delta[1], self.start[2] + k * self.delta[2]]
+    }
+}
+
+/// Walks rays through one frame's tree view, writing feedback and handing samples to an integrand.
+pub struct Traversal<'a> {
+    view: TreeView<'a>,
+    feedback: &'a FeedbackBuffer,
+    step_factor: f64,
+    lod_bias: f64,
+    world_per_volume: f64,
+    clip_lower: DVec3,
+    clip_upper: DVec3,
+    max_requests_per_ray: u32,
+    skip_empty_space: bool,
+    /// `N^d` for every level.
+    scale: [f64; MAX_TABLE_LEVELS],
+    n: u64,
+    brick_size: f64,
+    stored: usize,
+    inv_ln_n: f64,
+    ln_n: f64,
+}
+
+impl<'a> Traversal<'a> {
+    /// Prepares a traversal for one frame.
+    pub fn new(view: TreeView<'a>, feedback: &'a FeedbackBuffer, settings: &RenderSettings) -> Traversal<'a> {
+        let shape = view.shape;
+        let mut scale = [1.0f64; MAX_TABLE_LEVELS];
+        for d in 1..MAX_TABLE_LEVELS {
+            scale[d] = scale[d - 1] * shape.n as f64;
+        }
+        Traversal {
+            view,
+            feedback,
+            step_factor: settings.step_factor,
+            lod_bias: settings.lod_bias,
+            world_per_volume: settings.placement.mean_scale(),
+            clip_lower: DVec3::from(settings.placement.clip_lower),
+            clip_upper: DVec3::from(settings.placement.clip_upper),
+            max_requests_per_ray: settings.max_requests_per_ray,
+            skip_empty_space: settings.skip_empty_space,
+            scale,
+            n: shape.n as u64,
+            brick_size: shape.brick_size as f64,
+            stored: shape.stored_brick_size() as usize,
+            inv_ln_n: 1.0 / (shape.n as f64).ln(),
+            ln_n: (shape.n as f64).ln(),
+        }
+    }
+
+    /// The tree view this traversal reads.
+    pub fn view(&self) -> TreeView<'a> {
+        self.view
+    }
+
+    /// Continuous level of detail at distance `t` (world units) for a cone of `spread` per unit distance.
+    #[inline]
+    fn level_at(&self, t: f64, spread: f64) -> f64 {
+        let footprint = (t * spread / self.world_per_volume).max(1e-300);
+        let level = -(self.brick_size * footprint).ln() * self.inv_ln_n + self.lod_bias;
+        level.clamp(0.0, self.view.shape.max_level as f64)
+    }
+
+    /// Walks `ray`, handing its samples to `integrand` until the ray leaves the volume or the integrand stops it.
+    /// Appends at most `max_requests_per_ray` requests to `requests`.
+    pub fn trace<I: Integrand>(
+        &self,
+        ray: &Ray,
+        integrand: &mut I,
+        stats: &mut RayStats,
+        requests: &mut Vec<Request>,
+        path: &mut DescentPath,
+    ) {
+        let mut sink = RequestSink { requests, remaining: self.max_requests_per_ray };
+        let request = &mut sink;
+        stats.rays += 1;
+        let (origin, direction) = (ray.origin, ray.direction);
+        let Some((t_enter, t_leave)) = intersect_aabb(origin, direction, self.clip_lower, self.clip_upper) else {
+            return;
+        };
+        // Volume units travelled per unit of t.
+        let speed = direction.length();
+        let mut t = t_enter.max(0.0);
+        let inverse_direction = DVec3::ONE / direction;
+        path.reset(self.view);
+        if let Some(slot) = path.entries[0].node.brick() {
+            self.feedback.mark_brick(slot);
+        }
+        // The distance up to which samples have accounted for the ray, and the current step (None before the first
+        // brick segment).
+        let mut covered = t;
+        let mut step: Option<StepLength> = None;
+        let mut segments = 0;
+        while t < t_leave && segments < MAX_SEGMENTS {
+            segments += 1;
+            stats.descents += 1;
+            let p = origin + direction * t;
+            let level = self.level_at(t, ray.spread);
+            let (data, box_level, box_ijk) = self.descend(p, level.ceil() as u32, path, request);
+            let node_size = 1.0 / self.scale[box_level as usize];
+            let lower = DVec3::new(box_ijk[0] as f64, box_ijk[1] as f64, box_ijk[2] as f64) * node_size;
+            let t_exit = exit_distance(origin, inverse_direction, lower, node_size).min(t_leave);
+            // Never stall on a boundary: move at least a sliver of the node, and more than the rounding of p.
+            let t_exit = t_exit.max(t + (node_size * 1e-7 + 8e-16 * p.abs().max_element()) / speed + 8e-16 * t);
+            let flow = match data {
+                SegmentData::Nothing => {
+                    covered = covered.max(t_exit);
+                    ControlFlow::Continue(())
+                }
+                SegmentData::Constant(value) => {
+                    // Integrated over exactly the distance not yet accounted for.
+                    let from = covered;
+                    covered = covered.max(t_exit);
+                    if from < t_exit {
+                        stats.samples += 1;
+                        integrand.constant(from, t_exit, value)
+                    } else {
+                        ControlFlow::Continue(())
+                    }
+                }
+                SegmentData::Bricks { fine, coarse, blend_level } => {
+                    // Step by the cone's footprint (the voxel of the continuous level ℓ), or by the sampled voxel
+                    // where the data is coarser: a quadrilinear sample is filtered at the footprint, so finer steps
+                    // would only re-sample the same filtered signal (GigaVoxels [P09] §6, cone tracing).
+                    let sampled_voxel = 1.0 / (self.scale[fine.level as usize] * self.brick_size);
+                    let footprint_voxel = (-level * self.ln_n).exp() / self.brick_size;
+                    let desired_step = sampled_voxel.max(footprint_voxel) * self.step_factor / speed;
+                    let segment_step = match step {
+                        Some(current) if current.is_at_most(desired_step) => current,
+                        _ => StepLength::at_most(desired_step),
+                    };
+                    if step != Some(segment_step) {
+                        step = Some(segment_step);
+                        integrand.set_step(segment_step);
+                    }
+                    let dt = segment_step.world;
+                    // Each sample stands for the step around it: samples continue where the last one's step ended
+                    // (exact where the step changes), and those before the node's exit belong to this segment.
+                    let first = covered + 0.5 * dt;
+                    let count = if first < t_exit { ((t_exit - first) / dt).ceil().max(1.0) as u64 } else { 0 };
+                    covered += count as f64 * dt;
+                    if count == 0 {
+                        ControlFlow::Continue(())
+                    } else {
+                        let coarse = coarse.filter(|_| blend_level).and_then(|c| {
+                            let weight =
+                                (self.level_at(0.5 * (t + t_exit), ray.spread) - c.level as f64).clamp(0.0, 1.0);
+                            (weight < 1.0).then_some((c, weight as f32))
+                        });
+                        self.march_bricks(ray, fine, coarse, first, dt, count, integrand, stats)
+                    }
+                }
+            };
+            if flow.is_break() {
+                return;
+            }
+            t = t_exit;
+        }
+    }
+
+    /// Samples `count` points `first + k·dt` inside the bricks of one segment, skipping the runs that lie in
+    /// occupancy blocks the integrand cannot use.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn march_bricks<I: Integrand>(
+        &self,
+        ray: &Ray,
+        fine: BrickRef,
+        coarse: Option<(BrickRef, f32)>,
+        first: f64,
+        dt: f64,
+        count: u64,
+        integrand: &mut I,
+        stats: &mut RayStats,
+    ) -> ControlFlow<()> {
+        if self.skip_empty_space {
+            // Empty-space skipping: nothing in the bricks (fine, and coarse if blended) can contribute.
+            let [mut lo, mut hi] = self.view.brick_range(fine.slot);
+            if let Some((c, _)) = coarse {
+                let [clo, chi] = self.view.brick_range(c.slot);
+                lo = lo.min(clo);
+                hi = hi.max(chi);
+            }
+            if !integrand.can_contribute(lo, hi) {
+                return ControlFlow::Continue(());
+            }
+        }
+        let fine_line = self.brick_line(ray, &fine, first, dt);
+        let coarse_line = coarse.map(|(c, weight)| (self.brick_line(ray, &c, first, dt), weight));
+        let gradient = integrand.wants_gradient();
+        let blocks = self.view.shape.blocks_per_axis();
+        let count = count.min(u32::MAX as u64) as u32;
+        let mut k = 0u32;
+        while k < count {
+            let run_end = if self.skip_empty_space {
+                // The occupancy blocks of sample k bound every sample in their cells.
+                let x = fine_line.at(k as f32);
+                let fine_block = Cell::locate(self.stored, x).block(blocks);
+                let [mut lo, mut hi] = self.view.block_range(fine.slot, fine_block);
+                let mut exit = block_exit(&fine_line, fine_block, blocks);
+                if let Some((line, _)) = &coarse_line {
+                    let coarse_block = Cell::locate(self.stored, line.at(k as f32)).block(blocks);
+                    let [clo, chi] = self.view.block_range(line.slot, coarse_block);
+                    lo = lo.min(clo);
+                    hi = hi.max(chi);
+                    exit = exit.min(block_exit(line, coarse_block, blocks));
+                }
+                if !integrand.can_contribute(lo, hi) {
+                    // Every sample before `exit` (less a margin above f32 rounding) is in these blocks.
+                    let next = ((exit - 1e-3 * dt - first) / dt).ceil();
+                    k = if next > k as f64 { (next as u64).min(count as u64) as u32 } else { k + 1 };
+                    continue;
+                }
+                // Samples up to the blocks' exit need no check (one past it would be harmless: it is sampled).
+                let end = ((exit - first) / dt).ceil();
+                if end > k as f64 {
+                    (end as u64).min(count as u64) as u32
+                } else {
+                    k + 1
+                }
+            } else {
+                count
+            };
+            stats.samples += (run_end - k) as u64;
+            let flow = match (gradient, &coarse_line) {
+                (false, None) => self.sample_run::<I, false>(&fine_line, None, first, dt, k, run_end, integrand),
+                (true, None) => self.sample_run::<I, true>(&fine_line, None, first, dt, k, run_end, integrand),
+                (false, Some(c)) => self.sample_run::<I, false>(&fine_line, Some(*c), first, dt, k, run_end, integrand),
+                (true, Some(c)) => self.sample_run::<I, true>(&fine_line, Some(*c), first, dt, k, run_end, integrand),
+            };
+            if flow.is_break() {
+                stats.samples -= (run_end - k) as u64;
+                stats.samples += flow_samples(flow);
+                return ControlFlow::Break(());
+            }
+            k = run_end;
+        }
+        ControlFlow::Continue(())
+    }
+
+    /// The inner loop: samples `k..end` of a segment, with no skipping checks.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn sample_run<I: Integrand, const GRADIENT: bool>(
+        &self,
+        fine: &BrickLine<'_>,
+        coarse: Option<(BrickLine<'_>, f32)>,
+        first: f64,
+        dt: f64,
+        k: u32,
+        end: u32,
+        integrand: &mut I,
+    ) -> RunFlow {
+        let b = self.stored;
+        // A float counter (exact below 2²⁴) instead of converting the index per sample: positions are the same
+        // bits whichever sample a run starts at.
+        let mut kf = k as f32;
+        for s in k..end {
+            let cell = Cell::locate(b, fine.at(kf));
+            let (mut value, gradient) =
+                if GRADIENT { cell.value_and_gradient(fine.voxels, b) } else { (cell.value(fine.voxels, b), [0.0; 3]) };
+            if let Some((line, weight)) = &coarse {
+                let coarse_value = Cell::locate(b, line.at(kf)).value(line.voxels, b);
+                value = coarse_value + (value - coarse_value) * weight;
+            }
+            let sample = Sample { t: first + s as f64 * dt, value, gradient };
+            if integrand.sample(sample).is_break() {
+                return ControlFlow::Break(u64::from(s - k + 1));
+            }
+            kf += 1.0;
+        }
+        ControlFlow::Continue(())
+    }
+
+    /// The continuous voxel index in the brick of `node` along the ray, from sample `first` on in steps of `dt`.
+    #[inline]
+    fn brick_line(&self, ray: &Ray, node: &BrickRef, first: f64, dt: f64) -> BrickLine<'a> {
+        let s = self.scale[node.level as usize];
+        let m = self.brick_size;
+        let (o, d) = (ray.origin.to_array(), ray.direction.to_array());
+        let origin: [f64; 3] = std::array::from_fn(|a| (o[a] * s - node.ijk[a] as f64) * m + 0.5);
+        let rate: [f64; 3] = std::array::from_fn(|a| d[a] * s * m);
+        BrickLine {
+            voxels: self.view.brick(node.slot),
+            slot: node.slot,
+            start: std::array::from_fn(|a| (origin[a] + rate[a] * first) as f32),
+            delta: std::array::from_fn(|a| (rate[a] * dt) as f32),
+            origin,
+            rate,
+        }
+    }
+
+    /// Descends towards `target_level` at `p`, restarting from the deepest node of the previous descent that still
+    /// contains `p` (the root at worst, which is GigaVoxels' kd-restart); returns the data to use and the box of the
+    /// deepest node visited (the segment to march).
+    #[inline(always)]
+    fn descend(
+        &self,
+        p: DVec3,
+        target_level: u32,
+        path: &mut DescentPath,
+        request: &mut RequestSink<'_>,
+    ) -> (SegmentData, u32, [u64; 3]) {
+        let n = self.n;
+        let pa = [p.x, p.y, p.z];
+        // Keep the ancestors that contain p, and no deeper than the target.
+        let mut keep = path.len.min(target_level as usize + 1).max(1);
+        while keep > 1 {
+            let entry = &path.entries[keep - 1];
+            let s = self.scale[keep - 1];
+            if (0..3).all(|a| (pa[a] * s) as u64 == entry.ijk[a]) {
+                break;
+            }
+            keep -= 1;
+        }
+        path.len = keep;
+        loop {
+            let level = (path.len - 1) as u32;
+            let PathEntry { id, node, ijk } = path.entries[path.len - 1];
+            match node.data() {
+                NodeData::Constant(value) => return (SegmentData::Constant(value), level, ijk),
+                NodeData::Brick(_) => {}
+                NodeData::Missing => {
+                    request.push(Request { node: id, kind: RequestKind::Produce });
+                    break;
+                }
+            }
+            if level >= target_level || node.is_terminal() {
+                break;
+            }
+            let Some(tile) = node.child_tile() else {
+                request.push(Request { node: id, kind: RequestKind::Subdivide });
+                break;
+            };
+            self.feedback.mark_tile(tile);
+            let s = self.scale[level as usize + 1];
+            let mut child_ijk = [0u64; 3];
+            let mut child_index = 0u64;
+            let mut stride = 1u64;
+            for a in 0..3 {
+                let lo = ijk[a] * n;
+                // Positions are non-negative, so truncation is floor.
+                let g = ((pa[a] * s) as u64).clamp(lo, lo + n - 1);
+                child_ijk[a] = g;
+                child_index += (g - lo) * stride;
+                stride *= n;
+            }
+            let (child_id, child) = self.view.child(tile, child_index as u32);
+            if let Some(slot) = child.brick() {
+                self.feedback.mark_brick(slot);
+            }
+            path.entries[path.len] = PathEntry { id: child_id, node: child, ijk: child_ijk };
+            path.len += 1;
+        }
+        // Every node on the path but the last holds a brick; find the two deepest bricks.
+        let deepest = path.len - 1;
+        let last = path.entries[deepest];
+        let brick_at = |level: usize| {
+            path.entries[level].node.brick().map(|slot| BrickRef {
+                slot,
+                level: level as u32,
+                ijk: path.entries[level].ijk,
+            })
+        };
+        let fine_level = if last.node.brick().is_some() { Some(deepest) } else { deepest.checked_sub(1) };
+        let data = match fine_level.and_then(|l| brick_at(l).map(|b| (l, b))) {
+            None => SegmentData::Nothing,
+            Some((l, fine)) => SegmentData::Bricks {
+                fine,
+                coarse: l.checked_sub(1).and_then(brick_at),
+                // Blend with the parent only when the finest data is at the level the cone asked for.
+                blend_level: fine.level == target_level,
+            },
+        };
+        (data, deepest as u32, last.ijk)
+    }
+}
+
+/// How a run of samples ended: `Break(n)` after `n` samples when the integrand stopped the ray.
+type RunFlow = ControlFlow<u64>;
+
+/// Samples taken by a run that stopped the ray.
+fn flow_samples(flow: RunFlow) -> u64 {
+    match flow {
+        ControlFlow::Break(n) => n,
+        ControlFlow::Continue(()) => 0,
+    }
+}
+
+/// Where a ray's requests go, with its remaining allowance for this frame.
+struct RequestSink<'v> {
+    requests: &'v mut Vec<Request>,
+    remaining: u32,
+}
+
+impl RequestSink<'_> {
+    #[inline]
+    fn push(&mut self, request: Request) {
+        if self.remaining > 0 {
+            self.remaining -= 1;
+            self.requests.push(request);
+        }
+    }
+}
+
+/// The `t` at which a brick line leaves occupancy block `block`.
+#[inline]
+fn block_exit(line: &BrickLine<'_>, block: usize, blocks: usize) -> f64 {
+    let ijk = [block % blocks, block / blocks % blocks, block / (blocks * blocks)];
+    let mut exit = f64::INFINITY;
+    for a in 0..3 {
+        let rate = line.rate[a];
+        let edge = if rate > 0.0 {
+            ((ijk[a] + 1) * BLOCK_CELLS) as f64
+        } else if rate < 0.0 {
+            (ijk[a] * BLOCK_CELLS) as f64
+        } else {
+            continue;
+        };
+        exit = exit.min((edge - line.origin[a]) / rate);
+    }
+    exit
+}
+
+/// Distance at which a ray inside (or on) the cube `[lower, lower + size]` leaves it; `1/direction` precomputed.
+#[inline]
+fn exit_distance(origin: DVec3, inverse_direction: DVec3, lower: DVec3, size: f64) -> f64 {
+    let mut exit = f64::INFINITY;
+    for a in 0..3 {
+        let inv = inverse_direction[a];
+        if inv.is_finite() {
+            let bound = if inv > 0.0 { lower[a] + size } else { lower[a] };
+            exit = exit.min((bound - origin[a]) * inv);
+        }
+    }
+    exit
+}
+
+/// Slab test against the box `[lower, upper]`; returns `(t_enter, t_exit)` when hit ahead.
+#[inline]
+pub fn intersect_aabb(origin: DVec3, direction: DVec3, lower: DVec3, upper: DVec3) -> Option<(f64, f64)> {
+    let size = upper - lower;
+    // Scale to a unit cube so one slab test serves both.
+    let o = (origin - lower) / size;
+    let d = direction / size;
+    intersect_box(o, d, DVec3::ZERO, 1.0)
+}
+
+/// Slab test against the axis-aligned cube `[lower, lower + size]`; returns `(t_enter, t_exit)` when hit ahead.
+#[inline]
+pub fn intersect_box(origin: DVec3, direction: DVec3, lower: DVec3, size: f64) -> Option<(f64, f64)> {
+    let upper = lower + DVec3::splat(size);
+    let mut t0 = f64::NEG_INFINITY;
+    let mut t1 = f64::INFINITY;
+    for a in 0..3 {
+        let (o, d) = (origin[a], direction[a]);
+        if d == 0.0 {
+            if o < lower[a] || o > upper[a] {
+                return None;
+            }
+            continue;
+        }
+        let inv = 1.0 / d;
+        let (mut near, mut far) = ((lower[a] - o) * inv, (upper[a] - o) * inv);
+        if near > far {
+            std::mem::swap(&mut near, &mut far);
+        }
+        t0 = t0.max(near);
+        t1 = t1.min(far);
+    }
+    (t1 >= t0.max(0.0)).then_some((t0, t1))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn exit_distance_matches_the_slab_test() {
+        let origin = DVec3::new(0.3, 0.2, 0.9);
+        let direction = DVec3::new(0.5, -0.3, 0.2).normalize();
+        let (_, exit) = intersect_box(origin, direction, DVec3::ZERO, 1.0).unwrap();
+        assert!((exit_distance(origin, DVec3::ONE / direction, DVec3::ZERO, 1.0) - exit).abs() < 1e-12);
+        let axis = DVec3::new(0.0, 0.0, -1.0);
+        assert!((exit_distance(origin, DVec3::ONE / axis, DVec3::ZERO, 1.0) - 0.9).abs() < 1e-12);
+    }
+
+    #[test]
+    fn box_intersection() {
+        let hit = intersect_box(DVec3::new(-1.0, 0.5, 0.5), DVec3::X, DVec3::ZERO, 1.0).unwrap();
+        assert_eq!(hit, (1.0, 2.0));
+        assert!(intersect_box(DVec3::new(-1.0, 2.0, 0.5), DVec3::X, DVec3::ZERO, 1.0).is_none());
+        assert!(intersect_box(DVec3::new(2.0, 0.5, 0.5), DVec3::X, DVec3::ZERO, 1.0).is_none(), "box behind");
+        let inside = intersect_box(DVec3::splat(0.5), DVec3::Y, DVec3::ZERO, 1.0).unwrap();
+        assert_eq!(inside.1, 0.5);
+    }
+}

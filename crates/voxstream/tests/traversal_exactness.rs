@@ -1,0 +1,57 @@
+//! The traversal's promises, checked on whole frames: skipping empty space changes no bit of the image, and the
+//! image is the same whatever the number of threads.
+
+mod common;
+
+use voxstream::scenes::builtin;
+use voxstream::session::{LoopLimits, Mode, Session};
+use voxstream_render::{Image, RenderSettings};
+
+const SIZE: u32 = 64;
+
+/// A converged frame of a built-in scene and the samples it took.
+fn render(scene_name: &str, skip_empty_space: bool, threads: usize) -> (Image, u64) {
+    let scene = builtin(scene_name).expect("built-in scene");
+    let settings = RenderSettings {
+        width: SIZE,
+        height: SIZE,
+        shading: scene.shading,
+        light_direction: scene.light,
+        skip_empty_space,
+        ..RenderSettings::default()
+    };
+    let camera = scene.camera;
+    let mut session =
+        Session::new(scene.producer, &scene.transfer_function, settings, 256 << 20, LoopLimits::default())
+            .expect("session");
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("thread pool");
+    let result = pool.install(|| session.render(&camera, Mode::Converged)).expect("render");
+    assert!(result.is_converged(), "{scene_name}: not converged");
+    (result.image, result.samples)
+}
+
+#[test]
+fn skipping_empty_space_changes_no_bit() {
+    // The sponge's bricks are all visible (its empty space is constant nodes): only the image is compared there.
+    for (scene, has_hidden_blocks) in [("shell", true), ("hypertexture", true), ("sponge", false)] {
+        let (skipped, samples_skipping) = render(scene, true, 2);
+        let (marched, samples_marching) = render(scene, false, 2);
+        let covered = marched.pixels.iter().filter(|p| p[3] > 0.01).count();
+        assert!(covered > (SIZE * SIZE / 10) as usize, "{scene}: only {covered} pixels show anything");
+        let differing = skipped.pixels.iter().zip(&marched.pixels).filter(|(a, b)| a != b).count();
+        assert_eq!(differing, 0, "{scene}: {differing} pixels differ with skipping on");
+        println!("{scene}: {samples_skipping} samples with skipping, {samples_marching} without");
+        if has_hidden_blocks {
+            assert!(samples_skipping < samples_marching, "{scene}: skipping skipped nothing");
+        }
+    }
+}
+
+#[test]
+fn the_image_does_not_depend_on_the_thread_count() {
+    for scene in ["shell", "sponge"] {
+        let (one, _) = render(scene, true, 1);
+        let (three, _) = render(scene, true, 3);
+        assert!(one.pixels == three.pixels, "{scene}: 1 and 3 threads give different images");
+    }
+}
