@@ -22,12 +22,15 @@ impl Cell {
     #[inline(always)]
     pub fn locate(b: usize, x: [f32; 3]) -> Cell {
         let max = (b - 1) as f32;
+        let last_cell = b as u32 - 2;
         let mut ijk = [0usize; 3];
         let mut fraction = [0f32; 3];
         for a in 0..3 {
-            let c = x[a].clamp(0.0, max);
-            let i = (c as usize).min(b - 2);
-            ijk[a] = i;
+            // `max`/`min` rather than `clamp`: NaN goes to 0. `u32` conversions are one instruction each way
+            // (`usize` ones are not), and a brick edge is far below 2³².
+            let c = x[a].max(0.0).min(max);
+            let i = (c as u32).min(last_cell);
+            ijk[a] = i as usize;
             fraction[a] = c - i as f32;
         }
         Cell { base: (ijk[2] * b + ijk[1]) * b + ijk[0], fraction, ijk }

@@ -68,9 +68,11 @@ impl StepTable {
     /// Premultiplied colour and opacity of one step at normalised `value` (linear between entries; clamped).
     #[inline(always)]
     pub fn lookup(&self, value: f32) -> Vec4 {
-        let x = (value * (LUT_SIZE - 1) as f32).clamp(0.0, (LUT_SIZE - 1) as f32);
-        let i = (x as usize).min(LUT_SIZE - 2);
+        let x = (value * (LUT_SIZE - 1) as f32).max(0.0).min((LUT_SIZE - 1) as f32);
+        // `u32` conversions: one instruction each way, and the index provably in the table (no bounds check).
+        let i = (x as u32).min(LUT_SIZE as u32 - 2);
         let f = x - i as f32;
+        let i = i as usize;
         let (a, b) = (self.entries[i], self.entries[i + 1]);
         a + (b - a) * f
     }

@@ -366,11 +366,17 @@ impl<'a> Traversal<'a> {
                 count
             };
             stats.samples += (run_end - k) as u64;
-            let flow = match (gradient, &coarse_line) {
-                (false, None) => self.sample_run::<I, false>(&fine_line, None, first, dt, k, run_end, integrand),
-                (true, None) => self.sample_run::<I, true>(&fine_line, None, first, dt, k, run_end, integrand),
-                (false, Some(c)) => self.sample_run::<I, false>(&fine_line, Some(*c), first, dt, k, run_end, integrand),
-                (true, Some(c)) => self.sample_run::<I, true>(&fine_line, Some(*c), first, dt, k, run_end, integrand),
+            // One loop per combination, so that the loop itself holds no test of either.
+            let (coarse, weight) = match &coarse_line {
+                Some((line, weight)) => (line, *weight),
+                None => (&fine_line, 1.0),
+            };
+            let run = (first, dt, k, run_end);
+            let flow = match (gradient, coarse_line.is_some()) {
+                (false, false) => self.sample_run::<I, false, false>(&fine_line, coarse, weight, run, integrand),
+                (true, false) => self.sample_run::<I, true, false>(&fine_line, coarse, weight, run, integrand),
+                (false, true) => self.sample_run::<I, false, true>(&fine_line, coarse, weight, run, integrand),
+                (true, true) => self.sample_run::<I, true, true>(&fine_line, coarse, weight, run, integrand),
             };
             if flow.is_break() {
                 stats.samples -= (run_end - k) as u64;
@@ -382,17 +388,15 @@ impl<'a> Traversal<'a> {
         ControlFlow::Continue(())
     }
 
-    /// The inner loop: samples `k..end` of a segment, with no skipping checks.
-    #[allow(clippy::too_many_arguments)]
+    /// The inner loop: samples `k..end` of a segment (`run = (first, dt, k, end)`), with no skipping checks;
+    /// blended with `coarse` by `weight` when `COARSE`.
     #[inline(always)]
-    fn sample_run<I: Integrand, const GRADIENT: bool>(
+    fn sample_run<I: Integrand, const GRADIENT: bool, const COARSE: bool>(
         &self,
         fine: &BrickLine<'_>,
-        coarse: Option<(BrickLine<'_>, f32)>,
-        first: f64,
-        dt: f64,
-        k: u32,
-        end: u32,
+        coarse: &BrickLine<'_>,
+        weight: f32,
+        (first, dt, k, end): (f64, f64, u32, u32),
         integrand: &mut I,
     ) -> RunFlow {
         let b = self.stored;
@@ -403,8 +407,8 @@ impl<'a> Traversal<'a> {
             let cell = Cell::locate(b, fine.at(kf));
             let (mut value, gradient) =
                 if GRADIENT { cell.value_and_gradient(fine.voxels, b) } else { (cell.value(fine.voxels, b), [0.0; 3]) };
-            if let Some((line, weight)) = &coarse {
-                let coarse_value = Cell::locate(b, line.at(kf)).value(line.voxels, b);
+            if COARSE {
+                let coarse_value = Cell::locate(b, coarse.at(kf)).value(coarse.voxels, b);
                 value = coarse_value + (value - coarse_value) * weight;
             }
             let sample = Sample { t: first + s as f64 * dt, value, gradient };
