@@ -155,28 +155,31 @@ fn render_tile(
     let mut requests: Vec<Request> = Vec::new();
     let mut path = DescentPath::new(caster.view());
     let background = settings.background;
-    for y in y0..y1 {
-        for x in x0..x1 {
-            if !pending[(y * width + x) as usize] {
-                result.pixels.push(None);
-                result.pending.push(false);
-                continue;
+    // The loop and what it inlines (the whole traversal) are compiled for each instruction set; one is picked here.
+    settings.instruction_set.arch().dispatch(|| {
+        for y in y0..y1 {
+            for x in x0..x1 {
+                if !pending[(y * width + x) as usize] {
+                    result.pixels.push(None);
+                    result.pending.push(false);
+                    continue;
+                }
+                // In volume space, with t still measured in world units.
+                let direction = frame.direction(x, y, width, height) / scale;
+                let before = requests.len();
+                let (color, alpha) =
+                    caster.trace(origin, direction, frame.pixel_spread, &mut result.stats, &mut requests, &mut path);
+                result.pending.push(requests.len() > before);
+                let t = 1.0 - alpha;
+                result.pixels.push(Some([
+                    color[0] + t * background[0],
+                    color[1] + t * background[1],
+                    color[2] + t * background[2],
+                    alpha,
+                ]));
             }
-            // In volume space, with t still measured in world units.
-            let direction = frame.direction(x, y, width, height) / scale;
-            let before = requests.len();
-            let (color, alpha) =
-                caster.trace(origin, direction, frame.pixel_spread, &mut result.stats, &mut requests, &mut path);
-            result.pending.push(requests.len() > before);
-            let t = 1.0 - alpha;
-            result.pixels.push(Some([
-                color[0] + t * background[0],
-                color[1] + t * background[1],
-                color[2] + t * background[2],
-                alpha,
-            ]));
         }
-    }
+    });
     // Neighbouring rays miss the same nodes: merge them here so the frame's request list stays small.
     result.raw_requests = requests.len();
     requests.sort_unstable();

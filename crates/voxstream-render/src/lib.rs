@@ -28,6 +28,7 @@ pub mod emission_absorption;
 pub mod error;
 pub mod frame;
 pub mod image;
+pub mod instruction_set;
 pub mod integrand;
 pub mod ray_caster;
 pub mod sampler;
@@ -42,6 +43,7 @@ pub use frame::{
     frame_buffer_bytes, render_frame, render_pass, ProgressiveImage, RenderedFrame, FRAME_BYTES_PER_PIXEL, IMAGE_TILE,
 };
 pub use image::{psnr, Image};
+pub use instruction_set::InstructionSet;
 pub use integrand::{Integrand, Sample};
 pub use ray_caster::RayCaster;
 pub use settings::{PhongCoefficients, RenderSettings, Shading, VolumePlacement};

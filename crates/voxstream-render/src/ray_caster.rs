@@ -41,6 +41,7 @@ impl<'a> RayCaster<'a> {
     /// Traces one ray given in volume space with `t` in world units (`origin` in volume units, `direction` = the unit
     /// world direction divided by the placement's scale); returns premultiplied `[r, g, b]` and opacity.
     /// Appends at most `max_requests_per_ray` requests to `requests`.
+    #[inline(always)]
     pub fn trace(
         &self,
         origin: DVec3,

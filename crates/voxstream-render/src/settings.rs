@@ -3,6 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::error::RenderError;
+use crate::instruction_set::InstructionSet;
 
 /// How samples are lit.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -93,6 +94,8 @@ pub struct RenderSettings {
     /// Skip bricks and occupancy blocks the transfer function hides (exact: the image is the same bit for bit;
     /// off only to test that).
     pub skip_empty_space: bool,
+    /// Instructions the ray loop uses (detected at run time by default; the image is the same either way).
+    pub instruction_set: InstructionSet,
 }
 
 impl Default for RenderSettings {
@@ -110,6 +113,7 @@ impl Default for RenderSettings {
             opacity_cutoff: 0.998,
             max_requests_per_ray: 4,
             skip_empty_space: true,
+            instruction_set: InstructionSet::Detect,
         }
     }
 }

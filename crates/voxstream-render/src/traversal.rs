@@ -206,7 +206,9 @@ impl<'a> Traversal<'a> {
     }
 
     /// Walks `ray`, handing its samples to `integrand` until the ray leaves the volume or the integrand stops it.
-    /// Appends at most `max_requests_per_ray` requests to `requests`.
+    /// Appends at most `max_requests_per_ray` requests to `requests`. Always inlined, so that the caller's
+    /// instruction set ([`crate::InstructionSet`]) applies to the whole walk.
+    #[inline(always)]
     pub fn trace<I: Integrand>(
         &self,
         ray: &Ray,
@@ -305,7 +307,7 @@ impl<'a> Traversal<'a> {
     /// Samples `count` points `first + k·dt` inside the bricks of one segment, skipping the runs that lie in
     /// occupancy blocks the integrand cannot use.
     #[allow(clippy::too_many_arguments)]
-    #[inline]
+    #[inline(always)]
     fn march_bricks<I: Integrand>(
         &self,
         ray: &Ray,
@@ -421,7 +423,7 @@ impl<'a> Traversal<'a> {
     }
 
     /// The continuous voxel index in the brick of `node` along the ray, from sample `first` on in steps of `dt`.
-    #[inline]
+    #[inline(always)]
     fn brick_line(&self, ray: &Ray, node: &BrickRef, first: f64, dt: f64) -> BrickLine<'a> {
         let s = self.scale[node.level as usize];
         let m = self.brick_size;

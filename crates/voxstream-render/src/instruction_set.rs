@@ -1,0 +1,36 @@
+//! Which instructions the ray loop is compiled for, chosen at run time.
+//!
+//! The release build targets x86-64-v2 (SSE4.2), which every x86-64 CPU since 2009 runs. The tile loop and everything
+//! inlined into it is compiled a second time for x86-64-v3 (AVX2, FMA, BMI2; three-operand VEX encodings) and picked
+//! at run time when the CPU has it, through `pulp`'s safe dispatch (no `unsafe` here). Other architectures (aarch64)
+//! build the baseline only. The arithmetic is the same IEEE operations in either version (Rust never fuses a
+//! multiply and an add on its own), so the image is the same bytes whichever runs; a test checks it.
+
+/// The instruction set the ray loop uses.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum InstructionSet {
+    /// The best the CPU offers (AVX2+FMA on x86-64-v3 CPUs, else the baseline).
+    #[default]
+    Detect,
+    /// The build's baseline (x86-64-v2 here), whatever the CPU.
+    Baseline,
+}
+
+impl InstructionSet {
+    /// The dispatcher to run the tile loop with.
+    pub fn arch(self) -> pulp::Arch {
+        match self {
+            InstructionSet::Detect => pulp::Arch::new(),
+            InstructionSet::Baseline => pulp::Arch::Scalar,
+        }
+    }
+
+    /// What [`InstructionSet::Detect`] finds on this CPU, for reports: `"x86-64-v3 (AVX2+FMA)"` or `"baseline"`.
+    pub fn detected() -> &'static str {
+        #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
+        if let pulp::Arch::V3(_) = pulp::Arch::new() {
+            return "x86-64-v3 (AVX2+FMA)";
+        }
+        "baseline"
+    }
+}
