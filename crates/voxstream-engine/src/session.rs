@@ -157,6 +157,11 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
         &self.cache
     }
 
+    /// The renderer that draws the passes.
+    pub fn renderer(&self) -> &R {
+        &self.renderer
+    }
+
     /// The render settings.
     pub fn settings(&self) -> &RenderSettings {
         &self.settings
@@ -336,7 +341,7 @@ mod tests {
         let frame = counted.render(&camera, Mode::Converged).unwrap();
         assert!(frame.is_converged());
         assert!(frame.passes > 1, "the ball needs bricks, so more than one pass");
-        assert_eq!(counted.renderer.passes, frame.passes);
+        assert_eq!(counted.renderer().passes, frame.passes);
 
         let mut cpu = Session::new(Ball, &tf, settings, budget, LoopLimits::default()).unwrap();
         let reference = cpu.render(&camera, Mode::Converged).unwrap();
