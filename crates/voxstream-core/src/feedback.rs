@@ -11,6 +11,8 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 
+use voxstream_layout::{RequestRecord, REQUEST_PRODUCE, REQUEST_SUBDIVIDE};
+
 use crate::node::{BrickSlot, NodeId, TileId};
 
 /// What a ray asks the cache manager to do for a node.
@@ -29,6 +31,27 @@ pub struct Request {
     pub node: NodeId,
     /// What to do.
     pub kind: RequestKind,
+}
+
+impl Request {
+    /// The request as a GPU writes it ([`voxstream_layout::feedback_records`]).
+    pub fn to_record(self) -> RequestRecord {
+        let kind = match self.kind {
+            RequestKind::Produce => REQUEST_PRODUCE,
+            RequestKind::Subdivide => REQUEST_SUBDIVIDE,
+        };
+        RequestRecord { node: self.node.0, kind }
+    }
+
+    /// A request read back from a GPU's request buffer; `None` for a kind no ray writes (a corrupt buffer).
+    pub fn from_record(record: RequestRecord) -> Option<Request> {
+        let kind = match record.kind {
+            REQUEST_PRODUCE => RequestKind::Produce,
+            REQUEST_SUBDIVIDE => RequestKind::Subdivide,
+            _ => return None,
+        };
+        Some(Request { node: NodeId(record.node), kind })
+    }
 }
 
 /// The feedback of one frame, written concurrently by the renderer's threads.
@@ -122,5 +145,18 @@ mod tests {
         feedback.reset(8, 8);
         assert_eq!(feedback.used_tiles().count(), 0);
         assert_eq!(feedback.used_bricks().count(), 0);
+    }
+
+    #[test]
+    fn requests_round_trip_through_the_gpu_record() {
+        for kind in [RequestKind::Produce, RequestKind::Subdivide] {
+            let request = Request { node: NodeId(41), kind };
+            assert_eq!(Request::from_record(request.to_record()), Some(request));
+        }
+        assert_ne!(
+            Request { node: NodeId(1), kind: RequestKind::Produce }.to_record(),
+            Request { node: NodeId(1), kind: RequestKind::Subdivide }.to_record()
+        );
+        assert_eq!(Request::from_record(RequestRecord { node: 1, kind: 7 }), None);
     }
 }

@@ -4,8 +4,10 @@
 //! same layout. The view borrows the pools immutably: while a frame renders, the borrow checker guarantees that the
 //! cache manager cannot change them.
 
+use voxstream_layout::TreeHeader;
+
 use crate::brick_pool::dequantize;
-use crate::key::TreeShape;
+use crate::key::{TreeShape, BLOCK_CELLS};
 use crate::node::{BrickSlot, Node, NodeId, TileId};
 
 /// Flat, immutable view of the node pool and the brick pool.
@@ -24,6 +26,25 @@ pub struct TreeView<'a> {
 }
 
 impl<'a> TreeView<'a> {
+    /// The tree's shape and the pools' lengths as a GPU reads them (the uniform beside the node and brick buffers).
+    pub fn header(&self) -> TreeHeader {
+        let voxels_per_brick = self.shape.voxels_per_brick();
+        TreeHeader {
+            n: self.shape.n,
+            nodes_per_tile: self.shape.nodes_per_tile(),
+            brick_size: self.shape.brick_size,
+            stored_brick_size: self.shape.stored_brick_size(),
+            max_level: self.shape.max_level,
+            blocks_per_axis: self.shape.blocks_per_axis() as u32,
+            block_cells: BLOCK_CELLS as u32,
+            voxels_per_brick: voxels_per_brick as u32,
+            node_count: self.nodes.len() as u32,
+            brick_count: (self.voxels.len() / voxels_per_brick) as u32,
+            padding0: 0,
+            padding1: 0,
+        }
+    }
+
     /// The root node.
     #[inline]
     pub fn root(&self) -> Node {
@@ -64,5 +85,26 @@ impl<'a> TreeView<'a> {
     pub fn voxel(&self, brick: &[u16], i: usize, j: usize, k: usize) -> f32 {
         let b = self.shape.stored_brick_size() as usize;
         dequantize(brick[(k * b + j) * b + i])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn header_describes_the_shape_and_the_pools() {
+        let shape = TreeShape::new(3, 16, 5).unwrap();
+        let nodes = vec![Node::MISSING; 2 * 27];
+        let voxels = vec![0u16; 3 * shape.voxels_per_brick()];
+        let ranges = vec![[0u16, 0]; 3];
+        let blocks = vec![[0u16, 0]; 3 * shape.blocks_per_brick()];
+        let view = TreeView { shape, nodes: &nodes, voxels: &voxels, brick_ranges: &ranges, block_ranges: &blocks };
+        let header = view.header();
+        assert_eq!((header.n, header.nodes_per_tile, header.brick_size, header.stored_brick_size), (3, 27, 16, 18));
+        // 17 cells between the 18 stored voxels, in blocks of 8: three blocks per axis, the last one smaller.
+        assert_eq!((header.max_level, header.blocks_per_axis, header.block_cells), (5, 3, 8));
+        assert_eq!(header.voxels_per_brick, 18 * 18 * 18);
+        assert_eq!((header.node_count, header.brick_count), (54, 3));
     }
 }

@@ -24,9 +24,9 @@ use zarrs::storage::ReadableStorageTraits;
 
 use crate::error::StoreError;
 use crate::layout::PyramidLayout;
+use crate::level_source::{retrieve_f32, LevelSource};
 use crate::metadata::StoreAttributes;
 use crate::metadata_check::{check_chunk_sizes, dtype_range, validate_attributes};
-use crate::store_reader::LevelSource;
 use crate::volume::DType;
 
 /// Brick edge used for foreign stores.
@@ -161,7 +161,7 @@ pub(crate) fn open_foreign(
     }));
     let subset = ArraySubset::new_with_ranges(&ranges);
     let read_err = |e: zarrs::array::ArrayError| bad(format!("coarsest dataset: {e}"));
-    let values = crate::store_reader::retrieve_f32(coarsest, &subset, dtype).map_err(read_err)?;
+    let values = retrieve_f32(coarsest, &subset, dtype).map_err(read_err)?;
     let (lo, hi) = values
         .iter()
         .filter(|v| v.is_finite())

@@ -23,23 +23,10 @@ use zarrs::storage::ReadableStorageTraits;
 use crate::error::StoreError;
 use crate::import::{aside_paths, partial_path};
 use crate::layout::PyramidLayout;
+use crate::level_source::{retrieve_f32, LevelSource};
 use crate::metadata::{StoreAttributes, MINMAX_GROUP};
 use crate::metadata_check::{check_chunk_sizes, validate_attributes};
-use crate::volume::{DType, VolumeInfo};
-
-/// Reads `subset` of `array`, whose samples are of type `dtype`, as f32.
-pub(crate) fn retrieve_f32(
-    array: &Array<dyn ReadableStorageTraits>,
-    subset: &ArraySubset,
-    dtype: DType,
-) -> Result<Vec<f32>, zarrs::array::ArrayError> {
-    Ok(match dtype {
-        DType::U8 => array.retrieve_array_subset::<Vec<u8>>(subset)?.into_iter().map(f32::from).collect(),
-        DType::U16 => array.retrieve_array_subset::<Vec<u16>>(subset)?.into_iter().map(f32::from).collect(),
-        DType::I16 => array.retrieve_array_subset::<Vec<i16>>(subset)?.into_iter().map(f32::from).collect(),
-        DType::F32 => array.retrieve_array_subset::<Vec<f32>>(subset)?,
-    })
-}
+use crate::volume::VolumeInfo;
 
 /// Extends `data` (dims `have`, x fastest) to dims `want` by repeating its last samples.
 fn pad_to(data: &[f32], have: [u64; 3], want: [u64; 3]) -> Vec<f32> {
@@ -139,16 +126,6 @@ fn read_minmax(
 
 /// Default size of the host-side brick cache.
 pub const DEFAULT_CACHE_BYTES: u64 = 64 << 20;
-
-/// Where the samples of one level come from.
-pub(crate) enum LevelSource {
-    /// An array of shape `[.., z, y, x]`; leading axes (time, channel) are read at index 0. Its last three
-    /// dimensions may differ from the level's by one sample (foreign pyramids that halve rounding down): missing
-    /// samples repeat the edge.
-    Array { array: Array<dyn ReadableStorageTraits>, leading: usize, shape: [u64; 3] },
-    /// Averaged from the level below.
-    Synthesized,
-}
 
 /// An open store.
 pub struct StoreReader {

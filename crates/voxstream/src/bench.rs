@@ -6,14 +6,15 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use serde::Serialize;
+use voxstream_core::Producer;
+use voxstream_engine::{LoopLimits, Mode, Session};
 use voxstream_render::RenderSettings;
 
 use crate::camera_path::orbit;
 use crate::cli::BenchArgs;
 use crate::memory::peak_rss_bytes;
-use crate::render_budget::RenderBudget;
+use crate::render_budget::{check_budget, plan_budget};
 use crate::scenes::{builtin, Scene, SCENE_NAMES};
-use crate::session::{LoopLimits, Mode, Session};
 use crate::trilinear_bound::scalar_trilinear_ns_per_sample;
 
 /// How long the scalar trilinear bound is measured.
@@ -58,7 +59,7 @@ pub struct SceneFigures {
 pub fn run(args: &BenchArgs) -> Result<()> {
     let names: Vec<String> =
         if args.scenes.is_empty() { SCENE_NAMES.iter().map(|s| s.to_string()).collect() } else { args.scenes.clone() };
-    RenderBudget::plan(args.budget_mb, args.size, args.size, "--size")?;
+    check_budget(args.budget_mb, args.size, args.size, "--size")?;
     eprintln!("bench: the scalar trilinear bound …");
     let bound_ns = scalar_trilinear_ns_per_sample(BOUND_DURATION);
     let mut figures = Vec::new();
@@ -108,8 +109,9 @@ fn new_session(scene: &Scene, args: &BenchArgs) -> Result<Session<crate::scenes:
         ..RenderSettings::default()
     };
     // The same split as `render`: the frame's buffers count, and a budget beyond the machine is refused.
-    let pool_bytes = RenderBudget::plan(args.budget_mb, args.size, args.size, "--size")?.pool_bytes(0);
-    Session::new(scene.producer, &scene.transfer_function, settings, pool_bytes, LoopLimits::default())
+    let budget = check_budget(args.budget_mb, args.size, args.size, "--size")?;
+    let plan = plan_budget(&budget, &scene.producer.shape(), 0)?;
+    Ok(Session::new(scene.producer, &scene.transfer_function, settings, plan.pool_bytes, LoopLimits::default())?)
 }
 
 fn bench_scene(scene: &Scene, args: &BenchArgs, bound_ns: f64) -> Result<SceneFigures> {

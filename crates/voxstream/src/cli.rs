@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
 
-use crate::session::Mode;
+use voxstream_engine::Mode;
 
 /// voxstream: render volumes far larger than memory, loading only what the rays reach.
 #[derive(Parser, Debug)]

@@ -3,8 +3,9 @@
 //! `voxstream render [SOURCE]` renders a built-in scene through the whole GigaVoxels loop (see
 //! `docs/ARCHITECTURE.md`); `voxstream bench` measures it; `voxstream scenes` lists the scenes.
 //!
-//! This crate closes the loop camera → renderer → feedback → cache manager → producers → pools in
-//! [`session::Session::render`]; the other modules parse flags and files and write images and statistics.
+//! The loop camera → renderer → feedback → cache manager → producers → pools closes in `voxstream-engine`
+//! ([`voxstream_engine::Session`]), which also plans the memory budget; this crate parses flags and files, drives
+//! the engine, and writes images and statistics.
 
 pub mod bench;
 pub mod camera_path;
@@ -20,7 +21,6 @@ pub mod render_command;
 pub mod render_progress;
 pub mod render_warnings;
 pub mod scenes;
-pub mod session;
 pub mod source_path;
 pub mod stats;
 pub mod trilinear_bound;

@@ -6,7 +6,7 @@ use std::process::ExitCode;
 
 use clap::Parser;
 use voxstream::cli::{Cli, Command, RenderArgs};
-use voxstream::{bench, import_command, info_command, render_command, scenes, session};
+use voxstream::{bench, import_command, info_command, render_command, scenes};
 
 fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
@@ -69,7 +69,7 @@ fn unreachable_default() -> RenderArgs {
         light: None,
         background: [0.0; 3],
         budget_mb: 256,
-        mode: session::Mode::Converged,
+        mode: voxstream_engine::Mode::Converged,
         frames: 1,
         requests_per_frame: 1024,
         path: None,

@@ -6,6 +6,7 @@ use std::sync::Arc;
 
 use anyhow::{bail, Context, Result};
 use voxstream_core::Producer;
+use voxstream_engine::{LoopLimits, MemoryBudget, Mode, Session, MAX_BUDGET_MB};
 use voxstream_render::{Camera, RenderSettings, Shading, TransferFunction, VolumePlacement};
 use voxstream_store::{InMemoryVolume, StoreProducer, StoreReader};
 
@@ -15,11 +16,10 @@ use crate::exit_status::IncompleteImage;
 use crate::memory::{bytes_read, peak_rss_bytes};
 use crate::output_file::write_atomically;
 use crate::png_output::{numbered_path, write_png};
-use crate::render_budget::{RenderBudget, MAX_BUDGET_MB};
+use crate::render_budget::{check_budget, plan_budget};
 use crate::render_progress::RenderProgress;
 use crate::render_warnings::{empty_image, transfer_function_mismatch};
 use crate::scenes::builtin;
-use crate::session::{LoopLimits, Mode, Session};
 use crate::source_path::check_store_path;
 use crate::stats::RunStats;
 
@@ -45,7 +45,7 @@ struct Source<P> {
 /// Runs `voxstream render`.
 pub fn run(args: &RenderArgs) -> Result<()> {
     check_flags(args)?;
-    let budget = RenderBudget::plan(args.budget_mb, args.width, args.height, "--width/--height")?;
+    let budget = check_budget(args.budget_mb, args.width, args.height, "--width/--height")?;
     if let Some(scene) = builtin(&args.source) {
         let source = Source {
             name: scene.name.to_string(),
@@ -185,7 +185,7 @@ pub fn default_store_transfer_function(range: [f64; 2]) -> Result<TransferFuncti
     )?)
 }
 
-fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &RenderBudget) -> Result<()> {
+fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &MemoryBudget) -> Result<()> {
     let transfer_function = match &args.tf {
         Some(path) => read_transfer_function(path)?,
         None => source.transfer_function.clone(),
@@ -232,18 +232,17 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Ren
         }
     }
 
-    let budget_bytes = budget.total_bytes;
+    let budget_bytes = budget.total_bytes();
     let limits = LoopLimits { requests_per_frame: args.requests_per_frame, ..LoopLimits::default() };
-    let pool_bytes = budget.pool_bytes(source.producer_cache_bytes);
+    let plan = plan_budget(budget, &source.producer.shape(), source.producer_cache_bytes)?;
     let mut session = Session::with_value_range(
         source.producer,
         &transfer_function,
         settings,
-        pool_bytes,
+        plan.pool_bytes,
         limits,
         source.value_range,
-    )
-    .map_err(|error| budget_in_user_units(error, args.budget_mb, budget_bytes, pool_bytes))?;
+    )?;
     let mut stats = RunStats {
         source: source.name.clone(),
         mode: format!("{:?}", args.mode).to_lowercase(),
@@ -351,22 +350,6 @@ fn summary_line(written: &[std::path::PathBuf], args: &RenderArgs, stats: &RunSt
     format!(
         "wrote {files} ({}x{}, {state}, {passes} passes, {} bricks loaded)",
         args.width, args.height, stats.bricks_produced
-    )
-}
-
-/// The pools' "budget too small" in `--budget-mb`'s units: the smallest `--budget-mb` that works, counting the share
-/// of the budget that goes to a store's brick cache.
-fn budget_in_user_units(error: anyhow::Error, budget_mb: u64, budget_bytes: u64, pool_bytes: u64) -> anyhow::Error {
-    let Some(voxstream_core::CoreError::BudgetTooSmall { minimum_bytes, .. }) = error.downcast_ref() else {
-        return error;
-    };
-    // The pools get `pool_bytes` of `budget_bytes`; scale the minimum up by the same share, round up to whole MiB.
-    let share = pool_bytes.max(1) as f64 / budget_bytes.max(1) as f64;
-    let minimum_mb = ((*minimum_bytes as f64 / share) / 1048576.0).ceil().max(1.0) as u64;
-    let minimum_mb = if minimum_mb <= budget_mb { budget_mb + 1 } else { minimum_mb };
-    anyhow::anyhow!(
-        "--budget-mb {budget_mb} is too small for this source: the node and brick pools need at least {minimum_mb} \
-         MiB (use --budget-mb {minimum_mb} or more)"
     )
 }
 

@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
-use crate::session::PassProgress;
+use voxstream_engine::PassProgress;
 
 /// The progress display of one `render` run.
 pub struct RenderProgress {

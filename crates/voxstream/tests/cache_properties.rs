@@ -6,7 +6,7 @@ mod common;
 
 use proptest::prelude::*;
 use voxstream::scenes::SCENE_NAMES;
-use voxstream::session::Mode;
+use voxstream_engine::Mode;
 use voxstream_render::Camera;
 
 fn camera_strategy() -> impl Strategy<Value = Camera> {
@@ -37,8 +37,8 @@ proptest! {
         let minimum = voxstream_core::PoolCapacities::plan(&voxstream_core::Producer::shape(&scene_def.producer), budget);
         prop_assume!(minimum.is_ok());
         let settings = voxstream_render::RenderSettings { width: 24, height: 24, ..Default::default() };
-        let limits = voxstream::session::LoopLimits { requests_per_frame: limit, max_passes: 60 };
-        let mut session = voxstream::session::Session::new(
+        let limits = voxstream_engine::LoopLimits { requests_per_frame: limit, max_passes: 60 };
+        let mut session = voxstream_engine::Session::new(
             scene_def.producer, &scene_def.transfer_function, settings, budget, limits).unwrap();
         for camera in &path {
             for _ in 0..3 {
@@ -55,7 +55,7 @@ proptest! {
         prop_assert!(session.residency().bytes <= budget);
         if small.is_converged() {
             // Exactness: whatever was evicted on the way, a converged frame is the fully resident image.
-            let reference = voxstream::session::Session::new(
+            let reference = voxstream_engine::Session::new(
                 scene_def.producer, &scene_def.transfer_function,
                 voxstream_render::RenderSettings { width: 24, height: 24, ..Default::default() },
                 256 << 20, Default::default()).unwrap();
@@ -83,7 +83,7 @@ fn interactive_frames_converge_to_the_converged_image() {
 
 /// Keys of every resident brick of a session.
 fn resident_brick_bounds(
-    session: &voxstream::session::Session<voxstream::scenes::SceneProducer>,
+    session: &voxstream_engine::Session<voxstream::scenes::SceneProducer>,
 ) -> Vec<(u32, [f64; 3], f64)> {
     let cache = session.cache();
     let shape = *cache.shape();

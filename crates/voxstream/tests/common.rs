@@ -3,7 +3,7 @@
 
 use glam::DVec3;
 use voxstream::scenes::{builtin, SceneProducer};
-use voxstream::session::{LoopLimits, Mode, Session};
+use voxstream_engine::{LoopLimits, Mode, Session};
 use voxstream_render::{Camera, Image, RenderSettings};
 
 /// A session on a built-in scene at `size`², with the scene's transfer function and shading.

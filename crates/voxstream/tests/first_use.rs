@@ -10,7 +10,7 @@ use std::process::{Command, Output};
 use glam::DVec3;
 use voxstream::render_command::store_camera;
 use voxstream::scenes::builtin;
-use voxstream::session::{LoopLimits, Mode, Session};
+use voxstream_engine::{LoopLimits, Mode, Session};
 use voxstream_render::RenderSettings;
 use voxstream_store::{DType, VolumeInfo};
 

@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use glam::DVec3;
 use voxstream::render_command::{default_store_transfer_function, store_camera, store_placement};
-use voxstream::session::{LoopLimits, Mode, Session};
+use voxstream_engine::{LoopLimits, Mode, Session};
 use voxstream_render::{psnr, Camera, Image, RenderSettings, TransferFunction};
 use voxstream_store::formats::{open_volume, Endian, RawLayout};
 use voxstream_store::{import_volume, DType, ImportOptions, StoreProducer, StoreReader, VolumeInfo};

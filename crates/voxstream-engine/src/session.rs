@@ -8,15 +8,24 @@
 //! In converged mode, only the rays that reported a miss are traced again in the next pass ([R08]'s "interrupt and
 //! resume"); a ray that missed nothing already used exactly the data it needs.
 
+//!
+//! The renderer is any [`FrameRenderer`]: [`CpuRenderer`] by default, a GPU backend later.
+
 use std::time::Instant;
 
-use anyhow::{bail, Result};
 use voxstream_core::{CacheManager, ProduceError, Producer, Residency};
-use voxstream_render::{render_pass, Camera, Image, ProgressiveImage, RenderSettings, TransferFunction, TransferLut};
+use voxstream_render::{Camera, Image, ProgressiveImage, RenderSettings, TransferFunction, TransferLut};
+
+use crate::error::EngineError;
+use crate::frame_renderer::{CpuRenderer, FrameRenderer};
+
+type Result<T> = std::result::Result<T, EngineError>;
 
 /// How a frame is completed.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+#[cfg_attr(feature = "serde", serde(rename_all = "lowercase"))]
 pub enum Mode {
     /// Repeat render + produce until no request remains.
     Converged,
@@ -87,16 +96,17 @@ pub struct PassProgress {
     pub bricks_produced: u64,
 }
 
-/// A producer, its cache, and the render state shared by consecutive frames.
-pub struct Session<P: Producer> {
+/// A producer, its cache, the renderer, and the render state shared by consecutive frames.
+pub struct Session<P: Producer, R: FrameRenderer = CpuRenderer> {
     cache: CacheManager<P>,
+    renderer: R,
     lut: TransferLut,
     settings: RenderSettings,
     limits: LoopLimits,
     peak_resident_bytes: u64,
 }
 
-impl<P: Producer> Session<P> {
+impl<P: Producer> Session<P, CpuRenderer> {
     /// A session within `budget_bytes` on a producer whose values span `[0, 1]`. The transfer function's unit
     /// distance defaults to one finest voxel.
     pub fn new(
@@ -119,17 +129,37 @@ impl<P: Producer> Session<P> {
         limits: LoopLimits,
         value_range: [f64; 2],
     ) -> Result<Session<P>> {
+        Session::with_renderer(CpuRenderer, producer, transfer_function, settings, budget_bytes, limits, value_range)
+    }
+}
+
+impl<P: Producer, R: FrameRenderer> Session<P, R> {
+    /// A session drawn by `renderer` (see [`Session::with_value_range`] for the other arguments).
+    pub fn with_renderer(
+        renderer: R,
+        producer: P,
+        transfer_function: &TransferFunction,
+        settings: RenderSettings,
+        budget_bytes: u64,
+        limits: LoopLimits,
+        value_range: [f64; 2],
+    ) -> Result<Session<P, R>> {
         settings.validate()?;
         let shape = producer.shape();
         let finest_voxel = settings.placement.mean_scale() * shape.voxel_size(shape.max_level);
         let lut = TransferLut::new(transfer_function, value_range[0] as f32, value_range[1] as f32, finest_voxel);
         let cache = CacheManager::new(producer, budget_bytes)?;
-        Ok(Session { cache, lut, settings, limits, peak_resident_bytes: 0 })
+        Ok(Session { cache, renderer, lut, settings, limits, peak_resident_bytes: 0 })
     }
 
     /// The cache.
     pub fn cache(&self) -> &CacheManager<P> {
         &self.cache
+    }
+
+    /// The renderer that draws the passes.
+    pub fn renderer(&self) -> &R {
+        &self.renderer
     }
 
     /// The render settings.
@@ -181,8 +211,14 @@ impl<P: Producer> Session<P> {
         loop {
             self.cache.begin_frame();
             let render_start = Instant::now();
-            let (stats, _) =
-                render_pass(self.cache.view(), self.cache.feedback(), camera, &self.lut, &settings, &mut progressive)?;
+            let (stats, _) = self.renderer.render_pass(
+                self.cache.view(),
+                self.cache.feedback(),
+                camera,
+                &self.lut,
+                &settings,
+                &mut progressive,
+            )?;
             result.render_ms += render_start.elapsed().as_secs_f64() * 1e3;
             let limit = match mode {
                 Mode::Converged => None,
@@ -220,7 +256,7 @@ impl<P: Producer> Session<P> {
         max_frames: u32,
     ) -> Result<(u32, FrameResult)> {
         if max_frames == 0 {
-            bail!("at least one frame is needed");
+            return Err(EngineError::NoFrames);
         }
         let mut frames = 0;
         loop {
@@ -230,5 +266,93 @@ impl<P: Producer> Session<P> {
                 return Ok((frames, result));
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use voxstream_core::{FeedbackBuffer, NodeContent, NodeKey, ProduceError, Produced, TreeShape, TreeView};
+    use voxstream_render::RayStats;
+
+    use super::*;
+
+    /// A sphere of density 1 around the cube's centre, 0 elsewhere.
+    struct Ball;
+    impl Producer for Ball {
+        fn shape(&self) -> TreeShape {
+            TreeShape::new(2, 8, 3).unwrap()
+        }
+        fn produce(&self, key: NodeKey, voxels: &mut [u16]) -> std::result::Result<Produced, ProduceError> {
+            let shape = self.shape();
+            let ([x0, y0, z0], size) = key.bounds(&shape);
+            let b = shape.stored_brick_size() as usize;
+            let voxel = size / shape.brick_size as f64;
+            for (index, v) in voxels.iter_mut().enumerate() {
+                let (i, j, k) = (index % b, index / b % b, index / (b * b));
+                let p = [i, j, k].map(|c| (c as f64 - 0.5) * voxel);
+                let (x, y, z) = (x0 + p[0] - 0.5, y0 + p[1] - 0.5, z0 + p[2] - 0.5);
+                *v = if x * x + y * y + z * z < 0.09 { u16::MAX } else { 0 };
+            }
+            Ok(Produced { content: NodeContent::Brick, is_terminal: key.level == shape.max_level })
+        }
+    }
+
+    /// The CPU renderer, counting its passes.
+    #[derive(Default)]
+    struct CountingRenderer {
+        passes: u32,
+    }
+    impl FrameRenderer for CountingRenderer {
+        fn render_pass(
+            &mut self,
+            view: TreeView<'_>,
+            feedback: &FeedbackBuffer,
+            camera: &Camera,
+            lut: &TransferLut,
+            settings: &RenderSettings,
+            progressive: &mut ProgressiveImage,
+        ) -> std::result::Result<(RayStats, usize), voxstream_render::RenderError> {
+            self.passes += 1;
+            CpuRenderer.render_pass(view, feedback, camera, lut, settings, progressive)
+        }
+    }
+
+    fn parts() -> (TransferFunction, RenderSettings, Camera) {
+        let tf = TransferFunction::new(vec![[0.0, 1.0, 1.0, 1.0, 0.0], [1.0, 1.0, 0.5, 0.2, 0.9]], None).unwrap();
+        let settings = RenderSettings { width: 24, height: 24, ..RenderSettings::default() };
+        let camera = Camera { eye: [0.5, 0.5, 3.0], target: [0.5, 0.5, 0.5], up: [0.0, 1.0, 0.0], fov: 30.0 };
+        (tf, settings, camera)
+    }
+
+    #[test]
+    fn the_loop_drives_the_renderer_it_is_given_and_matches_the_cpu_session() {
+        let (tf, settings, camera) = parts();
+        let budget = 16 << 20;
+        let mut counted = Session::with_renderer(
+            CountingRenderer::default(),
+            Ball,
+            &tf,
+            settings.clone(),
+            budget,
+            LoopLimits::default(),
+            [0.0, 1.0],
+        )
+        .unwrap();
+        let frame = counted.render(&camera, Mode::Converged).unwrap();
+        assert!(frame.is_converged());
+        assert!(frame.passes > 1, "the ball needs bricks, so more than one pass");
+        assert_eq!(counted.renderer().passes, frame.passes);
+
+        let mut cpu = Session::new(Ball, &tf, settings, budget, LoopLimits::default()).unwrap();
+        let reference = cpu.render(&camera, Mode::Converged).unwrap();
+        assert_eq!(frame.image.pixels, reference.image.pixels);
+        assert!(reference.image.pixels.iter().any(|&p| p != reference.image.pixels[0]), "the ball is visible");
+    }
+
+    #[test]
+    fn zero_interactive_frames_is_an_error() {
+        let (tf, settings, camera) = parts();
+        let mut session = Session::new(Ball, &tf, settings, 16 << 20, LoopLimits::default()).unwrap();
+        assert!(matches!(session.render_until_converged_interactively(&camera, 0), Err(EngineError::NoFrames)));
     }
 }

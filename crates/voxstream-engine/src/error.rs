@@ -1,0 +1,18 @@
+//! The engine's errors: those of the crates it drives, passed through unchanged, and its own.
+
+use voxstream_core::CoreError;
+use voxstream_render::RenderError;
+
+/// What can go wrong when a session is built or renders.
+#[derive(Debug, thiserror::Error)]
+pub enum EngineError {
+    /// The cache could not be built (for instance, a budget too small for the pools).
+    #[error(transparent)]
+    Core(#[from] CoreError),
+    /// The render settings or camera were refused.
+    #[error(transparent)]
+    Render(#[from] RenderError),
+    /// A render was asked for zero frames.
+    #[error("at least one frame is needed")]
+    NoFrames,
+}
