@@ -154,11 +154,70 @@ fn render_tile(
     };
     let mut requests: Vec<Request> = Vec::new();
     let mut path = DescentPath::new(caster.view());
-    let background = settings.background;
     // The loop and what it inlines (the whole traversal) are compiled for each instruction set; one is picked here.
-    settings.instruction_set.arch().dispatch(|| {
-        for y in y0..y1 {
-            for x in x0..x1 {
+    settings.instruction_set.arch().dispatch(TileLoop {
+        caster,
+        frame,
+        pixels: (x0..x1, y0..y1),
+        width,
+        height,
+        origin,
+        scale,
+        background: settings.background,
+        pending,
+        result: &mut result,
+        requests: &mut requests,
+        path: &mut path,
+    });
+    // Neighbouring rays miss the same nodes: merge them here so the frame's request list stays small.
+    result.raw_requests = requests.len();
+    requests.sort_unstable();
+    requests.dedup();
+    feedback.push_requests(&requests);
+    result
+}
+
+/// The rays of one tile, as a [`pulp::WithSimd`] operation: `with_simd` is monomorphised per instruction set and
+/// always inlined into pulp's `#[target_feature]` entry point, and the traversal is always inlined into it, so each
+/// version of the whole ray loop is compiled for its instruction set. (A closure would be compiled once, for the
+/// baseline.)
+struct TileLoop<'t, 'a> {
+    caster: &'t RayCaster<'a>,
+    frame: &'t CameraFrame,
+    pixels: (std::ops::Range<u32>, std::ops::Range<u32>),
+    width: u32,
+    height: u32,
+    origin: glam::DVec3,
+    scale: glam::DVec3,
+    background: [f32; 3],
+    pending: &'t [bool],
+    result: &'t mut TileResult,
+    requests: &'t mut Vec<Request>,
+    path: &'t mut DescentPath,
+}
+
+impl pulp::WithSimd for TileLoop<'_, '_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        let TileLoop {
+            caster,
+            frame,
+            pixels,
+            width,
+            height,
+            origin,
+            scale,
+            background,
+            pending,
+            result,
+            requests,
+            path,
+        } = self;
+        let (columns, rows) = pixels;
+        for y in rows {
+            for x in columns.clone() {
                 if !pending[(y * width + x) as usize] {
                     result.pixels.push(None);
                     result.pending.push(false);
@@ -168,7 +227,7 @@ fn render_tile(
                 let direction = frame.direction(x, y, width, height) / scale;
                 let before = requests.len();
                 let (color, alpha) =
-                    caster.trace(origin, direction, frame.pixel_spread, &mut result.stats, &mut requests, &mut path);
+                    caster.trace(origin, direction, frame.pixel_spread, &mut result.stats, requests, path);
                 result.pending.push(requests.len() > before);
                 let t = 1.0 - alpha;
                 result.pixels.push(Some([
@@ -179,11 +238,5 @@ fn render_tile(
                 ]));
             }
         }
-    });
-    // Neighbouring rays miss the same nodes: merge them here so the frame's request list stays small.
-    result.raw_requests = requests.len();
-    requests.sort_unstable();
-    requests.dedup();
-    feedback.push_requests(&requests);
-    result
+    }
 }

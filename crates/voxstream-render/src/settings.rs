@@ -94,6 +94,9 @@ pub struct RenderSettings {
     /// Skip bricks and occupancy blocks the transfer function hides (exact: the image is the same bit for bit;
     /// off only to test that).
     pub skip_empty_space: bool,
+    /// Evaluate samples [`crate::sampler::LANES`] at a time where possible (the same bits as one at a time, which
+    /// stays as the reference; off only to test that).
+    pub sample_batches: bool,
     /// Instructions the ray loop uses (detected at run time by default; the image is the same either way).
     pub instruction_set: InstructionSet,
 }
@@ -114,6 +117,7 @@ impl Default for RenderSettings {
             max_requests_per_ray: 4,
             skip_empty_space: true,
             instruction_set: InstructionSet::Detect,
+            sample_batches: true,
         }
     }
 }

@@ -33,7 +33,7 @@ use glam::DVec3;
 use voxstream_core::{BrickSlot, FeedbackBuffer, Node, NodeData, NodeId, Request, RequestKind, TreeView, BLOCK_CELLS};
 
 use crate::integrand::{Integrand, Sample};
-use crate::sampler::Cell;
+use crate::sampler::{values_along, Cell, LANES};
 use crate::settings::RenderSettings;
 use crate::step_table::StepLength;
 
@@ -156,6 +156,7 @@ pub struct Traversal<'a> {
     clip_upper: DVec3,
     max_requests_per_ray: u32,
     skip_empty_space: bool,
+    sample_batches: bool,
     /// `N^d` for every level.
     scale: [f64; MAX_TABLE_LEVELS],
     n: u64,
@@ -183,6 +184,7 @@ impl<'a> Traversal<'a> {
             clip_upper: DVec3::from(settings.placement.clip_upper),
             max_requests_per_ray: settings.max_requests_per_ray,
             skip_empty_space: settings.skip_empty_space,
+            sample_batches: settings.sample_batches,
             scale,
             n: shape.n as u64,
             brick_size: shape.brick_size as f64,
@@ -405,7 +407,29 @@ impl<'a> Traversal<'a> {
         // A float counter (exact below 2²⁴) instead of converting the index per sample: positions are the same
         // bits whichever sample a run starts at.
         let mut kf = k as f32;
-        for s in k..end {
+        let mut s = k;
+        // Without gradients, LANES samples at a time (the same values, bit for bit: see `values_along`); the
+        // integrand still takes them one by one, in order.
+        if !GRADIENT && self.sample_batches {
+            while s + LANES as u32 <= end {
+                let mut values = values_along(fine.voxels, b, fine.start, fine.delta, kf);
+                if COARSE {
+                    let coarse_values = values_along(coarse.voxels, b, coarse.start, coarse.delta, kf);
+                    for (value, coarse_value) in values.iter_mut().zip(coarse_values) {
+                        *value = coarse_value + (*value - coarse_value) * weight;
+                    }
+                }
+                for (j, &value) in values.iter().enumerate() {
+                    let sample = Sample { t: first + (s + j as u32) as f64 * dt, value, gradient: [0.0; 3] };
+                    if integrand.sample(sample).is_break() {
+                        return ControlFlow::Break(u64::from(s - k) + j as u64 + 1);
+                    }
+                }
+                s += LANES as u32;
+                kf += LANES as f32;
+            }
+        }
+        for s in s..end {
             let cell = Cell::locate(b, fine.at(kf));
             let (mut value, gradient) =
                 if GRADIENT { cell.value_and_gradient(fine.voxels, b) } else { (cell.value(fine.voxels, b), [0.0; 3]) };

@@ -1,25 +1,30 @@
 //! The traversal's promises, checked on whole frames: skipping empty space changes no bit of the image, and the
-//! image is the same whatever the number of threads.
+//! image is the same whatever the number of threads and the instruction set the CPU offers.
 
 mod common;
 
 use voxstream::scenes::builtin;
-use voxstream::session::{LoopLimits, Mode, Session};
-use voxstream_render::{Image, RenderSettings};
+use voxstream_engine::{LoopLimits, Mode, Session};
+use voxstream_render::{Image, InstructionSet, RenderSettings};
 
 const SIZE: u32 = 64;
 
 /// A converged frame of a built-in scene and the samples it took.
 fn render(scene_name: &str, skip_empty_space: bool, threads: usize) -> (Image, u64) {
+    render_with(scene_name, threads, |settings| settings.skip_empty_space = skip_empty_space)
+}
+
+/// A converged frame of a built-in scene with its own settings changed by `adjust`, and the samples it took.
+fn render_with(scene_name: &str, threads: usize, adjust: impl FnOnce(&mut RenderSettings)) -> (Image, u64) {
     let scene = builtin(scene_name).expect("built-in scene");
-    let settings = RenderSettings {
+    let mut settings = RenderSettings {
         width: SIZE,
         height: SIZE,
         shading: scene.shading,
         light_direction: scene.light,
-        skip_empty_space,
         ..RenderSettings::default()
     };
+    adjust(&mut settings);
     let camera = scene.camera;
     let mut session =
         Session::new(scene.producer, &scene.transfer_function, settings, 256 << 20, LoopLimits::default())
@@ -53,5 +58,26 @@ fn the_image_does_not_depend_on_the_thread_count() {
         let (one, _) = render(scene, true, 1);
         let (three, _) = render(scene, true, 3);
         assert!(one.pixels == three.pixels, "{scene}: 1 and 3 threads give different images");
+    }
+}
+
+#[test]
+fn the_image_does_not_depend_on_the_instruction_set() {
+    println!("this CPU: {}", InstructionSet::detected());
+    for scene in ["shell", "sponge", "hypertexture"] {
+        let (detected, _) = render_with(scene, 2, |s| s.instruction_set = InstructionSet::Detect);
+        let (baseline, _) = render_with(scene, 2, |s| s.instruction_set = InstructionSet::Baseline);
+        assert!(detected.pixels == baseline.pixels, "{scene}: the baseline and detected instruction sets differ");
+    }
+}
+
+#[test]
+fn samples_taken_in_batches_equal_samples_taken_one_by_one() {
+    // The shell is unshaded, so its samples are batched; bricks of 16³ hold long runs.
+    for scene in ["shell"] {
+        let (batched, samples_batched) = render_with(scene, 2, |s| s.sample_batches = true);
+        let (single, samples_single) = render_with(scene, 2, |s| s.sample_batches = false);
+        assert_eq!(samples_batched, samples_single, "{scene}: the sample counts differ");
+        assert!(batched.pixels == single.pixels, "{scene}: batched and single samples give different images");
     }
 }
