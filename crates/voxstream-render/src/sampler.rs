@@ -40,8 +40,14 @@ impl Cell {
     /// block's value range bounds every sample taken in the cell.
     #[inline(always)]
     pub fn block(&self, blocks: usize) -> usize {
-        let [i, j, k] = self.ijk.map(|v| v / BLOCK_CELLS);
+        let [i, j, k] = self.block_ijk();
         (k * blocks + j) * blocks + i
+    }
+
+    /// The coordinates of [`Cell::block`]'s block.
+    #[inline(always)]
+    pub fn block_ijk(&self) -> [usize; 3] {
+        self.ijk.map(|v| v / BLOCK_CELLS)
     }
 
     /// The trilinear value in the cell (of a brick with `b` voxels per axis).
@@ -95,6 +101,64 @@ pub const LANES: usize = 8;
 /// offers (see [`crate::InstructionSet`]). Seed 002 §4 (Knoll et al.) traces packets of rays for the same reason.
 #[inline(always)]
 pub fn values_along(brick: &[u16], b: usize, start: [f32; 3], delta: [f32; 3], k: f32) -> [f32; LANES] {
+    let (corners, [fx, fy, fz]) = corners_along(brick, b, start, delta, k);
+    let mut out = [0f32; LANES];
+    for j in 0..LANES {
+        let v = |corner: usize| corners[corner][j];
+        let c00 = v(0) + (v(1) - v(0)) * fx[j];
+        let c10 = v(2) + (v(3) - v(2)) * fx[j];
+        let c01 = v(4) + (v(5) - v(4)) * fx[j];
+        let c11 = v(6) + (v(7) - v(6)) * fx[j];
+        let c0 = c00 + (c10 - c00) * fy[j];
+        let c1 = c01 + (c11 - c01) * fy[j];
+        out[j] = dequantize_scale(c0 + (c1 - c0) * fz[j]);
+    }
+    out
+}
+
+/// [`values_along`] with the analytic gradients of [`Cell::value_and_gradient`], bit for bit.
+#[inline(always)]
+pub fn values_and_gradients_along(
+    brick: &[u16],
+    b: usize,
+    start: [f32; 3],
+    delta: [f32; 3],
+    k: f32,
+) -> ([f32; LANES], [[f32; 3]; LANES]) {
+    let (corners, [fx, fy, fz]) = corners_along(brick, b, start, delta, k);
+    let mut values = [0f32; LANES];
+    let mut gradients = [[0f32; 3]; LANES];
+    let lerp = |a: f32, b: f32, t: f32| a + (b - a) * t;
+    for j in 0..LANES {
+        let v = |corner: usize| corners[corner][j];
+        let (v000, v100, v010, v110) = (v(0), v(1), v(2), v(3));
+        let (v001, v101, v011, v111) = (v(4), v(5), v(6), v(7));
+        let c00 = lerp(v000, v100, fx[j]);
+        let c10 = lerp(v010, v110, fx[j]);
+        let c01 = lerp(v001, v101, fx[j]);
+        let c11 = lerp(v011, v111, fx[j]);
+        let c0 = lerp(c00, c10, fy[j]);
+        let c1 = lerp(c01, c11, fy[j]);
+        values[j] = dequantize_scale(lerp(c0, c1, fz[j]));
+        let gz = c1 - c0;
+        let gy = lerp(c10 - c00, c11 - c01, fz[j]);
+        let gx = lerp(lerp(v100 - v000, v110 - v010, fy[j]), lerp(v101 - v001, v111 - v011, fy[j]), fz[j]);
+        gradients[j] = [gx, gy, gz].map(dequantize_scale);
+    }
+    (values, gradients)
+}
+
+/// The eight corners (`[corner][lane]`, corner = x + 2y + 4z) and the in-cell fractions (`[axis][lane]`) of the
+/// `LANES` points `start + (k + j)·delta`, located like [`Cell::locate`].
+#[inline(always)]
+#[allow(clippy::type_complexity)]
+fn corners_along(
+    brick: &[u16],
+    b: usize,
+    start: [f32; 3],
+    delta: [f32; 3],
+    k: f32,
+) -> ([[f32; LANES]; 8], [[f32; LANES]; 3]) {
     let max = (b - 1) as f32;
     let last_cell = b as u32 - 2;
     let (row, slab) = (b, b * b);
@@ -111,28 +175,16 @@ pub fn values_along(brick: &[u16], b: usize, start: [f32; 3], delta: [f32; 3], k
         }
         base[j] = (ijk[2] * b as u32 + ijk[1]) * b as u32 + ijk[0];
     }
-    // The corners: v[corner][lane], corner = x + 2y + 4z.
-    let mut v = [[0f32; LANES]; 8];
+    let mut corners = [[0f32; LANES]; 8];
+    let offsets = [0, 1, row, row + 1, slab, slab + 1, slab + row, slab + row + 1];
     for j in 0..LANES {
         let at = base[j] as usize;
-        let corners = &brick[at..at + slab + row + 2];
-        let offsets = [0, 1, row, row + 1, slab, slab + 1, slab + row, slab + row + 1];
+        let cell = &brick[at..at + slab + row + 2];
         for (corner, &offset) in offsets.iter().enumerate() {
-            v[corner][j] = corners[offset] as f32;
+            corners[corner][j] = cell[offset] as f32;
         }
     }
-    let [fx, fy, fz] = fraction;
-    let mut out = [0f32; LANES];
-    for j in 0..LANES {
-        let c00 = v[0][j] + (v[1][j] - v[0][j]) * fx[j];
-        let c10 = v[2][j] + (v[3][j] - v[2][j]) * fx[j];
-        let c01 = v[4][j] + (v[5][j] - v[4][j]) * fx[j];
-        let c11 = v[6][j] + (v[7][j] - v[6][j]) * fx[j];
-        let c0 = c00 + (c10 - c00) * fy[j];
-        let c1 = c01 + (c11 - c01) * fy[j];
-        out[j] = dequantize_scale(c0 + (c1 - c0) * fz[j]);
-    }
-    out
+    (corners, fraction)
 }
 
 /// A value interpolated from stored voxels, normalised like [`voxstream_core::dequantize`].
@@ -214,10 +266,14 @@ mod tests {
         ] {
             for k in [0.0f32, 3.0, 17.0] {
                 let values = values_along(&brick, b, start, delta, k);
+                let (with_gradient, gradients) = values_and_gradients_along(&brick, b, start, delta, k);
                 for (j, value) in values.iter().enumerate() {
                     let kj = k + j as f32;
                     let x = [start[0] + kj * delta[0], start[1] + kj * delta[1], start[2] + kj * delta[2]];
                     assert_eq!(value.to_bits(), trilinear(&brick, b, x).to_bits(), "lane {j} at {x:?}");
+                    let (single, gradient) = trilinear_with_gradient(&brick, b, x);
+                    assert_eq!(with_gradient[j].to_bits(), single.to_bits(), "lane {j} at {x:?}");
+                    assert_eq!(gradients[j].map(f32::to_bits), gradient.map(f32::to_bits), "lane {j} at {x:?}");
                 }
             }
         }

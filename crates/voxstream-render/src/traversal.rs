@@ -33,7 +33,7 @@ use glam::DVec3;
 use voxstream_core::{BrickSlot, FeedbackBuffer, Node, NodeData, NodeId, Request, RequestKind, TreeView, BLOCK_CELLS};
 
 use crate::integrand::{Integrand, Sample};
-use crate::sampler::{values_along, Cell, LANES};
+use crate::sampler::{values_along, values_and_gradients_along, Cell, LANES};
 use crate::settings::RenderSettings;
 use crate::step_table::StepLength;
 
@@ -136,6 +136,8 @@ struct BrickLine<'v> {
     /// The same line in `f64` over `t`, for block exits: `x(t) = origin + t·rate`.
     origin: [f64; 3],
     rate: [f64; 3],
+    /// `1 / rate` (infinite along an axis the ray does not move on).
+    inverse_rate: [f64; 3],
 }
 
 impl BrickLine<'_> {
@@ -343,15 +345,15 @@ impl<'a> Traversal<'a> {
             let run_end = if self.skip_empty_space {
                 // The occupancy blocks of sample k bound every sample in their cells.
                 let x = fine_line.at(k as f32);
-                let fine_block = Cell::locate(self.stored, x).block(blocks);
-                let [mut lo, mut hi] = self.view.block_range(fine.slot, fine_block);
-                let mut exit = block_exit(&fine_line, fine_block, blocks);
+                let fine_cell = Cell::locate(self.stored, x);
+                let [mut lo, mut hi] = self.view.block_range(fine.slot, fine_cell.block(blocks));
+                let mut exit = block_exit(&fine_line, fine_cell.block_ijk());
                 if let Some((line, _)) = &coarse_line {
-                    let coarse_block = Cell::locate(self.stored, line.at(k as f32)).block(blocks);
-                    let [clo, chi] = self.view.block_range(line.slot, coarse_block);
+                    let coarse_cell = Cell::locate(self.stored, line.at(k as f32));
+                    let [clo, chi] = self.view.block_range(line.slot, coarse_cell.block(blocks));
                     lo = lo.min(clo);
                     hi = hi.max(chi);
-                    exit = exit.min(block_exit(line, coarse_block, blocks));
+                    exit = exit.min(block_exit(line, coarse_cell.block_ijk()));
                 }
                 if !integrand.can_contribute(lo, hi) {
                     // Every sample before `exit` (less a margin above f32 rounding) is in these blocks.
@@ -408,19 +410,23 @@ impl<'a> Traversal<'a> {
         // bits whichever sample a run starts at.
         let mut kf = k as f32;
         let mut s = k;
-        // Without gradients, LANES samples at a time (the same values, bit for bit: see `values_along`); the
-        // integrand still takes them one by one, in order.
-        if !GRADIENT && self.sample_batches {
+        // LANES samples at a time (the same values, bit for bit: see `values_along`); the integrand still takes
+        // them one by one, in order.
+        if self.sample_batches {
             while s + LANES as u32 <= end {
-                let mut values = values_along(fine.voxels, b, fine.start, fine.delta, kf);
+                let (mut values, gradients) = if GRADIENT {
+                    values_and_gradients_along(fine.voxels, b, fine.start, fine.delta, kf)
+                } else {
+                    (values_along(fine.voxels, b, fine.start, fine.delta, kf), [[0.0; 3]; LANES])
+                };
                 if COARSE {
                     let coarse_values = values_along(coarse.voxels, b, coarse.start, coarse.delta, kf);
                     for (value, coarse_value) in values.iter_mut().zip(coarse_values) {
                         *value = coarse_value + (*value - coarse_value) * weight;
                     }
                 }
-                for (j, &value) in values.iter().enumerate() {
-                    let sample = Sample { t: first + (s + j as u32) as f64 * dt, value, gradient: [0.0; 3] };
+                for (j, (&value, &gradient)) in values.iter().zip(&gradients).enumerate() {
+                    let sample = Sample { t: first + (s + j as u32) as f64 * dt, value, gradient };
                     if integrand.sample(sample).is_break() {
                         return ControlFlow::Break(u64::from(s - k) + j as u64 + 1);
                     }
@@ -461,6 +467,7 @@ impl<'a> Traversal<'a> {
             delta: std::array::from_fn(|a| (rate[a] * dt) as f32),
             origin,
             rate,
+            inverse_rate: rate.map(|r| 1.0 / r),
         }
     }
 
@@ -577,21 +584,20 @@ impl RequestSink<'_> {
     }
 }
 
-/// The `t` at which a brick line leaves occupancy block `block`.
+/// The `t` at which a brick line leaves the occupancy block at `ijk` (block coordinates).
 #[inline]
-fn block_exit(line: &BrickLine<'_>, block: usize, blocks: usize) -> f64 {
-    let ijk = [block % blocks, block / blocks % blocks, block / (blocks * blocks)];
+fn block_exit(line: &BrickLine<'_>, ijk: [usize; 3]) -> f64 {
     let mut exit = f64::INFINITY;
-    for a in 0..3 {
+    for (a, &block) in ijk.iter().enumerate() {
         let rate = line.rate[a];
         let edge = if rate > 0.0 {
-            ((ijk[a] + 1) * BLOCK_CELLS) as f64
+            ((block + 1) * BLOCK_CELLS) as f64
         } else if rate < 0.0 {
-            (ijk[a] * BLOCK_CELLS) as f64
+            (block * BLOCK_CELLS) as f64
         } else {
             continue;
         };
-        exit = exit.min((edge - line.origin[a]) / rate);
+        exit = exit.min((edge - line.origin[a]) * line.inverse_rate[a]);
     }
     exit
 }

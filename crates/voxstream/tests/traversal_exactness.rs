@@ -73,8 +73,9 @@ fn the_image_does_not_depend_on_the_instruction_set() {
 
 #[test]
 fn samples_taken_in_batches_equal_samples_taken_one_by_one() {
-    // The shell is unshaded, so its samples are batched; bricks of 16³ hold long runs.
-    for scene in ["shell"] {
+    // The shell is unshaded with bricks of 16³ (long runs); the hypertexture is shaded (gradients), blended across
+    // levels.
+    for scene in ["shell", "hypertexture"] {
         let (batched, samples_batched) = render_with(scene, 2, |s| s.sample_batches = true);
         let (single, samples_single) = render_with(scene, 2, |s| s.sample_batches = false);
         assert_eq!(samples_batched, samples_single, "{scene}: the sample counts differ");
