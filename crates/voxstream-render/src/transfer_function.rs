@@ -177,8 +177,9 @@ impl TransferLut {
         // `lookup` reads entries ⌊x⌋ and ⌊x⌋+1, the latter with weight x − ⌊x⌋. A constant range is sampled exactly
         // (interpolating equal values returns them); otherwise allow samples a rounding error outside the range.
         let slack = if lower == upper { 0.0 } else { 1e-3 };
-        let first = (position(lower) - slack).max(0.0) as usize;
-        let last = ((position(upper) + slack).ceil() as usize).min(LUT_SIZE - 1);
+        // `u32` conversions: one instruction each.
+        let first = (position(lower) - slack).max(0.0) as u32 as usize;
+        let last = (((position(upper) + slack).ceil() as u32) as usize).min(LUT_SIZE - 1);
         let (a, b) = (first, last);
         self.visible_before[b + 1] > self.visible_before[a]
     }

@@ -489,7 +489,9 @@ impl<'a> Traversal<'a> {
         while keep > 1 {
             let entry = &path.entries[keep - 1];
             let s = self.scale[keep - 1];
-            if (0..3).all(|a| (pa[a] * s) as u64 == entry.ijk[a]) {
+            // Through i64: one instruction (a u64 conversion is a branchy sequence before AVX-512); positions are
+            // non-negative and node coordinates below 2⁶³.
+            if (0..3).all(|a| (pa[a] * s) as i64 as u64 == entry.ijk[a]) {
                 break;
             }
             keep -= 1;
@@ -521,7 +523,7 @@ impl<'a> Traversal<'a> {
             for a in 0..3 {
                 let lo = ijk[a] * n;
                 // Positions are non-negative, so truncation is floor.
-                let g = ((pa[a] * s) as u64).clamp(lo, lo + n - 1);
+                let g = ((pa[a] * s) as i64 as u64).clamp(lo, lo + n - 1);
                 child_ijk[a] = g;
                 child_index += (g - lo) * stride;
                 stride *= n;
