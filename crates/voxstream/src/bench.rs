@@ -69,8 +69,9 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         figures.push(bench_scene(&scene, args, bound_ns)?);
     }
     println!(
-        "threads: {}, peak RSS: {:.0} MiB, scalar trilinear bound: {bound_ns:.1} ns per sample on one core\n",
+        "threads: {}, ray loop: {}, peak RSS: {:.0} MiB, scalar trilinear bound: {bound_ns:.1} ns per sample on one core\n",
         rayon::current_num_threads(),
+        voxstream_render::InstructionSet::detected(),
         peak_rss_bytes().unwrap_or(0) as f64 / 1048576.0
     );
     println!("| scene | size | converged (cold) | passes | frames to converge (interactive) | warm frame | warm fps | rays/s | samples/s | ns/sample/core (bound) | path median | path p95 |");
