@@ -198,3 +198,68 @@ fn producing_new_children_at_once_keeps_the_image_and_saves_passes() {
         }
     }
 }
+
+#[test]
+fn producing_new_children_at_once_keeps_a_store_image() {
+    use voxstream::render_command::{default_store_transfer_function, store_camera, store_placement};
+    use voxstream_store::formats::{open_volume, Endian, RawLayout};
+    use voxstream_store::{import_volume, DType, ImportOptions, StoreProducer, StoreReader, VolumeInfo};
+
+    // A 72×60×50 u8 ball with a ripple, imported as a store with several levels of 32³ bricks.
+    let dir = std::env::temp_dir().join(format!("voxstream-prefetch-store-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let dims = [72u64, 60, 50];
+    let mut samples = Vec::with_capacity((dims[0] * dims[1] * dims[2]) as usize);
+    for k in 0..dims[2] {
+        for j in 0..dims[1] {
+            for i in 0..dims[0] {
+                let r = glam::DVec3::new(i as f64 - 36.0, j as f64 - 30.0, k as f64 - 25.0).length();
+                let value = (1.0 - r / 28.0).max(0.0) * (200.0 + 50.0 * (i as f64 * 0.7).sin());
+                samples.push(value as u8);
+            }
+        }
+    }
+    let raw = dir.join("ball.raw");
+    std::fs::write(&raw, &samples).unwrap();
+    let layout = RawLayout {
+        info: VolumeInfo { dims, dtype: DType::U8, spacing: [1.0; 3], origin: [0.0; 3] },
+        endian: Endian::Little,
+        header_bytes: 0,
+    };
+    let store = dir.join("ball.zarr");
+    let mut source = open_volume(&raw, Some(&layout)).unwrap();
+    import_volume(source.as_mut(), &store, &ImportOptions::default(), &mut |_, _| {}).unwrap();
+    let reader = std::sync::Arc::new(StoreReader::open(&store).unwrap());
+
+    let tf = default_store_transfer_function(reader.attributes().typical_range()).unwrap();
+    let camera = store_camera(reader.info(), 64, 64);
+    let settings = voxstream_render::RenderSettings {
+        width: 64,
+        height: 64,
+        placement: store_placement(&reader),
+        ..Default::default()
+    };
+    let frame = |prefetch_new_children| {
+        let limits = voxstream_engine::LoopLimits { prefetch_new_children, ..Default::default() };
+        let producer = StoreProducer::new(reader.clone()).unwrap();
+        let mut session = voxstream_engine::Session::with_value_range(
+            producer,
+            &tf,
+            settings.clone(),
+            64 << 20,
+            limits,
+            reader.attributes().value_range,
+        )
+        .unwrap();
+        let result = session.render(&camera, Mode::Converged).unwrap();
+        assert!(result.is_converged());
+        result
+    };
+    let (on, off) = (frame(true), frame(false));
+    let _ = std::fs::remove_dir_all(&dir);
+    println!("store: {} passes with new children produced at once, {} without", on.passes, off.passes);
+    assert!(on.image.pixels.iter().any(|&p| p != on.image.pixels[0]), "the ball is visible");
+    assert_eq!(on.image.pixels, off.image.pixels, "the image changed");
+    assert!(on.passes < off.passes, "store: {} passes with, {} without", on.passes, off.passes);
+}
