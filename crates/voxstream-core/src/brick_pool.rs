@@ -154,6 +154,21 @@ impl BrickPool {
         Some((BrickSlot(slot as u32), evicted))
     }
 
+    /// Slots a brick can take without evicting one: never used, or released.
+    pub fn free_slots(&self) -> u32 {
+        self.capacity() - self.len()
+    }
+
+    /// Stores `voxels` for `owner` in a free slot, never evicting: `None` when [`BrickPool::free_slots`] is 0.
+    pub fn insert_if_free(&mut self, owner: NodeId, voxels: &[u16], frame: u32) -> Option<BrickSlot> {
+        if self.free_slots() == 0 {
+            return None;
+        }
+        let (slot, evicted) = self.insert(owner, voxels, frame)?;
+        debug_assert!(evicted.is_none(), "a free slot was available, nothing may be evicted");
+        Some(slot)
+    }
+
     /// Frees `slot`.
     pub fn release(&mut self, slot: BrickSlot) {
         self.lru.release(slot.0);

@@ -19,6 +19,15 @@
 //!   frame renders (the store producer does); prefetching never changes what is produced.
 //! - **Failures.** A producer error is recorded once; the node stays missing, its ancestor stands in, and it is
 //!   not requested again.
+//! - **Children produced with their tile** (optional, [`ServeOptions::prefetch_new_children`]). Without it a ray
+//!   that reaches a childless node asks for a subdivision, sees the new children missing only in the next pass, and
+//!   asks for their bricks then: two passes per tree level. With it, serving a subdivision also produces, in the
+//!   same frame, every new child that the producer's oracle does not already know to be constant, as GigaVoxels
+//!   [P09] §5 lets its cache manager load the children of a subdivided node at once. It only fills brick slots that
+//!   are free (never used, or released) once every request of the frame is served, and never evicts for it, so a
+//!   tight budget behaves as without it. It trades over-production (children no ray will need, e.g. off screen or
+//!   occluded; none for the shell scene, 2.6× the bricks for the sponge's 27-child tiles) for fewer passes; converged frames turn it on, interactive frames keep their bounded work.
+//!   A child whose production fails is left missing, to be requested, and its failure reported, if a ray needs it.
 //! - **Brick analysis.** A produced terminal brick whose voxels are all equal becomes a constant node (no brick
 //!   slot). Non-terminal bricks stay bricks: only the producer knows whether finer levels are constant too.
 
@@ -44,6 +53,20 @@ pub const PREFETCH_LIMIT: usize = 1024;
 /// gets smaller batches, [`PoolCapacities::production_batch`]).
 pub const PRODUCTION_BATCH: usize = 256;
 
+/// How [`CacheManager::end_frame`] serves one frame's requests.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ServeOptions {
+    /// Most requests served (all if `None`); the rest wait for a later frame.
+    pub limit: Option<usize>,
+    /// Also produce the children of each new tile into free brick slots, never evicting (see the module docs).
+    pub prefetch_new_children: bool,
+}
+
+impl ServeOptions {
+    /// Serve every request, nothing more.
+    pub const ALL: ServeOptions = ServeOptions { limit: None, prefetch_new_children: false };
+}
+
 /// What serving one frame's requests did.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct ServeReport {
@@ -57,6 +80,9 @@ pub struct ServeReport {
     pub deferred: usize,
     /// Bricks produced and stored.
     pub bricks_produced: usize,
+    /// Of `bricks_produced`, those stored for children of new tiles that no ray asked for yet
+    /// ([`ServeOptions::prefetch_new_children`]).
+    pub bricks_prefetched: usize,
     /// Nodes that turned out constant (oracle or brick analysis).
     pub constant_nodes: usize,
     /// Tiles created.
@@ -179,8 +205,9 @@ impl<P: Producer> CacheManager<P> {
         }
     }
 
-    /// Ends the frame: refreshes what the rays used, then serves at most `limit` of their requests (all if `None`).
-    pub fn end_frame(&mut self, limit: Option<usize>) -> ServeReport {
+    /// Ends the frame: refreshes what the rays used, then serves their requests as `options` say.
+    pub fn end_frame(&mut self, options: ServeOptions) -> ServeReport {
+        let limit = options.limit;
         let frame = self.frame;
         for tile in self.feedback.used_tiles().collect::<Vec<_>>() {
             self.node_pool.touch(tile, frame);
@@ -231,18 +258,14 @@ impl<P: Producer> CacheManager<P> {
 
         // Produce on worker threads, with no lock held, a batch at a time so that produced-but-unapplied bricks
         // stay a bounded transient; then apply each batch in queue order.
+        let mut new_tiles: Vec<(TileId, NodeKey)> = Vec::new();
         for batch in work.chunks(self.capacities.production_batch.max(1) as usize) {
             let producer = &self.producer;
             let shape = self.shape;
-            let per_brick = shape.voxels_per_brick();
             let results: Vec<WorkResult> = batch
                 .par_iter()
                 .map(|&(request, key)| match request.kind {
-                    RequestKind::Produce => {
-                        let mut voxels = vec![0u16; per_brick];
-                        let produced = producer.produce(key, &mut voxels);
-                        WorkResult::Produced(produced.map(|p| analyse(p, voxels, key, &shape)))
-                    }
+                    RequestKind::Produce => WorkResult::Produced(produce_analysed(producer, key, &shape)),
                     RequestKind::Subdivide => WorkResult::Children(
                         (0..shape.nodes_per_tile()).map(|c| producer.oracle(key.child(c, shape.n))).collect(),
                     ),
@@ -250,13 +273,21 @@ impl<P: Producer> CacheManager<P> {
                 .collect();
             for (&(request, key), result) in batch.iter().zip(results) {
                 let applied = match result {
-                    WorkResult::Produced(Ok(brick)) => self.apply_produced(request.node, brick, &mut report),
+                    WorkResult::Produced(Ok(brick)) => {
+                        self.apply_produced(request.node, brick, Eviction::Allowed, &mut report)
+                    }
                     WorkResult::Produced(Err(error)) => {
                         self.failed.insert(key);
                         report.failures.push(error);
                         true
                     }
-                    WorkResult::Children(hints) => self.apply_subdivide(request.node, &hints, &mut report),
+                    WorkResult::Children(hints) => match self.apply_subdivide(request.node, &hints, &mut report) {
+                        Some(tile) => {
+                            new_tiles.push((tile, key));
+                            true
+                        }
+                        None => false,
+                    },
                 };
                 if applied {
                     report.served += 1;
@@ -265,11 +296,63 @@ impl<P: Producer> CacheManager<P> {
                 }
             }
         }
+        if options.prefetch_new_children {
+            self.prefetch_children(&new_tiles, &mut report);
+        }
         self.frame += 1;
         report
     }
 
-    fn apply_produced(&mut self, node_id: NodeId, brick: AnalysedBrick, report: &mut ServeReport) -> bool {
+    /// Produces the still-missing children of `new_tiles` (each with its parent's key) into free brick slots, in
+    /// tile then child order, a batch at a time; stops when no slot is free. Nothing is evicted, and a failure
+    /// leaves the child missing (a ray that needs it will request it, and the failure is reported then).
+    fn prefetch_children(&mut self, new_tiles: &[(TileId, NodeKey)], report: &mut ServeReport) {
+        let per_tile = self.shape.nodes_per_tile();
+        let n = self.shape.n;
+        let mut candidates: Vec<(NodeId, NodeKey)> = Vec::new();
+        for &(tile, parent_key) in new_tiles {
+            if !self.node_pool.is_in_use(tile) {
+                continue;
+            }
+            for child in 0..per_tile {
+                let node_id = NodeId::new(tile, child, per_tile);
+                let key = parent_key.child(child, n);
+                if self.node_pool.node(node_id).data() == NodeData::Missing && !self.failed.contains(&key) {
+                    candidates.push((node_id, key));
+                }
+            }
+        }
+        let batch_size = self.capacities.production_batch.max(1) as usize;
+        let mut remaining = candidates.as_slice();
+        while !remaining.is_empty() {
+            // Produce no more than the free slots can take: constant children need no slot, so recount each time.
+            let room = (self.brick_pool.free_slots() as usize).min(batch_size).min(remaining.len());
+            if room == 0 {
+                break;
+            }
+            let (batch, rest) = remaining.split_at(room);
+            remaining = rest;
+            let producer = &self.producer;
+            let shape = self.shape;
+            let results: Vec<Result<AnalysedBrick, ProduceError>> =
+                batch.par_iter().map(|&(_, key)| produce_analysed(producer, key, &shape)).collect();
+            for (&(node_id, _), result) in batch.iter().zip(results) {
+                let Ok(brick) = result else { continue };
+                let is_brick = brick.content == NodeContent::Brick;
+                if self.apply_produced(node_id, brick, Eviction::Forbidden, report) && is_brick {
+                    report.bricks_prefetched += 1;
+                }
+            }
+        }
+    }
+
+    fn apply_produced(
+        &mut self,
+        node_id: NodeId,
+        brick: AnalysedBrick,
+        eviction: Eviction,
+        report: &mut ServeReport,
+    ) -> bool {
         match brick.content {
             NodeContent::Empty | NodeContent::Constant(_) => {
                 let value = if let NodeContent::Constant(v) = brick.content { v } else { 0.0 };
@@ -282,7 +365,13 @@ impl<P: Producer> CacheManager<P> {
                 true
             }
             NodeContent::Brick => {
-                let Some((slot, evicted)) = self.brick_pool.insert(node_id, &brick.voxels, self.frame) else {
+                let inserted = match eviction {
+                    Eviction::Allowed => self.brick_pool.insert(node_id, &brick.voxels, self.frame),
+                    Eviction::Forbidden => {
+                        self.brick_pool.insert_if_free(node_id, &brick.voxels, self.frame).map(|slot| (slot, None))
+                    }
+                };
+                let Some((slot, evicted)) = inserted else {
                     return false;
                 };
                 if let Some(previous_owner) = evicted {
@@ -298,14 +387,14 @@ impl<P: Producer> CacheManager<P> {
         }
     }
 
-    fn apply_subdivide(&mut self, node_id: NodeId, hints: &[Option<f32>], report: &mut ServeReport) -> bool {
+    /// Gives `node_id` a tile of children (constant where `hints` say so); returns the tile, `None` if every tile
+    /// was used during this frame.
+    fn apply_subdivide(&mut self, node_id: NodeId, hints: &[Option<f32>], report: &mut ServeReport) -> Option<TileId> {
         if let Some(victim) = self.node_pool.oldest_recyclable(self.frame) {
             self.detach_and_free(victim);
             report.tiles_evicted += 1;
         }
-        let Some((tile, _)) = self.node_pool.allocate(node_id, self.frame) else {
-            return false;
-        };
+        let (tile, _) = self.node_pool.allocate(node_id, self.frame)?;
         self.node_pool.node_mut(node_id).set_child_tile(Some(tile));
         let per_tile = self.shape.nodes_per_tile();
         for (child, hint) in hints.iter().enumerate() {
@@ -315,7 +404,7 @@ impl<P: Producer> CacheManager<P> {
             }
         }
         report.tiles_created += 1;
-        true
+        Some(tile)
     }
 
     /// Clears the parent's pointer to `tile`, then frees the tile's subtree.
@@ -401,6 +490,15 @@ impl<P: Producer> CacheManager<P> {
     }
 }
 
+/// Whether storing a produced brick may recycle the least recently used slot.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Eviction {
+    /// A ray asked for it: recycle if needed.
+    Allowed,
+    /// Speculative: free slots only.
+    Forbidden,
+}
+
 enum WorkResult {
     Produced(Result<AnalysedBrick, ProduceError>),
     Children(Vec<Option<f32>>),
@@ -410,6 +508,13 @@ struct AnalysedBrick {
     content: NodeContent,
     is_terminal: bool,
     voxels: Vec<u16>,
+}
+
+/// Asks `producer` for the brick of `key`, then analyses it.
+fn produce_analysed<P: Producer>(producer: &P, key: NodeKey, shape: &TreeShape) -> Result<AnalysedBrick, ProduceError> {
+    let mut voxels = vec![0u16; shape.voxels_per_brick()];
+    let produced = producer.produce(key, &mut voxels)?;
+    Ok(analyse(produced, voxels, key, shape))
 }
 
 /// Brick analysis before upload ([R08] §4): a terminal brick of equal voxels is a constant node. A non-terminal one
@@ -428,4 +533,104 @@ fn analyse(produced: Produced, voxels: Vec<u16>, key: NodeKey, shape: &TreeShape
         other => other,
     };
     AnalysedBrick { content, is_terminal, voxels }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every node a brick of varying voxels; the oracle knows that the first child of every tile (all of `ijk` even)
+    /// is empty.
+    struct Ramp;
+    impl Producer for Ramp {
+        fn shape(&self) -> TreeShape {
+            TreeShape::new(2, 8, 3).unwrap()
+        }
+        fn oracle(&self, key: NodeKey) -> Option<f32> {
+            (key.level > 0 && key.ijk.iter().all(|c| c % 2 == 0)).then_some(0.0)
+        }
+        fn produce(&self, key: NodeKey, voxels: &mut [u16]) -> Result<Produced, ProduceError> {
+            for (index, v) in voxels.iter_mut().enumerate() {
+                *v = (index as u16).wrapping_mul(7).wrapping_add(key.level as u16);
+            }
+            Ok(Produced { content: NodeContent::Brick, is_terminal: key.level == self.shape().max_level })
+        }
+    }
+
+    fn request(cache: &mut CacheManager<Ramp>, node: NodeId, kind: RequestKind, prefetch: bool) -> ServeReport {
+        cache.begin_frame();
+        cache.feedback().push_requests(&[Request { node, kind }]);
+        let report = cache.end_frame(ServeOptions { limit: None, prefetch_new_children: prefetch });
+        assert_eq!(cache.check_invariants(), Ok(()));
+        report
+    }
+
+    /// The nodes that own a brick, sorted.
+    fn brick_owners(cache: &CacheManager<Ramp>) -> Vec<NodeId> {
+        let pool = cache.brick_pool();
+        let mut owners: Vec<NodeId> = (0..pool.allocated())
+            .map(crate::node::BrickSlot)
+            .filter(|&slot| pool.is_in_use(slot))
+            .map(|slot| pool.owner(slot))
+            .collect();
+        owners.sort_by_key(|id| id.0);
+        owners
+    }
+
+    fn root_children(cache: &CacheManager<Ramp>) -> Vec<NodeId> {
+        let tile = cache.node_pool().node(NodeId::ROOT).child_tile().unwrap();
+        (0..8).map(|c| NodeId::new(tile, c, 8)).collect()
+    }
+
+    #[test]
+    fn a_subdivision_produces_the_children_the_oracle_does_not_know_when_asked_to() {
+        for prefetch in [false, true] {
+            let mut cache = CacheManager::new(Ramp, 16 << 20).unwrap();
+            request(&mut cache, NodeId::ROOT, RequestKind::Produce, prefetch);
+            let report = request(&mut cache, NodeId::ROOT, RequestKind::Subdivide, prefetch);
+            let children = root_children(&cache);
+            assert_eq!(report.tiles_created, 1);
+            assert_eq!(report.constant_nodes, 1, "child 0 is known empty");
+            assert!(cache.node_pool().node(children[0]).is_constant());
+            let expected = if prefetch { 7 } else { 0 };
+            assert_eq!(report.bricks_prefetched, expected);
+            assert_eq!(report.bricks_produced, expected);
+            let with_bricks = children.iter().filter(|&&child| cache.node_pool().node(child).brick().is_some()).count();
+            assert_eq!(with_bricks, expected);
+        }
+    }
+
+    #[test]
+    fn prefetching_fills_only_free_slots_and_never_evicts() {
+        // The smallest budget: a few more brick slots than the root and its children need.
+        let minimum = match PoolCapacities::plan(&Ramp.shape(), 0) {
+            Err(CoreError::BudgetTooSmall { minimum_bytes, .. }) => minimum_bytes,
+            other => panic!("expected BudgetTooSmall, got {other:?}"),
+        };
+        let mut cache = (0..1000)
+            .find_map(|step| CacheManager::new(Ramp, minimum + step * 1024).ok())
+            .expect("a budget a little above the minimum plans");
+        let capacity = cache.brick_pool().capacity();
+        request(&mut cache, NodeId::ROOT, RequestKind::Produce, true);
+        request(&mut cache, NodeId::ROOT, RequestKind::Subdivide, true);
+        // Subdivide the root's children one by one until the pool is full, then once more.
+        let mut was_full = false;
+        for child in root_children(&cache).into_iter().skip(1) {
+            let free_before = cache.brick_pool().free_slots() as usize;
+            let owners_before = brick_owners(&cache);
+            let report = request(&mut cache, child, RequestKind::Subdivide, true);
+            assert_eq!(report.tiles_created, 1);
+            assert_eq!(report.bricks_evicted, 0);
+            assert_eq!(report.tiles_evicted, 0);
+            assert_eq!(report.bricks_prefetched, free_before.min(7), "7 unknown children, {free_before} free slots");
+            let owners_after = brick_owners(&cache);
+            assert!(owners_before.iter().all(|owner| owners_after.contains(owner)), "a resident brick was evicted");
+            assert!(cache.brick_pool().len() <= capacity);
+            if free_before == 0 {
+                was_full = true;
+                assert_eq!(owners_after, owners_before);
+            }
+        }
+        assert!(was_full, "the pool of {capacity} bricks never filled up");
+    }
 }

@@ -15,7 +15,7 @@
 //! - [`TreeView`]: the immutable flat view renderers read during a frame.
 //!
 //! ```
-//! use voxstream_core::{CacheManager, NodeContent, NodeKey, Produced, Producer, ProduceError, TreeShape};
+//! use voxstream_core::{CacheManager, NodeContent, NodeKey, Produced, Producer, ProduceError, ServeOptions, TreeShape};
 //!
 //! /// Everything is empty: the root turns out constant after one request.
 //! struct Vacuum;
@@ -32,7 +32,7 @@
 //!     node: voxstream_core::NodeId::ROOT,
 //!     kind: voxstream_core::RequestKind::Produce,
 //! }]);
-//! let report = cache.end_frame(None);
+//! let report = cache.end_frame(ServeOptions::ALL);
 //! assert_eq!(report.constant_nodes, 1);
 //! assert!(cache.view().root().is_constant());
 //! ```
@@ -52,7 +52,7 @@ pub mod tree_view;
 
 pub use brick_pool::{dequantize, quantize, BrickPool, VOXEL_MAX};
 pub use budget::PoolCapacities;
-pub use cache_manager::{CacheManager, Residency, ServeReport};
+pub use cache_manager::{CacheManager, Residency, ServeOptions, ServeReport};
 pub use error::{CoreError, ProduceError};
 pub use feedback::{FeedbackBuffer, Request, RequestKind};
 pub use key::{NodeKey, TreeShape, BLOCK_CELLS, BRICK_BORDER};

@@ -6,14 +6,17 @@
 //!   number of requests served, so the frame time stays bounded and detail arrives over the next frames.
 //!
 //! In converged mode, only the rays that reported a miss are traced again in the next pass ([R08]'s "interrupt and
-//! resume"); a ray that missed nothing already used exactly the data it needs.
+//! resume"); a ray that missed nothing already used exactly the data it needs. Converged frames also let the cache
+//! manager produce the children of each node it subdivides at once, into free brick slots only
+//! ([`LoopLimits::prefetch_new_children`], [`voxstream_core::ServeOptions`]): about one pass per tree level instead
+//! of two, for a little over-production. Interactive frames never do, so their per-frame work stays bounded.
 
 //!
 //! The renderer is any [`FrameRenderer`]: [`CpuRenderer`] by default, a GPU backend later.
 
 use std::time::Instant;
 
-use voxstream_core::{CacheManager, ProduceError, Producer, Residency};
+use voxstream_core::{CacheManager, ProduceError, Producer, Residency, ServeOptions};
 use voxstream_render::{Camera, Image, ProgressiveImage, RenderSettings, TransferFunction, TransferLut};
 
 use crate::error::EngineError;
@@ -43,11 +46,14 @@ pub struct LoopLimits {
     pub requests_per_frame: usize,
     /// Passes after which a converged frame gives up (reported as not converged).
     pub max_passes: u32,
+    /// Converged mode only: when a node is subdivided, also produce its new children's bricks in the same pass,
+    /// into free brick slots (never evicting). Fewer passes, the same image.
+    pub prefetch_new_children: bool,
 }
 
 impl Default for LoopLimits {
     fn default() -> Self {
-        LoopLimits { requests_per_frame: 1024, max_passes: 400 }
+        LoopLimits { requests_per_frame: 1024, max_passes: 400, prefetch_new_children: true }
     }
 }
 
@@ -70,6 +76,8 @@ pub struct FrameResult {
     pub requests: u64,
     /// Bricks produced.
     pub bricks_produced: u64,
+    /// Of `bricks_produced`, those produced for new children before any ray asked for them.
+    pub bricks_prefetched: u64,
     /// Requests still pending after the last pass: 0 = the image is exact.
     pub pending: usize,
     /// Producer failures met in this frame.
@@ -199,6 +207,7 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
             samples: 0,
             requests: 0,
             bricks_produced: 0,
+            bricks_prefetched: 0,
             pending: 0,
             failures: Vec::new(),
         };
@@ -220,17 +229,22 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
                 &mut progressive,
             )?;
             result.render_ms += render_start.elapsed().as_secs_f64() * 1e3;
-            let limit = match mode {
-                Mode::Converged => None,
-                Mode::Interactive => Some(self.limits.requests_per_frame),
+            let options = match mode {
+                Mode::Converged => {
+                    ServeOptions { limit: None, prefetch_new_children: self.limits.prefetch_new_children }
+                }
+                Mode::Interactive => {
+                    ServeOptions { limit: Some(self.limits.requests_per_frame), prefetch_new_children: false }
+                }
             };
-            let report = self.cache.end_frame(limit);
+            let report = self.cache.end_frame(options);
             self.peak_resident_bytes = self.peak_resident_bytes.max(self.cache.residency().bytes);
             result.passes += 1;
             result.rays += stats.rays;
             result.samples += stats.samples;
             result.requests += report.requests as u64;
             result.bricks_produced += report.bricks_produced as u64;
+            result.bricks_prefetched += report.bricks_prefetched as u64;
             result.pending = report.pending;
             result.failures.extend(report.failures);
             observe(&PassProgress {

@@ -8,10 +8,14 @@ use voxstream_render::{Camera, Image, RenderSettings};
 
 /// A session on a built-in scene at `size`², with the scene's transfer function and shading.
 pub fn scene_session(name: &str, size: u32, budget_bytes: u64) -> Session<SceneProducer> {
+    scene_session_with(name, size, budget_bytes, LoopLimits::default())
+}
+
+/// [`scene_session`] with the loop's limits and options.
+pub fn scene_session_with(name: &str, size: u32, budget_bytes: u64, limits: LoopLimits) -> Session<SceneProducer> {
     let scene = builtin(name).expect("built-in scene");
     let settings = RenderSettings { width: size, height: size, shading: scene.shading, ..RenderSettings::default() };
-    Session::new(scene.producer, &scene.transfer_function, settings, budget_bytes, LoopLimits::default())
-        .expect("session")
+    Session::new(scene.producer, &scene.transfer_function, settings, budget_bytes, limits).expect("session")
 }
 
 /// Renders a converged frame and checks it converged.
