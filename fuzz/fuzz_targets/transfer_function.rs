@@ -1,7 +1,8 @@
-//! A transfer-function JSON file (`--tf`): parsed, evaluated, and turned into the renderer's lookup table.
+//! A transfer-function JSON file (`--tf`): parsed, evaluated, and turned into the renderer's lookup tables.
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
+use voxstream_render::step_table::StepLength;
 use voxstream_render::transfer_function::{TransferFunction, TransferLut};
 
 fuzz_target!(|data: &[u8]| {
@@ -13,4 +14,8 @@ fuzz_target!(|data: &[u8]| {
     let lut = TransferLut::new(&tf, 0.0, 1.0, 1.0);
     let _ = lut.lookup(0.5);
     let _ = lut.is_visible_in(0.0, 1.0);
+    // The tables pre-corrected for a step: any extinction, tiny and huge steps.
+    for step in [1e-9, 0.37, 1e9] {
+        let _ = lut.step_table(StepLength::at_most(step)).lookup(0.5);
+    }
 });
