@@ -5,7 +5,8 @@
 //! [`Integrand`]'s business (see [`crate::integrand`]); the traversal does not know what is computed.
 //!
 //! 1. At the current distance `t`, the cone's footprint `w = t·spread` gives the continuous level
-//!    `ℓ = log_N(1 / (M·w))`: the level whose voxel matches the pixel. It is computed once per segment.
+//!    `ℓ = log_N(1 / (M·w))`: the level whose voxel matches the pixel. Its voxel `N^(−ℓ)/M` and `⌈ℓ⌉` are computed
+//!    once per segment without a logarithm (a search in the levels' voxel sizes); `frac(ℓ)` only where levels blend.
 //! 2. Descend from the root to the node containing the point at level `⌈ℓ⌉`, marking each tile and brick used.
 //!    Stop early at a constant node, a terminal node, a node whose data is missing (request production; the deepest
 //!    ancestor with data stands in) or a node without children (request a subdivision), reporting at most
@@ -165,7 +166,10 @@ pub struct Traversal<'a> {
     brick_size: f64,
     stored: usize,
     inv_ln_n: f64,
-    ln_n: f64,
+    /// `N^(−lod_bias)`.
+    bias_scale: f64,
+    /// Voxel edge (unit cube) of every level: `N^(−d) / M`, decreasing.
+    level_voxel: [f64; MAX_TABLE_LEVELS],
 }
 
 impl<'a> Traversal<'a> {
@@ -192,7 +196,8 @@ impl<'a> Traversal<'a> {
             brick_size: shape.brick_size as f64,
             stored: shape.stored_brick_size() as usize,
             inv_ln_n: 1.0 / (shape.n as f64).ln(),
-            ln_n: (shape.n as f64).ln(),
+            bias_scale: (-settings.lod_bias * (shape.n as f64).ln()).exp(),
+            level_voxel: scale.map(|s| 1.0 / (s * shape.brick_size as f64)),
         }
     }
 
@@ -207,6 +212,18 @@ impl<'a> Traversal<'a> {
         let footprint = (t * spread / self.world_per_volume).max(1e-300);
         let level = -(self.brick_size * footprint).ln() * self.inv_ln_n + self.lod_bias;
         level.clamp(0.0, self.view.shape.max_level as f64)
+    }
+
+    /// The voxel edge of the continuous level at distance `t`, `N^(−ℓ) / M`, and the level to descend to, `⌈ℓ⌉`,
+    /// without a logarithm or an exponential: unclamped, `N^(−ℓ) = M·w·N^(−bias)` for the footprint `w`, and `⌈ℓ⌉`
+    /// is the coarsest level whose voxel is no larger than that.
+    #[inline]
+    fn footprint_at(&self, t: f64, spread: f64) -> (f64, u32) {
+        let max_level = self.view.shape.max_level as usize;
+        let footprint = (t * spread / self.world_per_volume).max(1e-300);
+        let voxel = (footprint * self.bias_scale).clamp(self.level_voxel[max_level], self.level_voxel[0]);
+        let target = self.level_voxel[..=max_level].partition_point(|&v| v > voxel);
+        (voxel, target.min(max_level) as u32)
     }
 
     /// Walks `ray`, handing its samples to `integrand` until the ray leaves the volume or the integrand stops it.
@@ -245,8 +262,8 @@ impl<'a> Traversal<'a> {
             segments += 1;
             stats.descents += 1;
             let p = origin + direction * t;
-            let level = self.level_at(t, ray.spread);
-            let (data, box_level, box_ijk) = self.descend(p, level.ceil() as u32, path, request);
+            let (footprint_voxel, target_level) = self.footprint_at(t, ray.spread);
+            let (data, box_level, box_ijk) = self.descend(p, target_level, path, request);
             let node_size = 1.0 / self.scale[box_level as usize];
             let lower = DVec3::new(box_ijk[0] as f64, box_ijk[1] as f64, box_ijk[2] as f64) * node_size;
             let t_exit = exit_distance(origin, inverse_direction, lower, node_size).min(t_leave);
@@ -273,7 +290,6 @@ impl<'a> Traversal<'a> {
                     // where the data is coarser: a quadrilinear sample is filtered at the footprint, so finer steps
                     // would only re-sample the same filtered signal (GigaVoxels [P09] §6, cone tracing).
                     let sampled_voxel = 1.0 / (self.scale[fine.level as usize] * self.brick_size);
-                    let footprint_voxel = (-level * self.ln_n).exp() / self.brick_size;
                     let desired_step = sampled_voxel.max(footprint_voxel) * self.step_factor / speed;
                     let segment_step = match step {
                         Some(current) if current.is_at_most(desired_step) => current,
