@@ -387,7 +387,6 @@ impl<'a> Traversal<'a> {
             } else {
                 count
             };
-            stats.samples += (run_end - k) as u64;
             // One loop per combination, so that the loop itself holds no test of either.
             let (coarse, weight) = match &coarse_line {
                 Some((line, weight)) => (line, *weight),
@@ -400,10 +399,12 @@ impl<'a> Traversal<'a> {
                 (false, true) => self.sample_run::<I, false, true>(&fine_line, coarse, weight, run, integrand),
                 (true, true) => self.sample_run::<I, true, true>(&fine_line, coarse, weight, run, integrand),
             };
-            if flow.is_break() {
-                stats.samples -= (run_end - k) as u64;
-                stats.samples += flow_samples(flow);
-                return ControlFlow::Break(());
+            match flow {
+                ControlFlow::Break(taken) => {
+                    stats.samples += taken;
+                    return ControlFlow::Break(());
+                }
+                ControlFlow::Continue(()) => stats.samples += (run_end - k) as u64,
             }
             k = run_end;
         }
@@ -577,14 +578,6 @@ impl<'a> Traversal<'a> {
 
 /// How a run of samples ended: `Break(n)` after `n` samples when the integrand stopped the ray.
 type RunFlow = ControlFlow<u64>;
-
-/// Samples taken by a run that stopped the ray.
-fn flow_samples(flow: RunFlow) -> u64 {
-    match flow {
-        ControlFlow::Break(n) => n,
-        ControlFlow::Continue(()) => 0,
-    }
-}
 
 /// Where a ray's requests go, with its remaining allowance for this frame.
 struct RequestSink<'v> {
