@@ -7,21 +7,18 @@
 
 use std::ops::ControlFlow;
 
-use glam::{DVec3, Vec3, Vec4};
+use glam::{DVec3, Vec3};
 
 use crate::integrand::{Integrand, Sample};
-use crate::settings::{PhongCoefficients, RenderSettings, Shading};
+use crate::lighting::{LightingSettings, RayLight};
+use crate::settings::RenderSettings;
 use crate::step_table::{StepLength, StepTable};
 use crate::transfer_function::TransferLut;
 
 /// What stays the same for every ray of a frame.
 #[derive(Clone, Copy, Debug)]
 pub struct EmissionAbsorptionSettings {
-    phong: Option<PhongCoefficients>,
-    /// Fixed light direction (unit, world), or `None` for a headlight.
-    light: Option<Vec3>,
-    /// World units per unit of gradient along each brick axis (the placement's inverse scale).
-    gradient_scale: Vec3,
+    lighting: LightingSettings,
     /// Transmittance below which a ray stops.
     stop_below: f32,
 }
@@ -29,21 +26,8 @@ pub struct EmissionAbsorptionSettings {
 impl EmissionAbsorptionSettings {
     /// From the frame's settings.
     pub fn new(settings: &RenderSettings) -> EmissionAbsorptionSettings {
-        EmissionAbsorptionSettings {
-            phong: (settings.shading == Shading::Phong).then_some(settings.phong),
-            light: settings.light_direction.map(|l| DVec3::from(l).normalize().as_vec3()),
-            gradient_scale: Vec3::from(settings.placement.scale.map(|s| (1.0 / s) as f32)),
-            stop_below: 1.0 - settings.opacity_cutoff,
-        }
+        EmissionAbsorptionSettings { lighting: LightingSettings::new(settings), stop_below: 1.0 - settings.opacity_cutoff }
     }
-}
-
-/// Light and half vector of one ray (world space, unit).
-#[derive(Clone, Copy, Debug)]
-struct RayLight {
-    light: Vec3,
-    half: Vec3,
-    phong: PhongCoefficients,
 }
 
 /// The colour and opacity accumulated along one ray.
@@ -65,16 +49,11 @@ impl<'a> EmissionAbsorption<'a> {
         settings: &EmissionAbsorptionSettings,
         volume_direction: DVec3,
     ) -> EmissionAbsorption<'a> {
-        let light = settings.phong.map(|phong| {
-            let view = -(volume_direction.as_vec3() / settings.gradient_scale).normalize();
-            let light = settings.light.unwrap_or(view);
-            RayLight { light, half: (light + view).normalize_or_zero(), phong }
-        });
         EmissionAbsorption {
             lut,
             table: None,
-            light,
-            gradient_scale: settings.gradient_scale,
+            light: settings.lighting.ray(volume_direction),
+            gradient_scale: settings.lighting.gradient_scale,
             stop_below: settings.stop_below,
             color: Vec3::ZERO,
             transmittance: 1.0,
@@ -84,22 +63,6 @@ impl<'a> EmissionAbsorption<'a> {
     /// Premultiplied `[r, g, b]` and opacity.
     pub fn result(&self) -> ([f32; 3], f32) {
         (self.color.to_array(), 1.0 - self.transmittance)
-    }
-
-    /// Two-sided Phong of a premultiplied sample with the density gradient as normal.
-    #[inline(always)]
-    fn shade(light: &RayLight, premultiplied: Vec4, gradient: Vec3) -> Vec3 {
-        let phong = light.phong;
-        let color = premultiplied.truncate();
-        let length = gradient.length();
-        if length < 1e-6 {
-            return color * (phong.ambient + phong.diffuse);
-        }
-        // The normal points away from denser material; two-sided, so its sign does not matter.
-        let normal = gradient / length;
-        let diffuse = normal.dot(light.light).abs();
-        let specular = power(normal.dot(light.half).abs(), phong.shininess);
-        color * (phong.ambient + phong.diffuse * diffuse) + Vec3::splat(phong.specular * specular * premultiplied.w)
     }
 }
 
@@ -127,7 +90,7 @@ impl Integrand for EmissionAbsorption<'_> {
             return ControlFlow::Continue(());
         }
         let color = match &self.light {
-            Some(light) => Self::shade(light, entry, Vec3::from(sample.gradient) * self.gradient_scale),
+            Some(light) => light.shade(entry.truncate(), entry.w, Vec3::from(sample.gradient) * self.gradient_scale),
             None => entry.truncate(),
         };
         self.color += self.transmittance * color;
@@ -157,37 +120,10 @@ impl Integrand for EmissionAbsorption<'_> {
     }
 }
 
-/// `base^exponent`, by repeated squaring when the exponent is a small whole number (the usual Phong case).
-#[inline]
-fn power(base: f32, exponent: f32) -> f32 {
-    if exponent == exponent.trunc() && (0.0..=64.0).contains(&exponent) {
-        let mut result = 1.0;
-        let mut b = base;
-        let mut e = exponent as u32;
-        while e > 0 {
-            if e & 1 == 1 {
-                result *= b;
-            }
-            b *= b;
-            e >>= 1;
-        }
-        result
-    } else {
-        base.powf(exponent)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::transfer_function::TransferFunction;
-
-    #[test]
-    fn power_matches_powf() {
-        for (b, e) in [(0.5f32, 16.0f32), (0.9, 3.0), (0.7, 2.5), (0.0, 0.0)] {
-            assert!((power(b, e) - b.powf(e)).abs() < 1e-6);
-        }
-    }
 
     #[test]
     fn a_constant_node_equals_samples_of_the_same_value() {

@@ -10,10 +10,32 @@ use voxstream_core::{FeedbackBuffer, Request, TreeView};
 use crate::camera::{Camera, CameraFrame};
 use crate::error::RenderError;
 use crate::image::Image;
+use crate::isosurface::SurfaceSettings;
 use crate::ray_caster::RayCaster;
 use crate::settings::RenderSettings;
+use crate::surface_caster::SurfaceCaster;
 use crate::transfer_function::TransferLut;
 use crate::traversal::{DescentPath, RayStats};
+
+/// What traces one pixel's ray: a volume ray ([`RayCaster`]) or an isosurface ray ([`SurfaceCaster`]), each the
+/// one traversal paired with its integrand.
+pub trait PixelTracer: Sync {
+    /// The tree view it reads.
+    fn view(&self) -> TreeView<'_>;
+
+    /// Traces one ray given in volume space with `t` in world units (`origin` in volume units, `direction` = the
+    /// unit world direction divided by the placement's scale); returns premultiplied `[r, g, b]` and opacity.
+    /// Appends at most `max_requests_per_ray` requests per traversal to `requests`.
+    fn trace(
+        &self,
+        origin: glam::DVec3,
+        direction: glam::DVec3,
+        spread: f64,
+        stats: &mut RayStats,
+        requests: &mut Vec<Request>,
+        path: &mut DescentPath,
+    ) -> ([f32; 3], f32);
+}
 
 /// Edge of the square image tiles handed to worker threads.
 pub const IMAGE_TILE: u32 = 16;
@@ -91,14 +113,23 @@ pub fn render_pass(
         return Err(RenderError::InvalidSetting("progressive image size differs from the settings".into()));
     }
     let frame = camera.frame(width, height)?;
-    let caster = RayCaster::new(view, feedback, lut, settings);
     let tiles_x = width.div_ceil(IMAGE_TILE);
     let tiles_y = height.div_ceil(IMAGE_TILE);
     let pending = &progressive.pending;
-    let results: Vec<TileResult> = (0..tiles_x * tiles_y)
-        .into_par_iter()
-        .map(|tile| render_tile(&caster, &frame, settings, tile % tiles_x, tile / tiles_x, feedback, pending))
-        .collect();
+    let results: Vec<TileResult> = if settings.surfaces.is_empty() {
+        let caster = RayCaster::new(view, feedback, lut, settings);
+        (0..tiles_x * tiles_y)
+            .into_par_iter()
+            .map(|tile| render_tile(&caster, &frame, settings, tile % tiles_x, tile / tiles_x, feedback, pending))
+            .collect()
+    } else {
+        let surfaces = SurfaceSettings::new(settings, |value| lut.normalise(value));
+        let caster = SurfaceCaster::new(view, feedback, &surfaces, settings);
+        (0..tiles_x * tiles_y)
+            .into_par_iter()
+            .map(|tile| render_tile(&caster, &frame, settings, tile % tiles_x, tile / tiles_x, feedback, pending))
+            .collect()
+    };
     let mut stats = RayStats::default();
     let mut raw_requests = 0;
     for (tile, result) in results.into_iter().enumerate() {
@@ -128,8 +159,8 @@ struct TileResult {
     raw_requests: usize,
 }
 
-fn render_tile(
-    caster: &RayCaster<'_>,
+fn render_tile<T: PixelTracer>(
+    caster: &T,
     frame: &CameraFrame,
     settings: &RenderSettings,
     tile_x: u32,
@@ -181,8 +212,8 @@ fn render_tile(
 /// always inlined into pulp's `#[target_feature]` entry point, and the traversal is always inlined into it, so each
 /// version of the whole ray loop is compiled for its instruction set. (A closure would be compiled once, for the
 /// baseline.)
-struct TileLoop<'t, 'a> {
-    caster: &'t RayCaster<'a>,
+struct TileLoop<'t, T> {
+    caster: &'t T,
     frame: &'t CameraFrame,
     pixels: (std::ops::Range<u32>, std::ops::Range<u32>),
     width: u32,
@@ -196,7 +227,7 @@ struct TileLoop<'t, 'a> {
     path: &'t mut DescentPath,
 }
 
-impl pulp::WithSimd for TileLoop<'_, '_> {
+impl<T: PixelTracer> pulp::WithSimd for TileLoop<'_, T> {
     type Output = ();
 
     #[inline(always)]

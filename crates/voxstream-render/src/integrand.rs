@@ -8,6 +8,10 @@
 //! interval iterators, the traversal first asks whether a value range can contribute at all, and skips it otherwise.
 //!
 //! Every method is called in ray order. Generic dispatch (`trace::<I>`) inlines the integrand into the sample loop.
+//!
+//! An integrand that needs the field itself rather than samples of it (exact isosurfaces solve a cubic per trilinear
+//! cell, [`crate::isosurface`]) sets [`Integrand::TAKES_SPANS`] and receives each brick segment whole, as a
+//! [`BrickSpan`]: the brick's voxels and the ray's line through them, which [`crate::cell_walk`] walks cell by cell.
 
 use std::ops::ControlFlow;
 
@@ -25,8 +29,32 @@ pub struct Sample {
     pub gradient: [f32; 3],
 }
 
+/// One brick segment of a ray: the brick (the finest resident at the cone's level) and the ray's continuous voxel
+/// index in it, `x(t) = origin + t·rate`, over the distances `[from, to)`. Index `i` is voxel `i` of the stored brick
+/// (border included), so the segment's cells are `⌊x⌋ ∈ [0, B−2]` for `B` stored voxels per axis.
+#[derive(Clone, Copy, Debug)]
+pub struct BrickSpan<'v> {
+    /// The brick's voxels, `B³`, x fastest.
+    pub voxels: &'v [u16],
+    /// Stored voxels per axis, `B = M + 2`.
+    pub stored: usize,
+    /// Continuous voxel index at `t = 0`.
+    pub origin: [f64; 3],
+    /// Voxels per world unit of `t`, per axis.
+    pub rate: [f64; 3],
+    /// Where the segment starts.
+    pub from: f64,
+    /// Where it ends.
+    pub to: f64,
+    /// The brick's level in the tree.
+    pub level: u32,
+}
+
 /// Consumes the samples of one ray.
 pub trait Integrand {
+    /// Whether brick segments come whole ([`Integrand::span`]) instead of as samples ([`Integrand::sample`]).
+    const TAKES_SPANS: bool = false;
+
     /// Whether some normalised value in `[lower, upper]` can change the result. The traversal skips bricks and
     /// occupancy blocks whose values all lie in a range that cannot, so this must be conservative: skipping must not
     /// change a single bit of the result.
@@ -43,4 +71,10 @@ pub trait Integrand {
 
     /// A constant `value` (a constant node) over the distances `[from, to)`, to integrate analytically.
     fn constant(&mut self, from: f64, to: f64, value: f32) -> ControlFlow<()>;
+
+    /// A whole brick segment (only when [`Integrand::TAKES_SPANS`]); adds the work done (cells examined) to `work`.
+    fn span(&mut self, span: &BrickSpan<'_>, work: &mut u64) -> ControlFlow<()> {
+        let _ = (span, work);
+        ControlFlow::Continue(())
+    }
 }

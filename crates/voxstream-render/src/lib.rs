@@ -13,8 +13,10 @@
 //! - [`TransferFunction`] / [`TransferLut`]: piecewise-linear 1-D transfer function, VTK's opacity unit distance.
 //! - [`Traversal`]: one ray through the tree (descent, cone LOD, skipping, samples), handing samples to an
 //!   [`Integrand`]; [`emission_absorption`] is the volume-rendering integrand, with tables pre-corrected for the
-//!   step ([`step_table`]).
-//! - [`render_frame`]: rayon over 16×16 image tiles, one [`RayCaster`] ray per pixel.
+//!   step ([`step_table`]); [`isosurface`] is the exact first-hit integrand (Knoll et al.), which takes whole brick
+//!   segments and intersects each trilinear cell ([`cell_walk`], [`cell_intersection`]).
+//! - [`render_frame`]: rayon over 16×16 image tiles, one ray per pixel: [`RayCaster`] for volumes,
+//!   [`surface_caster::SurfaceCaster`] when the settings name isosurfaces.
 //!
 //! ```
 //! use voxstream_render::{TransferFunction, TransferLut};
@@ -24,13 +26,18 @@
 //! ```
 
 pub mod camera;
+pub mod cell_intersection;
+pub mod cell_walk;
 pub mod emission_absorption;
 pub mod error;
 pub mod frame;
 pub mod image;
 pub mod instruction_set;
 pub mod integrand;
+pub mod isosurface;
+pub mod lighting;
 pub mod ray_caster;
+pub mod surface_caster;
 pub mod sampler;
 pub mod settings;
 pub mod step_table;
@@ -44,7 +51,8 @@ pub use frame::{
 };
 pub use image::{psnr, Image};
 pub use instruction_set::InstructionSet;
-pub use integrand::{Integrand, Sample};
+pub use integrand::{BrickSpan, Integrand, Sample};
+pub use isosurface::{IsoSurface, MAX_SURFACES};
 pub use ray_caster::RayCaster;
 pub use settings::{PhongCoefficients, RenderSettings, Shading, VolumePlacement};
 pub use transfer_function::{TransferFunction, TransferLut};

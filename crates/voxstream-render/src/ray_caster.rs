@@ -6,6 +6,7 @@
 use glam::DVec3;
 use voxstream_core::{FeedbackBuffer, Request, TreeView};
 
+use crate::frame::PixelTracer;
 use crate::emission_absorption::{EmissionAbsorption, EmissionAbsorptionSettings};
 use crate::settings::RenderSettings;
 use crate::transfer_function::TransferLut;
@@ -33,16 +34,15 @@ impl<'a> RayCaster<'a> {
         }
     }
 
-    /// The tree view this caster reads.
-    pub fn view(&self) -> TreeView<'a> {
+}
+
+impl PixelTracer for RayCaster<'_> {
+    fn view(&self) -> TreeView<'_> {
         self.traversal.view()
     }
 
-    /// Traces one ray given in volume space with `t` in world units (`origin` in volume units, `direction` = the unit
-    /// world direction divided by the placement's scale); returns premultiplied `[r, g, b]` and opacity.
-    /// Appends at most `max_requests_per_ray` requests to `requests`.
     #[inline(always)]
-    pub fn trace(
+    fn trace(
         &self,
         origin: DVec3,
         direction: DVec3,
@@ -52,7 +52,7 @@ impl<'a> RayCaster<'a> {
         path: &mut DescentPath,
     ) -> ([f32; 3], f32) {
         let mut integrand = EmissionAbsorption::new(self.lut, &self.integrand, direction);
-        self.traversal.trace(&Ray { origin, direction, spread }, &mut integrand, stats, requests, path);
+        self.traversal.trace(&Ray { origin, direction, spread, start: 0.0 }, &mut integrand, stats, requests, path);
         integrand.result()
     }
 }

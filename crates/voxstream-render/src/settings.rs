@@ -4,6 +4,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::RenderError;
 use crate::instruction_set::InstructionSet;
+use crate::isosurface::{IsoSurface, MAX_SURFACES};
 
 /// How samples are lit.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -99,6 +100,10 @@ pub struct RenderSettings {
     pub sample_batches: bool,
     /// Instructions the ray loop uses (detected at run time by default; the image is the same either way).
     pub instruction_set: InstructionSet,
+    /// Isosurfaces to draw instead of the volume (Knoll et al.); empty = volume rendering.
+    pub surfaces: Vec<IsoSurface>,
+    /// Isosurfaces: hard shadows from the fixed light ([`RenderSettings::light_direction`], with Phong shading).
+    pub shadows: bool,
 }
 
 impl Default for RenderSettings {
@@ -118,6 +123,8 @@ impl Default for RenderSettings {
             skip_empty_space: true,
             instruction_set: InstructionSet::Detect,
             sample_batches: true,
+            surfaces: Vec::new(),
+            shadows: false,
         }
     }
 }
@@ -145,6 +152,20 @@ impl RenderSettings {
             let length = light.iter().map(|v| v * v).sum::<f64>().sqrt();
             if !(length.is_finite() && length > 0.0) {
                 return bad("light direction must be a non-zero finite vector".into());
+            }
+        }
+        if self.surfaces.len() > MAX_SURFACES {
+            return bad(format!("at most {MAX_SURFACES} isosurfaces, got {}", self.surfaces.len()));
+        }
+        for (i, surface) in self.surfaces.iter().enumerate() {
+            if !surface.value.is_finite() {
+                return bad(format!("isovalue {} is not finite", i + 1));
+            }
+            if surface.color.iter().any(|c| !(0.0..=1.0).contains(c)) {
+                return bad(format!("isosurface {} colour components must be in [0, 1]", i + 1));
+            }
+            if !(surface.opacity > 0.0 && surface.opacity <= 1.0) {
+                return bad(format!("isosurface {} opacity must be in (0, 1], got {}", i + 1, surface.opacity));
             }
         }
         let p = &self.placement;

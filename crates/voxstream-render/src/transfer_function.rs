@@ -116,6 +116,8 @@ pub struct TransferLut {
     visible_before: Vec<u32>,
     lower: f32,
     scale: f32,
+    /// The data values that normalised 0 and 1 stand for.
+    data_range: [f64; 2],
     /// The same table pre-corrected for each ray-march step used so far.
     step_tables: StepTables,
 }
@@ -147,7 +149,19 @@ impl TransferLut {
             visible_before,
             lower: 0.0,
             scale: (LUT_SIZE - 1) as f32,
+            data_range: [lower as f64, upper as f64],
             step_tables: StepTables::default(),
+        }
+    }
+
+    /// The normalised value (what bricks hold) of data value `value`: 0 at the data's lower bound, 1 at its upper;
+    /// 0 for a data range of zero width.
+    pub fn normalise(&self, value: f64) -> f64 {
+        let [lower, upper] = self.data_range;
+        if upper > lower {
+            (value - lower) / (upper - lower)
+        } else {
+            0.0
         }
     }
 

@@ -33,7 +33,7 @@ use std::ops::ControlFlow;
 use glam::DVec3;
 use voxstream_core::{BrickSlot, FeedbackBuffer, Node, NodeData, NodeId, Request, RequestKind, TreeView, BLOCK_CELLS};
 
-use crate::integrand::{Integrand, Sample};
+use crate::integrand::{BrickSpan, Integrand, Sample};
 use crate::sampler::{values_along, values_and_gradients_along, Cell, LANES};
 use crate::settings::RenderSettings;
 use crate::step_table::StepLength;
@@ -106,6 +106,9 @@ pub struct Ray {
     pub direction: DVec3,
     /// Cone footprint per unit distance (world units).
     pub spread: f64,
+    /// Distance at which the ray starts (0 for a primary ray; a shadow ray starts at its surface point, with an
+    /// origin moved back so that its cone is already as wide as the primary ray's there).
+    pub start: f64,
 }
 
 /// A brick found on the descent: which slot and which node it belongs to.
@@ -247,7 +250,7 @@ impl<'a> Traversal<'a> {
         };
         // Volume units travelled per unit of t.
         let speed = direction.length();
-        let mut t = t_enter.max(0.0);
+        let mut t = t_enter.max(ray.start);
         let inverse_direction = DVec3::ONE / direction;
         path.reset(self.view);
         if let Some(slot) = path.entries[0].node.brick() {
@@ -283,6 +286,20 @@ impl<'a> Traversal<'a> {
                         integrand.constant(from, t_exit, value)
                     } else {
                         ControlFlow::Continue(())
+                    }
+                }
+                SegmentData::Bricks { fine, .. } if I::TAKES_SPANS => {
+                    // The whole segment at the fine brick's level: no level blending (the integrand closes the
+                    // seams where the level changes).
+                    covered = covered.max(t_exit);
+                    let skip = self.skip_empty_space && {
+                        let [lo, hi] = self.view.brick_range(fine.slot);
+                        !integrand.can_contribute(lo, hi)
+                    };
+                    if skip {
+                        ControlFlow::Continue(())
+                    } else {
+                        integrand.span(&self.brick_span(ray, &fine, t, t_exit), &mut stats.samples)
                     }
                 }
                 SegmentData::Bricks { fine, coarse, blend_level } => {
@@ -485,6 +502,23 @@ impl<'a> Traversal<'a> {
             origin,
             rate,
             inverse_rate: rate.map(|r| 1.0 / r),
+        }
+    }
+
+    /// The brick of `node` along the ray over `[from, to)`, for integrands that take spans.
+    #[inline(always)]
+    fn brick_span(&self, ray: &Ray, node: &BrickRef, from: f64, to: f64) -> BrickSpan<'a> {
+        let s = self.scale[node.level as usize];
+        let m = self.brick_size;
+        let (o, d) = (ray.origin.to_array(), ray.direction.to_array());
+        BrickSpan {
+            voxels: self.view.brick(node.slot),
+            stored: self.stored,
+            origin: std::array::from_fn(|a| (o[a] * s - node.ijk[a] as f64) * m + 0.5),
+            rate: std::array::from_fn(|a| d[a] * s * m),
+            from,
+            to,
+            level: node.level,
         }
     }
 

@@ -1,0 +1,318 @@
+//! Exact isosurfaces: the first-hit [`Integrand`] of Knoll et al. (seed 002; `../shared/notes/knoll-isosurface.md`).
+//!
+//! The traversal hands over whole brick segments ([`Integrand::TAKES_SPANS`]); each is walked cell by cell
+//! ([`crate::cell_walk`]) and every cell whose corner range holds an isovalue is intersected exactly
+//! ([`crate::cell_intersection`]): the first crossing is found even when the ray crosses twice inside the cell.
+//!
+//! - **State, not samples.** The ray carries, per surface, whether it is inside (`f ≥ iso`). A crossing is any
+//!   change of that state: inside a cell (a root of the cubic), or between two pieces of the ray whose fields differ
+//!   (a level-of-detail seam, a constant node). So a surface that moves slightly where the level changes still
+//!   closes: the ray meets it on one side of the seam or at the seam, never neither (Knoll's transition slices aim at
+//!   the same: no cracks).
+//! - **Culling.** A brick, occupancy block or cell whose value range lies on the ray's current side of every
+//!   isovalue is skipped ([`Integrand::can_contribute`]); that is exact, because nothing in it can change the state.
+//! - **Several surfaces**, each with a colour and an opacity: crossings are composited front to back in order, so
+//!   nested translucent surfaces show each other; an opaque one ends the ray.
+//! - **Shading**: two-sided Phong ([`crate::lighting`]) with the analytic gradient of the trilinear cell as normal.
+
+use std::ops::ControlFlow;
+
+use glam::{DVec3, Vec3};
+use serde::{Deserialize, Serialize};
+use voxstream_core::VOXEL_MAX;
+
+use crate::cell_intersection::{cell_gradient, CellCubic};
+use crate::cell_walk::{walk_cells, CellVisit};
+use crate::integrand::{BrickSpan, Integrand, Sample};
+use crate::lighting::{LightingSettings, RayLight};
+use crate::settings::RenderSettings;
+use crate::step_table::StepLength;
+
+/// Surfaces one frame can draw at most.
+pub const MAX_SURFACES: usize = 8;
+
+/// Margin (normalised value) by which brick and block ranges must clear an isovalue before they are culled: the
+/// ranges are normalised `f32`, the cells compare the stored integers, and the margin keeps the two decisions
+/// consistent whatever the rounding.
+const RANGE_MARGIN: f32 = 1e-6;
+
+/// One isosurface to draw.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct IsoSurface {
+    /// The isovalue, in data values (what the transfer function is written in).
+    pub value: f64,
+    /// Linear colour.
+    pub color: [f32; 3],
+    /// Opacity in `(0, 1]`: 1 hides what is behind; less shows nested surfaces through.
+    pub opacity: f32,
+}
+
+/// The surfaces of a frame in the bricks' scale, and their lighting: what stays the same for every ray.
+#[derive(Clone, Debug)]
+pub struct SurfaceSettings {
+    count: usize,
+    /// Isovalues in stored units (`[0, 65535]`), what cell corners are compared with.
+    iso: [f32; MAX_SURFACES],
+    /// Isovalues normalised, less and plus [`RANGE_MARGIN`], for range culling.
+    lower: [f32; MAX_SURFACES],
+    upper: [f32; MAX_SURFACES],
+    /// Premultiplied colours.
+    color: [Vec3; MAX_SURFACES],
+    opacity: [f32; MAX_SURFACES],
+    lighting: LightingSettings,
+    stop_below: f32,
+}
+
+impl SurfaceSettings {
+    /// From the frame's settings; `normalise` maps a data value to the bricks' `[0, 1]`.
+    pub fn new(settings: &RenderSettings, normalise: impl Fn(f64) -> f64) -> SurfaceSettings {
+        let mut s = SurfaceSettings {
+            count: settings.surfaces.len().min(MAX_SURFACES),
+            iso: [0.0; MAX_SURFACES],
+            lower: [0.0; MAX_SURFACES],
+            upper: [0.0; MAX_SURFACES],
+            color: [Vec3::ZERO; MAX_SURFACES],
+            opacity: [0.0; MAX_SURFACES],
+            lighting: LightingSettings::new(settings),
+            stop_below: 1.0 - settings.opacity_cutoff,
+        };
+        for (i, surface) in settings.surfaces.iter().take(MAX_SURFACES).enumerate() {
+            let normalised = normalise(surface.value) as f32;
+            s.iso[i] = normalised * VOXEL_MAX as f32;
+            s.lower[i] = normalised - RANGE_MARGIN;
+            s.upper[i] = normalised + RANGE_MARGIN;
+            s.color[i] = Vec3::from(surface.color) * surface.opacity;
+            s.opacity[i] = surface.opacity;
+        }
+        s
+    }
+
+    /// How many surfaces.
+    pub fn count(&self) -> usize {
+        self.count
+    }
+}
+
+/// The surfaces met along one ray, composited front to back.
+pub struct Isosurfaces<'a> {
+    settings: &'a SurfaceSettings,
+    light: Option<RayLight>,
+    /// Per surface (bit `i`): whether the ray is inside (`f ≥ iso`) where it is now.
+    inside: u32,
+    /// Whether `inside` has been read from data yet (the volume's boundary is not a crossing).
+    known: bool,
+    color: Vec3,
+    transmittance: f32,
+    first_hit: Option<f64>,
+    /// What the first crossing's light added beyond its ambient term (removed if the crossing is in shadow).
+    first_lit: Vec3,
+    /// Stop at the first crossing whatever its opacity (shadow rays).
+    any_hit: bool,
+}
+
+impl<'a> Isosurfaces<'a> {
+    /// A ray that has met nothing; `volume_direction` is its direction in volume units per world unit.
+    pub fn new(settings: &'a SurfaceSettings, volume_direction: DVec3) -> Isosurfaces<'a> {
+        Isosurfaces {
+            settings,
+            light: settings.lighting.ray(volume_direction),
+            inside: 0,
+            known: false,
+            color: Vec3::ZERO,
+            transmittance: 1.0,
+            first_hit: None,
+            first_lit: Vec3::ZERO,
+            any_hit: false,
+        }
+    }
+
+    /// A shadow ray: it stops at the first crossing of any surface.
+    pub fn occlusion(settings: &'a SurfaceSettings) -> Isosurfaces<'a> {
+        Isosurfaces { light: None, any_hit: true, ..Isosurfaces::new(settings, DVec3::Z) }
+    }
+
+    /// Premultiplied `[r, g, b]` and opacity.
+    pub fn result(&self) -> ([f32; 3], f32) {
+        (self.color.to_array(), 1.0 - self.transmittance)
+    }
+
+    /// Distance of the first crossing, if any.
+    pub fn first_hit(&self) -> Option<f64> {
+        self.first_hit
+    }
+
+    /// The light of the ray (`None` without shading).
+    pub fn light(&self) -> Option<&RayLight> {
+        self.light.as_ref()
+    }
+
+    /// The first crossing is in shadow: only its ambient term stays.
+    pub fn shadow_first_hit(&mut self) {
+        self.color -= self.first_lit;
+        self.first_lit = Vec3::ZERO;
+    }
+
+    /// A crossing of surface `i` at `t`, with the field's gradient there (world axes; zero where unknown).
+    #[inline]
+    fn hit(&mut self, i: usize, t: f64, gradient: Vec3) -> ControlFlow<()> {
+        if self.any_hit {
+            self.first_hit = Some(t);
+            self.transmittance = 0.0;
+            return ControlFlow::Break(());
+        }
+        let (color, opacity) = (self.settings.color[i], self.settings.opacity[i]);
+        let shaded = match &self.light {
+            Some(light) => light.shade(color, opacity, gradient),
+            None => color,
+        };
+        if self.first_hit.is_none() {
+            self.first_hit = Some(t);
+            if let Some(light) = &self.light {
+                self.first_lit = self.transmittance * (shaded - light.ambient(color));
+            }
+        }
+        self.color += self.transmittance * shaded;
+        self.transmittance *= 1.0 - opacity;
+        if self.transmittance <= self.settings.stop_below {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    }
+
+    /// The surfaces a stored value is inside of.
+    #[inline]
+    fn inside_of(&self, stored: f32) -> u32 {
+        let mut bits = 0;
+        for i in 0..self.settings.count {
+            bits |= ((stored >= self.settings.iso[i]) as u32) << i;
+        }
+        bits
+    }
+
+    /// The state is `entry` from `t` on: crossings at `t` for every surface that changed (none for the first data).
+    #[inline]
+    fn enter(&mut self, entry: u32, t: f64, gradient: impl Fn() -> Vec3) -> ControlFlow<()> {
+        if !self.known {
+            self.known = true;
+            self.inside = entry;
+            return ControlFlow::Continue(());
+        }
+        let changed = entry ^ self.inside;
+        self.inside = entry;
+        if changed != 0 {
+            let g = gradient();
+            for i in 0..self.settings.count {
+                if changed & (1 << i) != 0 {
+                    self.hit(i, t, g)?;
+                }
+            }
+        }
+        ControlFlow::Continue(())
+    }
+
+    /// One trilinear cell: seams at its entry, then its exact crossings in order.
+    #[inline(always)]
+    fn cell(&mut self, c: &CellVisit) -> ControlFlow<()> {
+        let s = self.settings;
+        let (mut lo, mut hi) = (c.corners[0], c.corners[0]);
+        for &v in &c.corners[1..] {
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+        let (mut above, mut straddle) = (0u32, 0u32);
+        for i in 0..s.count {
+            if lo >= s.iso[i] {
+                above |= 1 << i;
+            } else if hi >= s.iso[i] {
+                straddle |= 1 << i;
+            }
+        }
+        if straddle == 0 && self.known && above == self.inside {
+            return ControlFlow::Continue(());
+        }
+        let scale = s.lighting.gradient_scale;
+        let gradient_at = |u: f32| {
+            let p = std::array::from_fn(|a| c.start[a] + u * c.rate[a]);
+            Vec3::from(cell_gradient(&c.corners, p)) * scale
+        };
+        if straddle == 0 {
+            return self.enter(above, c.t_in, || gradient_at(0.0));
+        }
+        let cubic = CellCubic::new(&c.corners, c.start, c.rate);
+        let f0 = cubic.at(0.0);
+        let mut entry = above;
+        for i in 0..s.count {
+            if straddle & (1 << i) != 0 && f0 >= s.iso[i] {
+                entry |= 1 << i;
+            }
+        }
+        self.enter(entry, c.t_in, || gradient_at(0.0))?;
+        // Every surface's crossings in the cell, merged in ray order.
+        let length = (c.t_out - c.t_in) as f32;
+        let mut crossings = [(0.0f32, 0u8); 3 * MAX_SURFACES];
+        let mut count = 0;
+        for i in 0..s.count {
+            if straddle & (1 << i) != 0 {
+                let mut roots = [0.0f32; 3];
+                let found = cubic.crossings(s.iso[i], length, &mut roots);
+                for &u in &roots[..found] {
+                    // Insertion keeps the list sorted (a handful of entries at most).
+                    let mut k = count;
+                    while k > 0 && crossings[k - 1].0 > u {
+                        crossings[k] = crossings[k - 1];
+                        k -= 1;
+                    }
+                    crossings[k] = (u, i as u8);
+                    count += 1;
+                }
+            }
+        }
+        for &(u, i) in &crossings[..count] {
+            self.inside ^= 1 << i;
+            self.hit(i as usize, c.t_in + u as f64, gradient_at(u))?;
+        }
+        ControlFlow::Continue(())
+    }
+}
+
+impl Integrand for Isosurfaces<'_> {
+    const TAKES_SPANS: bool = true;
+
+    #[inline]
+    fn can_contribute(&self, lower: f32, upper: f32) -> bool {
+        if !self.known {
+            return true;
+        }
+        let s = self.settings;
+        (0..s.count).any(|i| {
+            let may_straddle = lower <= s.upper[i] && upper >= s.lower[i];
+            let all_inside = lower > s.upper[i];
+            may_straddle || all_inside != (self.inside & (1 << i) != 0)
+        })
+    }
+
+    fn wants_gradient(&self) -> bool {
+        false
+    }
+
+    fn set_step(&mut self, _step: StepLength) {}
+
+    /// A lone sample (not used by the traversal for this integrand, which takes spans): a point of the field.
+    fn sample(&mut self, sample: Sample) -> ControlFlow<()> {
+        let entry = self.inside_of(sample.value * VOXEL_MAX as f32);
+        self.enter(entry, sample.t, || Vec3::ZERO)
+    }
+
+    fn constant(&mut self, from: f64, _to: f64, value: f32) -> ControlFlow<()> {
+        let entry = self.inside_of(value * VOXEL_MAX as f32);
+        self.enter(entry, from, || Vec3::ZERO)
+    }
+
+    #[inline(always)]
+    fn span(&mut self, span: &BrickSpan<'_>, work: &mut u64) -> ControlFlow<()> {
+        let (flow, cells) = walk_cells(span, |cell| self.cell(cell));
+        *work += cells;
+        flow
+    }
+}

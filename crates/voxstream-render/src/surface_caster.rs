@@ -1,0 +1,91 @@
+//! The isosurface ray: the tree [`Traversal`] with the [`Isosurfaces`] integrand, and optional hard shadows.
+//!
+//! Shadows follow Knoll et al. (seed 002 §5): from the first crossing, a ray towards the light through the same
+//! tree with the same exact intersection, at a coarser level of detail (its cone twice as wide as the primary ray's
+//! at the surface). A blocked light leaves the crossing its ambient term. The shadow ray reports its misses like any
+//! ray, so the data it needs is loaded too.
+
+use glam::DVec3;
+use voxstream_core::{FeedbackBuffer, Request, TreeView};
+
+use crate::frame::PixelTracer;
+use crate::isosurface::{Isosurfaces, SurfaceSettings};
+use crate::settings::RenderSettings;
+use crate::traversal::{DescentPath, Ray, RayStats, Traversal};
+
+/// How much wider a shadow ray's cone is than the primary ray's at the surface.
+const SHADOW_CONE: f64 = 2.0;
+/// A shadow ray starts this many of its footprints off the surface (no self-shadowing by the crossing itself).
+const SHADOW_OFFSET: f64 = 1.5;
+
+/// Traces isosurface rays against one frame's tree view, writing feedback.
+pub struct SurfaceCaster<'a> {
+    traversal: Traversal<'a>,
+    surfaces: &'a SurfaceSettings,
+    /// Towards the light in volume units per world unit, when shadows are on and a fixed light is set.
+    shadow_direction: Option<DVec3>,
+    /// World length of the finest voxel (the least shadow offset).
+    finest_voxel: f64,
+}
+
+impl<'a> SurfaceCaster<'a> {
+    /// Prepares a surface caster for one frame.
+    pub fn new(
+        view: TreeView<'a>,
+        feedback: &'a FeedbackBuffer,
+        surfaces: &'a SurfaceSettings,
+        settings: &RenderSettings,
+    ) -> SurfaceCaster<'a> {
+        let scale = DVec3::from(settings.placement.scale);
+        let shadow_direction = settings
+            .light_direction
+            .filter(|_| settings.shadows && settings.shading == crate::Shading::Phong)
+            .map(|l| DVec3::from(l).normalize() / scale);
+        let shape = view.shape;
+        SurfaceCaster {
+            traversal: Traversal::new(view, feedback, settings),
+            surfaces,
+            shadow_direction,
+            finest_voxel: settings.placement.mean_scale() * shape.voxel_size(shape.max_level),
+        }
+    }
+}
+
+impl PixelTracer for SurfaceCaster<'_> {
+    fn view(&self) -> TreeView<'_> {
+        self.traversal.view()
+    }
+
+    #[inline(always)]
+    fn trace(
+        &self,
+        origin: DVec3,
+        direction: DVec3,
+        spread: f64,
+        stats: &mut RayStats,
+        requests: &mut Vec<Request>,
+        path: &mut DescentPath,
+    ) -> ([f32; 3], f32) {
+        let mut surfaces = Isosurfaces::new(self.surfaces, direction);
+        self.traversal.trace(&Ray { origin, direction, spread, start: 0.0 }, &mut surfaces, stats, requests, path);
+        if let (Some(toward_light), Some(t_hit)) = (self.shadow_direction, surfaces.first_hit()) {
+            let point = origin + direction * t_hit;
+            // Start the shadow ray `back` before its origin so that its cone at the surface is SHADOW_CONE times the
+            // primary one's, then skip SHADOW_OFFSET footprints.
+            let back = t_hit * SHADOW_CONE;
+            let footprint = (t_hit * spread * SHADOW_CONE).max(self.finest_voxel);
+            let shadow = Ray {
+                origin: point - toward_light * back,
+                direction: toward_light,
+                spread,
+                start: back + SHADOW_OFFSET * footprint,
+            };
+            let mut blocker = Isosurfaces::occlusion(self.surfaces);
+            self.traversal.trace(&shadow, &mut blocker, stats, requests, path);
+            if blocker.first_hit().is_some() {
+                surfaces.shadow_first_hit();
+            }
+        }
+        surfaces.result()
+    }
+}
