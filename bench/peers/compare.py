@@ -92,10 +92,14 @@ def render_voxstream(scene, size, runs, data: Path, out: Path, step=0.5):
                                  "--out", store, "--quiet"])
     work = out / f"voxstream-step{step:g}" / f"{scene['name']}-{size}"
     work.mkdir(parents=True, exist_ok=True)
-    tf = scene["tf"] if scene["mode"] == "volume" else scene_list.steep_tf(scene["iso"])
-    (work / "tf.json").write_text(json.dumps(tf))
+    if scene["mode"] == "volume":
+        (work / "tf.json").write_text(json.dumps(scene["tf"]))
+        look = ["--tf", work / "tf.json"]
+    else:
+        iso = scene["iso"]
+        look = ["--iso", iso["value"], "--iso-color", ",".join(map(str, iso["color"]))]
     (work / "path.json").write_text(json.dumps([scene["camera"]] * (runs + 1)))
-    _, _, wall, peak = run([VOXSTREAM, "render", store, "--width", size, "--height", size, "--tf", work / "tf.json",
+    _, _, wall, peak = run([VOXSTREAM, "render", store, "--width", size, "--height", size, *look,
                             "--shading", scene["shading"], "--light",
                             ",".join(map(str, scene_list.headlight(scene["camera"]))),
                             "--path", work / "path.json", "--stats", work / "stats.json", "--out", work / "frame.png",

@@ -86,13 +86,6 @@ def scenes(data: Path):
     return result
 
 
-def steep_tf(iso):
-    """voxstream's stand-in for an isosurface: transparent below isovalue − ½, opaque (alpha 1 per 0.01 world units)
-    from isovalue + ½."""
-    c = iso["color"]
-    return {"points": [[iso["value"] - 0.5, *c, 0.0], [iso["value"] + 0.5, *c, 1.0]], "unit_distance": 0.01}
-
-
 def headlight(camera):
     d = [e - t for e, t in zip(camera["eye"], camera["target"])]
     n = math.sqrt(sum(v * v for v in d))

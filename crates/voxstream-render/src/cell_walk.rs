@@ -6,6 +6,8 @@
 
 use std::ops::ControlFlow;
 
+use voxstream_core::BLOCK_CELLS;
+
 use crate::integrand::BrickSpan;
 
 /// One cell along a ray.
@@ -23,39 +25,103 @@ pub struct CellVisit {
     pub rate: [f32; 3],
 }
 
-/// Cells visited by one span at most (a ray crosses at most `3·B` cells of a `B³` lattice; the cap only guards
-/// against a numerical stall).
+/// Cells visited (or blocks skipped) by one span at most (a ray crosses at most `3·B` cells of a `B³` lattice; the
+/// cap only guards against a numerical stall).
 fn max_cells(stored: usize) -> usize {
     3 * stored + 3
 }
 
-/// Visits the cells of `span` in ray order until the span ends or `visit` breaks; returns the cells visited.
+/// The DDA's state at one cell: the cell, and per axis the `t` of the next lattice plane.
+struct Lattice {
+    cell: [i64; 3],
+    next: [f64; 3],
+}
+
+impl Lattice {
+    /// The state at distance `t`, in the cell holding `x(t)` (clamped to the brick), or `forced` on one axis (the
+    /// cell just across a plane, which rounding of `x(t)` might not give).
+    #[inline(always)]
+    fn at(span: &BrickSpan<'_>, t: f64, forced: Option<(usize, i64)>) -> Lattice {
+        let last_cell = (span.stored - 2) as i64;
+        let mut cell: [i64; 3] =
+            std::array::from_fn(|a| ((span.origin[a] + t * span.rate[a]).floor() as i64).clamp(0, last_cell));
+        if let Some((axis, c)) = forced {
+            cell[axis] = c;
+        }
+        let next = std::array::from_fn(|a| {
+            let rate = span.rate[a];
+            if rate > 0.0 {
+                (cell[a] as f64 + 1.0 - span.origin[a]) / rate
+            } else if rate < 0.0 {
+                (cell[a] as f64 - span.origin[a]) / rate
+            } else {
+                f64::INFINITY
+            }
+        });
+        Lattice { cell, next }
+    }
+}
+
+/// What walks the cells: it takes each cell, and says which occupancy blocks it can skip.
+pub trait CellVisitor {
+    /// Whether some value in `[lower, upper]` (stored units) can matter; `false` skips the block.
+    fn block_can_contribute(&self, lower: u16, upper: u16) -> bool;
+    /// One cell; `Break` ends the walk.
+    fn visit(&mut self, cell: &CellVisit) -> ControlFlow<()>;
+}
+
+/// Visits the cells of `span` in ray order until the span ends or the visitor breaks; returns the cells visited.
+/// Where the span allows culling, an occupancy block the visitor rejects is crossed without visiting its cells.
 #[inline(always)]
-pub fn walk_cells(span: &BrickSpan<'_>, mut visit: impl FnMut(&CellVisit) -> ControlFlow<()>) -> (ControlFlow<()>, u64) {
+pub fn walk_cells<V: CellVisitor>(span: &BrickSpan<'_>, visitor: &mut V) -> (ControlFlow<()>, u64) {
     let b = span.stored;
     let last_cell = (b - 2) as i64;
-    let x0: [f64; 3] = std::array::from_fn(|a| span.origin[a] + span.from * span.rate[a]);
-    let mut cell: [i64; 3] = x0.map(|x| (x.floor() as i64).clamp(0, last_cell));
-    // Per axis: the t of the next lattice plane, the t between planes, and the step.
-    let mut next = [f64::INFINITY; 3];
     let mut delta = [f64::INFINITY; 3];
     let mut step = [0i64; 3];
     for a in 0..3 {
         let rate = span.rate[a];
-        if rate > 0.0 {
-            next[a] = (cell[a] as f64 + 1.0 - span.origin[a]) / rate;
-            delta[a] = 1.0 / rate;
-            step[a] = 1;
-        } else if rate < 0.0 {
-            next[a] = (cell[a] as f64 - span.origin[a]) / rate;
-            delta[a] = -1.0 / rate;
-            step[a] = -1;
+        if rate != 0.0 {
+            delta[a] = 1.0 / rate.abs();
+            step[a] = if rate > 0.0 { 1 } else { -1 };
         }
     }
+    let Lattice { mut cell, mut next } = Lattice::at(span, span.from, None);
     let rate = span.rate.map(|r| r as f32);
     let mut t = span.from;
     let mut visited = 0u64;
+    let mut checked_block = [i64::MIN; 3];
     for _ in 0..max_cells(b) {
+        if span.cull_blocks {
+            let block = cell.map(|c| c / BLOCK_CELLS as i64);
+            if block != checked_block {
+                checked_block = block;
+                let index = ((block[2] * span.blocks as i64 + block[1]) * span.blocks as i64 + block[0]) as usize;
+                let [lo, hi] = span.block_ranges[index];
+                if !visitor.block_can_contribute(lo, hi) {
+                    // Leave the block: the nearest of its exit planes.
+                    let mut exit = (f64::INFINITY, 0usize, 0i64);
+                    for a in 0..3 {
+                        let across = match step[a] {
+                            1 => ((block[a] + 1) * BLOCK_CELLS as i64).min(last_cell + 1),
+                            -1 => block[a] * BLOCK_CELLS as i64 - 1,
+                            _ => continue,
+                        };
+                        let plane = if step[a] > 0 { across } else { across + 1 };
+                        let t_plane = (plane as f64 - span.origin[a]) / span.rate[a];
+                        if t_plane < exit.0 {
+                            exit = (t_plane, a, across);
+                        }
+                    }
+                    let (t_exit, axis, across) = exit;
+                    if t_exit >= span.to || across < 0 || across > last_cell {
+                        break;
+                    }
+                    t = t_exit.max(t);
+                    Lattice { cell, next } = Lattice::at(span, t, Some((axis, across)));
+                    continue;
+                }
+            }
+        }
         let axis = if next[0] <= next[1] && next[0] <= next[2] {
             0
         } else if next[1] <= next[2] {
@@ -79,7 +145,7 @@ pub fn walk_cells(span: &BrickSpan<'_>, mut visit: impl FnMut(&CellVisit) -> Con
         ];
         let start = std::array::from_fn(|a| (span.origin[a] + t * span.rate[a] - cell[a] as f64) as f32);
         visited += 1;
-        if visit(&CellVisit { corners, t_in: t, t_out, start, rate }).is_break() {
+        if visitor.visit(&CellVisit { corners, t_in: t, t_out, start, rate }).is_break() {
             return (ControlFlow::Break(()), visited);
         }
         if next[axis] >= span.to {
@@ -99,6 +165,22 @@ pub fn walk_cells(span: &BrickSpan<'_>, mut visit: impl FnMut(&CellVisit) -> Con
 mod tests {
     use super::*;
 
+    /// Records cells; skips blocks whose lower bound is in `skip`.
+    struct Recorder<F: FnMut(&CellVisit)> {
+        skip: std::ops::RangeInclusive<u16>,
+        record: F,
+    }
+
+    impl<F: FnMut(&CellVisit)> CellVisitor for Recorder<F> {
+        fn block_can_contribute(&self, lower: u16, _upper: u16) -> bool {
+            !self.skip.contains(&lower)
+        }
+        fn visit(&mut self, cell: &CellVisit) -> ControlFlow<()> {
+            (self.record)(cell);
+            ControlFlow::Continue(())
+        }
+    }
+
     #[test]
     fn cells_tile_the_span_in_order() {
         let b = 6;
@@ -111,22 +193,54 @@ mod tests {
             from: 0.0,
             to: 3.0,
             level: 0,
+            block_ranges: &[],
+            blocks: 1,
+            cull_blocks: false,
         };
         let mut last_out = 0.0;
         let mut cells = Vec::new();
-        let (_, n) = walk_cells(&span, |c| {
+        let record = |c: &CellVisit| {
             assert_eq!(c.t_in, last_out, "no gap or overlap between cells");
             assert!(c.t_out >= c.t_in);
             // The start lies in the cell, and the corner v000 is the voxel at the cell's base.
             assert!(c.start.iter().all(|&s| (-1e-5..=1.0 + 1e-5).contains(&s)), "{:?}", c.start);
             last_out = c.t_out;
             cells.push(c.corners[0] as usize);
-            ControlFlow::Continue(())
-        });
+        };
+        let (_, n) = walk_cells(&span, &mut Recorder { skip: 1..=0, record });
         assert_eq!(last_out, 3.0);
         assert_eq!(n as usize, cells.len());
         // x from 0.6 to 4.5, y from 1.2 to 3.3, z from 4.9 to 2.2: 4 + 2 + 2 plane crossings, 9 cells.
         assert_eq!(cells.len(), 9, "{cells:?}");
         assert_eq!(cells[0], (4 * b + 1) * b, "first cell (0, 1, 4)");
+    }
+
+    #[test]
+    fn culled_blocks_are_crossed_without_visiting_their_cells() {
+        // A 34³ brick (32 cells per axis, blocks of 8 cells: 5 blocks per axis, the last one a single cell) whose
+        // voxel value is its block's x index: a ray along x through every block, culling blocks 1 and 2.
+        let b = 34;
+        let voxels: Vec<u16> = (0..b * b * b).map(|i| ((i % b) / BLOCK_CELLS) as u16).collect();
+        let blocks = 5;
+        let block_ranges: Vec<[u16; 2]> = (0..blocks * blocks * blocks).map(|i| [(i % 5) as u16; 2]).collect();
+        let span = BrickSpan {
+            voxels: &voxels,
+            stored: b,
+            origin: [0.5, 3.5, 3.5],
+            rate: [1.0, 0.0, 0.0],
+            from: 0.0,
+            to: 32.4,
+            level: 0,
+            block_ranges: &block_ranges,
+            blocks,
+            cull_blocks: true,
+        };
+        let mut seen = Vec::new();
+        let record = |c: &CellVisit| seen.push((c.corners[0] as u16, c.t_in));
+        let (_, n) = walk_cells(&span, &mut Recorder { skip: 1..=2, record });
+        // Cells 0..8 (block 0), then 24..=32 (blocks 3 and 4): the ray re-enters at x = 24, t = 23.5.
+        assert_eq!(n, 8 + 9, "{seen:?}");
+        assert_eq!(seen[8], (3, 23.5));
+        assert!(seen.iter().all(|&(block, _)| !(1..=2).contains(&block)));
     }
 }

@@ -48,6 +48,13 @@ pub struct BrickSpan<'v> {
     pub to: f64,
     /// The brick's level in the tree.
     pub level: u32,
+    /// Value ranges of the brick's occupancy blocks (stored units), `blocks³`, x fastest: block `(i, j, k)` bounds
+    /// every trilinear value in the cells `8i .. 8i+8` (and so on) ([`voxstream_core::BLOCK_CELLS`]).
+    pub block_ranges: &'v [[u16; 2]],
+    /// Blocks per axis.
+    pub blocks: usize,
+    /// Whether blocks the integrand cannot use may be skipped (off only to test that skipping is exact).
+    pub cull_blocks: bool,
 }
 
 /// Consumes the samples of one ray.

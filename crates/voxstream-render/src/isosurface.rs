@@ -22,7 +22,7 @@ use serde::{Deserialize, Serialize};
 use voxstream_core::VOXEL_MAX;
 
 use crate::cell_intersection::{cell_gradient, CellCubic};
-use crate::cell_walk::{walk_cells, CellVisit};
+use crate::cell_walk::{walk_cells, CellVisit, CellVisitor};
 use crate::integrand::{BrickSpan, Integrand, Sample};
 use crate::lighting::{LightingSettings, RayLight};
 use crate::settings::RenderSettings;
@@ -276,6 +276,19 @@ impl<'a> Isosurfaces<'a> {
     }
 }
 
+impl CellVisitor for Isosurfaces<'_> {
+    #[inline]
+    fn block_can_contribute(&self, lower: u16, upper: u16) -> bool {
+        let scale = 1.0 / VOXEL_MAX as f32;
+        self.can_contribute(lower as f32 * scale, upper as f32 * scale)
+    }
+
+    #[inline(always)]
+    fn visit(&mut self, cell: &CellVisit) -> ControlFlow<()> {
+        self.cell(cell)
+    }
+}
+
 impl Integrand for Isosurfaces<'_> {
     const TAKES_SPANS: bool = true;
 
@@ -311,7 +324,7 @@ impl Integrand for Isosurfaces<'_> {
 
     #[inline(always)]
     fn span(&mut self, span: &BrickSpan<'_>, work: &mut u64) -> ControlFlow<()> {
-        let (flow, cells) = walk_cells(span, |cell| self.cell(cell));
+        let (flow, cells) = walk_cells(span, self);
         *work += cells;
         flow
     }

@@ -511,6 +511,7 @@ impl<'a> Traversal<'a> {
         let s = self.scale[node.level as usize];
         let m = self.brick_size;
         let (o, d) = (ray.origin.to_array(), ray.direction.to_array());
+        let blocks = self.view.shape.blocks_per_brick();
         BrickSpan {
             voxels: self.view.brick(node.slot),
             stored: self.stored,
@@ -519,6 +520,9 @@ impl<'a> Traversal<'a> {
             from,
             to,
             level: node.level,
+            block_ranges: &self.view.block_ranges[node.slot.0 as usize * blocks..(node.slot.0 as usize + 1) * blocks],
+            blocks: self.view.shape.blocks_per_axis(),
+            cull_blocks: self.skip_empty_space,
         }
     }
 

@@ -69,7 +69,22 @@ pub struct RenderArgs {
     /// Transfer function JSON: {"points": [[value, r, g, b, alpha], ...], "unit_distance": u}.
     #[arg(long)]
     pub tf: Option<PathBuf>,
-    /// Lighting (default: the scene's).
+    /// Draw isosurfaces of these data values instead of the volume (exact ray-cell intersection, Knoll et al.):
+    /// one value or several, comma-separated (e.g. --iso 70 or --iso 40,110).
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_name = "V1,V2,...")]
+    pub iso: Vec<f64>,
+    /// Isosurface colours, one r,g,b in [0,1] (linear) per value, separated by ';' (e.g. "0.9,0.75,0.65;1,1,1").
+    /// Default: a palette.
+    #[arg(long, value_delimiter = ';', value_parser = parse_color, value_name = "R,G,B;...")]
+    pub iso_color: Vec<[f64; 3]>,
+    /// Isosurface opacities in (0,1], one per value, comma-separated: below 1 a surface shows the ones inside it.
+    /// Default: 1 (opaque).
+    #[arg(long, value_delimiter = ',', value_name = "A1,A2,...")]
+    pub iso_opacity: Vec<f32>,
+    /// Isosurfaces: hard shadows from the light given by --light (Phong shading).
+    #[arg(long)]
+    pub shadows: bool,
+    /// Lighting (default: the scene's; Phong for isosurfaces).
     #[arg(long, value_enum)]
     pub shading: Option<ShadingArg>,
     /// Direction towards the light x,y,z (default: a headlight).
@@ -212,6 +227,15 @@ pub fn parse_dims(text: &str) -> Result<[u64; 3], String> {
     Ok(out)
 }
 
+/// Parses `r,g,b` (each component in [0, 1]).
+pub fn parse_color(text: &str) -> Result<[f64; 3], String> {
+    let color = parse_vec3(text)?;
+    if color.iter().any(|c| !(0.0..=1.0).contains(c)) {
+        return Err(format!("colour components must be in [0, 1], got '{}'", text.trim()));
+    }
+    Ok(color)
+}
+
 /// Parses `x,y,z`.
 pub fn parse_vec3(text: &str) -> Result<[f64; 3], String> {
     let parts: Vec<&str> = text.split(',').map(str::trim).collect();
@@ -239,6 +263,13 @@ mod tests {
         assert!(parse_vec3("1,2").is_err());
         assert!(parse_vec3("1,2,x").is_err());
         assert!(parse_vec3("1,2,inf").is_err());
+    }
+
+    #[test]
+    fn color_parsing() {
+        assert_eq!(parse_color(" 0,0.5,1").unwrap(), [0.0, 0.5, 1.0]);
+        assert!(parse_color("1,0,2").unwrap_err().contains("[0, 1]"));
+        assert!(parse_color("1,0").is_err());
     }
 
     #[test]

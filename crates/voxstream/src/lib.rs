@@ -13,6 +13,7 @@ pub mod cli;
 pub mod exit_status;
 pub mod import_command;
 pub mod info_command;
+pub mod iso_flags;
 pub mod memory;
 pub mod output_file;
 pub mod png_output;

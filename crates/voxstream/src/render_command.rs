@@ -13,6 +13,7 @@ use voxstream_store::{InMemoryVolume, StoreProducer, StoreReader};
 use crate::camera_path::read_camera_path;
 use crate::cli::{RenderArgs, ShadingArg};
 use crate::exit_status::IncompleteImage;
+use crate::iso_flags;
 use crate::memory::{bytes_read, peak_rss_bytes};
 use crate::output_file::write_atomically;
 use crate::png_output::{numbered_path, write_png};
@@ -190,14 +191,19 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
         Some(path) => read_transfer_function(path)?,
         None => source.transfer_function.clone(),
     };
+    let surfaces = iso_flags::surfaces(args, source.value_range)?;
+    let drawing_surfaces = !surfaces.is_empty();
     let settings = RenderSettings {
         width: args.width,
         height: args.height,
         shading: match args.shading {
             Some(ShadingArg::None) => Shading::None,
             Some(ShadingArg::Phong) => Shading::Phong,
+            None if drawing_surfaces => Shading::Phong,
             None => source.shading,
         },
+        surfaces,
+        shadows: args.shadows,
         light_direction: args.light.or(source.light),
         background: args.background.map(|c| c as f32),
         step_factor: args.step,
@@ -254,7 +260,8 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
     let sequence = args.path.is_some();
     let repeats = if sequence || args.mode == Mode::Converged { 1 } else { args.frames };
     let progress = RenderProgress::new(cameras.len() as u64 * u64::from(repeats), args.quiet);
-    if let Some(warning) = transfer_function_mismatch(&transfer_function, source.typical_range, source.value_range) {
+    let mismatch = transfer_function_mismatch(&transfer_function, source.typical_range, source.value_range);
+    if let Some(warning) = mismatch.filter(|_| !drawing_surfaces) {
         progress.warn(&warning);
     }
     let mut empty_images = 0usize;
@@ -281,7 +288,7 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
             if repeat + 1 == repeats || (!sequence && stats.converged) {
                 let out = if sequence { numbered_path(&args.out, index) } else { args.out.clone() };
                 write_png(&result.image, &out)?;
-                if let Some(warning) = empty_image(&result.image) {
+                if let Some(warning) = empty_image(&result.image, drawing_surfaces) {
                     if empty_images == 0 {
                         progress.warn(&format!("{}: {warning}", out.display()));
                     }

@@ -28,13 +28,18 @@ pub fn transfer_function_mismatch(tf: &TransferFunction, typical: [f64; 2], full
     ))
 }
 
-/// A warning when no pixel of `image` is covered.
-pub fn empty_image(image: &Image) -> Option<String> {
+/// A warning when no pixel of `image` is covered (`surfaces`: the image draws isosurfaces, not a volume).
+pub fn empty_image(image: &Image, surfaces: bool) -> Option<String> {
     let covered = image.pixels.iter().any(|p| p[3] >= EMPTY_COVERAGE);
     (!covered).then(|| {
-        "the image is empty: nothing is visible under the transfer function from this camera (compare --tf's values \
-         with `voxstream info`'s value range, or check --eye and --target)"
-            .to_string()
+        if surfaces {
+            "the image is empty: no ray crosses the isosurfaces from this camera (compare --iso with `voxstream \
+             info`'s value range, or check --eye and --target)"
+        } else {
+            "the image is empty: nothing is visible under the transfer function from this camera (compare --tf's \
+             values with `voxstream info`'s value range, or check --eye and --target)"
+        }
+        .to_string()
     })
 }
 
@@ -68,8 +73,9 @@ mod tests {
     #[test]
     fn empty_images_are_flagged() {
         let mut image = Image::new(4, 4);
-        assert!(empty_image(&image).is_some());
+        assert!(empty_image(&image, false).unwrap().contains("transfer function"));
+        assert!(empty_image(&image, true).unwrap().contains("--iso"));
         image.pixels[5][3] = 0.01;
-        assert!(empty_image(&image).is_none());
+        assert!(empty_image(&image, false).is_none());
     }
 }
