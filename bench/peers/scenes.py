@@ -74,14 +74,14 @@ def scenes(data: Path):
              "tf": DRAGON, "shading": "none", "camera": dragon_camera,
              "fog": DRAGON_FOG, "tools": ["voxstream", "voxstream-step1", "vtk-fixed-point", "vdb_render"], **upsampled},
         ]
+        result.append({"name": f"mni-iso{label}", "volume": f"mni{suffix}", "mode": "isosurface",
+                       "iso": MNI_ISO, "shading": "phong", "camera": mni_camera,
+                       "tools": ["voxstream", "vtk-marching-cubes"], **upsampled})
         if not x4:
             result += [
                 {"name": "mni-shaded", "volume": "mni", "mode": "volume",
                  "tf": MNI_SHADED, "shading": "phong", "camera": mni_camera,
                  "tools": ["voxstream", "voxstream-step1", "vtk-fixed-point"], "reference_step_scale": 1.0},
-                {"name": "mni-iso", "volume": "mni", "mode": "isosurface",
-                 "iso": MNI_ISO, "shading": "phong", "camera": mni_camera,
-                 "tools": ["voxstream", "vtk-marching-cubes"], "reference_step_scale": 1.0},
             ]
     return result
 

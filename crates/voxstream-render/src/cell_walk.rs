@@ -41,7 +41,7 @@ impl Lattice {
     /// The state at distance `t`, in the cell holding `x(t)` (clamped to the brick), or `forced` on one axis (the
     /// cell just across a plane, which rounding of `x(t)` might not give).
     #[inline(always)]
-    fn at(span: &BrickSpan<'_>, t: f64, forced: Option<(usize, i64)>) -> Lattice {
+    fn at(span: &BrickSpan<'_>, inverse_rate: &[f64; 3], t: f64, forced: Option<(usize, i64)>) -> Lattice {
         let last_cell = (span.stored - 2) as i64;
         let mut cell: [i64; 3] =
             std::array::from_fn(|a| ((span.origin[a] + t * span.rate[a]).floor() as i64).clamp(0, last_cell));
@@ -49,11 +49,10 @@ impl Lattice {
             cell[axis] = c;
         }
         let next = std::array::from_fn(|a| {
-            let rate = span.rate[a];
-            if rate > 0.0 {
-                (cell[a] as f64 + 1.0 - span.origin[a]) / rate
-            } else if rate < 0.0 {
-                (cell[a] as f64 - span.origin[a]) / rate
+            let plane = cell[a] as f64 + if span.rate[a] > 0.0 { 1.0 } else { 0.0 };
+            // Infinite (never the nearest) along an axis the ray does not move on.
+            if span.rate[a] != 0.0 {
+                (plane - span.origin[a]) * inverse_rate[a]
             } else {
                 f64::INFINITY
             }
@@ -76,25 +75,23 @@ pub trait CellVisitor {
 pub fn walk_cells<V: CellVisitor>(span: &BrickSpan<'_>, visitor: &mut V) -> (ControlFlow<()>, u64) {
     let b = span.stored;
     let last_cell = (b - 2) as i64;
-    let mut delta = [f64::INFINITY; 3];
-    let mut step = [0i64; 3];
-    for a in 0..3 {
-        let rate = span.rate[a];
-        if rate != 0.0 {
-            delta[a] = 1.0 / rate.abs();
-            step[a] = if rate > 0.0 { 1 } else { -1 };
-        }
-    }
-    let Lattice { mut cell, mut next } = Lattice::at(span, span.from, None);
+    let inverse_rate = span.rate.map(|r| 1.0 / r);
+    let delta = inverse_rate.map(f64::abs);
+    let step = span.rate.map(|r| if r > 0.0 { 1i64 } else if r < 0.0 { -1 } else { 0 });
+    let Lattice { mut cell, mut next } = Lattice::at(span, &inverse_rate, span.from, None);
     let rate = span.rate.map(|r| r as f32);
     let mut t = span.from;
     let mut visited = 0u64;
-    let mut checked_block = [i64::MIN; 3];
+    // The block last checked, as one integer (cells are in [0, B−2], so their block coordinates fit 16 bits each).
+    let mut checked_block = u64::MAX;
+    let shift = BLOCK_CELLS.trailing_zeros();
     for _ in 0..max_cells(b) {
         if span.cull_blocks {
-            let block = cell.map(|c| c / BLOCK_CELLS as i64);
-            if block != checked_block {
-                checked_block = block;
+            let key = |c: i64| (c as u64) >> shift;
+            let block_key = key(cell[0]) | key(cell[1]) << 16 | key(cell[2]) << 32;
+            if block_key != checked_block {
+                checked_block = block_key;
+                let block = cell.map(|c| c >> shift);
                 let index = ((block[2] * span.blocks as i64 + block[1]) * span.blocks as i64 + block[0]) as usize;
                 let [lo, hi] = span.block_ranges[index];
                 if !visitor.block_can_contribute(lo, hi) {
@@ -107,7 +104,7 @@ pub fn walk_cells<V: CellVisitor>(span: &BrickSpan<'_>, visitor: &mut V) -> (Con
                             _ => continue,
                         };
                         let plane = if step[a] > 0 { across } else { across + 1 };
-                        let t_plane = (plane as f64 - span.origin[a]) / span.rate[a];
+                        let t_plane = (plane as f64 - span.origin[a]) * inverse_rate[a];
                         if t_plane < exit.0 {
                             exit = (t_plane, a, across);
                         }
@@ -117,7 +114,7 @@ pub fn walk_cells<V: CellVisitor>(span: &BrickSpan<'_>, visitor: &mut V) -> (Con
                         break;
                     }
                     t = t_exit.max(t);
-                    Lattice { cell, next } = Lattice::at(span, t, Some((axis, across)));
+                    Lattice { cell, next } = Lattice::at(span, &inverse_rate, t, Some((axis, across)));
                     continue;
                 }
             }
