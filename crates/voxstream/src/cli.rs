@@ -73,8 +73,8 @@ pub struct RenderArgs {
     /// one value or several, comma-separated (e.g. --iso 70 or --iso 40,110).
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_name = "V1,V2,...")]
     pub iso: Vec<f64>,
-    /// Isosurface colours, one r,g,b in [0,1] (linear) per value, separated by ';' (e.g. "0.9,0.75,0.65;1,1,1").
-    /// Default: a palette.
+    /// Isosurface colours, one r,g,b in [0,1] (linear) per value, separated by ';' (e.g. "0.9,0.75,0.65;1,1,1") or
+    /// given as repeated flags. Default: a palette.
     #[arg(long, value_delimiter = ';', value_parser = parse_color, value_name = "R,G,B;...")]
     pub iso_color: Vec<[f64; 3]>,
     /// Isosurface opacities in (0,1], one per value, comma-separated: below 1 a surface shows the ones inside it.

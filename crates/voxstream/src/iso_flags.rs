@@ -110,6 +110,8 @@ mod tests {
         assert!(error(&["--iso", "1,2", "--iso-color", "1,0,0"]).contains("1 colours for 2 isovalues"));
         let two = surfaces(&args(&["--iso", "1,2", "--iso-color", "1,0,0;0,0,1"]), [0.0, 255.0]).unwrap();
         assert_eq!(two[1].color, [0.0, 0.0, 1.0]);
+        let repeated = surfaces(&args(&["--iso", "1,2", "--iso-color", "1,0,0", "--iso-color", "0,0,1"]), [0.0, 255.0]);
+        assert_eq!(repeated.unwrap(), two);
         assert!(error(&["--iso", "1,2", "--iso-opacity", "1"]).contains("1 opacities for 2 isovalues"));
         assert!(error(&["--iso", "1", "--iso-opacity", "0"]).contains("not in (0, 1]"));
         assert!(error(&["--iso", "1", "--shadows"]).contains("--light"));
