@@ -154,6 +154,14 @@ impl BrickPool {
         Some((BrickSlot(slot as u32), evicted))
     }
 
+    /// Widens the value range of the brick in `slot` to include `[lower, upper]` (stored units): for a brick with
+    /// children, the bounds of its whole subtree, so that one range check can skip the subtree unloaded. Its
+    /// occupancy blocks keep their own ranges.
+    pub fn widen_range(&mut self, slot: BrickSlot, [lower, upper]: [u16; 2]) {
+        let range = &mut self.ranges[slot.0 as usize];
+        *range = [range[0].min(lower), range[1].max(upper)];
+    }
+
     /// Slots a brick can take without evicting one: never used, or released.
     pub fn free_slots(&self) -> u32 {
         self.capacity() - self.len()

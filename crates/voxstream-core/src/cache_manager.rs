@@ -35,7 +35,7 @@ use std::collections::HashSet;
 
 use rayon::prelude::*;
 
-use crate::brick_pool::{dequantize, BrickPool};
+use crate::brick_pool::{dequantize, BrickPool, VOXEL_MAX};
 use crate::budget::PoolCapacities;
 use crate::error::{CoreError, ProduceError};
 use crate::feedback::{FeedbackBuffer, Request, RequestKind};
@@ -378,6 +378,9 @@ impl<P: Producer> CacheManager<P> {
                     self.node_pool.node_mut(previous_owner).set_brick(None);
                     report.bricks_evicted += 1;
                 }
+                if let Some(range) = brick.subtree_range {
+                    self.brick_pool.widen_range(slot, range);
+                }
                 let node = self.node_pool.node_mut(node_id);
                 node.set_brick(Some(slot));
                 node.set_terminal(brick.is_terminal);
@@ -508,13 +511,22 @@ struct AnalysedBrick {
     content: NodeContent,
     is_terminal: bool,
     voxels: Vec<u16>,
+    /// The producer's bounds of the whole subtree (stored units, rounded outwards), for a brick with children.
+    subtree_range: Option<[u16; 2]>,
 }
 
 /// Asks `producer` for the brick of `key`, then analyses it.
 fn produce_analysed<P: Producer>(producer: &P, key: NodeKey, shape: &TreeShape) -> Result<AnalysedBrick, ProduceError> {
     let mut voxels = vec![0u16; shape.voxels_per_brick()];
     let produced = producer.produce(key, &mut voxels)?;
-    Ok(analyse(produced, voxels, key, shape))
+    let mut analysed = analyse(produced, voxels, key, shape);
+    if analysed.content == NodeContent::Brick && !analysed.is_terminal {
+        analysed.subtree_range = producer.subtree_range(key).map(|[lo, hi]| {
+            let stored = |v: f32| (v.clamp(0.0, 1.0) * VOXEL_MAX as f32) as f64;
+            [stored(lo).floor() as u16, stored(hi).ceil() as u16]
+        });
+    }
+    Ok(analysed)
 }
 
 /// Brick analysis before upload ([R08] §4): a terminal brick of equal voxels is a constant node. A non-terminal one
@@ -532,7 +544,7 @@ fn analyse(produced: Produced, voxels: Vec<u16>, key: NodeKey, shape: &TreeShape
         }
         other => other,
     };
-    AnalysedBrick { content, is_terminal, voxels }
+    AnalysedBrick { content, is_terminal, voxels, subtree_range: None }
 }
 
 #[cfg(test)]

@@ -44,6 +44,15 @@ pub trait Producer: Send + Sync {
     /// brick with its border: voxel `(i, j, k)` of the array is centred at `lower + (i − 1 + ½, …)·voxel_size`.
     fn produce(&self, key: NodeKey, voxels: &mut [u16]) -> Result<Produced, ProduceError>;
 
+    /// Normalised bounds of every value the tree can hold in `key`'s box at `key`'s level and every finer one,
+    /// including the trilinear values near its faces (which read the neighbours' voxels), or `None` if unknown.
+    /// Renderers use it to skip a whole subtree without loading it (Knoll et al.'s min/max hierarchy); it must be
+    /// conservative. The default knows nothing.
+    fn subtree_range(&self, key: NodeKey) -> Option<[f32; 2]> {
+        let _ = key;
+        None
+    }
+
     /// A hint that these nodes will probably be requested soon (requests deferred past this frame's bound): a
     /// producer that reads from slow storage may start fetching them in the background. It must not change what
     /// `produce` returns. The default does nothing.

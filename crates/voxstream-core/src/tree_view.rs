@@ -66,7 +66,8 @@ impl<'a> TreeView<'a> {
         &self.voxels[start..start + per_brick]
     }
 
-    /// `[min, max]` of a brick's voxels, normalised to `[0, 1]`.
+    /// `[min, max]` of a brick's voxels, normalised to `[0, 1]`; for a brick with children whose producer knows it,
+    /// widened to bound the whole subtree ([`crate::Producer::subtree_range`]).
     #[inline]
     pub fn brick_range(&self, slot: BrickSlot) -> [f32; 2] {
         let [lo, hi] = self.brick_ranges[slot.0 as usize];

@@ -266,7 +266,7 @@ impl<'a> Traversal<'a> {
             stats.descents += 1;
             let p = origin + direction * t;
             let (footprint_voxel, target_level) = self.footprint_at(t, ray.spread);
-            let (data, box_level, box_ijk) = self.descend(p, target_level, path, request);
+            let (data, box_level, box_ijk) = self.descend(p, target_level, path, request, integrand);
             let node_size = 1.0 / self.scale[box_level as usize];
             let lower = DVec3::new(box_ijk[0] as f64, box_ijk[1] as f64, box_ijk[2] as f64) * node_size;
             let t_exit = exit_distance(origin, inverse_direction, lower, node_size).min(t_leave);
@@ -530,12 +530,13 @@ impl<'a> Traversal<'a> {
     /// contains `p` (the root at worst, which is GigaVoxels' kd-restart); returns the data to use and the box of the
     /// deepest node visited (the segment to march).
     #[inline(always)]
-    fn descend(
+    fn descend<I: Integrand>(
         &self,
         p: DVec3,
         target_level: u32,
         path: &mut DescentPath,
         request: &mut RequestSink<'_>,
+        integrand: &I,
     ) -> (SegmentData, u32, [u64; 3]) {
         let n = self.n;
         let pa = [p.x, p.y, p.z];
@@ -565,6 +566,17 @@ impl<'a> Traversal<'a> {
             }
             if level >= target_level || node.is_terminal() {
                 break;
+            }
+            // A subtree whose values cannot matter is one segment, skipped whole and never loaded deeper (Knoll et
+            // al.'s min/max culling). Only for span integrands: the sampled ones place their samples by the step
+            // of each finer node, which skipping here would shift.
+            if I::TAKES_SPANS && self.skip_empty_space {
+                if let Some(slot) = node.brick() {
+                    let [lo, hi] = self.view.brick_range(slot);
+                    if !integrand.can_contribute(lo, hi) {
+                        break;
+                    }
+                }
             }
             let Some(tile) = node.child_tile() else {
                 request.push(Request { node: id, kind: RequestKind::Subdivide });

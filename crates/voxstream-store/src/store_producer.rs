@@ -187,6 +187,30 @@ impl<S: BrickSource> Producer for StoreProducer<S> {
         }
     }
 
+    /// The full-resolution samples below a brick bound every coarser sample above them (levels are averages), so
+    /// the union of the ranges of the brick and its 26 neighbours bounds every value, at any finer level, that the
+    /// trilinear field takes in the brick's box, faces included. Foreign stores keep no ranges: unbounded.
+    fn subtree_range(&self, key: NodeKey) -> Option<[f32; 2]> {
+        let level = self.store_level(&key);
+        let mut range = [f32::INFINITY, f32::NEG_INFINITY];
+        for dz in -1i64..=1 {
+            for dy in -1i64..=1 {
+                for dx in -1i64..=1 {
+                    let offset = [dx, dy, dz];
+                    let neighbour: [i64; 3] = std::array::from_fn(|a| key.ijk[a] as i64 + offset[a]);
+                    if neighbour.iter().any(|&c| c < 0) {
+                        continue;
+                    }
+                    // Outside the grid there is nothing: the border repeats the edge samples.
+                    if let Some([lo, hi]) = self.reader.brick_range(level, neighbour.map(|c| c as u64)) {
+                        range = [range[0].min(lo), range[1].max(hi)];
+                    }
+                }
+            }
+        }
+        (range[0] <= range[1]).then(|| [self.normalise(range[0]), self.normalise(range[1])])
+    }
+
     fn prefetch(&self, keys: &[NodeKey]) {
         let bricks = keys.iter().map(|key| (self.store_level(key), key.ijk)).collect();
         self.reader.prefetch(bricks);

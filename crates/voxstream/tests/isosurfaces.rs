@@ -162,6 +162,51 @@ fn a_sphere_stays_closed_where_the_level_of_detail_changes() {
     }
 }
 
+/// The ball's field with the bounds of each subtree known (what a store's per-brick min/max gives): the distance
+/// from `C` over the node's box grown by one voxel of its level.
+struct BoundedBall;
+
+impl Producer for BoundedBall {
+    fn shape(&self) -> TreeShape {
+        Field { density: ball }.shape()
+    }
+
+    fn produce(&self, key: NodeKey, voxels: &mut [u16]) -> Result<Produced, ProduceError> {
+        Field { density: ball }.produce(key, voxels)
+    }
+
+    fn subtree_range(&self, key: NodeKey) -> Option<[f32; 2]> {
+        let (lower, size) = key.bounds(&self.shape());
+        let margin = size / 16.0;
+        let (lo, hi) = (DVec3::from(lower) - margin, DVec3::from(lower) + size + margin);
+        let nearest = C.clamp(lo, hi);
+        let farthest = DVec3::select(C.cmplt((lo + hi) * 0.5), hi, lo);
+        let f = |p: DVec3| ball(p).clamp(0.0, 1.0) as f32;
+        Some([f(farthest), f(nearest)])
+    }
+}
+
+#[test]
+fn subtrees_that_cannot_hold_the_surface_are_never_loaded() {
+    // The surface at 0.55, just inside the ball's edge: nodes whose box (grown by a voxel) lies wholly outside the
+    // ball (all 0) or wholly inside the 0.55 sphere need no finer bricks once the ray knows which side it is on.
+    let camera = Camera { eye: [0.5, 0.5, 2.2], target: [0.5, 0.5, 0.5], up: [0.0, 1.0, 0.0], fov: 35.0 };
+    let render = |skip: bool| {
+        let settings = RenderSettings { skip_empty_space: skip, ..settings_for(vec![surface(0.55)]) };
+        let mut session = session(BoundedBall, settings);
+        let result = session.render(&camera, Mode::Converged).expect("render");
+        assert!(result.is_converged());
+        (result.image, result.bricks_produced)
+    };
+    let (culled, loaded_culled) = render(true);
+    let (unculled, loaded_unculled) = render(false);
+    println!("bounded ball: {loaded_culled} bricks loaded with culling, {loaded_unculled} without");
+    let differing = culled.pixels.iter().zip(&unculled.pixels).filter(|(a, b)| a != b).count();
+    assert_eq!(differing, 0, "{differing} pixels differ with culling on");
+    assert!(culled.pixels.iter().filter(|p| p[3] > 0.5).count() > (SIZE * SIZE / 8) as usize);
+    assert!(loaded_culled < loaded_unculled, "culling loaded {loaded_culled} bricks, {loaded_unculled} without");
+}
+
 /// A converged isosurface frame of the built-in shell with its settings changed by `adjust`.
 fn shell_frame(threads: usize, adjust: impl FnOnce(&mut RenderSettings)) -> (Image, u64) {
     let scene = builtin("shell").expect("shell");
