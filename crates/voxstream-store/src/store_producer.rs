@@ -187,22 +187,26 @@ impl<S: BrickSource> Producer for StoreProducer<S> {
         }
     }
 
-    /// The full-resolution samples below a brick bound every coarser sample above them (levels are averages), so
-    /// the union of the ranges of the brick and its 26 neighbours bounds every value, at any finer level, that the
-    /// trilinear field takes in the brick's box, faces included. Foreign stores keep no ranges: unbounded.
+    /// The per-brick ranges of the full-resolution level bound every coarser sample above them (levels are
+    /// averages of aligned 2×2×2 blocks), so the union of the finest bricks under the node's box, grown by the reach
+    /// of a trilinear sample near its faces at the node's own level (one of its voxels, rounded up to finest
+    /// bricks), bounds every value the tree holds there. Foreign stores keep no ranges: unbounded. `None` for a node
+    /// wholly outside the volume (it is empty).
     fn subtree_range(&self, key: NodeKey) -> Option<[f32; 2]> {
         let level = self.store_level(&key);
+        let m = self.shape.brick_size as u64;
+        // Finest bricks per node edge, and the margin: one voxel of the node's level, 2^level finest voxels.
+        let per_node = 1u64 << level;
+        let margin = (1u64 << level).div_ceil(m) as i64;
+        let finest = self.reader.layout().bricks(0);
+        let lower: [i64; 3] = std::array::from_fn(|a| (key.ijk[a] * per_node) as i64 - margin);
+        let upper: [i64; 3] =
+            std::array::from_fn(|a| (((key.ijk[a] + 1) * per_node) as i64 + margin).min(finest[a] as i64));
         let mut range = [f32::INFINITY, f32::NEG_INFINITY];
-        for dz in -1i64..=1 {
-            for dy in -1i64..=1 {
-                for dx in -1i64..=1 {
-                    let offset = [dx, dy, dz];
-                    let neighbour: [i64; 3] = std::array::from_fn(|a| key.ijk[a] as i64 + offset[a]);
-                    if neighbour.iter().any(|&c| c < 0) {
-                        continue;
-                    }
-                    // Outside the grid there is nothing: the border repeats the edge samples.
-                    if let Some([lo, hi]) = self.reader.brick_range(level, neighbour.map(|c| c as u64)) {
+        for z in lower[2].max(0)..upper[2] {
+            for y in lower[1].max(0)..upper[1] {
+                for x in lower[0].max(0)..upper[0] {
+                    if let Some([lo, hi]) = self.reader.brick_range(0, [x as u64, y as u64, z as u64]) {
                         range = [range[0].min(lo), range[1].max(hi)];
                     }
                 }

@@ -288,3 +288,78 @@ fn the_image_does_not_depend_on_the_thread_count() {
     let (three, _) = shell_frame(3, |s| s.shadows = true);
     assert!(one.pixels == three.pixels);
 }
+
+#[test]
+fn a_stores_subtree_ranges_bound_every_value_below_them() {
+    use voxstream_store::formats::{open_volume, Endian, RawLayout};
+    use voxstream_store::{import_volume, DType, ImportOptions, StoreProducer, StoreReader, VolumeInfo};
+
+    // A 72×60×50 u8 volume with structure at every scale (a ball, a ripple, four isolated spikes of 255, one next to a brick face), imported with
+    // 8³ bricks: five levels.
+    let dir = std::env::temp_dir().join(format!("voxstream-subtree-ranges-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let dims = [72u64, 60, 50];
+    let mut samples = Vec::new();
+    for k in 0..dims[2] {
+        for j in 0..dims[1] {
+            for i in 0..dims[0] {
+                let r = DVec3::new(i as f64 - 36.0, j as f64 - 30.0, k as f64 - 25.0).length();
+                let mut value = (1.0 - r / 28.0).max(0.0) * (150.0 + 50.0 * (i as f64 * 0.7).sin());
+                if [[5, 5, 5], [70, 3, 48], [40, 33, 27], [8, 58, 20]].contains(&[i, j, k]) {
+                    value = 255.0;
+                }
+                samples.push(value as u8);
+            }
+        }
+    }
+    let raw = dir.join("volume.raw");
+    std::fs::write(&raw, &samples).unwrap();
+    let layout = RawLayout {
+        info: VolumeInfo { dims, dtype: DType::U8, spacing: [1.0; 3], origin: [0.0; 3] },
+        endian: Endian::Little,
+        header_bytes: 0,
+    };
+    let store = dir.join("volume.zarr");
+    let mut source = open_volume(&raw, Some(&layout)).unwrap();
+    let options = ImportOptions { brick_size: 8, ..ImportOptions::default() };
+    import_volume(source.as_mut(), &store, &options, &mut |_, _| {}).unwrap();
+    let producer = StoreProducer::new(std::sync::Arc::new(StoreReader::open(&store).unwrap())).unwrap();
+    let shape = producer.shape();
+    assert!(shape.max_level >= 3);
+
+    // Every brick (borders included) of a node and of all its descendants lies within the node's subtree range.
+    let mut voxels = vec![0u16; shape.voxels_per_brick()];
+    let mut checked = 0;
+    let mut tight = 0;
+    let mut stack = vec![(NodeKey::ROOT, None::<[f32; 2]>)];
+    while let Some((key, mut bounds)) = stack.pop() {
+        // (None only for nodes wholly outside the volume, which are empty.)
+        if let Some(own) = producer.subtree_range(key).filter(|_| key.level < shape.max_level) {
+            // A node's bound also holds for its children's values: check against the tightest ancestor's bound
+            // and its own.
+            if own[1] - own[0] < 0.9 {
+                tight += 1;
+            }
+            bounds = Some(bounds.map_or(own, |b: [f32; 2]| [b[0].max(own[0]), b[1].min(own[1])]));
+        }
+        let produced = producer.produce(key, &mut voxels).unwrap();
+        if produced.content == NodeContent::Brick {
+            if let Some([lo, hi]) = bounds {
+                let (lo, hi) = ((lo * 65535.0).floor() as u16, (hi * 65535.0).ceil() as u16);
+                let outside = voxels.iter().filter(|&&v| v < lo || v > hi).count();
+                assert_eq!(outside, 0, "{key:?}: {outside} voxels outside its ancestors' subtree range");
+                checked += 1;
+            }
+            if key.level < shape.max_level {
+                for child in 0..8 {
+                    stack.push((key.child(child, 2), bounds));
+                }
+            }
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    println!("{checked} bricks checked, {tight} subtree ranges narrower than the data's range");
+    assert!(checked > 100, "only {checked} bricks checked");
+    assert!(tight > 10, "the ranges bound nothing: only {tight} are narrower than the data's");
+}
