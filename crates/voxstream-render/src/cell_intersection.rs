@@ -106,8 +106,7 @@ impl CellCubic {
         let mut found = 0;
         let mut a = 0.0f32;
         let mut fa = self.at(0.0) - iso;
-        for k in 0..=count {
-            let b = if k < count { extrema[k] } else { length };
+        for b in extrema[..count].iter().copied().chain([length]) {
             let fb = self.at(b) - iso;
             if (fa >= 0.0) != (fb >= 0.0) {
                 out[found] = self.refine(iso, a, fa, b, fb);

@@ -26,7 +26,10 @@ pub struct EmissionAbsorptionSettings {
 impl EmissionAbsorptionSettings {
     /// From the frame's settings.
     pub fn new(settings: &RenderSettings) -> EmissionAbsorptionSettings {
-        EmissionAbsorptionSettings { lighting: LightingSettings::new(settings), stop_below: 1.0 - settings.opacity_cutoff }
+        EmissionAbsorptionSettings {
+            lighting: LightingSettings::new(settings),
+            stop_below: 1.0 - settings.opacity_cutoff,
+        }
     }
 }
 

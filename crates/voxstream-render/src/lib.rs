@@ -37,10 +37,10 @@ pub mod integrand;
 pub mod isosurface;
 pub mod lighting;
 pub mod ray_caster;
-pub mod surface_caster;
 pub mod sampler;
 pub mod settings;
 pub mod step_table;
+pub mod surface_caster;
 pub mod transfer_function;
 pub mod traversal;
 

@@ -6,8 +6,8 @@
 use glam::DVec3;
 use voxstream_core::{FeedbackBuffer, Request, TreeView};
 
-use crate::frame::PixelTracer;
 use crate::emission_absorption::{EmissionAbsorption, EmissionAbsorptionSettings};
+use crate::frame::PixelTracer;
 use crate::settings::RenderSettings;
 use crate::transfer_function::TransferLut;
 use crate::traversal::{DescentPath, Ray, RayStats, Traversal};
@@ -33,7 +33,6 @@ impl<'a> RayCaster<'a> {
             integrand: EmissionAbsorptionSettings::new(settings),
         }
     }
-
 }
 
 impl PixelTracer for RayCaster<'_> {

@@ -272,8 +272,7 @@ fn shadows_darken_only_what_a_surface_hides_from_the_light() {
     });
     let luminance = |p: &[f32; 4]| p[0] + p[1] + p[2];
     let darker = lit.pixels.iter().zip(&shadowed.pixels).filter(|(a, b)| luminance(b) < luminance(a) - 1e-3).count();
-    let brighter =
-        lit.pixels.iter().zip(&shadowed.pixels).filter(|(a, b)| luminance(b) > luminance(a) + 1e-6).count();
+    let brighter = lit.pixels.iter().zip(&shadowed.pixels).filter(|(a, b)| luminance(b) > luminance(a) + 1e-6).count();
     println!("shadows: {darker} pixels darker");
     assert_eq!(brighter, 0, "a shadow never adds light");
     let covered = lit.pixels.iter().filter(|p| p[3] > 0.5).count();

@@ -176,8 +176,14 @@ fn ray_through_box(info: &VolumeInfo, eye: DVec3, d: DVec3) -> (f64, f64) {
 /// Brute-force first-hit isosurface through the dense array: a scan every eighth of the smallest spacing for a
 /// change of `f ≥ iso`, 40 bisections, then two-sided Phong (headlight: the light comes from the eye) with the
 /// trilinear interpolant's analytic gradient; the same coefficients as `RenderSettings::default()`.
-fn brute_force_isosurface(values: &[f32], info: &VolumeInfo, iso: f64, color: [f32; 3], camera: &Camera, size: u32)
-    -> Image {
+fn brute_force_isosurface(
+    values: &[f32],
+    info: &VolumeInfo,
+    iso: f64,
+    color: [f32; 3],
+    camera: &Camera,
+    size: u32,
+) -> Image {
     let step = info.spacing.iter().cloned().fold(f64::INFINITY, f64::min) * 0.125;
     let phong = voxstream_render::PhongCoefficients::default();
     let mut image = Image::new(size, size);
