@@ -173,6 +173,8 @@ pub struct Traversal<'a> {
     bias_scale: f64,
     /// Voxel edge (unit cube) of every level: `N^(−d) / M`, decreasing.
     level_voxel: [f64; MAX_TABLE_LEVELS],
+    /// `log2 N` when `N` is a power of two.
+    n_shift: Option<u32>,
 }
 
 impl<'a> Traversal<'a> {
@@ -201,6 +203,7 @@ impl<'a> Traversal<'a> {
             inv_ln_n: 1.0 / (shape.n as f64).ln(),
             bias_scale: (-settings.lod_bias * (shape.n as f64).ln()).exp(),
             level_voxel: scale.map(|s| 1.0 / (s * shape.brick_size as f64)),
+            n_shift: shape.n.is_power_of_two().then(|| shape.n.trailing_zeros()),
         }
     }
 
@@ -219,14 +222,24 @@ impl<'a> Traversal<'a> {
 
     /// The voxel edge of the continuous level at distance `t`, `N^(−ℓ) / M`, and the level to descend to, `⌈ℓ⌉`,
     /// without a logarithm or an exponential: unclamped, `N^(−ℓ) = M·w·N^(−bias)` for the footprint `w`, and `⌈ℓ⌉`
-    /// is the coarsest level whose voxel is no larger than that.
+    /// is the coarsest level whose voxel is no larger than that. The search starts from `hint`, the previous
+    /// segment's level (it changes by a level at a time along a ray), and leaves the result there.
     #[inline]
-    fn footprint_at(&self, t: f64, spread: f64) -> (f64, u32) {
+    fn footprint_at(&self, t: f64, spread: f64, hint: &mut usize) -> (f64, u32) {
         let max_level = self.view.shape.max_level as usize;
         let footprint = (t * spread / self.world_per_volume).max(1e-300);
         let voxel = (footprint * self.bias_scale).clamp(self.level_voxel[max_level], self.level_voxel[0]);
-        let target = self.level_voxel[..=max_level].partition_point(|&v| v > voxel);
-        (voxel, target.min(max_level) as u32)
+        // The first level whose voxel is not larger than `voxel` (the table decreases; at most max_level + 1).
+        let mut target = (*hint).min(max_level);
+        while target > 0 && self.level_voxel[target - 1] <= voxel {
+            target -= 1;
+        }
+        while target <= max_level && self.level_voxel[target] > voxel {
+            target += 1;
+        }
+        let target = target.min(max_level);
+        *hint = target;
+        (voxel, target as u32)
     }
 
     /// Walks `ray`, handing its samples to `integrand` until the ray leaves the volume or the integrand stops it.
@@ -261,11 +274,12 @@ impl<'a> Traversal<'a> {
         let mut covered = t;
         let mut step: Option<StepLength> = None;
         let mut segments = 0;
+        let mut level_hint = 0;
         while t < t_leave && segments < MAX_SEGMENTS {
             segments += 1;
             stats.descents += 1;
             let p = origin + direction * t;
-            let (footprint_voxel, target_level) = self.footprint_at(t, ray.spread);
+            let (footprint_voxel, target_level) = self.footprint_at(t, ray.spread, &mut level_hint);
             let (data, box_level, box_ijk) = self.descend(p, target_level, path, request, integrand);
             let node_size = 1.0 / self.scale[box_level as usize];
             let lower = DVec3::new(box_ijk[0] as f64, box_ijk[1] as f64, box_ijk[2] as f64) * node_size;
@@ -542,15 +556,35 @@ impl<'a> Traversal<'a> {
         let pa = [p.x, p.y, p.z];
         // Keep the ancestors that contain p, and no deeper than the target.
         let mut keep = path.len.min(target_level as usize + 1).max(1);
-        while keep > 1 {
-            let entry = &path.entries[keep - 1];
+        if keep > 1 {
+            // p's node coordinates at the deepest candidate level; through i64: one instruction (a u64 conversion
+            // is a branchy sequence before AVX-512); positions are non-negative and node coordinates below 2⁶³.
             let s = self.scale[keep - 1];
-            // Through i64: one instruction (a u64 conversion is a branchy sequence before AVX-512); positions are
-            // non-negative and node coordinates below 2⁶³.
-            if (0..3).all(|a| (pa[a] * s) as i64 as u64 == entry.ijk[a]) {
-                break;
+            let deepest = [0, 1, 2].map(|a| (pa[a] * s) as i64 as u64);
+            if let Some(shift) = self.n_shift {
+                // N = 2^shift: multiplying by a power of two is exact, so an ancestor's coordinates are these
+                // shifted, the same integers as computing them from p.
+                let mut up = 0;
+                while keep > 1 {
+                    let ijk = path.entries[keep - 1].ijk;
+                    if (0..3).all(|a| deepest[a] >> up == ijk[a]) {
+                        break;
+                    }
+                    keep -= 1;
+                    up += shift;
+                }
+            } else {
+                let mut first = true;
+                while keep > 1 {
+                    let entry = &path.entries[keep - 1];
+                    let s = self.scale[keep - 1];
+                    if (0..3).all(|a| if first { deepest[a] } else { (pa[a] * s) as i64 as u64 } == entry.ijk[a]) {
+                        break;
+                    }
+                    first = false;
+                    keep -= 1;
+                }
             }
-            keep -= 1;
         }
         path.len = keep;
         loop {
