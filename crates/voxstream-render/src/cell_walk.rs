@@ -19,10 +19,20 @@ pub struct CellVisit {
     pub t_in: f64,
     /// See `t_in`.
     pub t_out: f64,
-    /// The ray's position in the cell (cell-local, `[0, 1]³`) at `t_in`.
-    pub start: [f32; 3],
     /// Cell-local units per world unit of `t` (the span's rate).
     pub rate: [f32; 3],
+    /// The ray's cell-local position at `t = 0`, and the rate in `f64` (for [`CellVisit::start`]).
+    offset: [f64; 3],
+    rate_f64: [f64; 3],
+}
+
+impl CellVisit {
+    /// The ray's position in the cell (cell-local, `[0, 1]³`) at `t_in`; computed only for the cells that need it
+    /// (most are dismissed by their corners alone).
+    #[inline(always)]
+    pub fn start(&self) -> [f32; 3] {
+        std::array::from_fn(|a| (self.offset[a] + self.t_in * self.rate_f64[a]) as f32)
+    }
 }
 
 /// Cells visited (or blocks skipped) by one span at most (a ray crosses at most `3·B` cells of a `B³` lattice; the
@@ -43,8 +53,9 @@ impl Lattice {
     #[inline(always)]
     fn at(span: &BrickSpan<'_>, inverse_rate: &[f64; 3], t: f64, forced: Option<(usize, i64)>) -> Lattice {
         let last_cell = (span.stored - 2) as i64;
+        // Truncation, not floor: the two differ only below 0, which the clamp sends to 0 either way.
         let mut cell: [i64; 3] =
-            std::array::from_fn(|a| ((span.origin[a] + t * span.rate[a]).floor() as i64).clamp(0, last_cell));
+            std::array::from_fn(|a| ((span.origin[a] + t * span.rate[a]) as i64).clamp(0, last_cell));
         if let Some((axis, c)) = forced {
             cell[axis] = c;
         }
@@ -148,9 +159,10 @@ pub fn walk_cells<V: CellVisitor>(span: &BrickSpan<'_>, visitor: &mut V) -> (Con
             v[slab + row] as f32,
             v[slab + row + 1] as f32,
         ];
-        let start = std::array::from_fn(|a| (span.origin[a] + t * span.rate[a] - cell[a] as f64) as f32);
+        let offset = std::array::from_fn(|a| span.origin[a] - cell[a] as f64);
         visited += 1;
-        if visitor.visit(&CellVisit { corners, t_in: t, t_out, start, rate }).is_break() {
+        let visit = CellVisit { corners, t_in: t, t_out, rate, offset, rate_f64: span.rate };
+        if visitor.visit(&visit).is_break() {
             return (ControlFlow::Break(()), visited);
         }
         if next[axis] >= span.to {
@@ -208,7 +220,8 @@ mod tests {
             assert_eq!(c.t_in, last_out, "no gap or overlap between cells");
             assert!(c.t_out >= c.t_in);
             // The start lies in the cell, and the corner v000 is the voxel at the cell's base.
-            assert!(c.start.iter().all(|&s| (-1e-5..=1.0 + 1e-5).contains(&s)), "{:?}", c.start);
+            let start = c.start();
+            assert!(start.iter().all(|&s| (-1e-5..=1.0 + 1e-5).contains(&s)), "{start:?}");
             last_out = c.t_out;
             cells.push(c.corners[0] as usize);
         };

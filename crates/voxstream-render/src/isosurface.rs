@@ -232,14 +232,15 @@ impl<'a> Isosurfaces<'a> {
             return ControlFlow::Continue(());
         }
         let scale = s.lighting.gradient_scale;
+        let start = c.start();
         let gradient_at = |u: f32| {
-            let p = std::array::from_fn(|a| c.start[a] + u * c.rate[a]);
+            let p = std::array::from_fn(|a| start[a] + u * c.rate[a]);
             Vec3::from(cell_gradient(&c.corners, p)) * scale
         };
         if straddle == 0 {
             return self.enter(above, c.t_in, || gradient_at(0.0));
         }
-        let cubic = CellCubic::new(&c.corners, c.start, c.rate);
+        let cubic = CellCubic::new(&c.corners, start, c.rate);
         let f0 = cubic.at(0.0);
         let mut entry = above;
         for i in 0..s.count {
