@@ -49,11 +49,20 @@ pub struct LoopLimits {
     /// Converged mode only: when a node is subdivided, also produce its new children's bricks in the same pass,
     /// into free brick slots (never evicting). Fewer passes, the same image.
     pub prefetch_new_children: bool,
+    /// Converged mode only: the passes that only gather requests trace one pixel in [`GATHER_STRIDE`]² (their
+    /// neighbours ask for the same nodes, and subdividing produces whole tiles), until such a pass asks for
+    /// nothing; then every pixel still pending is traced. Each ray's final value is traced with all it needs
+    /// resident, so the image is the same; the early passes cost a quarter. A frame after one that needed no data
+    /// starts with every pixel.
+    pub gather_sparsely: bool,
 }
+
+/// The pixel stride of the request-gathering passes of a converged frame ([`LoopLimits::gather_sparsely`]).
+pub const GATHER_STRIDE: u32 = 2;
 
 impl Default for LoopLimits {
     fn default() -> Self {
-        LoopLimits { requests_per_frame: 1024, max_passes: 400, prefetch_new_children: true }
+        LoopLimits { requests_per_frame: 1024, max_passes: 400, prefetch_new_children: true, gather_sparsely: true }
     }
 }
 
@@ -112,6 +121,9 @@ pub struct Session<P: Producer, R: FrameRenderer = CpuRenderer> {
     settings: RenderSettings,
     limits: LoopLimits,
     peak_resident_bytes: u64,
+    /// Whether the next converged frame starts with sparse passes: yes unless the last one needed no data (a warm
+    /// view, where the sparse pass would only add a pass).
+    gather_sparsely_next: bool,
 }
 
 impl<P: Producer> Session<P, CpuRenderer> {
@@ -157,7 +169,7 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
         let finest_voxel = settings.placement.mean_scale() * shape.voxel_size(shape.max_level);
         let lut = TransferLut::new(transfer_function, value_range[0] as f32, value_range[1] as f32, finest_voxel);
         let cache = CacheManager::new(producer, budget_bytes)?;
-        Ok(Session { cache, renderer, lut, settings, limits, peak_resident_bytes: 0 })
+        Ok(Session { cache, renderer, lut, settings, limits, peak_resident_bytes: 0, gather_sparsely_next: true })
     }
 
     /// The cache.
@@ -216,6 +228,9 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
         let mut settings = self.settings.clone();
         if mode == Mode::Converged {
             settings.max_requests_per_ray = settings.max_requests_per_ray.max(CONVERGED_REQUESTS_PER_RAY);
+            if self.limits.gather_sparsely && self.gather_sparsely_next {
+                settings.pixel_stride = GATHER_STRIDE;
+            }
         }
         loop {
             self.cache.begin_frame();
@@ -254,9 +269,17 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
                 bricks_produced: result.bricks_produced,
             });
             let stalled = report.pending > 0 && report.served == 0;
+            if settings.pixel_stride > 1 && report.pending == 0 && report.requests == 0 && !stalled {
+                // The sparse rays need nothing more: trace every pixel still pending.
+                settings.pixel_stride = 1;
+                continue;
+            }
             if mode == Mode::Interactive || report.pending == 0 || stalled || result.passes >= self.limits.max_passes {
                 break;
             }
+        }
+        if mode == Mode::Converged {
+            self.gather_sparsely_next = result.requests > 0;
         }
         result.image = progressive.image;
         result.elapsed_ms = start.elapsed().as_secs_f64() * 1e3;

@@ -196,6 +196,7 @@ fn render_tile<T: PixelTracer>(
         scale,
         background: settings.background,
         pending,
+        stride: settings.pixel_stride.max(1),
         result: &mut result,
         requests: &mut requests,
         path: &mut path,
@@ -222,6 +223,7 @@ struct TileLoop<'t, T> {
     scale: glam::DVec3,
     background: [f32; 3],
     pending: &'t [bool],
+    stride: u32,
     result: &'t mut TileResult,
     requests: &'t mut Vec<Request>,
     path: &'t mut DescentPath,
@@ -242,6 +244,7 @@ impl<T: PixelTracer> pulp::WithSimd for TileLoop<'_, T> {
             scale,
             background,
             pending,
+            stride,
             result,
             requests,
             path,
@@ -249,7 +252,8 @@ impl<T: PixelTracer> pulp::WithSimd for TileLoop<'_, T> {
         let (columns, rows) = pixels;
         for y in rows {
             for x in columns.clone() {
-                if !pending[(y * width + x) as usize] {
+                if !pending[(y * width + x) as usize] || x % stride != 0 || y % stride != 0 {
+                    // Not traced this pass: the pixel keeps its value and its pending flag.
                     result.pixels.push(None);
                     result.pending.push(false);
                     continue;

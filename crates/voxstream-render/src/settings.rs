@@ -104,6 +104,9 @@ pub struct RenderSettings {
     pub surfaces: Vec<IsoSurface>,
     /// Isosurfaces: hard shadows from the fixed light ([`RenderSettings::light_direction`], with Phong shading).
     pub shadows: bool,
+    /// A pass traces only the pending pixels whose coordinates are both multiples of this (1: all of them); the
+    /// others stay pending. The frame loop uses 2 for the passes of a converged frame that only gather requests.
+    pub pixel_stride: u32,
 }
 
 impl Default for RenderSettings {
@@ -125,6 +128,7 @@ impl Default for RenderSettings {
             sample_batches: true,
             surfaces: Vec::new(),
             shadows: false,
+            pixel_stride: 1,
         }
     }
 }
@@ -153,6 +157,9 @@ impl RenderSettings {
             if !(length.is_finite() && length > 0.0) {
                 return bad("light direction must be a non-zero finite vector".into());
             }
+        }
+        if !(1..=16).contains(&self.pixel_stride) {
+            return bad(format!("pixel stride must be in 1..=16, got {}", self.pixel_stride));
         }
         if self.surfaces.len() > MAX_SURFACES {
             return bad(format!("at most {MAX_SURFACES} isosurfaces, got {}", self.surfaces.len()));

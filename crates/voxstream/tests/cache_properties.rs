@@ -40,7 +40,8 @@ proptest! {
         let minimum = voxstream_core::PoolCapacities::plan(&voxstream_core::Producer::shape(&scene_def.producer), budget);
         prop_assume!(minimum.is_ok());
         let settings = voxstream_render::RenderSettings { width: 24, height: 24, ..Default::default() };
-        let limits = voxstream_engine::LoopLimits { requests_per_frame: limit, max_passes: 60, prefetch_new_children };
+        let limits =
+            voxstream_engine::LoopLimits { requests_per_frame: limit, max_passes: 60, prefetch_new_children, ..Default::default() };
         let mut session = voxstream_engine::Session::new(
             scene_def.producer, &scene_def.transfer_function, settings, budget, limits).unwrap();
         for camera in &path {
@@ -196,6 +197,32 @@ fn producing_new_children_at_once_keeps_the_image_and_saves_passes() {
         if scene == "shell" {
             assert!(on.passes < off.passes, "shell: {} passes with, {} without", on.passes, off.passes);
         }
+    }
+}
+
+#[test]
+fn sparse_gathering_passes_keep_the_image_and_trace_fewer_rays() {
+    let camera = voxstream::scenes::default_camera();
+    for scene in ["shell", "sponge", "hypertexture"] {
+        let frame = |gather_sparsely| {
+            let limits = voxstream_engine::LoopLimits { gather_sparsely, ..Default::default() };
+            let mut session = common::scene_session_with(scene, 64, 64 << 20, limits);
+            let cold = session.render(&camera, Mode::Converged).unwrap();
+            assert!(cold.is_converged(), "{scene}: not converged after {} passes", cold.passes);
+            // A warm frame of the same view: dense from the start once the last frame needed nothing.
+            let _ = session.render(&camera, Mode::Converged).unwrap();
+            let warm = session.render(&camera, Mode::Converged).unwrap();
+            (cold, warm)
+        };
+        let ((sparse, sparse_warm), (dense, dense_warm)) = (frame(true), frame(false));
+        println!(
+            "{scene}: cold frame {} rays in {} passes gathering sparsely, {} rays in {} passes densely",
+            sparse.rays, sparse.passes, dense.rays, dense.passes
+        );
+        assert_eq!(sparse.image.pixels, dense.image.pixels, "{scene}: the image changed");
+        assert!(sparse.rays < dense.rays, "{scene}: {} rays sparsely, {} densely", sparse.rays, dense.rays);
+        assert_eq!(sparse_warm.image.pixels, dense_warm.image.pixels);
+        assert_eq!((sparse_warm.passes, sparse_warm.rays), (1, dense_warm.rays), "{scene}: a warm frame is one pass");
     }
 }
 
