@@ -4,7 +4,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::RenderError;
 use crate::instruction_set::InstructionSet;
-use crate::isosurface::{IsoSurface, MAX_SURFACES};
+use crate::isosurface::{IsoSurface, SurfaceNormals, MAX_SURFACES};
 
 /// How samples are lit.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -104,6 +104,8 @@ pub struct RenderSettings {
     pub surfaces: Vec<IsoSurface>,
     /// Isosurfaces: hard shadows from the fixed light ([`RenderSettings::light_direction`], with Phong shading).
     pub shadows: bool,
+    /// Isosurfaces: where normals come from.
+    pub surface_normals: SurfaceNormals,
     /// A pass traces only the pending pixels whose coordinates are both multiples of this (1: all of them); the
     /// others stay pending. The frame loop uses 2 for the passes of a converged frame that only gather requests.
     pub pixel_stride: u32,
@@ -128,6 +130,7 @@ impl Default for RenderSettings {
             sample_batches: true,
             surfaces: Vec::new(),
             shadows: false,
+            surface_normals: SurfaceNormals::Cell,
             pixel_stride: 1,
         }
     }

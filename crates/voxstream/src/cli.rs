@@ -39,6 +39,15 @@ pub enum ShadingArg {
     Phong,
 }
 
+/// Isosurface normals on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum NormalsArg {
+    /// The analytic gradient of the trilinear cell hit.
+    Cell,
+    /// Central differences at the cell's corners, interpolated trilinearly.
+    Central,
+}
+
 /// `voxstream render`.
 #[derive(Args, Debug, Clone)]
 pub struct RenderArgs {
@@ -84,6 +93,10 @@ pub struct RenderArgs {
     /// Isosurfaces: hard shadows from the light given by --light (Phong shading).
     #[arg(long)]
     pub shadows: bool,
+    /// Isosurfaces: normals from the trilinear cell's own gradient (cell), or from central differences at its
+    /// corners interpolated trilinearly (central: smoother shading).
+    #[arg(long, value_enum, default_value_t = NormalsArg::Cell)]
+    pub normals: NormalsArg,
     /// Lighting (default: the scene's; Phong for isosurfaces).
     #[arg(long, value_enum)]
     pub shading: Option<ShadingArg>,

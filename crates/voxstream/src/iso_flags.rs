@@ -4,7 +4,7 @@
 use anyhow::{bail, Result};
 use voxstream_render::{IsoSurface, MAX_SURFACES};
 
-use crate::cli::RenderArgs;
+use crate::cli::{NormalsArg, RenderArgs};
 
 /// Colours of the surfaces when `--iso-color` is not given, in order (linear RGB).
 pub const PALETTE: [[f32; 3]; MAX_SURFACES] = [
@@ -21,8 +21,12 @@ pub const PALETTE: [[f32; 3]; MAX_SURFACES] = [
 /// The surfaces the flags ask for (empty: volume rendering), checked against the data's `value_range`.
 pub fn surfaces(args: &RenderArgs, value_range: [f64; 2]) -> Result<Vec<IsoSurface>> {
     if args.iso.is_empty() {
-        if !args.iso_color.is_empty() || !args.iso_opacity.is_empty() || args.shadows {
-            bail!("--iso-color, --iso-opacity and --shadows apply to isosurfaces: add --iso VALUE");
+        if !args.iso_color.is_empty()
+            || !args.iso_opacity.is_empty()
+            || args.shadows
+            || args.normals != NormalsArg::Cell
+        {
+            bail!("--iso-color, --iso-opacity, --shadows and --normals apply to isosurfaces: add --iso VALUE");
         }
         return Ok(Vec::new());
     }
@@ -117,6 +121,7 @@ mod tests {
         assert!(error(&["--iso", "1", "--shadows"]).contains("--light"));
         assert!(error(&["--iso", "1", "--tf", "x.json"]).contains("give one of them"));
         assert!(error(&["--shadows"]).contains("add --iso"));
+        assert!(error(&["--normals", "central"]).contains("add --iso"));
         assert!(error(&["--iso", "1,2,3,4,5,6,7,8,9"]).contains("at most 8"));
     }
 }

@@ -69,6 +69,7 @@ fn unreachable_default() -> RenderArgs {
         iso_color: Vec::new(),
         iso_opacity: Vec::new(),
         shadows: false,
+        normals: voxstream::cli::NormalsArg::Cell,
         shading: None,
         light: None,
         background: [0.0; 3],

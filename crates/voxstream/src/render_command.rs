@@ -7,11 +7,11 @@ use std::sync::Arc;
 use anyhow::{bail, Context, Result};
 use voxstream_core::Producer;
 use voxstream_engine::{LoopLimits, MemoryBudget, Mode, Session, MAX_BUDGET_MB};
-use voxstream_render::{Camera, RenderSettings, Shading, TransferFunction, VolumePlacement};
+use voxstream_render::{Camera, RenderSettings, Shading, SurfaceNormals, TransferFunction, VolumePlacement};
 use voxstream_store::{InMemoryVolume, StoreProducer, StoreReader};
 
 use crate::camera_path::read_camera_path;
-use crate::cli::{RenderArgs, ShadingArg};
+use crate::cli::{NormalsArg, RenderArgs, ShadingArg};
 use crate::exit_status::IncompleteImage;
 use crate::iso_flags;
 use crate::memory::{bytes_read, peak_rss_bytes};
@@ -204,6 +204,10 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
         },
         surfaces,
         shadows: args.shadows,
+        surface_normals: match args.normals {
+            NormalsArg::Cell => SurfaceNormals::Cell,
+            NormalsArg::Central => SurfaceNormals::CentralDifferences,
+        },
         light_direction: args.light.or(source.light),
         background: args.background.map(|c| c as f32),
         step_factor: args.step,
