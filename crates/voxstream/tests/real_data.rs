@@ -425,11 +425,18 @@ fn foreign_ome_zarr_v2_and_v3_render_like_the_native_store() {
         .output()
         .expect("python3");
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
-    let render = |reader: Arc<StoreReader>| {
+    // The volume, and its isosurface at 100 at the finest level (foreign pyramids round their coarse levels
+    // differently).
+    let iso = RenderSettings {
+        surfaces: vec![voxstream_render::IsoSurface { value: 100.0, color: [0.9, 0.75, 0.65], opacity: 1.0 }],
+        shading: voxstream_render::Shading::Phong,
+        lod_bias: 8.0,
+        ..RenderSettings::default()
+    };
+    let render = |reader: Arc<StoreReader>, look: &RenderSettings| {
         let range = reader.attributes().value_range;
         let tf = default_store_transfer_function([0.0, 255.0]).unwrap();
-        let settings =
-            RenderSettings { width: 96, height: 96, placement: store_placement(&reader), ..RenderSettings::default() };
+        let settings = RenderSettings { width: 96, height: 96, placement: store_placement(&reader), ..look.clone() };
         let camera = store_camera(reader.info(), 96, 96);
         let producer = StoreProducer::new(reader).unwrap();
         let mut session =
@@ -438,7 +445,10 @@ fn foreign_ome_zarr_v2_and_v3_render_like_the_native_store() {
         assert!(frame.is_converged());
         frame.image.to_rgb8()
     };
-    let native_image = render(native);
+    let volume = RenderSettings::default();
+    let (native_image, native_iso) = (render(native.clone(), &volume), render(native, &iso));
+    let lit = native_iso.chunks(3).filter(|p| p.iter().any(|&c| c > 0)).count();
+    assert!(lit > 96 * 96 / 10, "the isosurface covers only {lit} pixels");
     for name in ["v3.zarr", "v2.zarr"] {
         let reader = Arc::new(StoreReader::open(&work.join(name)).unwrap());
         assert!(!reader.is_native());
@@ -447,8 +457,10 @@ fn foreign_ome_zarr_v2_and_v3_render_like_the_native_store() {
         let level0 = reader.read_region(0, [0, 0, 0], [197, 233, 189]).unwrap();
         let (expected, _) = reference(&dir, "mni152_t1");
         assert!(level0 == expected, "{name}: level 0 differs");
-        let quality = psnr(&render(reader), &native_image);
-        println!("{name}: PSNR {quality:.1} dB against the native store");
+        let quality = psnr(&render(reader.clone(), &volume), &native_image);
+        let iso_quality = psnr(&render(reader, &iso), &native_iso);
+        println!("{name}: PSNR {quality:.1} dB (volume), {iso_quality:.1} dB (isosurface) against the native store");
         assert!(quality >= 45.0, "{name}: PSNR {quality:.1} dB");
+        assert!(iso_quality >= 45.0, "{name}: isosurface PSNR {iso_quality:.1} dB");
     }
 }
