@@ -51,14 +51,14 @@ pub struct LoopLimits {
     pub prefetch_new_children: bool,
     /// Converged mode only: the passes that only gather requests trace one pixel in [`GATHER_STRIDE`]² (their
     /// neighbours ask for the same nodes, and subdividing produces whole tiles), until such a pass asks for
-    /// nothing; then every pixel still pending is traced. Each ray's final value is traced with all it needs
+    /// nothing; then one in half that stride squared, and so on down to every pixel still pending. Each ray's final value is traced with all it needs
     /// resident, so the image is the same; the early passes cost a quarter. A frame after one that needed no data
     /// starts with every pixel.
     pub gather_sparsely: bool,
 }
 
 /// The pixel stride of the request-gathering passes of a converged frame ([`LoopLimits::gather_sparsely`]).
-pub const GATHER_STRIDE: u32 = 2;
+pub const GATHER_STRIDE: u32 = 4;
 
 impl Default for LoopLimits {
     fn default() -> Self {
@@ -270,8 +270,8 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
             });
             let stalled = report.pending > 0 && report.served == 0;
             if settings.pixel_stride > 1 && report.pending == 0 && report.requests == 0 && !stalled {
-                // The sparse rays need nothing more: trace every pixel still pending.
-                settings.pixel_stride = 1;
+                // The sparse rays need nothing more: trace more of the pixels still pending (4×4, 2×2, all).
+                settings.pixel_stride /= 2;
                 continue;
             }
             if mode == Mode::Interactive || report.pending == 0 || stalled || result.passes >= self.limits.max_passes {
