@@ -107,7 +107,8 @@ pub struct RenderSettings {
     /// Isosurfaces: where normals come from.
     pub surface_normals: SurfaceNormals,
     /// A pass traces only the pending pixels whose coordinates are both multiples of this (1: all of them); the
-    /// others stay pending. The frame loop uses 2 for the passes of a converged frame that only gather requests.
+    /// others stay pending. The frame loop uses 4, then 2, for the passes of a converged frame that only gather
+    /// requests.
     pub pixel_stride: u32,
 }
 
