@@ -46,8 +46,6 @@ pub struct BrickSpan<'v> {
     pub from: f64,
     /// Where it ends.
     pub to: f64,
-    /// The brick's level in the tree.
-    pub level: u32,
     /// Value ranges of the brick's occupancy blocks (stored units), `blocks³`, x fastest: block `(i, j, k)` bounds
     /// every trilinear value in the cells `8i .. 8i+8` (and so on) ([`voxstream_core::BLOCK_CELLS`]).
     pub block_ranges: &'v [[u16; 2]],

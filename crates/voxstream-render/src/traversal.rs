@@ -533,7 +533,6 @@ impl<'a> Traversal<'a> {
             rate: std::array::from_fn(|a| d[a] * s * m),
             from,
             to,
-            level: node.level,
             block_ranges: &self.view.block_ranges[node.slot.0 as usize * blocks..(node.slot.0 as usize + 1) * blocks],
             blocks: self.view.shape.blocks_per_axis(),
             cull_blocks: self.skip_empty_space,
@@ -573,15 +572,13 @@ impl<'a> Traversal<'a> {
                     keep -= 1;
                     up += shift;
                 }
-            } else {
-                let mut first = true;
+            } else if deepest != path.entries[keep - 1].ijk {
+                keep -= 1;
                 while keep > 1 {
-                    let entry = &path.entries[keep - 1];
                     let s = self.scale[keep - 1];
-                    if (0..3).all(|a| if first { deepest[a] } else { (pa[a] * s) as i64 as u64 } == entry.ijk[a]) {
+                    if (0..3).all(|a| (pa[a] * s) as i64 as u64 == path.entries[keep - 1].ijk[a]) {
                         break;
                     }
-                    first = false;
                     keep -= 1;
                 }
             }

@@ -107,13 +107,24 @@ fn level_zero_equals_the_independently_decoded_source() {
     }
 }
 
-/// Trilinear interpolation of the dense array at world point `p` (clamped to the box of sample centres).
-fn dense_sample(values: &[f32], info: &VolumeInfo, p: DVec3) -> f64 {
-    let [nx, ny, _] = info.dims.map(|d| d as usize);
+/// The dense array's cell holding world point `p` (clamped to the box of sample centres): its first sample's
+/// indices and the position inside it.
+fn dense_cell(info: &VolumeInfo, p: DVec3) -> ([usize; 3], [f64; 3]) {
     let c = [0, 1, 2].map(|a| ((p[a] - info.origin[a]) / info.spacing[a]).clamp(0.0, (info.dims[a] - 1) as f64));
     let i0 = [0, 1, 2].map(|a| (c[a].floor() as usize).min(info.dims[a] as usize - 2));
-    let f = [0, 1, 2].map(|a| c[a] - i0[a] as f64);
-    let v = |dx: usize, dy: usize, dz: usize| values[((i0[2] + dz) * ny + i0[1] + dy) * nx + i0[0] + dx] as f64;
+    (i0, [0, 1, 2].map(|a| c[a] - i0[a] as f64))
+}
+
+/// Sample `i0 + d` of the dense array (x fastest).
+fn dense_at(values: &[f32], info: &VolumeInfo, i0: [usize; 3], d: [usize; 3]) -> f64 {
+    let [nx, ny, _] = info.dims.map(|n| n as usize);
+    values[((i0[2] + d[2]) * ny + i0[1] + d[1]) * nx + i0[0] + d[0]] as f64
+}
+
+/// Trilinear interpolation of the dense array at world point `p` (clamped to the box of sample centres).
+fn dense_sample(values: &[f32], info: &VolumeInfo, p: DVec3) -> f64 {
+    let (i0, f) = dense_cell(info, p);
+    let v = |dx: usize, dy: usize, dz: usize| dense_at(values, info, i0, [dx, dy, dz]);
     let lerp = |a: f64, b: f64, t: f64| a + (b - a) * t;
     let x00 = lerp(v(0, 0, 0), v(1, 0, 0), f[0]);
     let x10 = lerp(v(0, 1, 0), v(1, 1, 0), f[0]);
@@ -124,11 +135,7 @@ fn dense_sample(values: &[f32], info: &VolumeInfo, p: DVec3) -> f64 {
 
 /// The analytic gradient (per world unit) of the dense array's trilinear interpolant at `p`.
 fn dense_gradient(values: &[f32], info: &VolumeInfo, p: DVec3) -> DVec3 {
-    let [nx, ny, _] = info.dims.map(|d| d as usize);
-    let c = [0, 1, 2].map(|a| ((p[a] - info.origin[a]) / info.spacing[a]).clamp(0.0, (info.dims[a] - 1) as f64));
-    let i0 = [0, 1, 2].map(|a| (c[a].floor() as usize).min(info.dims[a] as usize - 2));
-    let f = [0, 1, 2].map(|a| c[a] - i0[a] as f64);
-    let v = |d: [usize; 3]| values[((i0[2] + d[2]) * ny + i0[1] + d[1]) * nx + i0[0] + d[0]] as f64;
+    let (i0, f) = dense_cell(info, p);
     let mut g = [0.0; 3];
     for (a, component) in g.iter_mut().enumerate() {
         // d/da: the differences along a, weighted bilinearly over the other two axes.
@@ -141,7 +148,7 @@ fn dense_gradient(values: &[f32], info: &VolumeInfo, p: DVec3) -> DVec3 {
             hi[b] = ob;
             hi[c2] = oc;
             hi[a] = 1;
-            *component += w * (v(hi) - v(lo));
+            *component += w * (dense_at(values, info, i0, hi) - dense_at(values, info, i0, lo));
         }
         *component /= info.spacing[a];
     }
@@ -234,27 +241,13 @@ fn brute_force_isosurface(
 /// spacing, the transfer function evaluated directly, over the box of sample centres.
 fn brute_force(values: &[f32], info: &VolumeInfo, tf: &TransferFunction, camera: &Camera, size: u32) -> Image {
     let sample = |p: DVec3| dense_sample(values, info, p);
-    let lower = DVec3::from(info.origin);
-    let upper = lower + DVec3::from([0, 1, 2].map(|a| (info.dims[a] as f64 - 1.0) * info.spacing[a]));
     let unit = tf.unit_distance.unwrap_or((info.spacing[0] * info.spacing[1] * info.spacing[2]).cbrt());
     let step = info.spacing.iter().cloned().fold(f64::INFINITY, f64::min) * 0.25;
-    let eye = DVec3::from(camera.eye);
-    let forward = (DVec3::from(camera.target) - eye).normalize();
-    let right = forward.cross(DVec3::from(camera.up)).normalize();
-    let up = right.cross(forward);
-    let half = (camera.fov.to_radians() / 2.0).tan();
     let mut image = Image::new(size, size);
     for y in 0..size {
         for x in 0..size {
-            let sx = ((x as f64 + 0.5) / size as f64 * 2.0 - 1.0) * half;
-            let sy = (1.0 - (y as f64 + 0.5) / size as f64 * 2.0) * half;
-            let d = (forward + right * sx + up * sy).normalize();
-            let (mut t0, mut t1) = (0.0f64, f64::INFINITY);
-            for a in 0..3 {
-                let (n, f) = ((lower[a] - eye[a]) / d[a], (upper[a] - eye[a]) / d[a]);
-                t0 = t0.max(n.min(f));
-                t1 = t1.min(n.max(f));
-            }
+            let (eye, d) = camera_ray(camera, x, y, size);
+            let (t0, t1) = ray_through_box(info, eye, d);
             let (mut color, mut transmittance) = ([0.0f64; 3], 1.0f64);
             if t0 < t1 {
                 let steps = ((t1 - t0) / step).ceil() as usize;
