@@ -1,0 +1,18 @@
+//! # voxstream-geometry: sources that are not voxel grids
+//!
+//! Producers sit at the far end of the loop (camera → renderer → feedback → cache manager → **producers** → pools).
+//! This crate's producers make each brick when a ray asks for it, at the resolution the ray needs, from a spatial
+//! index over triangles or particles: no preprocessing pass and no resolution fixed in advance (GigaVoxels [R08] §4;
+//! Reichl, seed 004, ch. 5 and 7).
+//!
+//! - [`formats`]: readers for PLY, OBJ, OFF, STL (meshes), and PLY points, `x y z` text, GRO, PDB, VTK (particles).
+//! - [`TriangleMesh`] and [`ParticleSet`]: the validated data.
+
+pub mod error;
+pub mod formats;
+pub mod particles;
+pub mod triangle_mesh;
+
+pub use error::GeometryError;
+pub use particles::{ParticleSet, RawParticles};
+pub use triangle_mesh::{RawMesh, TriangleMesh};
