@@ -16,3 +16,9 @@ pub mod triangle_mesh;
 pub use error::GeometryError;
 pub use particles::{ParticleSet, RawParticles};
 pub use triangle_mesh::{RawMesh, TriangleMesh};
+pub mod mesh_distance;
+pub mod mesh_producer;
+pub mod triangle_bvh;
+
+pub use mesh_distance::{MeshDistance, UnitCubeFit};
+pub use mesh_producer::{Amplification, MeshProducer, MeshTreeSettings};

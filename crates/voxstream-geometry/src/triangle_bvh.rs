@@ -1,0 +1,308 @@
+//! A bounding-volume hierarchy over a mesh's triangles, and the closest-point query the mesh producer's signed
+//! distance is built on.
+//!
+//! Built once when the mesh is opened (median split of the triangle centroids along the widest axis, leaves of up to
+//! [`LEAF_TRIANGLES`]), queried for every voxel a brick needs. The query is a depth-first search that visits the
+//! nearer child first and prunes boxes farther than the best distance so far; callers pass an upper bound on the
+//! distance (a neighbouring voxel's distance plus the step, the distance field being 1-Lipschitz), which prunes
+//! almost everything at once. Reichl (seed 004, ch. 7) voxelises triangles into bricks the same on-demand way; the
+//! closest-point-in-triangle test with feature classification is Ericson, *Real-Time Collision Detection* §5.1.5.
+
+use glam::DVec3;
+
+/// Most triangles in a leaf.
+pub const LEAF_TRIANGLES: usize = 4;
+
+/// One node: a box and either two children (`count == 0`: left is the next node, right is `first`) or a leaf
+/// (`count` triangles of the reordered list from `first`).
+#[derive(Clone, Copy, Debug)]
+struct BvhNode {
+    lower: [f32; 3],
+    upper: [f32; 3],
+    first: u32,
+    count: u32,
+}
+
+/// Which part of a triangle a closest point lies on: its inside, an edge (0: ab, 1: bc, 2: ca) or a vertex (0: a,
+/// 1: b, 2: c). The sign of the distance comes from the pseudo-normal of that feature.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TriangleFeature {
+    /// Inside the triangle.
+    Face,
+    /// On edge `0`: ab, `1`: bc, `2`: ca.
+    Edge(u8),
+    /// At vertex `0`: a, `1`: b, `2`: c.
+    Vertex(u8),
+}
+
+/// The closest point of a triangle to a query point.
+#[derive(Clone, Copy, Debug)]
+pub struct ClosestPoint {
+    /// The point.
+    pub point: DVec3,
+    /// Squared distance to the query point.
+    pub distance_squared: f64,
+    /// Index of the triangle (in the mesh's order).
+    pub triangle: u32,
+    /// The feature of the triangle it lies on.
+    pub feature: TriangleFeature,
+}
+
+/// The hierarchy over triangles given by their corners.
+#[derive(Clone, Debug)]
+pub struct TriangleBvh {
+    nodes: Vec<BvhNode>,
+    /// Triangle indices in leaf order.
+    order: Vec<u32>,
+}
+
+fn widen(bound: f64, down: bool) -> f32 {
+    // f32 boxes must contain the f64 triangles: round outward by more than f32's rounding.
+    let value = bound as f32;
+    let slack = value.abs().max(1e-6) * 4.0 * f32::EPSILON;
+    if down {
+        value - slack
+    } else {
+        value + slack
+    }
+}
+
+impl TriangleBvh {
+    /// Builds the hierarchy over `corners` (one entry per triangle). The median split keeps the depth at
+    /// ⌈log₂(triangles / leaf)⌉, so recursion is shallow.
+    pub fn build(positions: &[DVec3], triangles: &[[u32; 3]]) -> TriangleBvh {
+        let corners = |t: &[u32; 3]| t.map(|i| positions[i as usize]);
+        let mut builder = Builder {
+            positions,
+            triangles,
+            centroids: triangles.iter().map(|t| corners(t).iter().sum::<DVec3>() / 3.0).collect(),
+            order: (0..triangles.len() as u32).collect(),
+            nodes: Vec::with_capacity(2 * triangles.len() / LEAF_TRIANGLES + 1),
+        };
+        builder.node(0, triangles.len());
+        TriangleBvh { nodes: builder.nodes, order: builder.order }
+    }
+
+    /// The closest point of any triangle to `p` strictly within `max_distance`, or `None` if no triangle comes that
+    /// close. `positions` and `triangles` must be those the hierarchy was built over.
+    pub fn closest_point(
+        &self,
+        positions: &[DVec3],
+        triangles: &[[u32; 3]],
+        p: DVec3,
+        max_distance: f64,
+    ) -> Option<ClosestPoint> {
+        let mut best: Option<ClosestPoint> = None;
+        let mut best_squared = max_distance * max_distance;
+        let mut stack = [0u32; 64];
+        let mut depth = 1;
+        while depth > 0 {
+            depth -= 1;
+            let node = &self.nodes[stack[depth] as usize];
+            if box_distance_squared(node, p) >= best_squared {
+                continue;
+            }
+            if node.count > 0 {
+                let first = node.first as usize;
+                for &t in &self.order[first..first + node.count as usize] {
+                    let [a, b, c] = triangles[t as usize].map(|i| positions[i as usize]);
+                    let (point, feature) = closest_on_triangle(p, a, b, c);
+                    let distance_squared = (point - p).length_squared();
+                    if distance_squared < best_squared {
+                        best_squared = distance_squared;
+                        best = Some(ClosestPoint { point, distance_squared, triangle: t, feature });
+                    }
+                }
+                continue;
+            }
+            let left = stack[depth] + 1;
+            let right = node.first;
+            let left_distance = box_distance_squared(&self.nodes[left as usize], p);
+            let right_distance = box_distance_squared(&self.nodes[right as usize], p);
+            // Push the farther child first, so the nearer one is searched first.
+            let (near, far) = if left_distance <= right_distance { (left, right) } else { (right, left) };
+            // Depth ≤ ⌈log₂ triangles⌉ + 1 ≤ 33 (median split), and each level leaves one entry: 64 always suffice.
+            stack[depth] = far;
+            stack[depth + 1] = near;
+            depth += 2;
+        }
+        best
+    }
+
+    /// Depth of the hierarchy (root = 1).
+    pub fn depth(&self) -> usize {
+        fn depth_of(nodes: &[BvhNode], index: usize) -> usize {
+            let node = &nodes[index];
+            if node.count > 0 {
+                1
+            } else {
+                1 + depth_of(nodes, index + 1).max(depth_of(nodes, node.first as usize))
+            }
+        }
+        depth_of(&self.nodes, 0)
+    }
+}
+
+struct Builder<'a> {
+    positions: &'a [DVec3],
+    triangles: &'a [[u32; 3]],
+    centroids: Vec<DVec3>,
+    order: Vec<u32>,
+    nodes: Vec<BvhNode>,
+}
+
+impl Builder<'_> {
+    fn node(&mut self, start: usize, end: usize) -> u32 {
+        let index = self.nodes.len();
+        let mut lower = DVec3::splat(f64::INFINITY);
+        let mut upper = DVec3::splat(f64::NEG_INFINITY);
+        let mut centre_lower = lower;
+        let mut centre_upper = upper;
+        for &t in &self.order[start..end] {
+            for &i in &self.triangles[t as usize] {
+                lower = lower.min(self.positions[i as usize]);
+                upper = upper.max(self.positions[i as usize]);
+            }
+            centre_lower = centre_lower.min(self.centroids[t as usize]);
+            centre_upper = centre_upper.max(self.centroids[t as usize]);
+        }
+        self.nodes.push(BvhNode {
+            lower: lower.to_array().map(|v| widen(v, true)),
+            upper: upper.to_array().map(|v| widen(v, false)),
+            first: start as u32,
+            count: (end - start) as u32,
+        });
+        let extent = centre_upper - centre_lower;
+        if end - start <= LEAF_TRIANGLES || extent.max_element() <= 0.0 {
+            return index as u32;
+        }
+        let axis = if extent.x >= extent.y && extent.x >= extent.z {
+            0
+        } else if extent.y >= extent.z {
+            1
+        } else {
+            2
+        };
+        let middle = start + (end - start) / 2;
+        let centroids = &self.centroids;
+        self.order[start..end].select_nth_unstable_by(middle - start, |&a, &b| {
+            centroids[a as usize][axis].total_cmp(&centroids[b as usize][axis])
+        });
+        let left = self.node(start, middle);
+        debug_assert_eq!(left as usize, index + 1, "the left child follows its parent");
+        let right = self.node(middle, end);
+        self.nodes[index].first = right;
+        self.nodes[index].count = 0;
+        index as u32
+    }
+}
+
+#[inline]
+fn box_distance_squared(node: &BvhNode, p: DVec3) -> f64 {
+    let mut sum = 0.0;
+    for a in 0..3 {
+        let lower = f64::from(node.lower[a]);
+        let upper = f64::from(node.upper[a]);
+        let d = (lower - p[a]).max(p[a] - upper).max(0.0);
+        sum += d * d;
+    }
+    sum
+}
+
+/// The point of triangle `abc` closest to `p`, and the feature it lies on (Ericson §5.1.5, Voronoi regions).
+pub fn closest_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> (DVec3, TriangleFeature) {
+    let ab = b - a;
+    let ac = c - a;
+    let ap = p - a;
+    let d1 = ab.dot(ap);
+    let d2 = ac.dot(ap);
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return (a, TriangleFeature::Vertex(0));
+    }
+    let bp = p - b;
+    let d3 = ab.dot(bp);
+    let d4 = ac.dot(bp);
+    if d3 >= 0.0 && d4 <= d3 {
+        return (b, TriangleFeature::Vertex(1));
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        let v = d1 / (d1 - d3);
+        return (a + ab * v, TriangleFeature::Edge(0));
+    }
+    let cp = p - c;
+    let d5 = ab.dot(cp);
+    let d6 = ac.dot(cp);
+    if d6 >= 0.0 && d5 <= d6 {
+        return (c, TriangleFeature::Vertex(2));
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        let w = d2 / (d2 - d6);
+        return (a + ac * w, TriangleFeature::Edge(2));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return (b + (c - b) * w, TriangleFeature::Edge(1));
+    }
+    let denominator = 1.0 / (va + vb + vc);
+    let v = vb * denominator;
+    let w = vc * denominator;
+    (a + ab * v + ac * w, TriangleFeature::Face)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn random_triangles(count: usize, seed: u64) -> (Vec<DVec3>, Vec<[u32; 3]>) {
+        let mut state = seed;
+        let mut next = move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut positions = Vec::new();
+        for _ in 0..count {
+            let centre = DVec3::new(next(), next(), next());
+            for _ in 0..3 {
+                positions.push(centre + DVec3::new(next(), next(), next()) * 0.05);
+            }
+        }
+        (positions, (0..count as u32).map(|t| [3 * t, 3 * t + 1, 3 * t + 2]).collect())
+    }
+
+    #[test]
+    fn closest_point_equals_brute_force() {
+        let (positions, triangles) = random_triangles(500, 7);
+        let bvh = TriangleBvh::build(&positions, &triangles);
+        assert!(bvh.depth() <= 10, "median split keeps the tree shallow: {}", bvh.depth());
+        for i in 0..200 {
+            let p = DVec3::new((i % 7) as f64 / 6.0, (i % 11) as f64 / 10.0, (i % 13) as f64 / 12.0) * 1.2
+                - DVec3::splat(0.1);
+            let brute = triangles
+                .iter()
+                .map(|t| t.map(|i| positions[i as usize]))
+                .map(|[a, b, c]| (closest_on_triangle(p, a, b, c).0 - p).length_squared())
+                .fold(f64::INFINITY, f64::min);
+            let found = bvh.closest_point(&positions, &triangles, p, f64::INFINITY).unwrap();
+            assert_eq!(found.distance_squared, brute, "at {p}");
+            // A bound just above the distance still finds it; one below finds nothing.
+            assert!(bvh.closest_point(&positions, &triangles, p, brute.sqrt() * 1.0001 + 1e-12).is_some());
+            assert!(bvh.closest_point(&positions, &triangles, p, brute.sqrt() * 0.9999).is_none());
+        }
+    }
+
+    #[test]
+    fn features_are_classified() {
+        let (a, b, c) = (DVec3::ZERO, DVec3::X, DVec3::Y);
+        let (point, feature) = closest_on_triangle(DVec3::new(0.2, 0.2, 1.0), a, b, c);
+        assert!((point - DVec3::new(0.2, 0.2, 0.0)).length() < 1e-15);
+        assert_eq!(feature, TriangleFeature::Face);
+        assert_eq!(closest_on_triangle(DVec3::new(-1.0, -1.0, 0.0), a, b, c).1, TriangleFeature::Vertex(0));
+        assert_eq!(closest_on_triangle(DVec3::new(2.0, -0.1, 0.0), a, b, c).1, TriangleFeature::Vertex(1));
+        assert_eq!(closest_on_triangle(DVec3::new(0.5, -1.0, 0.0), a, b, c).1, TriangleFeature::Edge(0));
+        assert_eq!(closest_on_triangle(DVec3::new(1.0, 1.0, 0.3), a, b, c).1, TriangleFeature::Edge(1));
+        assert_eq!(closest_on_triangle(DVec3::new(-1.0, 0.5, 0.0), a, b, c).1, TriangleFeature::Edge(2));
+    }
+}
