@@ -18,7 +18,9 @@ pub use particles::{ParticleSet, RawParticles};
 pub use triangle_mesh::{RawMesh, TriangleMesh};
 pub mod mesh_distance;
 pub mod mesh_producer;
+pub mod particle_producer;
 pub mod triangle_bvh;
 
 pub use mesh_distance::{MeshDistance, UnitCubeFit};
 pub use mesh_producer::{Amplification, MeshProducer, MeshTreeSettings};
+pub use particle_producer::{ParticleProducer, ParticleTreeSettings};
