@@ -51,9 +51,18 @@ pub enum NormalsArg {
 /// `voxstream render`.
 #[derive(Args, Debug, Clone)]
 pub struct RenderArgs {
-    /// A built-in scene (sponge, hypertexture, shell) or a store folder made by `voxstream import`.
+    /// A built-in scene (sponge, hypertexture, shell), a store folder made by `voxstream import`, or a mesh (.ply,
+    /// .obj, .off, .stl) or particle file (.ply points, .xyz/.csv, .gro, .pdb, .vtk, .vtp; any of them .gz).
     #[arg(default_value = crate::scenes::DEFAULT_SCENE)]
     pub source: String,
+    /// Mesh files: add multi-octave noise to the distance field (GigaVoxels' hypertexture), amplitude as a fraction
+    /// of the mesh's largest side, e.g. 0.02.
+    #[arg(long, value_name = "AMPLITUDE")]
+    pub amplify: Option<f64>,
+    /// Mesh and particle files: voxels per axis of the finest level (default: from the triangles' size or the
+    /// smoothing lengths).
+    #[arg(long, value_name = "VOXELS")]
+    pub resolution: Option<u64>,
     /// Output PNG (with --path, frames are numbered: frame_0000.png, …).
     #[arg(long, default_value = "frame.png")]
     pub out: PathBuf,

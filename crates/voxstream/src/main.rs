@@ -57,6 +57,8 @@ fn main() -> ExitCode {
 fn unreachable_default() -> RenderArgs {
     RenderArgs {
         source: scenes::DEFAULT_SCENE.into(),
+        amplify: None,
+        resolution: None,
         out: "frame.png".into(),
         width: 512,
         height: 512,

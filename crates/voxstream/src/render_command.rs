@@ -7,12 +7,16 @@ use std::sync::Arc;
 use anyhow::{bail, Context, Result};
 use voxstream_core::Producer;
 use voxstream_engine::{LoopLimits, MemoryBudget, Mode, Session, MAX_BUDGET_MB};
-use voxstream_render::{Camera, RenderSettings, Shading, SurfaceNormals, TransferFunction, VolumePlacement};
+use voxstream_geometry::formats::is_geometry_file_name;
+use voxstream_render::{
+    Camera, IsoSurface, RenderSettings, Shading, SurfaceNormals, TransferFunction, VolumePlacement,
+};
 use voxstream_store::{InMemoryVolume, StoreProducer, StoreReader};
 
 use crate::camera_path::read_camera_path;
 use crate::cli::{NormalsArg, RenderArgs, ShadingArg};
 use crate::exit_status::IncompleteImage;
+use crate::geometry_source;
 use crate::iso_flags;
 use crate::memory::{bytes_read, peak_rss_bytes};
 use crate::output_file::write_atomically;
@@ -41,6 +45,8 @@ struct Source<P> {
     sample_bytes: u64,
     /// Direction towards the light unless `--light` is given (`None`: a headlight).
     light: Option<[f64; 3]>,
+    /// Surfaces drawn when neither `--iso` nor `--tf` is given (empty: the volume).
+    default_surfaces: Vec<IsoSurface>,
 }
 
 /// Runs `voxstream render`.
@@ -60,11 +66,36 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             typical_range: [0.0, 1.0],
             producer_cache_bytes: 0,
             sample_bytes: 2,
+            default_surfaces: Vec::new(),
         };
+        check_geometry_flags(args, &source.name)?;
         return render_source(args, source, &budget);
     }
     let path = Path::new(&args.source);
+    if path.is_file() && is_geometry_file_name(path) {
+        let geometry = geometry_source::open(path, args)?;
+        if !args.quiet {
+            eprintln!("{}", geometry.description);
+        }
+        let source = Source {
+            name: args.source.clone(),
+            producer: geometry.producer,
+            transfer_function: geometry.transfer_function,
+            shading: Shading::Phong,
+            camera: geometry.camera,
+            placement: geometry.placement,
+            value_range: geometry.value_range,
+            typical_range: geometry.value_range,
+            // The triangles' or particles' index is held for the whole run: it comes out of the budget.
+            producer_cache_bytes: geometry.index_bytes,
+            sample_bytes: 2,
+            light: None,
+            default_surfaces: geometry.default_surfaces,
+        };
+        return render_source(args, source, &budget);
+    }
     check_store_path(path, "render")?;
+    check_geometry_flags(args, &args.source)?;
     let cache_bytes = budget.store_cache_bytes();
     let reader = Arc::new(StoreReader::open_with_cache(path, cache_bytes)?);
     let attributes = reader.attributes().clone();
@@ -97,7 +128,18 @@ fn store_source<P>(
         producer_cache_bytes,
         sample_bytes: reader.info().dtype.size() as u64,
         light: None,
+        default_surfaces: Vec::new(),
     }
+}
+
+/// `--amplify` and `--resolution` shape the trees of mesh and particle files only.
+fn check_geometry_flags(args: &RenderArgs, source: &str) -> Result<()> {
+    for (flag, given) in [("--amplify", args.amplify.is_some()), ("--resolution", args.resolution.is_some())] {
+        if given {
+            bail!("{flag} applies to mesh and particle files; {source} is not one");
+        }
+    }
+    Ok(())
 }
 
 fn check_flags(args: &RenderArgs) -> Result<()> {
@@ -143,13 +185,28 @@ const STORE_FRAME_FILL: f64 = 0.95;
 /// A three-quarter view of the volume's centre, `+z` up, 30° vertical field of view, just far enough that all eight
 /// corners of the volume's box (the sample centres) fall inside a `width × height` image.
 pub fn store_camera(info: &voxstream_store::VolumeInfo, width: u32, height: u32) -> Camera {
+    let lower = info.origin;
+    let upper = [0, 1, 2].map(|a| info.origin[a] + (info.dims[a] as f64 - 1.0) * info.spacing[a]);
+    frame_box(lower, upper, width, height, STORE_VIEW_DIRECTION, [0.0, 0.0, 1.0])
+}
+
+/// A view of the box `lower..upper` from its centre's side `towards_eye`, `up` up, 30° vertical field of view, just
+/// far enough that all eight corners fall inside a `width × height` image.
+pub fn frame_box(
+    lower: [f64; 3],
+    upper: [f64; 3],
+    width: u32,
+    height: u32,
+    towards_eye: [f64; 3],
+    up: [f64; 3],
+) -> Camera {
     use glam::DVec3;
-    let lower = DVec3::from(info.origin);
-    let upper = lower + DVec3::from([0, 1, 2].map(|a| (info.dims[a] as f64 - 1.0) * info.spacing[a]));
+    let lower = DVec3::from(lower);
+    let upper = DVec3::from(upper);
     let centre = (lower + upper) * 0.5;
     let fov: f64 = 30.0;
-    let up_hint = DVec3::Z;
-    let towards_eye = DVec3::from(STORE_VIEW_DIRECTION).normalize();
+    let up_hint = DVec3::from(up);
+    let towards_eye = DVec3::from(towards_eye).normalize();
     // The camera's basis (as `Camera::frame` builds it): forward = −towards_eye, right = forward × up.
     let forward = -towards_eye;
     let right = forward.cross(up_hint).normalize();
@@ -191,7 +248,10 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
         Some(path) => read_transfer_function(path)?,
         None => source.transfer_function.clone(),
     };
-    let surfaces = iso_flags::surfaces(args, source.value_range)?;
+    let mut surfaces = iso_flags::surfaces(args, source.value_range)?;
+    if surfaces.is_empty() && args.tf.is_none() {
+        surfaces = source.default_surfaces.clone();
+    }
     let drawing_surfaces = !surfaces.is_empty();
     let settings = RenderSettings {
         width: args.width,

@@ -1,0 +1,210 @@
+//! `voxstream render` of a mesh or particle file: reads it, builds its producer, and chooses the defaults (camera
+//! around its bounds in the file's own units, a surface for meshes and molecules, a density ramp for particles).
+//!
+//! The producers are those of `voxstream-geometry` (seed 004, ch. 5 and 7; GigaVoxels' amplified meshes): bricks are
+//! made when rays ask for them, so nothing is voxelised in advance.
+
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use voxstream_core::{NodeKey, ProduceError, Produced, Producer, TreeShape};
+use voxstream_geometry::formats::{read_geometry, RawGeometry};
+use voxstream_geometry::{
+    Amplification, MeshProducer, MeshTreeSettings, ParticleProducer, ParticleSet, ParticleTreeSettings, TriangleMesh,
+    UnitCubeFit,
+};
+use voxstream_render::{Camera, IsoSurface, TransferFunction, VolumePlacement};
+
+use crate::cli::RenderArgs;
+use crate::render_command::frame_box;
+
+/// A producer over a mesh or particles (a closed set, dispatched through an enum).
+#[derive(Clone, Debug)]
+pub enum GeometryProducer {
+    /// Signed-distance bricks of a triangle mesh.
+    Mesh(MeshProducer),
+    /// SPH density bricks of particles.
+    Particles(ParticleProducer),
+}
+
+impl Producer for GeometryProducer {
+    fn shape(&self) -> TreeShape {
+        match self {
+            GeometryProducer::Mesh(p) => p.shape(),
+            GeometryProducer::Particles(p) => p.shape(),
+        }
+    }
+
+    fn oracle(&self, key: NodeKey) -> Option<f32> {
+        match self {
+            GeometryProducer::Mesh(p) => p.oracle(key),
+            GeometryProducer::Particles(p) => p.oracle(key),
+        }
+    }
+
+    fn produce(&self, key: NodeKey, voxels: &mut [u16]) -> Result<Produced, ProduceError> {
+        match self {
+            GeometryProducer::Mesh(p) => p.produce(key, voxels),
+            GeometryProducer::Particles(p) => p.produce(key, voxels),
+        }
+    }
+}
+
+/// A geometry file ready to render, with its defaults.
+pub struct GeometrySource {
+    /// The producer.
+    pub producer: GeometryProducer,
+    /// What the voxel values 0 and 1 stand for (meshes: 0 outside, ½ on the surface, 1 inside; particles: density).
+    pub value_range: [f64; 2],
+    /// Surfaces drawn unless `--iso` or `--tf` says otherwise (meshes: the surface; molecules: the atoms' surface).
+    pub default_surfaces: Vec<IsoSurface>,
+    /// Transfer function for volume rendering (with `--tf` absent and no surfaces).
+    pub transfer_function: TransferFunction,
+    /// Tree cube in file units.
+    pub placement: VolumePlacement,
+    /// Default view.
+    pub camera: Camera,
+    /// Bytes held by the producer's index (triangles and hierarchy, or particles and grid).
+    pub index_bytes: u64,
+    /// One line saying what was read.
+    pub description: String,
+}
+
+/// The view direction for geometry (file coordinates, `+y` up as most mesh and particle files are): front right,
+/// from above.
+const GEOMETRY_VIEW_DIRECTION: [f64; 3] = [0.55, 0.45, 0.7];
+
+/// Whether the file is a molecular structure (atoms with radii).
+fn is_molecular(path: &Path) -> bool {
+    let name = path.to_string_lossy().to_lowercase();
+    let name = name.strip_suffix(".gz").unwrap_or(&name);
+    name.ends_with(".gro") || name.ends_with(".pdb")
+}
+
+/// Reads `path` and builds its producer with the flags of `args`.
+pub fn open(path: &Path, args: &RenderArgs) -> Result<GeometrySource> {
+    let started = Instant::now();
+    let raw = read_geometry(path)?;
+    let shown = path.display();
+    if let Some(resolution) = args.resolution {
+        if !(16..=1 << 20).contains(&resolution) {
+            bail!("--resolution {resolution} is out of range: give 16 to 1048576 voxels per axis");
+        }
+    }
+    match raw {
+        RawGeometry::Mesh(raw) => {
+            let mesh = TriangleMesh::new(raw).with_context(|| format!("in {shown}"))?;
+            let (lower, upper) = mesh.bounds();
+            let extent = (0..3).map(|a| upper[a] - lower[a]).fold(0.0, f64::max);
+            let settings = MeshTreeSettings::default();
+            let amplify = match args.amplify {
+                Some(k) if !(k > 0.0 && k <= 0.1) => {
+                    bail!("--amplify {k} is out of range: give the noise amplitude as a fraction of the mesh's size, in (0, 0.1]")
+                }
+                // The mesh's largest side is `fill` of the cube.
+                Some(k) => Some(Amplification::with_amplitude(k * settings.fill)),
+                None => None,
+            };
+            let settings = MeshTreeSettings { amplify, resolution: args.resolution, ..settings };
+            let producer = MeshProducer::new(&mesh, settings)?;
+            let fit = producer.fit();
+            let description = format!(
+                "{shown}: {} triangles{}, {}³ virtual voxels{}, distance index built in {:.1} s",
+                mesh.triangles().len(),
+                match mesh.degenerate_dropped {
+                    0 => String::new(),
+                    n => format!(" ({n} of zero area dropped)"),
+                },
+                producer.shape().virtual_resolution(),
+                if amplify.is_some() { ", amplified" } else { "" },
+                started.elapsed().as_secs_f64()
+            );
+            let index_bytes = producer.field().heap_bytes();
+            let _ = extent;
+            Ok(GeometrySource {
+                producer: GeometryProducer::Mesh(producer),
+                value_range: [0.0, 1.0],
+                default_surfaces: vec![IsoSurface { value: 0.5, color: [0.85, 0.78, 0.68], opacity: 1.0 }],
+                transfer_function: mesh_transfer_function(),
+                placement: placement(fit),
+                camera: frame_box(lower, upper, args.width, args.height, GEOMETRY_VIEW_DIRECTION, [0.0, 1.0, 0.0]),
+                index_bytes,
+                description,
+            })
+        }
+        RawGeometry::Particles(raw) => {
+            if args.amplify.is_some() {
+                bail!("--amplify applies to meshes; {shown} holds particles");
+            }
+            let molecular = is_molecular(path);
+            let particles = ParticleSet::new(raw).with_context(|| format!("in {shown}"))?;
+            let settings = ParticleTreeSettings {
+                resolution: args.resolution,
+                smoothing_scale: if molecular { 2.0 } else { 1.0 },
+                ..ParticleTreeSettings::default()
+            };
+            let producer = ParticleProducer::new(&particles, settings)?;
+            let (lower, upper) = particles.bounds();
+            let value_range = producer.value_range();
+            let default_surfaces = if molecular {
+                // An isolated atom's density (unit mass, kernel support 2r) crosses 2/(π(2r)³) at its radius r:
+                // the surface of the median atom, as VMD's QuickSurf draws it.
+                let mut radii = particles.smoothing().to_vec();
+                let middle = radii.len() / 2;
+                radii.select_nth_unstable_by(middle, f32::total_cmp);
+                let h = 2.0 * f64::from(radii[middle]);
+                let value = (2.0 / (std::f64::consts::PI * h * h * h)).min(value_range[1] * 0.5);
+                vec![IsoSurface { value, color: [0.55, 0.7, 0.95], opacity: 1.0 }]
+            } else {
+                Vec::new()
+            };
+            let description = format!(
+                "{shown}: {} particles, {}³ virtual voxels, grid built in {:.1} s; density 0 to {:.4e}",
+                particles.len(),
+                producer.shape().virtual_resolution(),
+                started.elapsed().as_secs_f64(),
+                value_range[1]
+            );
+            Ok(GeometrySource {
+                index_bytes: producer.heap_bytes(),
+                placement: placement(producer.fit()),
+                producer: GeometryProducer::Particles(producer),
+                value_range,
+                default_surfaces,
+                transfer_function: particle_transfer_function(value_range[1]),
+                camera: frame_box(lower, upper, args.width, args.height, GEOMETRY_VIEW_DIRECTION, [0.0, 1.0, 0.0]),
+                description,
+            })
+        }
+    }
+}
+
+/// The tree's unit cube in file units.
+fn placement(fit: UnitCubeFit) -> VolumePlacement {
+    VolumePlacement::cube(fit.origin, fit.size)
+}
+
+/// A mesh as a volume: a soft solid (values above ½ are inside).
+fn mesh_transfer_function() -> TransferFunction {
+    TransferFunction::new(
+        vec![[0.0, 0.0, 0.0, 0.0, 0.0], [0.45, 0.85, 0.6, 0.4, 0.0], [0.6, 0.9, 0.8, 0.7, 0.6], [1.0, 1.0, 0.95, 0.9, 0.8]],
+        None,
+    )
+    .expect("the built-in transfer function is valid")
+}
+
+/// Particle density: transparent where sparse, warm and opaque where dense.
+fn particle_transfer_function(max_density: f64) -> TransferFunction {
+    let at = |f: f64| max_density * f;
+    TransferFunction::new(
+        vec![
+            [0.0, 0.0, 0.0, 0.0, 0.0],
+            [at(0.05), 0.2, 0.3, 0.8, 0.0],
+            [at(0.3), 0.9, 0.5, 0.2, 0.08],
+            [at(1.0), 1.0, 0.95, 0.8, 0.4],
+        ],
+        None,
+    )
+    .expect("the built-in transfer function is valid")
+}
