@@ -58,8 +58,7 @@ pub struct MeshDistance {
 impl MeshDistance {
     /// Places `mesh` in the unit cube by `fit` and builds its hierarchy and pseudo-normals.
     pub fn new(mesh: &TriangleMesh, fit: UnitCubeFit) -> MeshDistance {
-        let positions: Vec<DVec3> =
-            mesh.positions().iter().map(|p| fit.to_unit(p.map(f64::from))).collect();
+        let positions: Vec<DVec3> = mesh.positions().iter().map(|p| fit.to_unit(p.map(f64::from))).collect();
         let triangles = mesh.triangles().to_vec();
         let corners = |t: &[u32; 3]| t.map(|i| positions[i as usize]);
         let face_normals: Vec<DVec3> = triangles
@@ -105,6 +104,22 @@ impl MeshDistance {
     /// `max_distance`; `None` otherwise.
     pub fn signed_distance_within(&self, p: DVec3, max_distance: f64) -> Option<f64> {
         let closest = self.bvh.closest_point(&self.positions, &self.triangles, p, max_distance)?;
+        Some(self.signed(p, closest))
+    }
+
+    /// The hierarchy's leaves within `reach` of the box `lower..upper` (see [`Self::signed_distance_in_leaves`]).
+    pub fn leaves_near(&self, lower: DVec3, upper: DVec3, reach: f64, leaves: &mut Vec<u32>) {
+        self.bvh.leaves_near(lower, upper, reach, leaves);
+    }
+
+    /// [`Self::signed_distance_within`] searching only `leaves`, gathered for a box holding `p` with a reach of at
+    /// least `max_distance`.
+    pub fn signed_distance_in_leaves(&self, leaves: &[u32], p: DVec3, max_distance: f64) -> Option<f64> {
+        let closest = self.bvh.closest_point_in_leaves(&self.positions, &self.triangles, leaves, p, max_distance)?;
+        Some(self.signed(p, closest))
+    }
+
+    fn signed(&self, p: DVec3, closest: crate::triangle_bvh::ClosestPoint) -> f64 {
         let t = closest.triangle as usize;
         let normal = match closest.feature {
             TriangleFeature::Face => self.face_normals[t],
@@ -112,7 +127,11 @@ impl MeshDistance {
             TriangleFeature::Vertex(v) => self.vertex_normals[self.triangles[t][v as usize] as usize],
         };
         let distance = closest.distance_squared.sqrt();
-        Some(if (p - closest.point).dot(normal) < 0.0 { -distance } else { distance })
+        if (p - closest.point).dot(normal) < 0.0 {
+            -distance
+        } else {
+            distance
+        }
     }
 
     /// Signed distance from unit-cube point `p` to the mesh (negative inside).

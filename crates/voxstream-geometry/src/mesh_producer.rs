@@ -167,13 +167,18 @@ impl Producer for MeshProducer {
         // distance is 1-Lipschitz, so the surface cannot pass between two points whose distances sum to more than
         // the step between them, and `slack` ≥ band/2 > half a voxel. Only the first voxel needs a full search.
         debug_assert!(self.settings.band_voxels > 1.0);
+        // The triangles that can come within `slack` of any voxel, gathered once for the brick.
+        let first = voxel_centre(&self.shape, &key, 0, 0, 0);
+        let last = voxel_centre(&self.shape, &key, b as u32 - 1, b as u32 - 1, b as u32 - 1);
+        let mut leaves = Vec::new();
+        self.field.leaves_near(first, last, slack, &mut leaves);
         let mut inside = vec![false; b * b * b];
         let mut index = 0;
         for k in 0..b {
             for j in 0..b {
                 for i in 0..b {
                     let p = voxel_centre(&self.shape, &key, i as u32, j as u32, k as u32);
-                    let value = match self.field.signed_distance_within(p, slack) {
+                    let value = match self.field.signed_distance_in_leaves(&leaves, p, slack) {
                         Some(distance) => {
                             inside[index] = distance < 0.0;
                             (0.5 - self.displaced(p, distance, key.level) / band).clamp(0.0, 1.0)
@@ -293,7 +298,10 @@ mod tests {
             let band = producer.band(level);
             let per_axis = shape.nodes_per_axis(level);
             for index in (0..per_axis.pow(3)).step_by(7) {
-                let key = NodeKey { level, ijk: [index % per_axis, index / per_axis % per_axis, index / per_axis / per_axis] };
+                let key = NodeKey {
+                    level,
+                    ijk: [index % per_axis, index / per_axis % per_axis, index / per_axis / per_axis],
+                };
                 let oracle = producer.oracle(key);
                 if oracle.is_some() && index % 5 != 0 {
                     continue;

@@ -145,9 +145,8 @@ impl ParticleProducer {
         // The margin keeps every kernel inside the cube; a huge smoothing length only makes the field smoother.
         let max_support = support.iter().copied().fold(0.0, f64::max);
         let min_support = support.iter().copied().fold(f64::INFINITY, f64::min);
-        let resolution = settings
-            .resolution
-            .unwrap_or_else(|| (4.0 / min_support.max(1e-9)).clamp(256.0, 8192.0) as u64);
+        let resolution =
+            settings.resolution.unwrap_or_else(|| (4.0 / min_support.max(1e-9)).clamp(256.0, 8192.0) as u64);
         let bricks = resolution.div_ceil(u64::from(settings.brick_size)).max(1);
         let max_level = 64 - (bricks - 1).leading_zeros();
         let shape = TreeShape::new(2, settings.brick_size, max_level)?;
@@ -207,10 +206,8 @@ impl ParticleProducer {
             max_density: 1.0,
             total_mass,
         };
-        let max_density = (0..count)
-            .into_par_iter()
-            .map(|i| producer.density(producer.positions[i], 0.0))
-            .reduce(|| 0.0, f64::max);
+        let max_density =
+            (0..count).into_par_iter().map(|i| producer.density(producer.positions[i], 0.0)).reduce(|| 0.0, f64::max);
         producer.max_density = if max_density > 0.0 { max_density } else { 1.0 };
         Ok(producer)
     }
@@ -417,7 +414,8 @@ mod tests {
         let mut voxels = vec![0u16; shape.voxels_per_brick()];
         let mut sum = 0.0;
         for index in 0..per_axis.pow(3) {
-            let key = NodeKey { level, ijk: [index % per_axis, index / per_axis % per_axis, index / per_axis / per_axis] };
+            let key =
+                NodeKey { level, ijk: [index % per_axis, index / per_axis % per_axis, index / per_axis / per_axis] };
             if producer.oracle(key).is_some() {
                 continue;
             }
@@ -494,7 +492,10 @@ mod tests {
         for level in 1..4u32 {
             let per_axis = shape.nodes_per_axis(level);
             for index in 0..per_axis.pow(3) {
-                let key = NodeKey { level, ijk: [index % per_axis, index / per_axis % per_axis, index / per_axis / per_axis] };
+                let key = NodeKey {
+                    level,
+                    ijk: [index % per_axis, index / per_axis % per_axis, index / per_axis / per_axis],
+                };
                 if producer.oracle(key) == Some(0.0) {
                     empty += 1;
                     let produced = producer.produce(key, &mut voxels).unwrap();

@@ -35,7 +35,8 @@ impl ParticleSet {
         if count == 0 {
             return Err(GeometryError::Invalid { message: "the file holds no particles".into() });
         }
-        for (name, column) in [("smoothing lengths", &raw.smoothing), ("masses", &raw.masses), ("values", &raw.values)] {
+        for (name, column) in [("smoothing lengths", &raw.smoothing), ("masses", &raw.masses), ("values", &raw.values)]
+        {
             if !column.is_empty() && column.len() != count {
                 return Err(GeometryError::Invalid {
                     message: format!("{} {name} for {count} particles", column.len()),

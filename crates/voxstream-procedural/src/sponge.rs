@@ -26,7 +26,7 @@ impl MengerSponge {
     pub fn new(brick_size: u32, max_level: u32) -> Result<MengerSponge, voxstream_core::CoreError> {
         let mut digits = 0;
         let mut m = brick_size;
-        while m > 1 && m % 3 == 0 {
+        while m > 1 && m.is_multiple_of(3) {
             m /= 3;
             digits += 1;
         }

@@ -16,9 +16,11 @@ pub struct Cli {
 }
 
 /// Subcommands.
+// Parsed once per run: the size of the largest variant costs nothing worth a Box.
+#[allow(clippy::large_enum_variant)]
 #[derive(Subcommand, Debug)]
 pub enum Command {
-    /// Render a built-in scene or a store to PNG.
+    /// Render a built-in scene, a store, or a mesh or particle file to PNG.
     Render(RenderArgs),
     /// Import a volume file into a multiresolution OME-Zarr brick store.
     Import(ImportArgs),

@@ -188,7 +188,12 @@ fn placement(fit: UnitCubeFit) -> VolumePlacement {
 /// A mesh as a volume: a soft solid (values above ½ are inside).
 fn mesh_transfer_function() -> TransferFunction {
     TransferFunction::new(
-        vec![[0.0, 0.0, 0.0, 0.0, 0.0], [0.45, 0.85, 0.6, 0.4, 0.0], [0.6, 0.9, 0.8, 0.7, 0.6], [1.0, 1.0, 0.95, 0.9, 0.8]],
+        vec![
+            [0.0, 0.0, 0.0, 0.0, 0.0],
+            [0.45, 0.85, 0.6, 0.4, 0.0],
+            [0.6, 0.9, 0.8, 0.7, 0.6],
+            [1.0, 1.0, 0.95, 0.9, 0.8],
+        ],
         None,
     )
     .expect("the built-in transfer function is valid")

@@ -24,6 +24,7 @@ use crate::error::GeometryError;
 use crate::particles::RawParticles;
 use crate::triangle_mesh::RawMesh;
 
+pub mod elements;
 pub mod gro;
 pub mod obj;
 pub mod off;
@@ -76,9 +77,9 @@ pub fn read_file_bytes(path: &Path) -> Result<Vec<u8>, GeometryError> {
     let mut bytes = Vec::new();
     if gz {
         let mut decoder = flate2::read::MultiGzDecoder::new(std::io::BufReader::new(file)).take(MAX_FILE_BYTES + 1);
-        decoder.read_to_end(&mut bytes).map_err(|error| {
-            GeometryError::format(path, None, format!("not a valid gzip file ({error})"))
-        })?;
+        decoder
+            .read_to_end(&mut bytes)
+            .map_err(|error| GeometryError::format(path, None, format!("not a valid gzip file ({error})")))?;
         if bytes.len() as u64 > MAX_FILE_BYTES {
             return Err(GeometryError::Unsupported {
                 path: path.to_path_buf(),

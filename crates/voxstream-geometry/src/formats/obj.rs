@@ -1,11 +1,164 @@
-//! (being written)
+//! Wavefront OBJ geometry (<http://paulbourke.net/dataformats/obj/>): `v x y z [w]` vertices (further numbers,
+//! such as the vertex colours some tools append, are read past; `w` is ignored) and `f` faces whose corners are
+//! `i`, `i/t`, `i//n` or `i/t/n`, with 1-based or negative (relative: `-1` is the latest vertex) indices; polygons
+//! are fanned into triangles `(0, i, i+1)`. Every other statement (`vn`, `vt`, `g`, `o`, `usemtl`, `mtllib`, `s`,
+//! `l`, `p`, curves and surfaces …) and every comment is ignored; materials are never opened.
+//!
+//! Not read: line continuations (`\` at a line's end), free-form geometry, texture coordinates and normals.
+//!
+//! Hand-written rather than the `tobj` crate: only positions and face corners are needed (a screenful of code), and
+//! this reader has to meet the project's hostile-input rules itself: no panic on any input (tobj has panicked on an
+//! out-of-range face index before, Twinklebear/tobj#18), errors that name the line (tobj's `LoadError` carries none),
+//! no file opened besides the one given (tobj resolves `mtllib` through a loader that must be stubbed out), and one
+//! mesh rather than tobj's per-object models to merge again.
 
 use std::path::Path;
 
 use crate::error::GeometryError;
 use crate::triangle_mesh::RawMesh;
 
-/// Parses a `obj` file.
-pub fn parse(_bytes: &[u8], path: &Path) -> Result<RawMesh, GeometryError> {
-    Err(GeometryError::Unsupported { path: path.to_path_buf(), message: "not yet".into() })
+/// Parses an OBJ file's vertices and faces.
+pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh, GeometryError> {
+    let mut mesh = RawMesh::default();
+    let mut faces = 0u64;
+    for (number, line) in bytes.split(|&b| b == b'\n').enumerate() {
+        let number = number as u64 + 1;
+        let at = |message: String| GeometryError::format(path, Some(number), message);
+        let mut words = line.split(|b| b.is_ascii_whitespace()).filter(|w| !w.is_empty());
+        match words.next() {
+            Some(b"v") => {
+                let mut position = [0.0f32; 3];
+                for (axis, c) in position.iter_mut().enumerate() {
+                    let word = words.next().ok_or_else(|| {
+                        at(format!("vertex {} has {axis} coordinates: it needs 3", mesh.positions.len()))
+                    })?;
+                    *c = text(word).parse().map_err(|_| {
+                        at(format!("vertex {}: '{}' is not a number", mesh.positions.len(), shown(word)))
+                    })?;
+                }
+                mesh.positions.push(position);
+            }
+            Some(b"f") => {
+                let face = faces;
+                faces += 1;
+                // Fanned as read: (first, previous, this) from the third corner on.
+                let (mut first, mut previous, mut corners) = (0u32, 0u32, 0u64);
+                for word in words {
+                    let vertex =
+                        corner(word, mesh.positions.len()).map_err(|problem| at(format!("face {face} {problem}")))?;
+                    match corners {
+                        0 => first = vertex,
+                        1 => {}
+                        _ => mesh.triangles.push([first, previous, vertex]),
+                    }
+                    previous = vertex;
+                    corners += 1;
+                }
+                if corners < 3 {
+                    return Err(at(format!("face {face} uses {corners} vertices: a face needs at least 3")));
+                }
+            }
+            _ => {}
+        }
+    }
+    Ok(mesh)
+}
+
+/// The 0-based vertex index of a face corner (`i`, `i/t`, `i//n`, `i/t/n`), given the vertices read so far, or what
+/// is wrong with it (to follow "face 12 ").
+fn corner(word: &[u8], vertices: usize) -> Result<u32, String> {
+    let index = word.split(|&b| b == b'/').next().unwrap_or_default();
+    let index: i64 =
+        text(index).parse().map_err(|_| format!("has the corner '{}': not a vertex index", shown(word)))?;
+    let zero_based = match index {
+        0 => return Err("uses vertex 0: OBJ indices start at 1 (or count back from -1)".into()),
+        1.. => index - 1,
+        _ => {
+            let back = index.unsigned_abs();
+            if back > vertices as u64 {
+                return Err(format!("uses vertex {index}: only {vertices} vertices precede it"));
+            }
+            vertices as i64 - back as i64
+        }
+    };
+    u32::try_from(zero_based).map_err(|_| format!("uses vertex {index}: voxstream reads at most 2^32 vertices"))
+}
+
+/// A word as text for parsing (words that are not UTF-8 parse as nothing).
+fn text(word: &[u8]) -> &str {
+    std::str::from_utf8(word).unwrap_or("\u{fffd}")
+}
+
+/// A word for an error message, cut to 40 characters.
+fn shown(word: &[u8]) -> String {
+    let text = String::from_utf8_lossy(word);
+    let mut chars = text.chars();
+    let mut out: String = chars.by_ref().take(40).collect();
+    if chars.next().is_some() {
+        out.push('…');
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn path() -> &'static Path {
+        Path::new("test.obj")
+    }
+
+    fn error(text: &str) -> String {
+        parse(text.as_bytes(), path()).unwrap_err().to_string()
+    }
+
+    const SQUARE: &str =
+        "# a unit square and a triangle\r\nmtllib missing.mtl\r\no square\r\nv 0 0 0\r\nv 1 0 0 1.0\r\n\
+                          vt 0 0\r\nvn 0 0 1\r\nv 1 1 0 0.5 0.5 0.5\r\nv 0 1 0\r\ng top\r\nusemtl red\r\ns off\r\n\
+                          f 1/1/1 2/1/1 3//1 4/1\r\nv 0 0 1\r\nf -5 -4 -1\r\nl 1 2\r\np 3\r\n";
+
+    #[test]
+    fn reads_slashed_and_negative_indices() {
+        let mesh = parse(SQUARE.as_bytes(), path()).unwrap();
+        assert_eq!(
+            mesh.positions,
+            vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+        );
+        assert_eq!(mesh.triangles, vec![[0, 1, 2], [0, 2, 3], [0, 1, 4]]);
+    }
+
+    #[test]
+    fn errors_name_the_line_and_problem() {
+        let e = error("v 0 0 0\nv 1 0 0\nf 1 2\n");
+        assert!(e.ends_with("test.obj line 3: face 0 uses 2 vertices: a face needs at least 3"), "{e}");
+        let e = error("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf -1 -2 -4\n");
+        assert!(e.ends_with("line 5: face 1 uses vertex -4: only 3 vertices precede it"), "{e}");
+        let e = error("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n");
+        assert!(e.ends_with("line 4: face 0 uses vertex 0: OBJ indices start at 1 (or count back from -1)"), "{e}");
+        let e = error("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 /3\n");
+        assert!(e.ends_with("line 4: face 0 has the corner '/3': not a vertex index"), "{e}");
+        let e = error("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4294967297\n");
+        assert!(e.ends_with("face 0 uses vertex 4294967297: voxstream reads at most 2^32 vertices"), "{e}");
+        let e = error("v 0 0 0\nv 1 zero 0\n");
+        assert!(e.ends_with("line 2: vertex 1: 'zero' is not a number"), "{e}");
+        let e = error("v 0 0\n");
+        assert!(e.ends_with("line 1: vertex 0 has 2 coordinates: it needs 3"), "{e}");
+        let e = error("v 0 0 0\nf -9223372036854775808 1 1\n");
+        assert!(e.ends_with("uses vertex -9223372036854775808: only 1 vertices precede it"), "{e}");
+    }
+
+    #[test]
+    fn no_input_panics() {
+        let file = SQUARE.as_bytes();
+        for cut in 0..file.len() {
+            let _ = parse(&file[..cut], path());
+        }
+        for at in 0..file.len() {
+            for byte in [0u8, b'\n', b' ', b'9', b'-', b'/', 0xff] {
+                let mut changed = file.to_vec();
+                changed[at] = byte;
+                let _ = parse(&changed, path());
+            }
+        }
+    }
 }

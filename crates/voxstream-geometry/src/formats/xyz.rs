@@ -1,11 +1,242 @@
-//! (being written)
+//! Particles as columns of text (`.xyz`, `.csv`, `.txt`): one particle a line, `x y z [h] [value]`, separated by
+//! blanks or by commas.
+//!
+//! `#` starts a comment (to the end of the line); blank lines are skipped. If the first line that is not a comment
+//! is not all numbers, it names the columns: `x`, `y` and `z` (required), a smoothing length (`h`, `hsml`, `radius`,
+//! `smoothing_length`), a mass (`mass`, `m`), and the first other column becomes the scalar attribute under its
+//! name; further columns are ignored (names in any letter case, CSV quotes removed). Without such a header, 3
+//! columns are positions, a 4th the smoothing length and a 5th a scalar named `value`. Every line must have as many
+//! columns as the first; in a line with commas, an empty field is an error.
+//!
+//! Not read: the chemists' XYZ format (an atom count, a comment line, then `element x y z`), which is recognised
+//! and refused with that explanation; quoted fields containing commas.
 
 use std::path::Path;
 
 use crate::error::GeometryError;
 use crate::particles::RawParticles;
 
-/// Parses a `xyz` file.
-pub fn parse(_bytes: &[u8], path: &Path) -> Result<RawParticles, GeometryError> {
-    Err(GeometryError::Unsupported { path: path.to_path_buf(), message: "not yet".into() })
+/// What a named column or array holds (shared with the VTK readers).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum ColumnRole {
+    /// A smoothing length or radius.
+    Smoothing,
+    /// A mass.
+    Mass,
+    /// Anything else: a candidate for the scalar attribute.
+    Value,
+}
+
+/// The role of a column or array named `name` (letter case ignored).
+pub(super) fn column_role(name: &str) -> ColumnRole {
+    match name.trim().to_ascii_lowercase().as_str() {
+        "h" | "hsml" | "radius" | "smoothing_length" | "smoothinglength" => ColumnRole::Smoothing,
+        "m" | "mass" => ColumnRole::Mass,
+        _ => ColumnRole::Value,
+    }
+}
+
+/// Which column holds what.
+struct Layout {
+    columns: usize,
+    position: [usize; 3],
+    smoothing: Option<usize>,
+    mass: Option<usize>,
+    value: Option<(usize, String)>,
+}
+
+impl Layout {
+    fn unnamed(columns: usize) -> Option<Layout> {
+        if !(3..=5).contains(&columns) {
+            return None;
+        }
+        Some(Layout {
+            columns,
+            position: [0, 1, 2],
+            smoothing: (columns >= 4).then_some(3),
+            mass: None,
+            value: (columns == 5).then(|| (4, "value".to_string())),
+        })
+    }
+
+    fn named(names: &[&str]) -> Result<Layout, String> {
+        let mut position = [None; 3];
+        let (mut smoothing, mut mass, mut value) = (None, None, None);
+        for (column, raw) in names.iter().enumerate() {
+            let name = raw.trim().trim_matches('"').trim_matches('\'').trim();
+            let axis = match name.to_ascii_lowercase().as_str() {
+                "x" => Some(0),
+                "y" => Some(1),
+                "z" => Some(2),
+                _ => None,
+            };
+            if let Some(axis) = axis {
+                if position[axis].is_some() {
+                    return Err(format!("the header names column {name} twice"));
+                }
+                position[axis] = Some(column);
+                continue;
+            }
+            match column_role(name) {
+                ColumnRole::Smoothing if smoothing.is_none() => smoothing = Some(column),
+                ColumnRole::Mass if mass.is_none() => mass = Some(column),
+                ColumnRole::Value if value.is_none() => value = Some((column, name.to_string())),
+                _ => {}
+            }
+        }
+        let [Some(x), Some(y), Some(z)] = position else {
+            let missing: Vec<&str> =
+                ["x", "y", "z"].iter().zip(position).filter(|(_, c)| c.is_none()).map(|(n, _)| *n).collect();
+            return Err(format!(
+                "the header line ({}) has no column named {}: name the position columns x, y and z",
+                names.join(" "),
+                missing.join(", ")
+            ));
+        };
+        Ok(Layout { columns: names.len(), position: [x, y, z], smoothing, mass, value })
+    }
+}
+
+/// The fields of a line with its comment removed: split at commas if it has any, otherwise at blanks.
+fn fields(line: &str) -> Vec<&str> {
+    if line.contains(',') {
+        line.split(',').map(str::trim).collect()
+    } else {
+        line.split_whitespace().collect()
+    }
+}
+
+/// Parses columns of text.
+pub fn parse(bytes: &[u8], path: &Path) -> Result<RawParticles, GeometryError> {
+    let mut raw = RawParticles::default();
+    let mut layout: Option<Layout> = None;
+    let mut first_line = 0u64;
+    for (line, number) in bytes.split(|&b| b == b'\n').zip(1u64..) {
+        let bad = |message: String| GeometryError::format(path, Some(number), message);
+        let line = std::str::from_utf8(line).map_err(|_| bad("not text (invalid UTF-8)".into()))?;
+        let line = line.split('#').next().unwrap_or("").trim();
+        if line.is_empty() {
+            continue;
+        }
+        let fields = fields(line);
+        if let Some(empty) = fields.iter().position(|f| f.is_empty()) {
+            return Err(bad(format!("field {} is empty", empty + 1)));
+        }
+        let layout = match &layout {
+            Some(layout) => layout,
+            None => {
+                first_line = number;
+                let numeric = fields.iter().all(|f| f.parse::<f64>().is_ok());
+                if !numeric {
+                    layout = Some(Layout::named(&fields).map_err(bad)?);
+                    continue;
+                }
+                if let [count] = fields.as_slice() {
+                    if count.parse::<u64>().is_ok() {
+                        return Err(bad(format!(
+                            "a single number ({count}): this looks like a chemists' XYZ file (atom count, comment, \
+                             element x y z), which is not read; write the columns x y z [h] [value] instead"
+                        )));
+                    }
+                }
+                layout.insert(Layout::unnamed(fields.len()).ok_or_else(|| {
+                    bad(format!(
+                        "{} columns: without a header line naming them, a line holds 3 to 5 (x y z [h] [value])",
+                        fields.len()
+                    ))
+                })?)
+            }
+        };
+        if fields.len() != layout.columns {
+            return Err(bad(format!(
+                "expected {} columns (as on line {first_line}), found {}",
+                layout.columns,
+                fields.len()
+            )));
+        }
+        let number_at = |column: usize| -> Result<f64, GeometryError> {
+            let text = fields.get(column).copied().unwrap_or("");
+            text.parse::<f64>().map_err(|_| bad(format!("column {}: '{text}' is not a number", column + 1)))
+        };
+        let [x, y, z] = layout.position;
+        raw.positions.push([number_at(x)?, number_at(y)?, number_at(z)?]);
+        if let Some(c) = layout.smoothing {
+            raw.smoothing.push(number_at(c)? as f32);
+        }
+        if let Some(c) = layout.mass {
+            raw.masses.push(number_at(c)? as f32);
+        }
+        if let Some((c, name)) = &layout.value {
+            raw.values.push(number_at(*c)? as f32);
+            if raw.value_name.is_empty() {
+                raw.value_name.clone_from(name);
+            }
+        }
+    }
+    Ok(raw)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse_str(text: &str) -> Result<RawParticles, GeometryError> {
+        parse(text.as_bytes(), Path::new("p.xyz"))
+    }
+
+    fn error(text: &str) -> String {
+        parse_str(text).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn three_four_and_five_columns_without_header() {
+        let p = parse_str("# particles\n0 0 0\n1 2 3 # the second\n\n").unwrap();
+        assert_eq!(p.positions, vec![[0.0; 3], [1.0, 2.0, 3.0]]);
+        assert!(p.smoothing.is_empty() && p.masses.is_empty() && p.values.is_empty());
+        let p = parse_str("0 0 0 0.5\n1 1 1 0.25\n").unwrap();
+        assert_eq!(p.smoothing, vec![0.5, 0.25]);
+        let p = parse_str("0\t0 0 0.5 7\r\n1 1 1 0.25 -1e3\r\n").unwrap();
+        assert_eq!(p.smoothing, vec![0.5, 0.25]);
+        assert_eq!(p.values, vec![7.0, -1000.0]);
+        assert_eq!(p.value_name, "value");
+    }
+
+    #[test]
+    fn commas() {
+        let p = parse_str("1.5, 2, 3\n4,5,6\n").unwrap();
+        assert_eq!(p.positions, vec![[1.5, 2.0, 3.0], [4.0, 5.0, 6.0]]);
+    }
+
+    #[test]
+    fn header_names_the_columns() {
+        let p = parse_str("# sph\nid,\"X\",y,z,Mass,hsml,temperature\n1,0,0,0,2,0.1,300\n2,1,1,1,3,0.2,400\n").unwrap();
+        assert_eq!(p.positions, vec![[0.0; 3], [1.0; 3]]);
+        assert_eq!(p.masses, vec![2.0, 3.0]);
+        assert_eq!(p.smoothing, vec![0.1, 0.2]);
+        // The first other column is the attribute.
+        assert_eq!(p.values, vec![1.0, 2.0]);
+        assert_eq!(p.value_name, "id");
+        let p = parse_str("z y x radius\n3 2 1 0.5\n").unwrap();
+        assert_eq!(p.positions, vec![[1.0, 2.0, 3.0]]);
+        assert_eq!(p.smoothing, vec![0.5]);
+        assert!(p.values.is_empty());
+    }
+
+    #[test]
+    fn errors_name_the_line_and_the_problem() {
+        let e = error("0 0 0\n1 1 1\n\n# c\n2 2\n");
+        assert_eq!(e, "p.xyz line 5: expected 3 columns (as on line 1), found 2");
+        assert_eq!(
+            error("0 0\n"),
+            "p.xyz line 1: 2 columns: without a header line naming them, a line holds 3 to 5 (x y z [h] [value])"
+        );
+        assert_eq!(error("0 0 0\n0 a 0\n"), "p.xyz line 2: column 2: 'a' is not a number");
+        assert_eq!(error("1,,2\n"), "p.xyz line 1: field 2 is empty");
+        assert!(error("x y h\n0 0 0\n").contains("line 1: the header line (x y h) has no column named z"));
+        assert!(error("x x y z\n").contains("names column x twice"));
+        assert!(error("2\nwater\nO 0 0 0\n").contains("chemists' XYZ"));
+        let e = parse(b"0 0 0\n0 0 \xff\n", Path::new("p.xyz")).unwrap_err().to_string();
+        assert_eq!(e, "p.xyz line 2: not text (invalid UTF-8)");
+        assert_eq!(parse_str("# nothing\n").unwrap(), RawParticles::default());
+    }
 }
