@@ -107,18 +107,6 @@ impl MeshDistance {
         Some(self.signed(p, closest))
     }
 
-    /// The hierarchy's leaves within `reach` of the box `lower..upper` (see [`Self::signed_distance_in_leaves`]).
-    pub fn leaves_near(&self, lower: DVec3, upper: DVec3, reach: f64, leaves: &mut Vec<u32>) {
-        self.bvh.leaves_near(lower, upper, reach, leaves);
-    }
-
-    /// [`Self::signed_distance_within`] searching only `leaves`, gathered for a box holding `p` with a reach of at
-    /// least `max_distance`.
-    pub fn signed_distance_in_leaves(&self, leaves: &[u32], p: DVec3, max_distance: f64) -> Option<f64> {
-        let closest = self.bvh.closest_point_in_leaves(&self.positions, &self.triangles, leaves, p, max_distance)?;
-        Some(self.signed(p, closest))
-    }
-
     fn signed(&self, p: DVec3, closest: crate::triangle_bvh::ClosestPoint) -> f64 {
         let t = closest.triangle as usize;
         let normal = match closest.feature {
@@ -135,9 +123,22 @@ impl MeshDistance {
     }
 
     /// Signed distance from unit-cube point `p` to the mesh (negative inside).
+    ///
+    /// Searches within a radius that doubles until a triangle is found: a search with a radius below twice the
+    /// distance prunes far better than one without a bound, which must first find some triangle to prune with (about
+    /// 20× faster inside the Stanford dragon's coils).
     pub fn signed_distance(&self, p: DVec3) -> f64 {
-        // A mesh has at least one triangle, so an unbounded search always finds one.
-        self.signed_distance_within(p, f64::INFINITY).unwrap_or(f64::INFINITY)
+        let mut radius = 1.0 / 1024.0;
+        loop {
+            if let Some(distance) = self.signed_distance_within(p, radius) {
+                return distance;
+            }
+            if !radius.is_finite() {
+                // A mesh has at least one triangle, so an unbounded search always finds one.
+                return f64::INFINITY;
+            }
+            radius = if radius > 16.0 { f64::INFINITY } else { radius * 2.0 };
+        }
     }
 
     /// Number of triangles.

@@ -13,8 +13,9 @@
 //!
 //! The oracle answers from one distance query at the node's centre: a node whose centre is farther from the surface
 //! than its half-diagonal plus half the band (plus the noise bound) is wholly outside (empty) or inside (solid).
-//! Within a brick, each voxel's search is bounded by the previous voxel's distance plus the step between them (the
-//! distance is 1-Lipschitz), which prunes the hierarchy to a few leaves.
+//! Within a brick, each voxel searches only within the band (plus the noise bound): beyond it the value is 0 or 1 and
+//! only the sign matters, which a voxel takes from its neighbour (the distance is 1-Lipschitz, so the surface cannot
+//! pass between two neighbours both farther from it than half a voxel). Only a brick's first voxel needs a full search.
 
 use std::sync::Arc;
 
@@ -167,18 +168,13 @@ impl Producer for MeshProducer {
         // distance is 1-Lipschitz, so the surface cannot pass between two points whose distances sum to more than
         // the step between them, and `slack` ≥ band/2 > half a voxel. Only the first voxel needs a full search.
         debug_assert!(self.settings.band_voxels > 1.0);
-        // The triangles that can come within `slack` of any voxel, gathered once for the brick.
-        let first = voxel_centre(&self.shape, &key, 0, 0, 0);
-        let last = voxel_centre(&self.shape, &key, b as u32 - 1, b as u32 - 1, b as u32 - 1);
-        let mut leaves = Vec::new();
-        self.field.leaves_near(first, last, slack, &mut leaves);
         let mut inside = vec![false; b * b * b];
         let mut index = 0;
         for k in 0..b {
             for j in 0..b {
                 for i in 0..b {
                     let p = voxel_centre(&self.shape, &key, i as u32, j as u32, k as u32);
-                    let value = match self.field.signed_distance_in_leaves(&leaves, p, slack) {
+                    let value = match self.field.signed_distance_within(p, slack) {
                         Some(distance) => {
                             inside[index] = distance < 0.0;
                             (0.5 - self.displaced(p, distance, key.level) / band).clamp(0.0, 1.0)

@@ -5,7 +5,8 @@
 //! [`LEAF_TRIANGLES`]), queried for every voxel a brick needs. The query is a depth-first search that visits the
 //! nearer child first and prunes boxes farther than the best distance so far; callers pass an upper bound on the
 //! distance (a neighbouring voxel's distance plus the step, the distance field being 1-Lipschitz), which prunes
-//! almost everything at once. Reichl (seed 004, ch. 7) voxelises triangles into bricks the same on-demand way; the
+//! almost everything at once. (Gathering the leaves near a brick once and searching only those per voxel was tried:
+//! no faster on the Stanford dragon, where a voxel's band already holds dozens of triangles.) Reichl (seed 004, ch. 7) voxelises triangles into bricks the same on-demand way; the
 //! closest-point-in-triangle test with feature classification is Ericson, *Real-Time Collision Detection* §5.1.5.
 
 use glam::DVec3;
@@ -125,61 +126,6 @@ impl TriangleBvh {
             stack[depth] = far;
             stack[depth + 1] = near;
             depth += 2;
-        }
-        best
-    }
-
-    /// Appends to `leaves` every leaf whose box comes within `reach` of the box `lower..upper`: a brick gathers
-    /// them once, then each of its voxels searches only those ([`Self::closest_point_in_leaves`]).
-    pub fn leaves_near(&self, lower: DVec3, upper: DVec3, reach: f64, leaves: &mut Vec<u32>) {
-        let reach_squared = reach * reach;
-        let mut stack = vec![0u32];
-        while let Some(index) = stack.pop() {
-            let node = &self.nodes[index as usize];
-            let mut gap = 0.0;
-            for a in 0..3 {
-                let d = (f64::from(node.lower[a]) - upper[a]).max(lower[a] - f64::from(node.upper[a])).max(0.0);
-                gap += d * d;
-            }
-            if gap > reach_squared {
-                continue;
-            }
-            if node.count > 0 {
-                leaves.push(index);
-            } else {
-                stack.push(node.first);
-                stack.push(index + 1);
-            }
-        }
-    }
-
-    /// [`Self::closest_point`] restricted to the triangles of `leaves` (from [`Self::leaves_near`]); exact for any
-    /// point whose search radius stays within the gathered reach.
-    pub fn closest_point_in_leaves(
-        &self,
-        positions: &[DVec3],
-        triangles: &[[u32; 3]],
-        leaves: &[u32],
-        p: DVec3,
-        max_distance: f64,
-    ) -> Option<ClosestPoint> {
-        let mut best: Option<ClosestPoint> = None;
-        let mut best_squared = max_distance * max_distance;
-        for &leaf in leaves {
-            let node = &self.nodes[leaf as usize];
-            if box_distance_squared(node, p) >= best_squared {
-                continue;
-            }
-            let first = node.first as usize;
-            for &t in &self.order[first..first + node.count as usize] {
-                let [a, b, c] = triangles[t as usize].map(|i| positions[i as usize]);
-                let (point, feature) = closest_on_triangle(p, a, b, c);
-                let distance_squared = (point - p).length_squared();
-                if distance_squared < best_squared {
-                    best_squared = distance_squared;
-                    best = Some(ClosestPoint { point, distance_squared, triangle: t, feature });
-                }
-            }
         }
         best
     }
@@ -342,12 +288,6 @@ mod tests {
                 .fold(f64::INFINITY, f64::min);
             let found = bvh.closest_point(&positions, &triangles, p, f64::INFINITY).unwrap();
             assert_eq!(found.distance_squared, brute, "at {p}");
-            // The same from the leaves gathered around a small box holding `p`.
-            let mut leaves = Vec::new();
-            let reach = brute.sqrt() * 1.01 + 1e-9;
-            bvh.leaves_near(p - DVec3::splat(0.01), p + DVec3::splat(0.01), reach, &mut leaves);
-            let gathered = bvh.closest_point_in_leaves(&positions, &triangles, &leaves, p, reach).unwrap();
-            assert_eq!(gathered.distance_squared, brute);
             // A bound just above the distance still finds it; one below finds nothing.
             assert!(bvh.closest_point(&positions, &triangles, p, brute.sqrt() * 1.0001 + 1e-12).is_some());
             assert!(bvh.closest_point(&positions, &triangles, p, brute.sqrt() * 0.9999).is_none());
