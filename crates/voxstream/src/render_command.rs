@@ -94,6 +94,9 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         };
         return render_source(args, source, &budget);
     }
+    if is_geometry_file_name(path) && !path.exists() {
+        bail!("mesh or particle file {} not found (check the path)", path.display());
+    }
     check_store_path(path, "render")?;
     check_geometry_flags(args, &args.source)?;
     let cache_bytes = budget.store_cache_bytes();

@@ -216,28 +216,40 @@ fn read_mesh(path: &Path) -> TriangleMesh {
 #[test]
 fn the_bunny_surface_covers_the_pixels_its_triangles_cover() {
     let Some(dir) = real_data_dir() else { return };
-    let file = dir.join("bunny00.off");
-    let mesh = read_mesh(&file);
+    let views = [("front", DVec3::new(0.0, 0.2, 1.0)), ("side", DVec3::new(1.0, 0.5, -0.3))];
+    silhouettes_match(&dir.join("bunny00.off"), &views);
+}
+
+#[test]
+fn the_dragon_surface_covers_the_pixels_its_triangles_cover() {
+    // The Stanford dragon: 871,414 triangles (108 of zero area), scanned, with holes.
+    let Some(dir) = real_data_dir() else { return };
+    silhouettes_match(&dir.join("dragon_vrip.ply.gz"), &[("three-quarter", DVec3::new(0.6, 0.4, 0.7))]);
+}
+
+fn silhouettes_match(file: &Path, views: &[(&str, DVec3)]) {
+    let mesh = read_mesh(file);
     let (lower, upper) = mesh.bounds();
     let centre = (DVec3::from(lower) + DVec3::from(upper)) * 0.5;
     let extent = (DVec3::from(upper) - DVec3::from(lower)).max_element();
     let size = 256;
-    for (view, direction) in [("front", DVec3::new(0.0, 0.2, 1.0)), ("side", DVec3::new(1.0, 0.5, -0.3))] {
+    let name = file.file_name().unwrap().to_string_lossy().into_owned();
+    for &(view, direction) in views {
         let eye = centre + direction.normalize() * extent * 2.2;
         let fov = 32.0;
-        let out = scratch("silhouette").join(format!("bunny-{view}.png"));
+        let out = scratch("silhouette").join(format!("{name}-{view}.png"));
         let text = |v: DVec3| format!("{},{},{}", v.x, v.y, v.z);
         let (eye_text, target_text, fov_text) = (text(eye), text(centre), fov.to_string());
         let extra = ["--eye", &eye_text, "--target", &target_text, "--up", "0,1,0", "--fov", &fov_text];
         let extra = [&extra[..], &["--background", "0,1,0"]].concat();
-        let (_, _, image) = render(&file, size, &extra, &out);
+        let (_, _, image) = render(file, size, &extra, &out);
         let drawn: Vec<bool> = image.chunks_exact(3).map(|p| p != [0, 255, 0]).collect();
         let reference = rasterise(mesh.positions(), mesh.triangles(), eye, centre, fov, size);
         let both = drawn.iter().zip(&reference).filter(|(a, b)| **a && **b).count();
         let either = drawn.iter().zip(&reference).filter(|(a, b)| **a || **b).count();
         let iou = both as f64 / either as f64;
-        eprintln!("bunny {view}: IoU {iou:.4} over {either} pixels");
-        assert!(either > 5000, "the bunny fills a good part of the image");
+        eprintln!("{name} {view}: IoU {iou:.4} over {either} pixels");
+        assert!(either > 5000, "the mesh fills a good part of the image");
         assert!(iou >= 0.98, "{view}: silhouette IoU {iou:.4} < 0.98");
     }
 }
@@ -317,4 +329,77 @@ fn the_bunny_distance_agrees_with_openvdb() {
     assert!(worst < 0.6, "every distance within 0.6 voxel of OpenVDB's: {worst}");
     // The bunny has holes in its base: there OpenVDB's flood fill and our pseudo-normals may take different sides.
     assert!(sign_disagreements * 1000 < compared, "{sign_disagreements} of {compared} signs differ");
+}
+
+/// Runs `voxstream render` expecting one `error:` line containing `needle`, a non-zero exit and no panic.
+fn assert_fails(args: &[&str], needle: &str) {
+    let output = run(args);
+    let text = stderr(&output);
+    assert!(!output.status.success(), "{args:?} succeeded");
+    assert!(!text.contains("panicked"), "{args:?} panicked: {text}");
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines.len(), 1, "{args:?}: one line expected, got {text}");
+    assert!(lines[0].starts_with("error: ") && lines[0].contains(needle), "{args:?}: {text}");
+}
+
+#[test]
+fn bad_geometry_files_get_one_clear_line() {
+    let dir = scratch("bad");
+    let mut stl = vec![0u8; 80];
+    stl.extend(1000u32.to_le_bytes());
+    stl.extend([0u8; 100]);
+    let files: [(&str, &[u8], &str); 7] = [
+        ("nan.obj", b"v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n", "vertex 1 has a non-finite coordinate"),
+        (
+            "huge.ply",
+            b"ply\nformat ascii 1.0\nelement vertex 99999999999\nproperty float x\nproperty float y\nproperty float z\n\
+              end_header\n",
+            "header announces 99999999999 vertices but only 0 bytes follow",
+        ),
+        ("truncated.stl", &stl, "a binary STL of 1000 triangles is 50084 bytes long, not 184"),
+        ("flat.off", b"OFF\n3 1 0\n0 0 0\n1 1 1\n2 2 2\n3 0 1 2\n", "all 1 triangles of the mesh have zero area"),
+        ("empty.xyz", b"", "no particles"),
+        ("short.gro", b"title\n   99\n    1SOL     OW    1   0.126   1.624   1.679\n", "line 2: atom count 99"),
+        ("bad.xyz", b"0 0 0\n1 1\n", "line 2"),
+    ];
+    for (name, bytes, needle) in files {
+        let path = dir.join(name);
+        std::fs::write(&path, bytes).unwrap();
+        assert_fails(&["render", path.to_str().unwrap(), "--out", dir.join("x.png").to_str().unwrap()], needle);
+        assert!(!dir.join("x.png").exists(), "{name}: no image is written");
+    }
+    let points = dir.join("points.xyz");
+    std::fs::write(&points, "0 0 0\n1 1 1\n").unwrap();
+    assert_fails(&["render", points.to_str().unwrap(), "--amplify", "0.02"], "--amplify applies to meshes");
+    assert_fails(&["render", "shell", "--amplify", "0.02"], "applies to mesh and particle files; shell is not one");
+    let sphere = &write_sphere_files(&dir)[0];
+    assert_fails(&["render", sphere.to_str().unwrap(), "--resolution", "5"], "--resolution 5 is out of range");
+    assert_fails(&["render", sphere.to_str().unwrap(), "--amplify", "3"], "--amplify 3 is out of range");
+    assert_fails(&["render", dir.join("nosuch.ply").to_str().unwrap()], "nosuch.ply not found (check the path)");
+}
+
+#[test]
+fn particle_files_render_as_density_and_molecular_surfaces() {
+    let dir = scratch("particles");
+    // A ball of particles as plain text: rendered as a density volume.
+    let mut text = String::from("x y z mass\n");
+    for i in 0..4000u32 {
+        let f = |k: u32| ((i.wrapping_mul(k) % 1000) as f64 / 1000.0) * 2.0 - 1.0;
+        let p = [f(7919), f(104729), f(1299709)];
+        if p.iter().map(|v| v * v).sum::<f64>() <= 1.0 {
+            text += &format!("{} {} {} 1.5\n", p[0], p[1], p[2]);
+        }
+    }
+    let ball = dir.join("ball.xyz");
+    std::fs::write(&ball, text).unwrap();
+    let (_, _, image) = render(&ball, 64, &[], &dir.join("ball.png"));
+    let lit = |image: &[u8], x: usize, y: usize, size: usize| image[(y * size + x) * 3..][..3].iter().any(|&c| c > 0);
+    assert!(lit(&image, 32, 32, 64) && !lit(&image, 1, 1, 64), "the ball's density shows in the middle");
+    // Real molecules: the surfaces of adenylate kinase in water (GRO) and HIV protease (PDB).
+    let Some(real) = real_data_dir() else { return };
+    for file in ["adk_oplsaa.gro", "1hvr.pdb"] {
+        let (_, _, image) = render(&real.join(file), 96, &[], &dir.join(format!("{file}.png")));
+        let covered = image.chunks_exact(3).filter(|p| p.iter().any(|&c| c > 0)).count();
+        assert!(covered > 96 * 96 / 8 && lit(&image, 48, 48, 96), "{file}: the molecule's surface fills the view");
+    }
 }
