@@ -116,6 +116,11 @@ impl MeshProducer {
         self.settings.band_voxels * self.shape.voxel_size(level)
     }
 
+    /// How far beyond the mesh's bounds (unit-cube units) values can be non-zero: half the finest band plus the noise.
+    pub fn margin(&self) -> f64 {
+        self.band(self.shape.max_level) * 0.5 + self.noise_bound()
+    }
+
     fn noise_bound(&self) -> f64 {
         self.settings.amplify.map_or(0.0, |a| a.amplitude * fbm_bound(a.octaves, a.gain))
     }

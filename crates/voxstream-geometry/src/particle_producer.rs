@@ -222,6 +222,11 @@ impl ParticleProducer {
         [0.0, self.max_density / self.fit.size.powi(3)]
     }
 
+    /// How far beyond the particles' bounds (unit-cube units) the finest level's density reaches: the largest support.
+    pub fn margin(&self) -> f64 {
+        self.max_support.max(MIN_SUPPORT_VOXELS * self.shape.voxel_size(self.shape.max_level))
+    }
+
     /// Total mass.
     pub fn total_mass(&self) -> f64 {
         self.total_mass

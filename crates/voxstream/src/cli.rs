@@ -164,8 +164,14 @@ pub enum EndianArg {
 #[derive(Args, Debug, Clone)]
 pub struct ImportArgs {
     /// Input: .nrrd/.nhdr, .nii/.nii.gz, .mha/.mhd, .inr/.inr.gz, .vti, .npy, .npz, .tif/.tiff (or a folder of slices),
-    /// or a raw file with --dims and --dtype.
+    /// a raw file with --dims and --dtype, or a mesh or particle file (baked at --resolution).
     pub input: PathBuf,
+    /// Mesh and particle files: voxels per axis of the cube the object's largest side fills 80% of (default 512).
+    #[arg(long, value_name = "VOXELS")]
+    pub resolution: Option<u64>,
+    /// Mesh files: noise amplitude as a fraction of the mesh's largest side (as `render --amplify`).
+    #[arg(long, value_name = "AMPLITUDE")]
+    pub amplify: Option<f64>,
     /// The store folder to create.
     #[arg(long)]
     pub out: PathBuf,

@@ -16,8 +16,20 @@ use voxstream_geometry::{
 };
 use voxstream_render::{Camera, IsoSurface, TransferFunction, VolumePlacement};
 
-use crate::cli::RenderArgs;
 use crate::render_command::frame_box;
+
+/// The flags that shape a geometry file's tree (from `render` or `import`).
+#[derive(Clone, Copy, Debug)]
+pub struct GeometryOptions {
+    /// `--amplify`: noise amplitude as a fraction of the mesh's largest side.
+    pub amplify: Option<f64>,
+    /// `--resolution`: voxels per axis of the finest level.
+    pub resolution: Option<u64>,
+    /// Image size, for the default camera.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+}
 
 /// A producer over a mesh or particles (a closed set, dispatched through an enum).
 #[derive(Clone, Debug)]
@@ -26,6 +38,24 @@ pub enum GeometryProducer {
     Mesh(MeshProducer),
     /// SPH density bricks of particles.
     Particles(ParticleProducer),
+}
+
+impl GeometryProducer {
+    /// How far beyond the object's bounds (unit-cube units) its values can be non-zero.
+    pub fn margin(&self) -> f64 {
+        match self {
+            GeometryProducer::Mesh(p) => p.margin(),
+            GeometryProducer::Particles(p) => p.margin(),
+        }
+    }
+
+    /// Where the object sits in the unit cube.
+    pub fn fit(&self) -> UnitCubeFit {
+        match self {
+            GeometryProducer::Mesh(p) => p.fit(),
+            GeometryProducer::Particles(p) => p.fit(),
+        }
+    }
 }
 
 impl Producer for GeometryProducer {
@@ -67,6 +97,8 @@ pub struct GeometrySource {
     pub camera: Camera,
     /// Bytes held by the producer's index (triangles and hierarchy, or particles and grid).
     pub index_bytes: u64,
+    /// The object's bounds, file units.
+    pub bounds: ([f64; 3], [f64; 3]),
     /// One line saying what was read.
     pub description: String,
 }
@@ -83,7 +115,7 @@ fn is_molecular(path: &Path) -> bool {
 }
 
 /// Reads `path` and builds its producer with the flags of `args`.
-pub fn open(path: &Path, args: &RenderArgs) -> Result<GeometrySource> {
+pub fn open(path: &Path, args: &GeometryOptions) -> Result<GeometrySource> {
     let started = Instant::now();
     let raw = read_geometry(path)?;
     let shown = path.display();
@@ -96,7 +128,6 @@ pub fn open(path: &Path, args: &RenderArgs) -> Result<GeometrySource> {
         RawGeometry::Mesh(raw) => {
             let mesh = TriangleMesh::new(raw).with_context(|| format!("in {shown}"))?;
             let (lower, upper) = mesh.bounds();
-            let extent = (0..3).map(|a| upper[a] - lower[a]).fold(0.0, f64::max);
             let settings = MeshTreeSettings::default();
             let amplify = match args.amplify {
                 Some(k) if !(k > 0.0 && k <= 0.1) => {
@@ -121,7 +152,6 @@ pub fn open(path: &Path, args: &RenderArgs) -> Result<GeometrySource> {
                 started.elapsed().as_secs_f64()
             );
             let index_bytes = producer.field().heap_bytes();
-            let _ = extent;
             Ok(GeometrySource {
                 producer: GeometryProducer::Mesh(producer),
                 value_range: [0.0, 1.0],
@@ -130,6 +160,7 @@ pub fn open(path: &Path, args: &RenderArgs) -> Result<GeometrySource> {
                 placement: placement(fit),
                 camera: frame_box(lower, upper, args.width, args.height, GEOMETRY_VIEW_DIRECTION, [0.0, 1.0, 0.0]),
                 index_bytes,
+                bounds: (lower, upper),
                 description,
             })
         }
@@ -160,7 +191,8 @@ pub fn open(path: &Path, args: &RenderArgs) -> Result<GeometrySource> {
                 Vec::new()
             };
             let description = format!(
-                "{shown}: {} particles, {}³ virtual voxels, grid built in {:.1} s; density 0 to {:.4e}",
+                "{shown}: {} particles, {}³ virtual voxels, grid built in {:.1} s; density 0 to {:.4e} (mass per \
+                 file unit³)",
                 particles.len(),
                 producer.shape().virtual_resolution(),
                 started.elapsed().as_secs_f64(),
@@ -174,6 +206,7 @@ pub fn open(path: &Path, args: &RenderArgs) -> Result<GeometrySource> {
                 default_surfaces,
                 transfer_function: particle_transfer_function(value_range[1]),
                 camera: frame_box(lower, upper, args.width, args.height, GEOMETRY_VIEW_DIRECTION, [0.0, 1.0, 0.0]),
+                bounds: (lower, upper),
                 description,
             })
         }

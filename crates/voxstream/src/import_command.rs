@@ -6,9 +6,35 @@ use voxstream_store::formats::{open_volume, Endian, RawLayout, WithGeometry};
 use voxstream_store::{import_volume, DType, ImportOptions, StoreError, VolumeInfo, VolumeSource};
 
 use crate::cli::{EndianArg, ImportArgs};
+use crate::geometry_import::{BakedGeometry, DEFAULT_BAKE_RESOLUTION};
+use crate::geometry_source::{self, GeometryOptions};
 
 /// Runs `voxstream import`.
 pub fn run(args: &ImportArgs) -> Result<()> {
+    let is_geometry = voxstream_geometry::formats::is_geometry_file_name(&args.input) && args.dims.is_none();
+    if !is_geometry && (args.resolution.is_some() || args.amplify.is_some()) {
+        bail!("--resolution and --amplify apply to mesh and particle files; {} is not one", args.input.display());
+    }
+    if is_geometry {
+        if args.dtype.is_some() || args.spacing.is_some() || args.origin.is_some() || args.nan_as.is_some() {
+            bail!("--dtype, --spacing, --origin and --nan-as apply to volume files; a mesh or particle file keeps its own units");
+        }
+        if !args.input.is_file() {
+            bail!("mesh or particle file {} not found (check the path)", args.input.display());
+        }
+        let options = GeometryOptions {
+            amplify: args.amplify,
+            resolution: Some(args.resolution.unwrap_or(DEFAULT_BAKE_RESOLUTION)),
+            width: 512,
+            height: 512,
+        };
+        let geometry = geometry_source::open(&args.input, &options)?;
+        if !args.quiet {
+            eprintln!("{}", geometry.description);
+        }
+        let mut source = BakedGeometry::new(geometry.producer, geometry.value_range[1], geometry.bounds);
+        return import_source(args, &mut source);
+    }
     let raw = match (&args.dims, &args.dtype) {
         (Some(dims), Some(dtype)) => {
             let dtype = DType::from_name(dtype)
@@ -38,6 +64,11 @@ pub fn run(args: &ImportArgs) -> Result<()> {
     if let Some(v) = args.nan_as.filter(|v| !v.is_finite()) {
         bail!("--nan-as must be a finite number, got {v}");
     }
+    import_source(args, source.as_mut())
+}
+
+/// Imports an opened source into the store `args.out`, with a progress bar.
+fn import_source(args: &ImportArgs, source: &mut dyn VolumeSource) -> Result<()> {
     let info = source.info().clone();
     let options = ImportOptions {
         brick_size: args.brick_size,
@@ -53,7 +84,7 @@ pub fn run(args: &ImportArgs) -> Result<()> {
     );
     bar.set_message(format!("importing {}", args.input.display()));
     let mut progress = |done: u64, _total: u64| bar.set_position(done);
-    let report = import_volume(source.as_mut(), &args.out, &options, &mut progress).map_err(|error| match error {
+    let report = import_volume(source, &args.out, &options, &mut progress).map_err(|error| match error {
         // The only error that does not name a file already.
         StoreError::NonFinite { .. } => anyhow!("{}: {error}", args.input.display()),
         error => error.into(),

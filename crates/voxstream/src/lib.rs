@@ -11,6 +11,7 @@ pub mod bench;
 pub mod camera_path;
 pub mod cli;
 pub mod exit_status;
+pub mod geometry_import;
 pub mod geometry_source;
 pub mod import_command;
 pub mod info_command;

@@ -73,7 +73,13 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     }
     let path = Path::new(&args.source);
     if path.is_file() && is_geometry_file_name(path) {
-        let geometry = geometry_source::open(path, args)?;
+        let options = geometry_source::GeometryOptions {
+            amplify: args.amplify,
+            resolution: args.resolution,
+            width: args.width,
+            height: args.height,
+        };
+        let geometry = geometry_source::open(path, &options)?;
         if !args.quiet {
             eprintln!("{}", geometry.description);
         }

@@ -403,3 +403,35 @@ fn particle_files_render_as_density_and_molecular_surfaces() {
         assert!(covered > 96 * 96 / 8 && lit(&image, 48, 48, 96), "{file}: the molecule's surface fills the view");
     }
 }
+
+#[test]
+fn a_mesh_baked_into_a_store_renders_like_the_mesh() {
+    let dir = scratch("bake");
+    let sphere = &write_sphere_files(&dir)[0];
+    let store = dir.join("sphere.zarr");
+    let output = run(&["import", sphere.to_str().unwrap(), "--out", store.to_str().unwrap(), "--resolution", "64"]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    assert!(stderr(&output).contains("into"), "the import reports what it wrote: {}", stderr(&output));
+    // The same camera on both: the surface of the baked store (value ½) and of the mesh produced on demand.
+    let view = ["--eye", "0.2,-0.1,4.3", "--target", "0.2,-0.1,0.3", "--up", "0,1,0", "--fov", "34"];
+    let from_store = render(&store, 128, &[&view[..], &["--iso", "0.5"]].concat(), &dir.join("store.png")).2;
+    let from_mesh = render(sphere, 128, &[&view[..], &["--resolution", "64"]].concat(), &dir.join("mesh.png")).2;
+    let covered = |image: &[u8]| image.chunks_exact(3).map(|p| p.iter().any(|&c| c > 0)).collect::<Vec<bool>>();
+    let (a, b) = (covered(&from_store), covered(&from_mesh));
+    let both = a.iter().zip(&b).filter(|(x, y)| **x && **y).count();
+    let either = a.iter().zip(&b).filter(|(x, y)| **x || **y).count();
+    assert!(either > 128 * 128 / 4, "the sphere fills the view");
+    assert!(
+        both as f64 / either as f64 >= 0.99,
+        "baked and produced silhouettes differ: IoU {}",
+        both as f64 / either as f64
+    );
+    // Volume flags make no sense for a mesh; geometry flags none for a volume.
+    assert_fails(&["import", sphere.to_str().unwrap(), "--out", "x.zarr", "--spacing", "1,1,1"], "keeps its own units");
+    let raw = dir.join("volume.raw");
+    std::fs::write(&raw, [0u8; 8]).unwrap();
+    assert_fails(
+        &["import", raw.to_str().unwrap(), "--out", "y.zarr", "--dims", "2,2,2", "--dtype", "u8", "--resolution", "64"],
+        "apply to mesh and particle files",
+    );
+}
