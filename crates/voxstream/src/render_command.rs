@@ -329,6 +329,7 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
         threads: rayon::current_num_threads(),
         ..RunStats::default()
     };
+    stats.camera = cameras.first().copied();
     let read_before = bytes_read();
     let sequence = args.path.is_some();
     let repeats = if sequence || args.mode == Mode::Converged { 1 } else { args.frames };

@@ -45,4 +45,7 @@ pub struct RunStats {
     pub brick_bytes_used: Option<u64>,
     /// Milliseconds until the first image was complete enough to write (the first frame).
     pub first_frame_ms: Option<f64>,
+    /// The first camera rendered (the source's default unless flags or a path gave one): a camera path made of it
+    /// reproduces the view.
+    pub camera: Option<voxstream_render::Camera>,
 }
