@@ -38,7 +38,7 @@ fi
 
 timed() { # label command... -> prints "seconds peak_MiB"
     /usr/bin/time -f "%e %M" -o "$out/time.txt" "$@" >"$out/last.log" 2>&1 || { cat "$out/last.log"; exit 1; }
-    awk '{ printf "%.2f %.0f", $1, $2 / 1024 }' "$out/time.txt"
+    awk '{ printf "%.2f %.0f\n", $1, $2 / 1024 }' "$out/time.txt"
 }
 
 {

@@ -9,9 +9,8 @@
 //! triangle takes that triangle's normal; an edge shared by more than two triangles (non-manifold) sums all of
 //! their normals. Inconsistently oriented triangles flip the sign locally: the mesh's own winding is trusted.
 
-use std::collections::HashMap;
-
 use glam::DVec3;
+use rayon::prelude::*;
 
 use crate::triangle_bvh::{TriangleBvh, TriangleFeature};
 use crate::triangle_mesh::TriangleMesh;
@@ -69,7 +68,6 @@ impl MeshDistance {
             })
             .collect();
         let mut vertex_normals = vec![DVec3::ZERO; positions.len()];
-        let mut edge_sums: HashMap<(u32, u32), DVec3> = HashMap::with_capacity(triangles.len() * 3 / 2);
         let mut edge_lengths = Vec::with_capacity(triangles.len());
         for (t, normal) in triangles.iter().zip(&face_normals) {
             let p = corners(t);
@@ -79,20 +77,29 @@ impl MeshDistance {
                 if angle.is_finite() {
                     vertex_normals[t[corner] as usize] += *normal * angle;
                 }
-                let (i, j) = (t[corner], t[(corner + 1) % 3]);
-                *edge_sums.entry((i.min(j), i.max(j))).or_insert(DVec3::ZERO) += *normal;
             }
             edge_lengths.push((p[1] - p[0]).length());
         }
-        let edge_normals = triangles
-            .iter()
-            .map(|t| {
-                [0, 1, 2].map(|e| {
-                    let (i, j) = (t[e], t[(e + 1) % 3]);
-                    edge_sums[&(i.min(j), i.max(j))].as_vec3().to_array()
+        // Edge pseudo-normals: every (edge, triangle) pair sorted by the edge's vertex pair, then summed per edge.
+        let mut edges: Vec<(u64, u32)> = triangles
+            .par_iter()
+            .enumerate()
+            .flat_map_iter(|(t, v)| {
+                (0..3).map(move |e| {
+                    let (i, j) = (v[e], v[(e + 1) % 3]);
+                    ((u64::from(i.min(j)) << 32) | u64::from(i.max(j)), (t * 3 + e) as u32)
                 })
             })
             .collect();
+        edges.par_sort_unstable();
+        let mut edge_normals = vec![[0.0f32; 3]; triangles.len() * 3];
+        for group in edges.chunk_by(|a, b| a.0 == b.0) {
+            let sum: DVec3 = group.iter().map(|&(_, slot)| face_normals[slot as usize / 3]).sum();
+            for &(_, slot) in group {
+                edge_normals[slot as usize] = sum.as_vec3().to_array();
+            }
+        }
+        let edge_normals = edge_normals.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
         let middle = edge_lengths.len() / 2;
         edge_lengths.select_nth_unstable_by(middle, f64::total_cmp);
         let median_edge = edge_lengths[middle];

@@ -10,6 +10,7 @@
 //! closest-point-in-triangle test with feature classification is Ericson, *Real-Time Collision Detection* §5.1.5.
 
 use glam::DVec3;
+use rayon::prelude::*;
 
 /// Most triangles in a leaf.
 pub const LEAF_TRIANGLES: usize = 4;
@@ -69,19 +70,15 @@ fn widen(bound: f64, down: bool) -> f32 {
 }
 
 impl TriangleBvh {
-    /// Builds the hierarchy over `corners` (one entry per triangle). The median split keeps the depth at
-    /// ⌈log₂(triangles / leaf)⌉, so recursion is shallow.
+    /// Builds the hierarchy over the triangles. The median split keeps the depth at ⌈log₂(triangles / leaf)⌉, so
+    /// recursion is shallow; subtrees of more than [`PARALLEL_TRIANGLES`] are built on the worker threads.
     pub fn build(positions: &[DVec3], triangles: &[[u32; 3]]) -> TriangleBvh {
-        let corners = |t: &[u32; 3]| t.map(|i| positions[i as usize]);
-        let mut builder = Builder {
-            positions,
-            triangles,
-            centroids: triangles.iter().map(|t| corners(t).iter().sum::<DVec3>() / 3.0).collect(),
-            order: (0..triangles.len() as u32).collect(),
-            nodes: Vec::with_capacity(2 * triangles.len() / LEAF_TRIANGLES + 1),
-        };
-        builder.node(0, triangles.len());
-        TriangleBvh { nodes: builder.nodes, order: builder.order }
+        let centroids: Vec<DVec3> =
+            triangles.par_iter().map(|t| t.map(|i| positions[i as usize]).iter().sum::<DVec3>() / 3.0).collect();
+        let mut order: Vec<u32> = (0..triangles.len() as u32).collect();
+        let builder = Builder { positions, triangles, centroids: &centroids };
+        let nodes = builder.subtree(&mut order, 0);
+        TriangleBvh { nodes, order }
     }
 
     /// The closest point of any triangle to `p` strictly within `max_distance`, or `None` if no triangle comes that
@@ -144,22 +141,24 @@ impl TriangleBvh {
     }
 }
 
+/// Subtrees larger than this are built in parallel (rayon::join).
+pub const PARALLEL_TRIANGLES: usize = 1 << 14;
+
 struct Builder<'a> {
     positions: &'a [DVec3],
     triangles: &'a [[u32; 3]],
-    centroids: Vec<DVec3>,
-    order: Vec<u32>,
-    nodes: Vec<BvhNode>,
+    centroids: &'a [DVec3],
 }
 
 impl Builder<'_> {
-    fn node(&mut self, start: usize, end: usize) -> u32 {
-        let index = self.nodes.len();
+    /// The subtree over `order` (which starts at `offset` of the whole list), its nodes numbered from 0 in depth-first
+    /// order (left child next to its parent, `first` of an inner node the right child's index).
+    fn subtree(&self, order: &mut [u32], offset: usize) -> Vec<BvhNode> {
         let mut lower = DVec3::splat(f64::INFINITY);
         let mut upper = DVec3::splat(f64::NEG_INFINITY);
         let mut centre_lower = lower;
         let mut centre_upper = upper;
-        for &t in &self.order[start..end] {
+        for &t in order.iter() {
             for &i in &self.triangles[t as usize] {
                 lower = lower.min(self.positions[i as usize]);
                 upper = upper.max(self.positions[i as usize]);
@@ -167,15 +166,15 @@ impl Builder<'_> {
             centre_lower = centre_lower.min(self.centroids[t as usize]);
             centre_upper = centre_upper.max(self.centroids[t as usize]);
         }
-        self.nodes.push(BvhNode {
+        let root = BvhNode {
             lower: lower.to_array().map(|v| widen(v, true)),
             upper: upper.to_array().map(|v| widen(v, false)),
-            first: start as u32,
-            count: (end - start) as u32,
-        });
+            first: offset as u32,
+            count: order.len() as u32,
+        };
         let extent = centre_upper - centre_lower;
-        if end - start <= LEAF_TRIANGLES || extent.max_element() <= 0.0 {
-            return index as u32;
+        if order.len() <= LEAF_TRIANGLES || extent.max_element() <= 0.0 {
+            return vec![root];
         }
         let axis = if extent.x >= extent.y && extent.x >= extent.z {
             0
@@ -184,17 +183,30 @@ impl Builder<'_> {
         } else {
             2
         };
-        let middle = start + (end - start) / 2;
-        let centroids = &self.centroids;
-        self.order[start..end].select_nth_unstable_by(middle - start, |&a, &b| {
+        let middle = order.len() / 2;
+        let centroids = self.centroids;
+        order.select_nth_unstable_by(middle, |&a, &b| {
             centroids[a as usize][axis].total_cmp(&centroids[b as usize][axis])
         });
-        let left = self.node(start, middle);
-        debug_assert_eq!(left as usize, index + 1, "the left child follows its parent");
-        let right = self.node(middle, end);
-        self.nodes[index].first = right;
-        self.nodes[index].count = 0;
-        index as u32
+        let (left_order, right_order) = order.split_at_mut(middle);
+        let (left, right) = if left_order.len() + right_order.len() > PARALLEL_TRIANGLES {
+            rayon::join(|| self.subtree(left_order, offset), || self.subtree(right_order, offset + middle))
+        } else {
+            (self.subtree(left_order, offset), self.subtree(right_order, offset + middle))
+        };
+        let mut nodes = Vec::with_capacity(1 + left.len() + right.len());
+        let right_index = 1 + left.len();
+        nodes.push(BvhNode { first: right_index as u32, count: 0, ..root });
+        for (shift, part) in [(1, left), (right_index, right)] {
+            nodes.extend(part.into_iter().map(|node| {
+                if node.count == 0 {
+                    BvhNode { first: node.first + shift as u32, ..node }
+                } else {
+                    node
+                }
+            }));
+        }
+        nodes
     }
 }
 
@@ -291,6 +303,26 @@ mod tests {
             // A bound just above the distance still finds it; one below finds nothing.
             assert!(bvh.closest_point(&positions, &triangles, p, brute.sqrt() * 1.0001 + 1e-12).is_some());
             assert!(bvh.closest_point(&positions, &triangles, p, brute.sqrt() * 0.9999).is_none());
+        }
+    }
+
+    #[test]
+    fn a_tree_built_in_parallel_finds_the_same_closest_points() {
+        let (positions, triangles) = random_triangles(3 * PARALLEL_TRIANGLES, 9);
+        let bvh = TriangleBvh::build(&positions, &triangles);
+        let mut seen = vec![false; triangles.len()];
+        for &t in &bvh.order {
+            seen[t as usize] = true;
+        }
+        assert!(seen.iter().all(|&s| s), "every triangle is in one leaf");
+        for i in 0..40 {
+            let p = DVec3::new((i % 5) as f64 / 4.0, (i % 3) as f64 / 2.0, (i % 7) as f64 / 6.0);
+            let brute = triangles
+                .iter()
+                .map(|t| t.map(|i| positions[i as usize]))
+                .map(|[a, b, c]| (closest_on_triangle(p, a, b, c).0 - p).length_squared())
+                .fold(f64::INFINITY, f64::min);
+            assert_eq!(bvh.closest_point(&positions, &triangles, p, f64::INFINITY).unwrap().distance_squared, brute);
         }
     }
 
