@@ -65,6 +65,9 @@ pub struct RenderArgs {
     /// smoothing lengths).
     #[arg(long, value_name = "VOXELS")]
     pub resolution: Option<u64>,
+    /// Particle files: render the particles' scalar attribute (SPH-interpolated) instead of their density.
+    #[arg(long)]
+    pub attribute: bool,
     /// Output PNG (with --path, frames are numbered: frame_0000.png, …).
     #[arg(long, default_value = "frame.png")]
     pub out: PathBuf,

@@ -25,6 +25,8 @@ pub struct GeometryOptions {
     pub amplify: Option<f64>,
     /// `--resolution`: voxels per axis of the finest level.
     pub resolution: Option<u64>,
+    /// `--attribute`: particles' scalar attribute instead of their density.
+    pub attribute: bool,
     /// Image size, for the default camera.
     pub width: u32,
     /// Image height.
@@ -126,6 +128,9 @@ pub fn open(path: &Path, args: &GeometryOptions) -> Result<GeometrySource> {
     }
     match raw {
         RawGeometry::Mesh(raw) => {
+            if args.attribute {
+                bail!("--attribute applies to particle files; {shown} holds a mesh");
+            }
             let mesh = TriangleMesh::new(raw).with_context(|| format!("in {shown}"))?;
             let (lower, upper) = mesh.bounds();
             let settings = MeshTreeSettings::default();
@@ -173,12 +178,13 @@ pub fn open(path: &Path, args: &GeometryOptions) -> Result<GeometrySource> {
             let settings = ParticleTreeSettings {
                 resolution: args.resolution,
                 smoothing_scale: if molecular { 2.0 } else { 1.0 },
+                attribute: args.attribute,
                 ..ParticleTreeSettings::default()
             };
-            let producer = ParticleProducer::new(&particles, settings)?;
+            let producer = ParticleProducer::new(&particles, settings).with_context(|| format!("in {shown}"))?;
             let (lower, upper) = particles.bounds();
             let value_range = producer.value_range();
-            let default_surfaces = if molecular {
+            let default_surfaces = if molecular && !args.attribute {
                 // An isolated atom's density (unit mass, kernel support 2r) crosses 2/(π(2r)³) at its radius r:
                 // the surface of the median atom, as VMD's QuickSurf draws it.
                 let mut radii = particles.smoothing().to_vec();
@@ -190,21 +196,29 @@ pub fn open(path: &Path, args: &GeometryOptions) -> Result<GeometrySource> {
             } else {
                 Vec::new()
             };
+            let field = if args.attribute {
+                format!("{} {:.4e} to {:.4e}", particles.values().1, value_range[0], value_range[1])
+            } else {
+                format!("density 0 to {:.4e} (mass per file unit³)", value_range[1])
+            };
             let description = format!(
-                "{shown}: {} particles, {}³ virtual voxels, grid built in {:.1} s; density 0 to {:.4e} (mass per \
-                 file unit³)",
+                "{shown}: {} particles, {}³ virtual voxels, grid built in {:.1} s; {field}",
                 particles.len(),
                 producer.shape().virtual_resolution(),
                 started.elapsed().as_secs_f64(),
-                value_range[1]
             );
+            let transfer_function = if args.attribute {
+                attribute_transfer_function(value_range)
+            } else {
+                particle_transfer_function(value_range[1])
+            };
             Ok(GeometrySource {
                 index_bytes: producer.heap_bytes(),
                 placement: placement(producer.fit()),
                 producer: GeometryProducer::Particles(producer),
                 value_range,
                 default_surfaces,
-                transfer_function: particle_transfer_function(value_range[1]),
+                transfer_function,
                 camera: frame_box(lower, upper, args.width, args.height, GEOMETRY_VIEW_DIRECTION, [0.0, 1.0, 0.0]),
                 bounds: (lower, upper),
                 description,
@@ -245,4 +259,18 @@ fn particle_transfer_function(max_density: f64) -> TransferFunction {
         None,
     )
     .expect("the built-in transfer function is valid")
+}
+
+/// A particle attribute: transparent at 0 (where no particle reaches), blue towards negative values, orange towards
+/// positive ones.
+fn attribute_transfer_function([lower, upper]: [f64; 2]) -> TransferFunction {
+    let mut points = Vec::new();
+    if lower < 0.0 {
+        points.push([lower, 0.2, 0.4, 1.0, 0.25]);
+    }
+    points.push([0.0, 0.0, 0.0, 0.0, 0.0]);
+    if upper > 0.0 {
+        points.push([upper, 1.0, 0.55, 0.15, 0.25]);
+    }
+    TransferFunction::new(points, None).expect("a transfer function over the attribute's range is valid")
 }

@@ -25,6 +25,7 @@ pub fn run(args: &ImportArgs) -> Result<()> {
         let options = GeometryOptions {
             amplify: args.amplify,
             resolution: Some(args.resolution.unwrap_or(DEFAULT_BAKE_RESOLUTION)),
+            attribute: false,
             width: 512,
             height: 512,
         };

@@ -59,6 +59,7 @@ fn unreachable_default() -> RenderArgs {
         source: scenes::DEFAULT_SCENE.into(),
         amplify: None,
         resolution: None,
+        attribute: false,
         out: "frame.png".into(),
         width: 512,
         height: 512,

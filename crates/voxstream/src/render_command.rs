@@ -76,6 +76,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         let options = geometry_source::GeometryOptions {
             amplify: args.amplify,
             resolution: args.resolution,
+            attribute: args.attribute,
             width: args.width,
             height: args.height,
         };
@@ -143,7 +144,12 @@ fn store_source<P>(
 
 /// `--amplify` and `--resolution` shape the trees of mesh and particle files only.
 fn check_geometry_flags(args: &RenderArgs, source: &str) -> Result<()> {
-    for (flag, given) in [("--amplify", args.amplify.is_some()), ("--resolution", args.resolution.is_some())] {
+    let flags = [
+        ("--amplify", args.amplify.is_some()),
+        ("--resolution", args.resolution.is_some()),
+        ("--attribute", args.attribute),
+    ];
+    for (flag, given) in flags {
         if given {
             bail!("{flag} applies to mesh and particle files; {source} is not one");
         }

@@ -4,6 +4,8 @@
 
 use std::path::{Path, PathBuf};
 
+use voxstream_geometry::formats::{parse_geometry, RawGeometry, GEOMETRY_FILE_ENDINGS};
+use voxstream_geometry::{ParticleSet, TriangleMesh};
 use voxstream_store::formats::{open_volume, Endian, RawLayout};
 use voxstream_store::{import_volume, DType, ImportOptions, VolumeInfo};
 
@@ -68,6 +70,20 @@ fn replay(dir: &Path, target: &str, data: &[u8]) {
                     let _ = tf.evaluate(value);
                 }
                 let _ = voxstream_render::transfer_function::TransferLut::new(&tf, 0.0, 1.0, 1.0).lookup(0.5);
+            }
+        }
+        "geometry_files" => {
+            if let Some((&selector, file)) = data.split_first() {
+                let ending = GEOMETRY_FILE_ENDINGS[selector as usize % GEOMETRY_FILE_ENDINGS.len()];
+                match parse_geometry(file, ending, Path::new(&format!("fuzz{ending}"))) {
+                    Ok(RawGeometry::Mesh(raw)) => {
+                        let _ = TriangleMesh::new(raw).map(|mesh| mesh.bounds());
+                    }
+                    Ok(RawGeometry::Particles(raw)) => {
+                        let _ = ParticleSet::new(raw).map(|particles| particles.bounds());
+                    }
+                    Err(_) => {}
+                }
             }
         }
         "camera_path" => {

@@ -382,12 +382,12 @@ fn bad_geometry_files_get_one_clear_line() {
 fn particle_files_render_as_density_and_molecular_surfaces() {
     let dir = scratch("particles");
     // A ball of particles as plain text: rendered as a density volume.
-    let mut text = String::from("x y z mass\n");
+    let mut text = String::from("x y z mass temperature\n");
     for i in 0..4000u32 {
         let f = |k: u32| ((i.wrapping_mul(k) % 1000) as f64 / 1000.0) * 2.0 - 1.0;
         let p = [f(7919), f(104729), f(1299709)];
         if p.iter().map(|v| v * v).sum::<f64>() <= 1.0 {
-            text += &format!("{} {} {} 1.5\n", p[0], p[1], p[2]);
+            text += &format!("{} {} {} 1.5 {}\n", p[0], p[1], p[2], if p[0] < 0.0 { -3.0 } else { 5.0 });
         }
     }
     let ball = dir.join("ball.xyz");
@@ -395,6 +395,16 @@ fn particle_files_render_as_density_and_molecular_surfaces() {
     let (_, _, image) = render(&ball, 64, &[], &dir.join("ball.png"));
     let lit = |image: &[u8], x: usize, y: usize, size: usize| image[(y * size + x) * 3..][..3].iter().any(|&c| c > 0);
     assert!(lit(&image, 32, 32, 64) && !lit(&image, 1, 1, 64), "the ball's density shows in the middle");
+    // Its attribute instead: cold (blue) where x < 0, warm (orange) where x > 0.
+    let (_, _, attribute) =
+        render(&ball, 64, &["--attribute", "--eye", "0,0,6", "--target", "0,0,0"], &dir.join("t.png"));
+    let pixel = |x: usize| &attribute[(32 * 64 + x) * 3..][..3];
+    assert!(pixel(20)[2] > pixel(20)[0], "x < 0 is blue: {:?}", pixel(20));
+    assert!(pixel(44)[0] > pixel(44)[2], "x > 0 is orange: {:?}", pixel(44));
+    assert_fails(
+        &["render", write_sphere_files(&dir)[0].to_str().unwrap(), "--attribute"],
+        "applies to particle files",
+    );
     // Real molecules: the surfaces of adenylate kinase in water (GRO) and HIV protease (PDB).
     let Some(real) = real_data_dir() else { return };
     for file in ["adk_oplsaa.gro", "1hvr.pdb"] {

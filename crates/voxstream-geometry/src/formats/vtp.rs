@@ -12,11 +12,14 @@
 //! Every array's size follows from `NumberOfPoints` and is checked before anything is decoded: at most
 //! [`MAX_ARRAY_BYTES`], within what the inline text or the file holds, and for compressed arrays the block header
 //! must add up to it, the compressed bytes must be able to inflate to it, and each block must inflate to exactly
-//! its announced size (zlib's adler32 checked).
+//! its announced size (zlib's adler32 checked). Appended arrays name their data by offset, so several could name the
+//! same bytes: all binary and appended arrays together may decode to no more than the file could hold (its length
+//! uncompressed, 1032 times it compressed), which bounds what the reader allocates whatever the pieces announce.
 //!
 //! Not read: cells (`Verts`, `Lines`, `Strips`, `Polys`), cell and field data, other dataset types (`.vtu`, `.vti`:
 //! their names do not end in `.vtp`), other compressors (LZ4, LZMA), `String` and `Bit` arrays.
 
+use std::cell::Cell;
 use std::io::Read;
 use std::path::Path;
 
@@ -323,7 +326,8 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawParticles, GeometryError> {
         }
         _ => None,
     };
-    let decoder = Decoder { bytes, path, header, appended, appended_base64: appended_base64.as_deref() };
+    let decoder =
+        Decoder { bytes, path, header, appended, appended_base64: appended_base64.as_deref(), decoded: Cell::new(0) };
     assemble(pieces, &decoder, path)
 }
 
@@ -349,6 +353,8 @@ struct Decoder<'a> {
     header: Header,
     appended: Option<&'a [u8]>,
     appended_base64: Option<&'a [u8]>,
+    /// Bytes the binary and appended arrays decoded so far.
+    decoded: Cell<u64>,
 }
 
 impl Decoder<'_> {
@@ -386,6 +392,26 @@ impl Decoder<'_> {
                 .map_err(bad)?
             }
         };
+        // Each array's data is bytes of its own (inline text, or a stretch of the appended data), so together they
+        // decode to at most the file's length, or what that inflates to; checked once the array's own checks have
+        // passed, before its values are kept.
+        let file = self.bytes.len() as u64;
+        let (limit, holds) = if self.header.compressed {
+            (
+                file.saturating_mul(DEFLATE_MAX_RATIO),
+                format!("inflate to (deflate expands at most {DEFLATE_MAX_RATIO}:1)"),
+            )
+        } else {
+            (file, "hold".to_string())
+        };
+        let total = self.decoded.get().saturating_add(data.len() as u64);
+        if total > limit {
+            return Err(bad(format!(
+                "with the arrays before it, {total} bytes of data, more than the file's {file} bytes can {holds}: \
+                 arrays cannot share their data"
+            )));
+        }
+        self.decoded.set(total);
         let size = array.ty.size();
         Ok(data.chunks_exact(size).map(|b| array.ty.decode(b, self.header.big_endian)).collect())
     }
@@ -805,6 +831,47 @@ _"#,
         for end in 0..file.len() {
             let _ = parse_bytes(&file[..end]);
         }
+    }
+
+    /// Pieces whose appended arrays all name the same data, which would decode to far more than the file holds.
+    fn shared_offsets(pieces: usize, points: usize, compressed: bool) -> Vec<u8> {
+        let zeros = vec![0u8; points * 12];
+        let data = if compressed {
+            let block = zlib(&zeros);
+            let mut data = le_bytes(&[1u32, zeros.len() as u32, 0, block.len() as u32], u32::to_le_bytes);
+            data.extend(block);
+            data
+        } else {
+            let mut data = (zeros.len() as u32).to_le_bytes().to_vec();
+            data.extend(&zeros);
+            data
+        };
+        let compressor = if compressed { r#" compressor="vtkZLibDataCompressor""# } else { "" };
+        let piece = format!(
+            r#"<Piece NumberOfPoints="{points}"><Points>{}</Points></Piece>"#,
+            r#"<DataArray type="Float32" NumberOfComponents="3" format="appended" offset="0"/>"#
+        );
+        let mut f = format!(
+            r#"<VTKFile type="PolyData"{compressor}><PolyData>{}</PolyData><AppendedData encoding="raw">_"#,
+            piece.repeat(pieces)
+        )
+        .into_bytes();
+        f.extend(data);
+        f.extend(b"</AppendedData></VTKFile>");
+        f
+    }
+
+    #[test]
+    fn appended_arrays_sharing_their_data_are_refused() {
+        // Sharing within what the file holds is read.
+        assert_eq!(parse_bytes(&shared_offsets(2, 1, false)).unwrap().positions, vec![[0.0; 3]; 2]);
+        let e = error(&shared_offsets(3, 1000, false));
+        assert!(e.contains("DataArray 'Points': with the arrays before it, 24000 bytes of data, more than the"), "{e}");
+        assert!(e.ends_with("bytes can hold: arrays cannot share their data"), "{e}");
+        // A zlib block of 1.2 MB of zeros, named by 3 pieces: one inflates within 1032:1, two do not.
+        let e = error(&shared_offsets(3, 100_000, true));
+        assert!(e.contains("with the arrays before it, 2400000 bytes of data"), "{e}");
+        assert!(e.ends_with("can inflate to (deflate expands at most 1032:1): arrays cannot share their data"), "{e}");
     }
 
     #[test]
