@@ -1,8 +1,9 @@
 //! A bounding-volume hierarchy over a mesh's triangles, and the closest-point query the mesh producer's signed
 //! distance is built on.
 //!
-//! Built once when the mesh is opened (median split of the triangle centroids along the widest axis, leaves of up to
-//! [`LEAF_TRIANGLES`]), queried for every voxel a brick needs. The query is a depth-first search that visits the
+//! Built once when the mesh is opened (binned surface-area-heuristic splits of the triangle centroids along the widest
+//! axis, median splits below [`MAX_DEPTH`], leaves of up to [`LEAF_TRIANGLES`]), queried for every voxel a brick
+//! needs. The query is a depth-first search that visits the
 //! nearer child first and prunes boxes farther than the best distance so far; callers pass an upper bound on the
 //! distance (a neighbouring voxel's distance plus the step, the distance field being 1-Lipschitz), which prunes
 //! almost everything at once. (Gathering the leaves near a brick once and searching only those per voxel was tried:
@@ -70,14 +71,14 @@ fn widen(bound: f64, down: bool) -> f32 {
 }
 
 impl TriangleBvh {
-    /// Builds the hierarchy over the triangles. The median split keeps the depth at ⌈log₂(triangles / leaf)⌉, so
-    /// recursion is shallow; subtrees of more than [`PARALLEL_TRIANGLES`] are built on the worker threads.
+    /// Builds the hierarchy over the triangles (depth at most [`MAX_DEPTH`]); subtrees of more than
+    /// [`PARALLEL_TRIANGLES`] are built on the worker threads.
     pub fn build(positions: &[DVec3], triangles: &[[u32; 3]]) -> TriangleBvh {
         let centroids: Vec<DVec3> =
             triangles.par_iter().map(|t| t.map(|i| positions[i as usize]).iter().sum::<DVec3>() / 3.0).collect();
         let mut order: Vec<u32> = (0..triangles.len() as u32).collect();
         let builder = Builder { positions, triangles, centroids: &centroids };
-        let nodes = builder.subtree(&mut order, 0);
+        let nodes = builder.subtree(&mut order, 0, 0);
         TriangleBvh { nodes, order }
     }
 
@@ -92,14 +93,18 @@ impl TriangleBvh {
     ) -> Option<ClosestPoint> {
         let mut best: Option<ClosestPoint> = None;
         let mut best_squared = max_distance * max_distance;
-        let mut stack = [0u32; 64];
+        // Pending nodes with their box distances. Each level of the tree leaves at most one pending sibling, and the
+        // build bounds the depth by MAX_DEPTH.
+        let mut stack = [(0u32, 0.0f64); MAX_DEPTH + 2];
+        stack[0] = (0, box_distance_squared(&self.nodes[0], p));
         let mut depth = 1;
         while depth > 0 {
             depth -= 1;
-            let node = &self.nodes[stack[depth] as usize];
-            if box_distance_squared(node, p) >= best_squared {
+            let (index, distance) = stack[depth];
+            if distance >= best_squared {
                 continue;
             }
+            let node = &self.nodes[index as usize];
             if node.count > 0 {
                 let first = node.first as usize;
                 for &t in &self.order[first..first + node.count as usize] {
@@ -113,16 +118,25 @@ impl TriangleBvh {
                 }
                 continue;
             }
-            let left = stack[depth] + 1;
+            let left = index + 1;
             let right = node.first;
             let left_distance = box_distance_squared(&self.nodes[left as usize], p);
             let right_distance = box_distance_squared(&self.nodes[right as usize], p);
-            // Push the farther child first, so the nearer one is searched first.
-            let (near, far) = if left_distance <= right_distance { (left, right) } else { (right, left) };
-            // Depth ≤ ⌈log₂ triangles⌉ + 1 ≤ 33 (median split), and each level leaves one entry: 64 always suffice.
-            stack[depth] = far;
-            stack[depth + 1] = near;
-            depth += 2;
+            // The farther child below the nearer one, so the nearer is searched first; a child already beyond the
+            // best distance is not pushed.
+            let (near, far) = if left_distance <= right_distance {
+                ((left, left_distance), (right, right_distance))
+            } else {
+                ((right, right_distance), (left, left_distance))
+            };
+            if far.1 < best_squared {
+                stack[depth] = far;
+                depth += 1;
+            }
+            if near.1 < best_squared {
+                stack[depth] = near;
+                depth += 1;
+            }
         }
         best
     }
@@ -144,6 +158,13 @@ impl TriangleBvh {
 /// Subtrees larger than this are built in parallel (rayon::join).
 pub const PARALLEL_TRIANGLES: usize = 1 << 14;
 
+/// Deepest the surface-area split may go before the build falls back to median splits (which halve the triangles),
+/// so that the tree's depth, and the query's stack, stay bounded whatever the mesh.
+pub const MAX_DEPTH: usize = 96;
+
+/// Bins of the surface-area heuristic along the split axis.
+const SAH_BINS: usize = 16;
+
 struct Builder<'a> {
     positions: &'a [DVec3],
     triangles: &'a [[u32; 3]],
@@ -153,7 +174,7 @@ struct Builder<'a> {
 impl Builder<'_> {
     /// The subtree over `order` (which starts at `offset` of the whole list), its nodes numbered from 0 in depth-first
     /// order (left child next to its parent, `first` of an inner node the right child's index).
-    fn subtree(&self, order: &mut [u32], offset: usize) -> Vec<BvhNode> {
+    fn subtree(&self, order: &mut [u32], offset: usize, depth: usize) -> Vec<BvhNode> {
         let mut lower = DVec3::splat(f64::INFINITY);
         let mut upper = DVec3::splat(f64::NEG_INFINITY);
         let mut centre_lower = lower;
@@ -183,16 +204,26 @@ impl Builder<'_> {
         } else {
             2
         };
-        let middle = order.len() / 2;
         let centroids = self.centroids;
-        order.select_nth_unstable_by(middle, |&a, &b| {
-            centroids[a as usize][axis].total_cmp(&centroids[b as usize][axis])
-        });
+        let middle = match self.surface_area_split(order, axis, centre_lower[axis], extent[axis]) {
+            // Past MAX_DEPTH − log₂(triangles), only median splits: the depth stays below MAX_DEPTH.
+            Some(middle) if depth + (usize::BITS - order.len().leading_zeros()) as usize + 1 < MAX_DEPTH => middle,
+            _ => {
+                let middle = order.len() / 2;
+                order.select_nth_unstable_by(middle, |&a, &b| {
+                    centroids[a as usize][axis].total_cmp(&centroids[b as usize][axis])
+                });
+                middle
+            }
+        };
         let (left_order, right_order) = order.split_at_mut(middle);
         let (left, right) = if left_order.len() + right_order.len() > PARALLEL_TRIANGLES {
-            rayon::join(|| self.subtree(left_order, offset), || self.subtree(right_order, offset + middle))
+            rayon::join(
+                || self.subtree(left_order, offset, depth + 1),
+                || self.subtree(right_order, offset + middle, depth + 1),
+            )
         } else {
-            (self.subtree(left_order, offset), self.subtree(right_order, offset + middle))
+            (self.subtree(left_order, offset, depth + 1), self.subtree(right_order, offset + middle, depth + 1))
         };
         let mut nodes = Vec::with_capacity(1 + left.len() + right.len());
         let right_index = 1 + left.len();
@@ -207,6 +238,65 @@ impl Builder<'_> {
             }));
         }
         nodes
+    }
+}
+
+impl Builder<'_> {
+    /// Partitions `order` at the binned surface-area-heuristic split along `axis` (centroids from `lower` over
+    /// `extent`) and returns the split index, or `None` when every split leaves one side empty.
+    fn surface_area_split(&self, order: &mut [u32], axis: usize, lower: f64, extent: f64) -> Option<usize> {
+        let bin_of = |t: u32| {
+            let f = (self.centroids[t as usize][axis] - lower) / extent;
+            ((f * SAH_BINS as f64) as usize).min(SAH_BINS - 1)
+        };
+        let mut counts = [0usize; SAH_BINS];
+        let mut boxes = [(DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)); SAH_BINS];
+        for &t in order.iter() {
+            let bin = bin_of(t);
+            counts[bin] += 1;
+            for &i in &self.triangles[t as usize] {
+                boxes[bin].0 = boxes[bin].0.min(self.positions[i as usize]);
+                boxes[bin].1 = boxes[bin].1.max(self.positions[i as usize]);
+            }
+        }
+        let area = |(lo, hi): (DVec3, DVec3)| {
+            let d = (hi - lo).max(DVec3::ZERO);
+            d.x * d.y + d.y * d.z + d.z * d.x
+        };
+        let merge = |a: (DVec3, DVec3), b: (DVec3, DVec3)| (a.0.min(b.0), a.1.max(b.1));
+        // Cost of splitting after bin k: area(left) · count(left) + area(right) · count(right).
+        let mut right_cost = [0.0f64; SAH_BINS];
+        let mut accumulated = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+        let mut count = 0;
+        for k in (1..SAH_BINS).rev() {
+            accumulated = merge(accumulated, boxes[k]);
+            count += counts[k];
+            right_cost[k] = area(accumulated) * count as f64;
+        }
+        let mut best: Option<(f64, usize)> = None;
+        let mut accumulated = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+        let mut left_count = 0;
+        for k in 0..SAH_BINS - 1 {
+            accumulated = merge(accumulated, boxes[k]);
+            left_count += counts[k];
+            if left_count == 0 || left_count == order.len() {
+                continue;
+            }
+            let cost = area(accumulated) * left_count as f64 + right_cost[k + 1];
+            if best.is_none_or(|(c, _)| cost < c) {
+                best = Some((cost, k));
+            }
+        }
+        let (_, split_bin) = best?;
+        // Partition in place: bins ≤ split_bin first.
+        let mut middle = 0;
+        for i in 0..order.len() {
+            if bin_of(order[i]) <= split_bin {
+                order.swap(i, middle);
+                middle += 1;
+            }
+        }
+        Some(middle)
     }
 }
 
@@ -289,7 +379,7 @@ mod tests {
     fn closest_point_equals_brute_force() {
         let (positions, triangles) = random_triangles(500, 7);
         let bvh = TriangleBvh::build(&positions, &triangles);
-        assert!(bvh.depth() <= 10, "median split keeps the tree shallow: {}", bvh.depth());
+        assert!(bvh.depth() <= MAX_DEPTH, "the depth is bounded: {}", bvh.depth());
         for i in 0..200 {
             let p = DVec3::new((i % 7) as f64 / 6.0, (i % 11) as f64 / 10.0, (i % 13) as f64 / 12.0) * 1.2
                 - DVec3::splat(0.1);
