@@ -2,7 +2,7 @@
 //!
 //! Reichl (seed 004, ch. 5) renders huge SPH runs by resampling the particles into multiresolution bricks with the
 //! SPH kernel. Here each brick is made on demand: the particles whose kernels reach the brick are found through a
-//! uniform grid built once ([`ParticleGrid`]), and each adds `m·W(|x − xⱼ|, h)` to the voxels within its support.
+//! index built once (support classes on sorted cells), and each adds `m·W(|x − xⱼ|, h)` to the voxels within its support.
 //!
 //! - **Kernel:** the cubic B-spline (Monaghan's M4) with compact support `h`, normalised in 3-D so that its
 //!   integral is 1: `W(r, h) = 8/(πh³)·(1 − 6q² + 6q³)` for `q = r/h ≤ ½`, `16/(πh³)·(1 − q)³` for `½ < q ≤ 1`,
@@ -10,11 +10,17 @@
 //! - **Levels:** level `L` uses `h' = max(h, 2·voxel_L)`: each level is the same density smoothed to what its voxels
 //!   can hold, so it still integrates to the total mass and the finer levels refine it; a coarse level is never
 //!   built from its children (Reichl averages them bottom-up), which is what lets any node be produced first.
-//! - **Values:** voxels hold `ρ / ρ_max` with `ρ_max` the largest density at a particle's own position (computed once
-//!   when opening), clamped at 1 where the sampled density between particles slightly exceeds it. The value range is
+//! - **Values:** voxels hold `ρ / ρ_max` with `ρ_max` the largest density found at the particles when opening (at
+//!   every particle of the two narrowest support classes, where the density peaks, and one in 64 of the others),
+//!   clamped at 1 where the density exceeds it (between particles, or at a peak the probe missed). The value range is
 //!   `[0, ρ_max]` in the file's mass per file volume unit.
-//! - **Oracle:** a node is empty when no particle lies within its box widened by the largest support, counted with a
-//!   summed-area table over the grid: empty space is never produced.
+//! - **Smoothing lengths:** the file's, or, where it has none, `h = 2·(distance to the 8th nearest neighbour)` per
+//!   particle (a k-d tree, `kiddo`): narrow kernels in dense clusters, wide ones in sparse outskirts.
+//! - **Index:** particles grouped in support classes (powers of two of the smallest `h`), each sorted by its cells
+//!   on a grid no finer than its widest kernel, so gathering around a point visits about as many particles as reach
+//!   it, whatever the spread of `h`.
+//! - **Oracle:** a node is empty when no particle of any class lies within its box widened by that class's support,
+//!   counted with each class's summed-area table: empty space is never produced.
 //!
 //! The grid is built in memory: particle sets larger than memory (Reichl's out-of-core superbricks) are not
 //! supported yet.
@@ -25,6 +31,9 @@
 //!   includes 0 (empty space), to 0…1.
 
 use glam::DVec3;
+use std::num::NonZero;
+
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 use voxstream_core::{quantize, NodeContent, NodeKey, ProduceError, Produced, Producer, TreeShape};
 use voxstream_procedural::brick_fill::voxel_centre;
@@ -75,25 +84,115 @@ impl Default for ParticleTreeSettings {
     }
 }
 
-/// Particles binned into a uniform grid of cells (counting sort), with a summed-area table of the counts.
+/// Particle counts on a coarse uniform grid (at most 64³ cells) as a summed-area table: the oracle's O(1) test.
 #[derive(Clone, Debug)]
 pub struct ParticleGrid {
     /// Cells per axis.
     cells: usize,
-    /// Particle index range of each cell: `start[c]..start[c + 1]` (particles sorted by cell).
-    start: Vec<u32>,
     /// Summed-area table, `(cells + 1)³`.
     prefix: Vec<u32>,
 }
 
+/// The particles' cells on a fine grid (cell ≥ the largest support, up to 2²⁰ per axis), as sorted keys
+/// `(z·cells + y)·cells + x`: the particles of a box are found by binary searches per row of cells, so memory is one
+/// key per particle whatever the grid's size.
+#[derive(Clone, Debug)]
+pub struct SortedCells {
+    cells: u64,
+    keys: Vec<u64>,
+}
+
+/// Most support classes (powers of two of the smallest support).
+const MAX_CLASSES: usize = 24;
+
+/// The particles whose supports lie within a factor of two: a contiguous run of the sorted particles, on cells no
+/// smaller than their largest support, so that gathering around a point visits about as many particles as reach it.
+#[derive(Clone, Debug)]
+struct SupportClass {
+    /// Index of the class's first particle.
+    first: usize,
+    max_support: f64,
+    cells: SortedCells,
+    /// The class's counts for the oracle.
+    counts: ParticleGrid,
+}
+
+/// Rows of cells searched one by one below this; above, whole slabs (the particles' own distance tests then skip
+/// the extra ones).
+const MAX_ROWS: u64 = 4096;
+
+impl SortedCells {
+    fn cell_of(&self, p: DVec3) -> [u64; 3] {
+        let scale = self.cells as f64;
+        [0, 1, 2].map(|a| ((p[a] * scale).floor().max(0.0) as u64).min(self.cells - 1))
+    }
+
+    fn key(&self, [x, y, z]: [u64; 3]) -> u64 {
+        (z * self.cells + y) * self.cells + x
+    }
+
+    /// Calls `f` with index ranges (into the sorted particles) covering every particle in the cells overlapping the
+    /// box `lower..upper`, and perhaps others.
+    fn for_each_range(&self, lower: DVec3, upper: DVec3, mut f: impl FnMut(std::ops::Range<usize>)) {
+        let [x0, y0, z0] = self.cell_of(lower);
+        let [x1, y1, z1] = self.cell_of(upper);
+        let mut span = |from: u64, to: u64| {
+            let a = self.keys.partition_point(|&k| k < from);
+            let b = self.keys.partition_point(|&k| k <= to);
+            if a < b {
+                f(a..b);
+            }
+        };
+        let last = self.cells - 1;
+        if (y1 - y0 + 1) * (z1 - z0 + 1) <= MAX_ROWS {
+            for z in z0..=z1 {
+                for y in y0..=y1 {
+                    span(self.key([x0, y, z]), self.key([x1, y, z]));
+                }
+            }
+        } else if z1 - z0 < MAX_ROWS {
+            for z in z0..=z1 {
+                span(self.key([0, y0, z]), self.key([last, y1, z]));
+            }
+        } else {
+            span(self.key([0, 0, z0]), self.key([last, last, z1]));
+        }
+    }
+}
+
 impl ParticleGrid {
+    /// Counts `points` (unit-cube positions) on `cells`³ cells.
+    fn new(points: impl Iterator<Item = DVec3>, cells: usize) -> ParticleGrid {
+        let scale = cells as f64;
+        let mut counts = vec![0u32; cells * cells * cells];
+        for p in points {
+            let c = [0, 1, 2].map(|a| ((p[a] * scale).floor().max(0.0) as usize).min(cells - 1));
+            counts[(c[2] * cells + c[1]) * cells + c[0]] += 1;
+        }
+        let n = cells + 1;
+        let mut prefix = vec![0u32; n * n * n];
+        let at = |x: usize, y: usize, z: usize| (z * n + y) * n + x;
+        for z in 0..cells {
+            for y in 0..cells {
+                for x in 0..cells {
+                    let value = counts[(z * cells + y) * cells + x] as i64
+                        + prefix[at(x, y + 1, z + 1)] as i64
+                        + prefix[at(x + 1, y, z + 1)] as i64
+                        + prefix[at(x + 1, y + 1, z)] as i64
+                        - prefix[at(x, y, z + 1)] as i64
+                        - prefix[at(x, y + 1, z)] as i64
+                        - prefix[at(x + 1, y, z)] as i64
+                        + prefix[at(x, y, z)] as i64;
+                    prefix[at(x + 1, y + 1, z + 1)] = value as u32;
+                }
+            }
+        }
+        ParticleGrid { cells, prefix }
+    }
+
     fn cell_of(&self, p: DVec3) -> [usize; 3] {
         let scale = self.cells as f64;
         [0, 1, 2].map(|a| ((p[a] * scale).floor().max(0.0) as usize).min(self.cells - 1))
-    }
-
-    fn flat(&self, c: [usize; 3]) -> usize {
-        (c[2] * self.cells + c[1]) * self.cells + c[0]
     }
 
     /// Cell ranges (inclusive) covering the box `lower..upper` (unit units).
@@ -130,7 +229,7 @@ pub struct ParticleProducer {
     /// What each particle adds, times its kernel: its mass (density), or `mⱼ/ρⱼ·Aⱼ` (attribute).
     weights: Vec<f64>,
     max_support: f64,
-    grid: ParticleGrid,
+    classes: Vec<SupportClass>,
     /// Largest density at a particle, unit-cube units.
     max_density: f64,
     total_mass: f64,
@@ -160,7 +259,7 @@ impl ParticleProducer {
             particles.masses().iter().map(|&m| f64::from(m)).collect()
         };
         let support: Vec<f64> = if particles.smoothing().is_empty() {
-            vec![default_support(&unit); count]
+            adaptive_support(&unit)
         } else {
             particles.smoothing().iter().map(|&h| f64::from(h) * settings.smoothing_scale / fit.size).collect()
         };
@@ -174,46 +273,39 @@ impl ParticleProducer {
         let shape = TreeShape::new(2, settings.brick_size, max_level)
             .map_err(|error| GeometryError::Invalid { message: error.to_string() })?;
 
-        let cells = ((1.0 / max_support.max(1e-9)).floor() as usize).clamp(1, 128);
-        let scale = cells as f64;
-        let cell_index = |p: DVec3| {
-            let c = [0, 1, 2].map(|a| ((p[a] * scale).floor().max(0.0) as usize).min(cells - 1));
-            (c[2] * cells + c[1]) * cells + c[0]
-        };
-        let mut start = vec![0u32; cells * cells * cells + 1];
-        let keys: Vec<usize> = unit.iter().map(|p| cell_index(*p)).collect();
-        for &key in &keys {
-            start[key + 1] += 1;
+        // Particles by support class (powers of two from the smallest), each class on a grid of cells no smaller
+        // than its own largest support, sorted by (class, cell).
+        let class_of = |h: f64| ((h / min_support.max(1e-12)).log2().floor().max(0.0) as usize).min(MAX_CLASSES - 1);
+        let mut class_max = [0.0f64; MAX_CLASSES];
+        for &h in &support {
+            let c = class_of(h);
+            class_max[c] = class_max[c].max(h);
         }
-        let counts: Vec<u32> = start[1..].to_vec();
-        for c in 0..cells * cells * cells {
-            start[c + 1] += start[c];
+        let class_cells = class_max.map(|h| if h > 0.0 { ((1.0 / h).floor() as u64).clamp(1, 1 << 20) } else { 1 });
+        let mut keyed: Vec<(usize, u64, u32)> = unit
+            .par_iter()
+            .zip(&support)
+            .enumerate()
+            .map(|(i, (p, &h))| {
+                let c = class_of(h);
+                let cells = SortedCells { cells: class_cells[c], keys: Vec::new() };
+                (c, cells.key(cells.cell_of(*p)), i as u32)
+            })
+            .collect();
+        keyed.par_sort_unstable();
+        let order: Vec<u32> = keyed.iter().map(|&(_, _, i)| i).collect();
+        let mut classes = Vec::new();
+        for group in keyed.chunk_by(|a, b| a.0 == b.0) {
+            let class = group[0].0;
+            let first = classes.last().map_or(0, |c: &SupportClass| c.first + c.cells.keys.len());
+            let coarse = ((1.0 / class_max[class]).floor() as usize).clamp(1, 64);
+            classes.push(SupportClass {
+                first,
+                max_support: class_max[class],
+                cells: SortedCells { cells: class_cells[class], keys: group.iter().map(|&(_, k, _)| k).collect() },
+                counts: ParticleGrid::new(group.iter().map(|&(_, _, i)| unit[i as usize]), coarse),
+            });
         }
-        let mut order = vec![0u32; count];
-        let mut cursor = start.clone();
-        for (i, &key) in keys.iter().enumerate() {
-            order[cursor[key] as usize] = i as u32;
-            cursor[key] += 1;
-        }
-        let n = cells + 1;
-        let mut prefix = vec![0u32; n * n * n];
-        for z in 0..cells {
-            for y in 0..cells {
-                for x in 0..cells {
-                    let at = |x: usize, y: usize, z: usize| (z * n + y) * n + x;
-                    let value = counts[(z * cells + y) * cells + x] as i64
-                        + prefix[at(x, y + 1, z + 1)] as i64
-                        + prefix[at(x + 1, y, z + 1)] as i64
-                        + prefix[at(x + 1, y + 1, z)] as i64
-                        - prefix[at(x, y, z + 1)] as i64
-                        - prefix[at(x, y + 1, z)] as i64
-                        - prefix[at(x + 1, y, z)] as i64
-                        + prefix[at(x, y, z)] as i64;
-                    prefix[at(x + 1, y + 1, z + 1)] = value as u32;
-                }
-            }
-        }
-        let grid = ParticleGrid { cells, start, prefix };
         let positions: Vec<DVec3> = order.iter().map(|&i| unit[i as usize]).collect();
         let support: Vec<f64> = order.iter().map(|&i| support[i as usize]).collect();
         let masses: Vec<f64> = order.iter().map(|&i| masses[i as usize]).collect();
@@ -226,15 +318,21 @@ impl ParticleProducer {
             weights: masses.clone(),
             masses,
             max_support,
-            grid,
+            classes,
             max_density: 1.0,
             total_mass,
             lower: 0.0,
             upper: 1.0,
             attribute: settings.attribute,
         };
-        let densities: Vec<f64> =
-            (0..count).into_par_iter().map(|i| producer.density(producer.positions[i], 0.0)).collect();
+        // The largest density is where the kernels are narrowest (the densest particles): exactly at every particle
+        // of the two narrowest classes, and at one in 64 of the others (the attribute needs every particle's).
+        let narrow_end = producer.classes.get(2).map_or(count, |c| c.first);
+        let probed = |i: &usize| settings.attribute || *i < narrow_end || i.is_multiple_of(64);
+        let densities: Vec<f64> = (0..count)
+            .into_par_iter()
+            .map(|i| if probed(&i) { producer.density(producer.positions[i], 0.0) } else { 0.0 })
+            .collect();
         let max_density = densities.iter().copied().fold(0.0, f64::max);
         producer.max_density = if max_density > 0.0 { max_density } else { 1.0 };
         producer.upper = producer.max_density;
@@ -292,6 +390,17 @@ impl ParticleProducer {
         self.max_density
     }
 
+    /// Calls `f` with index ranges covering every particle whose kernel (no narrower than `min_support`) can reach the
+    /// box `lower..upper`, and perhaps others (each caller tests the distance).
+    fn gather(&self, lower: DVec3, upper: DVec3, min_support: f64, mut f: impl FnMut(std::ops::Range<usize>)) {
+        for class in &self.classes {
+            let reach = DVec3::splat(class.max_support.max(min_support));
+            class.cells.for_each_range(lower - reach, upper + reach, |range| {
+                f(class.first + range.start..class.first + range.end)
+            });
+        }
+    }
+
     /// Kernel support used at `level`'s voxel size for a particle of support `h`.
     #[inline]
     fn level_support(&self, h: f64, min_support: f64) -> f64 {
@@ -309,48 +418,46 @@ impl ParticleProducer {
     }
 
     fn kernel_sum(&self, weights: &[f64], p: DVec3, min_support: f64) -> f64 {
-        let reach = self.max_support.max(min_support);
-        let (from, to) = self.grid.cell_range(p - DVec3::splat(reach), p + DVec3::splat(reach));
         let mut sum = 0.0;
-        for z in from[2]..=to[2] {
-            for y in from[1]..=to[1] {
-                let row = self.grid.flat([from[0], y, z])..=self.grid.flat([to[0], y, z]);
-                let (first, last) = (self.grid.start[*row.start()], self.grid.start[*row.end() + 1]);
-                for i in first as usize..last as usize {
-                    let h = self.level_support(self.support[i], min_support);
-                    sum += weights[i] * cubic_spline((self.positions[i] - p).length(), h);
-                }
+        self.gather(p, p, min_support, |range| {
+            for i in range {
+                let h = self.level_support(self.support[i], min_support);
+                sum += weights[i] * cubic_spline((self.positions[i] - p).length(), h);
             }
-        }
+        });
         sum
     }
 
     /// Bytes held, for the memory budget.
     pub fn heap_bytes(&self) -> u64 {
-        (self.positions.len() * (24 + 8 + 8 + 8) + self.grid.start.len() * 4 + self.grid.prefix.len() * 4) as u64
+        let counts: usize = self.classes.iter().map(|c| c.counts.prefix.len() * 4).sum();
+        (self.positions.len() * (24 + 8 + 8 + 8 + 8) + counts) as u64
     }
 }
 
-/// Four times the median distance to the nearest other particle, over a sample of up to 2000 particles (about 30
-/// neighbours within the support in a volume, a dozen on a scanned surface).
-fn default_support(unit: &[DVec3]) -> f64 {
+/// Neighbours the adaptive smoothing length reaches: `h = 2 · (distance to the 8th nearest other particle)`, about
+/// 65 neighbours within the support in a uniform volume (SPH codes use 30 to 100).
+pub const SMOOTHING_NEIGHBOURS: usize = 8;
+
+/// Per-particle smoothing lengths for files that give none, adapted to the local spacing (a k-d tree's 8 nearest
+/// neighbours), so that dense clusters get narrow kernels and sparse outskirts wide ones. Clamped to [1e-6, 0.1] of
+/// the cube.
+fn adaptive_support(unit: &[DVec3]) -> Vec<f64> {
     if unit.len() < 2 {
-        return 0.05;
+        return vec![0.05; unit.len()];
     }
-    let step = (unit.len() / 2000).max(1);
-    let mut nearest: Vec<f64> = unit
+    let points: Vec<[f64; 3]> = unit.iter().map(|p| p.to_array()).collect();
+    let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&points);
+    let k = (SMOOTHING_NEIGHBOURS + 1).min(points.len());
+    let wanted = NonZero::new(k).unwrap_or(NonZero::<usize>::MIN);
+    points
         .par_iter()
-        .step_by(step)
-        .map(|p| unit.iter().map(|q| (*q - *p).length_squared()).filter(|&d| d > 0.0).fold(f64::INFINITY, f64::min))
-        .filter(|d| d.is_finite())
-        .map(f64::sqrt)
-        .collect();
-    if nearest.is_empty() {
-        return 0.05;
-    }
-    let middle = nearest.len() / 2;
-    nearest.select_nth_unstable_by(middle, f64::total_cmp);
-    (4.0 * nearest[middle]).clamp(1e-6, 0.1)
+        .map(|p| {
+            let nearest = tree.nearest_n::<SquaredEuclidean>(p, wanted);
+            let farthest = nearest.iter().map(|n| n.distance).fold(0.0, f64::max);
+            (2.0 * farthest.sqrt()).clamp(1e-6, 0.1)
+        })
+        .collect()
 }
 
 impl Producer for ParticleProducer {
@@ -361,14 +468,20 @@ impl Producer for ParticleProducer {
     fn oracle(&self, key: NodeKey) -> Option<f32> {
         let (lower, size) = key.bounds(&self.shape);
         let voxel = size / f64::from(self.shape.brick_size);
-        let reach = self.max_support.max(MIN_SUPPORT_VOXELS * voxel) + voxel;
-        let lower = DVec3::from(lower) - DVec3::splat(reach);
-        let upper = lower + DVec3::splat(size + 2.0 * reach);
-        if upper.min_element() < 0.0 || lower.max_element() > 1.0 {
-            return Some(self.empty_value());
+        let node_lower = DVec3::from(lower);
+        for class in &self.classes {
+            let reach = class.max_support.max(MIN_SUPPORT_VOXELS * voxel) + voxel;
+            let lower = node_lower - DVec3::splat(reach);
+            let upper = node_lower + DVec3::splat(size + reach);
+            if upper.min_element() < 0.0 || lower.max_element() > 1.0 {
+                continue;
+            }
+            let (from, to) = class.counts.cell_range(lower, upper);
+            if class.counts.count(from, to) > 0 {
+                return None;
+            }
         }
-        let (from, to) = self.grid.cell_range(lower, upper);
-        (self.grid.count(from, to) == 0).then(|| self.empty_value())
+        Some(self.empty_value())
     }
 
     fn produce(&self, key: NodeKey, voxels: &mut [u16]) -> Result<Produced, ProduceError> {
@@ -376,48 +489,43 @@ impl Producer for ParticleProducer {
         let (_, size) = key.bounds(&self.shape);
         let voxel = size / f64::from(self.shape.brick_size);
         let min_support = MIN_SUPPORT_VOXELS * voxel;
-        let reach = self.max_support.max(min_support);
         // Stored voxel (i, j, k) is centred at first + (i, j, k)·voxel.
         let first = voxel_centre(&self.shape, &key, 0, 0, 0);
         let last = first + DVec3::splat((b - 1) as f64 * voxel);
-        let (from, to) = self.grid.cell_range(first - DVec3::splat(reach), last + DVec3::splat(reach));
         let mut density = vec![0.0f64; b * b * b];
         let mut reached = false;
-        for z in from[2]..=to[2] {
-            for y in from[1]..=to[1] {
-                let (row_first, row_last) = (self.grid.flat([from[0], y, z]), self.grid.flat([to[0], y, z]));
-                for i in self.grid.start[row_first] as usize..self.grid.start[row_last + 1] as usize {
-                    let p = self.positions[i];
-                    let h = self.level_support(self.support[i], min_support);
-                    // Does the kernel reach the box of the stored voxel centres (which holds every finer level's
-                    // voxel centres too)? Finer levels use kernels no wider, so if none does, none will.
-                    let outside = (first - p).max(p - last).max(DVec3::ZERO);
-                    if outside.length() >= h {
-                        continue;
-                    }
-                    reached = true;
-                    // Voxel index range within the kernel's support.
-                    let low = ((p - DVec3::splat(h) - first) / voxel).ceil();
-                    let high = ((p + DVec3::splat(h) - first) / voxel).floor();
-                    if high.min_element() < 0.0 || low.max_element() > (b - 1) as f64 {
-                        continue;
-                    }
-                    let low = low.max(DVec3::ZERO).as_uvec3();
-                    let high = high.min(DVec3::splat((b - 1) as f64)).as_uvec3();
-                    for vz in low.z..=high.z {
-                        for vy in low.y..=high.y {
-                            let row = (vz as usize * b + vy as usize) * b;
-                            let centre_yz = first + DVec3::new(0.0, f64::from(vy), f64::from(vz)) * voxel;
-                            for vx in low.x..=high.x {
-                                let centre = centre_yz + DVec3::new(f64::from(vx) * voxel, 0.0, 0.0);
-                                let w = cubic_spline((centre - p).length(), h);
-                                density[row + vx as usize] += self.weights[i] * w;
-                            }
+        self.gather(first, last, min_support, |range| {
+            for i in range {
+                let p = self.positions[i];
+                let h = self.level_support(self.support[i], min_support);
+                // Does the kernel reach the box of the stored voxel centres (which holds every finer level's
+                // voxel centres too)? Finer levels use kernels no wider, so if none does, none will.
+                let outside = (first - p).max(p - last).max(DVec3::ZERO);
+                if outside.length() >= h {
+                    continue;
+                }
+                reached = true;
+                // Voxel index range within the kernel's support.
+                let low = ((p - DVec3::splat(h) - first) / voxel).ceil();
+                let high = ((p + DVec3::splat(h) - first) / voxel).floor();
+                if high.min_element() < 0.0 || low.max_element() > (b - 1) as f64 {
+                    continue;
+                }
+                let low = low.max(DVec3::ZERO).as_uvec3();
+                let high = high.min(DVec3::splat((b - 1) as f64)).as_uvec3();
+                for vz in low.z..=high.z {
+                    for vy in low.y..=high.y {
+                        let row = (vz as usize * b + vy as usize) * b;
+                        let centre_yz = first + DVec3::new(0.0, f64::from(vy), f64::from(vz)) * voxel;
+                        for vx in low.x..=high.x {
+                            let centre = centre_yz + DVec3::new(f64::from(vx) * voxel, 0.0, 0.0);
+                            let w = cubic_spline((centre - p).length(), h);
+                            density[row + vx as usize] += self.weights[i] * w;
                         }
                     }
                 }
             }
-        }
+        });
         if !reached {
             let content = match self.empty_value() {
                 0.0 => NodeContent::Empty,
@@ -595,6 +703,32 @@ mod tests {
         let no_attribute = particles(vec![[0.0; 3]], vec![], vec![]);
         let error = ParticleProducer::new(&no_attribute, settings).unwrap_err().to_string();
         assert!(error.contains("no scalar attribute"), "{error}");
+    }
+
+    #[test]
+    fn adaptive_smoothing_follows_the_local_spacing() {
+        // Two lattices, spacing 0.01 and 0.03: inside each, the 8th neighbour is a face diagonal away (6 at s, then
+        // 12 at s·√2), so h = 2·√2·s.
+        let mut unit = Vec::new();
+        for (origin, spacing) in [(0.1, 0.01), (0.5, 0.03)] {
+            for k in 0..8 {
+                for j in 0..8 {
+                    for i in 0..8 {
+                        unit.push(DVec3::new(i as f64, j as f64, k as f64) * spacing + DVec3::splat(origin));
+                    }
+                }
+            }
+        }
+        let h = adaptive_support(&unit);
+        let interior = |i: usize| {
+            (i % 8).clamp(1, 6) == i % 8
+                && (i / 8 % 8).clamp(1, 6) == i / 8 % 8
+                && (i / 64 % 8).clamp(1, 6) == i / 64 % 8
+        };
+        for (i, h) in h.iter().enumerate().filter(|(i, _)| interior(*i)) {
+            let spacing = if i < 512 { 0.01 } else { 0.03 };
+            assert!((h - 2.0 * 2f64.sqrt() * spacing).abs() < 1e-9, "particle {i}: {h}");
+        }
     }
 
     #[test]
