@@ -148,3 +148,149 @@ put("camera_path", "list", json.dumps([{"eye": [0, 0, 3], "target": [0, 0, 0], "
                                        {"eye": [3, 0, 0], "target": [0, 0, 0], "up": [0, 1, 0], "fov": 35}]))
 put("camera_path", "object", json.dumps({"cameras": [{"eye": [1, 2, 3], "target": [0, 0, 0], "up": [0, 0, 1],
                                                       "fov": 60}]}))
+
+
+# geometry_files: the first byte picks the file-name ending (its index in GEOMETRY_FILE_ENDINGS of
+# crates/voxstream-geometry/src/formats/mod.rs, modulo their number), the rest is the file.
+GEOMETRY_ENDINGS = [".ply", ".obj", ".off", ".stl", ".xyz", ".csv", ".txt", ".gro", ".pdb", ".vtk", ".vtp"]
+
+
+def geometry(name, ending, data):
+    put("geometry_files", name, bytes([GEOMETRY_ENDINGS.index(ending)]) + (data if isinstance(data, bytes)
+                                                                          else data.encode()))
+
+
+TETRA = [(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1)]
+TETRA_FACES = [(0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3)]
+PLY_MESH_HEAD = ("ply\nformat %s 1.0\ncomment a tetrahedron\nelement vertex 4\nproperty float x\nproperty float y\n"
+                 "property float z\nproperty uchar red\nelement edge 1\nproperty list uchar int vertex_pair\n"
+                 "element face 4\nproperty list uchar int vertex_indices\nend_header\n")
+geometry("ply-ascii-mesh", ".ply", PLY_MESH_HEAD % "ascii" + "".join("%g %g %g 255\n" % p for p in TETRA)
+         + "2 0 1\n" + "".join("3 %d %d %d\n" % f for f in TETRA_FACES))
+for fmt, order in (("binary_little_endian", "<"), ("binary_big_endian", ">")):
+    body = b"".join(struct.pack(order + "3fB", *p, 255) for p in TETRA) + struct.pack(order + "B2i", 2, 0, 1)
+    body += b"".join(struct.pack(order + "B3i", 3, *f) for f in TETRA_FACES)
+    geometry("ply-binary-%s-mesh" % ("le" if order == "<" else "be"), ".ply", (PLY_MESH_HEAD % fmt).encode() + body)
+PLY_POINTS_HEAD = ("ply\nformat %s 1.0\nelement vertex 3\nproperty double x\nproperty double y\nproperty double z\n"
+                   "property float nx\nproperty float hsml\nproperty float mass\nproperty float temperature\n"
+                   "end_header\n")
+POINTS = [(0, 0, 0, 1, 0.5, 1, 300), (1, 0, 0, 1, 0.25, 2, 310), (0, 1, 0.5, 1, 0.75, 3, 320)]
+geometry("ply-ascii-points", ".ply", PLY_POINTS_HEAD % "ascii" + "".join("%g %g %g %g %g %g %g\n" % p for p in POINTS))
+geometry("ply-binary-points", ".ply", (PLY_POINTS_HEAD % "binary_little_endian").encode()
+         + b"".join(struct.pack("<3d4f", *p) for p in POINTS))
+geometry("obj", ".obj", "# a tetrahedron\nmtllib none.mtl\no tetra\n" + "".join("v %g %g %g\n" % p for p in TETRA)
+         + "vn 0 0 1\nvt 0 0\nf 1/1/1 3/1/1 2/1/1\nf 1//1 2//1 4//1\nf -4 -1 -2\nf 2 3 4\n")
+geometry("off", ".off", "OFF\n# a tetrahedron\n4 4 6\n" + "".join("%g %g %g\n" % p for p in TETRA)
+         + "".join("3 %d %d %d\n" % f for f in TETRA_FACES[:3]) + "3 1 2 3 255 0 0\n")
+
+
+def stl_facets():
+    return [[TETRA[i] for i in f] for f in TETRA_FACES]
+
+
+geometry("stl-ascii", ".stl", "solid tetra\n" + "".join(
+    "facet normal 0 0 0\n outer loop\n" + "".join("  vertex %g %g %g\n" % v for v in f) + " endloop\nendfacet\n"
+    for f in stl_facets()) + "endsolid tetra\n")
+geometry("stl-binary", ".stl", b"solid binary header".ljust(80, b" ") + struct.pack("<I", 4) + b"".join(
+    struct.pack("<3f", 0, 0, 0) + b"".join(struct.pack("<3f", *v) for v in f) + b"\0\0" for f in stl_facets()))
+geometry("xyz-header", ".xyz", "# particles\nx y z h density\n0 0 0 0.5 1\n1 0 0 0.25 2\n0 1 0.5 0.75 3\n")
+geometry("csv-header", ".csv", "\"x\",\"y\",\"z\",\"mass\",\"T\"\n0,0,0,1,300\n1,0,0,2,310\n0,1,0.5,3,320\n")
+geometry("txt-plain", ".txt", "0 0 0\n1 0 0 \n0 1 0.5\n")
+geometry("gro", ".gro", "Two atoms, t= 0.0\n    2\n"
+         "    1ALA     CA    1   1.000   2.000  -3.500  0.1000  0.2000  0.3000\n"
+         "    2CL-     CL    2  10.125   0.000   0.001\n   5.00000   5.00000   5.00000\n")
+geometry("pdb", ".pdb", "HEADER    TEST\nMODEL        1\n"
+         "ATOM      1  N   ALA A   1      -8.901   4.127  -0.555  1.00  0.00           N\n"
+         "ATOM      2  CA  ALA A   1      -8.608   3.135  -1.618  1.00  0.00           C\n"
+         "ATOM      3  HB1AALA A   1       1.000   1.000   1.000  0.50  0.00           H\n"
+         "ATOM      4  HB1BALA A   1       1.100   1.000   1.000  0.50  0.00           H\n"
+         "HETATM    5 CA    CA A   4       0.000   3.000   0.000  1.00 00.00\n"
+         "ENDMDL\nMODEL        2\n"
+         "ATOM      1  N   ALA A   1      -9.901   4.127  -0.555  1.00  0.00           N\nENDMDL\nEND\n")
+geometry("vtk-ascii", ".vtk", "# vtk DataFile Version 3.0\nthree particles\nASCII\nDATASET POLYDATA\n"
+         "POINTS 3 float\n0 0 0 1 0 0\n0 1 0.5\nVERTICES 3 6\n1 0 1 1 1 2\nPOINT_DATA 3\n"
+         "SCALARS density double\nLOOKUP_TABLE default\n1.5 2.5 3.5\nVECTORS velocity float\n0 0 0 1 1 1 2 2 2\n"
+         "FIELD FieldData 2\nhsml 1 3 float\n0.1 0.2 0.3\nmass 1 3 int\n4 5 6\n")
+geometry("vtk-ascii-v5", ".vtk", "# vtk DataFile Version 5.1\nvtk output\nASCII\nDATASET UNSTRUCTURED_GRID\n"
+         "FIELD FieldData 1\nTIME 1 1 double\n0.5\nPOINTS 2 double\n1 2 3 4 5 6\nMETADATA\nINFORMATION 0\n\n"
+         "CELLS 3 2\nOFFSETS vtktypeint64\n0 1 2\nCONNECTIVITY vtktypeint64\n0 1\nCELL_TYPES 2\n1\n1\n"
+         "CELL_DATA 2\nSCALARS cell_id int 1\nLOOKUP_TABLE default\n7 8\nPOINT_DATA 2\n"
+         "SCALARS radius float\nLOOKUP_TABLE default\n0.25 0.5\nSCALARS pressure%20kPa float 1\n"
+         "LOOKUP_TABLE default\n10 20\n")
+vtk = b"# vtk DataFile Version 3.0\nbinary\nBINARY\nDATASET POLYDATA\nPOINTS 2 float\n"
+vtk += struct.pack(">6f", 1, 2, 3, -4, 5.5, 6) + b"\nVERTICES 1 3\n" + struct.pack(">3i", 2, 0, 1)
+vtk += b"\nPOINT_DATA 2\nSCALARS temperature short\nLOOKUP_TABLE default\n" + struct.pack(">2h", -300, 10)
+vtk += b"\nNORMALS n double\n" + struct.pack(">6d", 0, 0, 1, 0, 1, 0)
+vtk += b"\nSCALARS h double\nLOOKUP_TABLE default\n" + struct.pack(">2d", 0.5, 0.75)
+vtk += b"\nFIELD FieldData 1\nm 1 2 unsigned_char\n\x07\x08\n"
+geometry("vtk-binary", ".vtk", vtk)
+geometry("vtp-ascii", ".vtp", """<?xml version="1.0"?>
+<VTKFile type="PolyData" version="0.1" byte_order="LittleEndian">
+  <PolyData>
+    <Piece NumberOfPoints="3" NumberOfVerts="0" NumberOfLines="0" NumberOfStrips="0" NumberOfPolys="0">
+      <PointData Scalars="density">
+        <DataArray type="Float32" Name="velocity" NumberOfComponents="3" format="ascii">0 0 0 1 1 1 2 2 2</DataArray>
+        <DataArray type="Float64" Name="density" format="ascii">1.5 2.5 3.5</DataArray>
+        <DataArray type="Float32" Name="Mass" format="ascii">1 2 3</DataArray>
+        <DataArray type="Float32" Name="hsml" format="ascii">0.1 0.2 0.3</DataArray>
+      </PointData>
+      <Points>
+        <DataArray type="Float32" Name="Points" NumberOfComponents="3" format="ascii">0 0 0 1 0 0 0 1 0.5</DataArray>
+      </Points>
+      <Verts><DataArray type="Int64" Name="connectivity" format="ascii">0 1 2</DataArray></Verts>
+    </Piece>
+  </PolyData>
+</VTKFile>
+""")
+
+
+def vtp_zlib(data, block, u64=True):
+    """A zlib-compressed array as VTK writes it: the block header and the blocks, two base64 runs."""
+    blocks = [zlib.compress(data[i:i + block]) for i in range(0, len(data), block)]
+    last = len(data) - (len(blocks) - 1) * block
+    entries = [len(blocks), block, 0 if last == block else last] + [len(b) for b in blocks]
+    header = struct.pack(("<%dQ" if u64 else "<%dI") % len(entries), *entries)
+    return (base64.b64encode(header) + base64.b64encode(b"".join(blocks))).decode()
+
+
+VTP_POINTS = struct.pack("<9d", 0, 0, 0, 1, 2, 3, -1, 0.5, 9)
+VTP_HSML = struct.pack("<3f", 0.1, 0.2, 0.3)
+geometry("vtp-base64-zlib", ".vtp", """<VTKFile type="PolyData" version="1.0" byte_order="LittleEndian" \
+header_type="UInt64" compressor="vtkZLibDataCompressor">
+<PolyData><Piece NumberOfPoints="3">
+<PointData><DataArray type="Float32" Name="hsml" format="binary">
+  %s
+</DataArray></PointData>
+<Points><DataArray type="Float64" NumberOfComponents="3" format="binary">%s</DataArray></Points>
+</Piece></PolyData></VTKFile>
+""" % (vtp_zlib(VTP_HSML, 8), vtp_zlib(VTP_POINTS, 32)))
+geometry("vtp-base64-uncompressed-be", ".vtp", """<VTKFile type="PolyData" byte_order="BigEndian"><PolyData>
+<Piece NumberOfPoints="1"><Points><DataArray type="Float32" NumberOfComponents="3" format="binary">%s</DataArray>
+</Points></Piece></PolyData></VTKFile>
+""" % base64.b64encode(struct.pack(">I3f", 12, 1, 2, 3)).decode())
+vtp_arrays = [struct.pack("<6f", 0, 0, 0, 1, 1, 1), struct.pack("<2h", -5, 6), struct.pack("<3f", 2, 2, 2),
+              struct.pack("<h", 7)]
+vtp_offsets, vtp_data = [], b""
+for array in vtp_arrays:
+    vtp_offsets.append(len(vtp_data))
+    vtp_data += struct.pack("<I", len(array)) + array
+geometry("vtp-appended-raw", ".vtp", ("""<?xml version="1.0"?>
+<VTKFile type="PolyData" version="0.1" byte_order="LittleEndian">
+<PolyData>
+<Piece NumberOfPoints="2"><PointData><DataArray type="Int16" Name="T" format="appended" offset="%d"/></PointData>
+<Points><DataArray type="Float32" NumberOfComponents="3" format="appended" offset="%d"/></Points></Piece>
+<Piece NumberOfPoints="1"><PointData><DataArray type="Int16" Name="T" format="appended" offset="%d"/></PointData>
+<Points><DataArray type="Float32" NumberOfComponents="3" format="appended" offset="%d"/></Points></Piece>
+</PolyData>
+<AppendedData encoding="raw">
+_""" % (vtp_offsets[1], vtp_offsets[0], vtp_offsets[3], vtp_offsets[2])).encode() + vtp_data
+         + b"\n</AppendedData>\n</VTKFile>\n")
+vtp_mass = vtp_zlib(struct.pack("<d", 3.0), 8, u64=False)
+geometry("vtp-appended-base64-zlib", ".vtp", """<VTKFile type="PolyData" compressor="vtkZLibDataCompressor">
+<PolyData><Piece NumberOfPoints="1"><PointData><DataArray type="Float64" Name="m" format="appended" offset="0"/>
+</PointData><Points><DataArray type="Float32" NumberOfComponents="3" format="appended" offset="%d"/></Points></Piece>
+</PolyData>
+<AppendedData encoding="base64">
+_%s%s
+</AppendedData></VTKFile>
+""" % (len(vtp_mass), vtp_mass, vtp_zlib(struct.pack("<3f", 4, 5, 6), 12, u64=False)))
