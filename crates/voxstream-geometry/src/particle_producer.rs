@@ -12,7 +12,9 @@
 //!   built from its children (Reichl averages them bottom-up), which is what lets any node be produced first.
 //! - **Values:** voxels hold `ρ / ρ_max` with `ρ_max` the largest density found at the particles when opening (at
 //!   every particle of the two narrowest support classes, where the density peaks, and one in 64 of the others),
-//!   clamped at 1 where the density exceeds it (between particles, or at a peak the probe missed). The value range is
+//!   clamped at 1 where the density exceeds it (between particles, or at a peak the probe missed). The scale's top is
+//!   at most [`DENSITY_RANGE`] times the median density at the particles: 16-bit voxels cannot hold the 10⁸ between a
+//!   cluster's core and its halo, so the densest cores saturate rather than the halo vanishing below one step. The value range is
 //!   `[0, ρ_max]` in the file's mass per file volume unit.
 //! - **Smoothing lengths:** the file's, or, where it has none, `h = 2·(distance to the 8th nearest neighbour)` per
 //!   particle (a k-d tree, `kiddo`): narrow kernels in dense clusters, wide ones in sparse outskirts.
@@ -41,6 +43,9 @@ use voxstream_procedural::brick_fill::voxel_centre;
 use crate::error::GeometryError;
 use crate::mesh_distance::UnitCubeFit;
 use crate::particles::ParticleSet;
+
+/// The top of the density scale, in median densities at the particles (see [`ParticleProducer::value_range`]).
+pub const DENSITY_RANGE: f64 = 1000.0;
 
 /// The kernel's support, in voxels of a level, below which a level widens the kernel.
 pub const MIN_SUPPORT_VOXELS: f64 = 2.0;
@@ -232,6 +237,8 @@ pub struct ParticleProducer {
     classes: Vec<SupportClass>,
     /// Largest density at a particle, unit-cube units.
     max_density: f64,
+    /// Median density at the probed particles, unit-cube units.
+    typical_density: f64,
     total_mass: f64,
     /// The field values the voxel values 0 and 1 stand for (unit-cube units for the density).
     lower: f64,
@@ -320,6 +327,7 @@ impl ParticleProducer {
             max_support,
             classes,
             max_density: 1.0,
+            typical_density: 1.0,
             total_mass,
             lower: 0.0,
             upper: 1.0,
@@ -334,8 +342,17 @@ impl ParticleProducer {
             .map(|i| if probed(&i) { producer.density(producer.positions[i], 0.0) } else { 0.0 })
             .collect();
         let max_density = densities.iter().copied().fold(0.0, f64::max);
+        let mut probed_densities: Vec<f64> = densities.iter().copied().filter(|&d| d > 0.0).collect();
+        let middle = probed_densities.len() / 2;
+        producer.typical_density = match probed_densities.is_empty() {
+            true => max_density,
+            false => *probed_densities.select_nth_unstable_by(middle, f64::total_cmp).1,
+        };
         producer.max_density = if max_density > 0.0 { max_density } else { 1.0 };
-        producer.upper = producer.max_density;
+        // 16-bit voxels cannot span the density range of clustered particles (10⁸ between a cluster's core and its
+        // halo is common): the top of the scale is at most DENSITY_RANGE times the median, and denser voxels
+        // saturate there.
+        producer.upper = producer.max_density.min(DENSITY_RANGE * producer.typical_density.max(f64::MIN_POSITIVE));
         if settings.attribute {
             let values = particles.values().0;
             // Every particle's kernel is positive at its own centre, so ρⱼ > 0.
@@ -360,19 +377,26 @@ impl ParticleProducer {
         self.fit
     }
 
-    /// The values the voxel values 0 and 1 stand for: `[0, ρ_max]` in file mass per file volume, or the attribute's
+    /// The values the voxel values 0 and 1 stand for: `[0, ρ_top]` in file mass per file volume, `ρ_top` the peak
+    /// density or [`DENSITY_RANGE`] times the median, whichever is lower (denser voxels saturate); or the attribute's
     /// interpolated range (including 0, its value where no particle reaches).
     pub fn value_range(&self) -> [f64; 2] {
         if self.attribute {
             [self.lower, self.upper]
         } else {
-            [0.0, self.max_density / self.fit.size.powi(3)]
+            [0.0, self.upper / self.fit.size.powi(3)]
         }
     }
 
     /// The voxel value (0 to 1) where no particle reaches.
     fn empty_value(&self) -> f32 {
         quantize((-self.lower / (self.upper - self.lower)) as f32) as f32 / 65535.0
+    }
+
+    /// The median density at the particles (probed as for the peak), in file mass per file volume: where a default
+    /// transfer function should put its ramp, the peak being often orders of magnitude above it.
+    pub fn typical_density(&self) -> f64 {
+        self.typical_density / self.fit.size.powi(3)
     }
 
     /// How far beyond the particles' bounds (unit-cube units) the finest level's density reaches: the largest support.
@@ -385,9 +409,14 @@ impl ParticleProducer {
         self.total_mass
     }
 
-    /// Largest density at a particle, unit-cube units (the voxel value 1).
+    /// Largest density found at a particle, unit-cube units.
     pub fn max_density(&self) -> f64 {
         self.max_density
+    }
+
+    /// The density the voxel value 1 stands for, unit-cube units (density mode).
+    pub fn density_scale(&self) -> f64 {
+        self.upper
     }
 
     /// Calls `f` with index ranges covering every particle whose kernel (no narrower than `min_support`) can reach the
@@ -441,7 +470,7 @@ pub const SMOOTHING_NEIGHBOURS: usize = 8;
 
 /// Per-particle smoothing lengths for files that give none, adapted to the local spacing (a k-d tree's 8 nearest
 /// neighbours), so that dense clusters get narrow kernels and sparse outskirts wide ones. Clamped to [1e-6, 0.1] of
-/// the cube.
+/// the cube and to [`MAX_SUPPORT_OVER_MEDIAN`] times the median.
 fn adaptive_support(unit: &[DVec3]) -> Vec<f64> {
     if unit.len() < 2 {
         return vec![0.05; unit.len()];
@@ -450,15 +479,26 @@ fn adaptive_support(unit: &[DVec3]) -> Vec<f64> {
     let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&points);
     let k = (SMOOTHING_NEIGHBOURS + 1).min(points.len());
     let wanted = NonZero::new(k).unwrap_or(NonZero::<usize>::MIN);
-    points
+    let mut support: Vec<f64> = points
         .par_iter()
         .map(|p| {
             let nearest = tree.nearest_n::<SquaredEuclidean>(p, wanted);
             let farthest = nearest.iter().map(|n| n.distance).fold(0.0, f64::max);
             (2.0 * farthest.sqrt()).clamp(1e-6, 0.1)
         })
-        .collect()
+        .collect();
+    // Isolated particles (outliers, a sparse halo) would get kernels spanning much of the volume: their density is
+    // negligible, but every brick their kernel touches would have to be made. At most four times the median.
+    let mut sorted = support.clone();
+    let middle = sorted.len() / 2;
+    let median = *sorted.select_nth_unstable_by(middle, f64::total_cmp).1;
+    let cap = MAX_SUPPORT_OVER_MEDIAN * median;
+    support.iter_mut().for_each(|h| *h = h.min(cap));
+    support
 }
+
+/// The adaptive smoothing length's cap, in median smoothing lengths.
+pub const MAX_SUPPORT_OVER_MEDIAN: f64 = 4.0;
 
 impl Producer for ParticleProducer {
     fn shape(&self) -> TreeShape {
@@ -612,7 +652,7 @@ mod tests {
                 }
             }
         }
-        sum * producer.max_density() * voxel.powi(3)
+        sum * producer.density_scale() * voxel.powi(3)
     }
 
     #[test]
@@ -655,10 +695,11 @@ mod tests {
         let b = shape.stored_brick_size();
         for (n, &v) in voxels.iter().enumerate() {
             let p = voxel_centre(&shape, &key, n as u32 % b, n as u32 / b % b, n as u32 / b / b);
-            let expected = 2.0 * cubic_spline((p - centre).length(), h) / producer.max_density();
+            let expected = 2.0 * cubic_spline((p - centre).length(), h) / producer.density_scale();
             assert!((f64::from(v) / 65535.0 - expected.min(1.0)).abs() < 2.0 / 65535.0, "{p}");
         }
-        assert_eq!(producer.value_range()[1], producer.max_density() / producer.fit().size.powi(3));
+        assert_eq!(producer.value_range()[1], producer.density_scale() / producer.fit().size.powi(3));
+        assert_eq!(producer.density_scale(), producer.max_density(), "one particle: the peak is the median");
         assert!((producer.max_density() - 2.0 * cubic_spline(0.0, h)).abs() < 1e-9);
     }
 

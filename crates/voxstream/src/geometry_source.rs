@@ -210,7 +210,7 @@ pub fn open(path: &Path, args: &GeometryOptions) -> Result<GeometrySource> {
             let transfer_function = if args.attribute {
                 attribute_transfer_function(value_range)
             } else {
-                particle_transfer_function(value_range[1])
+                particle_transfer_function(producer.typical_density(), value_range[1])
             };
             Ok(GeometrySource {
                 index_bytes: producer.heap_bytes(),
@@ -246,19 +246,17 @@ fn mesh_transfer_function() -> TransferFunction {
     .expect("the built-in transfer function is valid")
 }
 
-/// Particle density: transparent where sparse, warm and opaque where dense.
-fn particle_transfer_function(max_density: f64) -> TransferFunction {
-    let at = |f: f64| max_density * f;
-    TransferFunction::new(
-        vec![
-            [0.0, 0.0, 0.0, 0.0, 0.0],
-            [at(0.05), 0.2, 0.3, 0.8, 0.0],
-            [at(0.3), 0.9, 0.5, 0.2, 0.08],
-            [at(1.0), 1.0, 0.95, 0.8, 0.4],
-        ],
-        None,
-    )
-    .expect("the built-in transfer function is valid")
+/// Particle density: transparent below a tenth of the median density at the particles, blue to orange up to four
+/// times it, then white and more opaque up to the peak (often orders of magnitude above the median).
+fn particle_transfer_function(typical: f64, max_density: f64) -> TransferFunction {
+    let mut points = vec![[0.0, 0.0, 0.0, 0.0, 0.0]];
+    for (f, r, g, b, a) in [(0.1, 0.2, 0.3, 0.8, 0.0), (1.0, 0.9, 0.5, 0.2, 0.05), (4.0, 1.0, 0.8, 0.5, 0.2)] {
+        if typical * f < max_density {
+            points.push([typical * f, r, g, b, a]);
+        }
+    }
+    points.push([max_density, 1.0, 0.95, 0.85, 0.4]);
+    TransferFunction::new(points, None).expect("the built-in transfer function is valid")
 }
 
 /// A particle attribute: transparent at 0 (where no particle reaches), blue towards negative values, orange towards
