@@ -12,6 +12,7 @@
 use glam::DVec3;
 use rayon::prelude::*;
 
+use crate::error::GeometryError;
 use crate::triangle_bvh::{TriangleBvh, TriangleFeature};
 use crate::triangle_mesh::TriangleMesh;
 
@@ -32,6 +33,26 @@ impl UnitCubeFit {
         let size = if extent > 0.0 { extent / fill } else { 1.0 };
         let origin = [0, 1, 2].map(|a| 0.5 * (lower[a] + upper[a]) - 0.5 * size);
         UnitCubeFit { origin, size }
+    }
+
+    /// [`Self::around`], refusing spans a double cannot scale by (the cube's volume must be a normal number: densities
+    /// are divided by it) and a `fill` outside (0, 1].
+    pub fn checked_around(lower: [f64; 3], upper: [f64; 3], fill: f64) -> Result<UnitCubeFit, GeometryError> {
+        if !(fill > 0.0 && fill <= 1.0) {
+            return Err(GeometryError::Invalid { message: format!("fill {fill} must be in (0, 1]") });
+        }
+        let extent = (0..3).map(|a| upper[a] - lower[a]).fold(0.0, f64::max);
+        let fit = UnitCubeFit::around(lower, upper, fill);
+        let volume = fit.size.powi(3);
+        if !(extent.is_finite() && volume.is_normal() && (1.0 / volume).is_normal()) {
+            return Err(GeometryError::Invalid {
+                message: format!(
+                    "the coordinates span {extent:e} file units: voxstream handles spans from about 1e-100 to 1e100 \
+                     (rescale the file's coordinates)"
+                ),
+            });
+        }
+        Ok(fit)
     }
 
     /// Unit-cube coordinates of a file position.
@@ -190,6 +211,15 @@ mod tests {
         assert!(field.signed_distance(DVec3::new(0.99, 0.5, 0.98)) < 0.0);
         assert!(field.signed_distance(DVec3::new(0.01, 0.02, 0.01)) < 0.0);
         assert!(field.signed_distance_within(DVec3::new(3.0, 0.5, 0.5), 1.0).is_none());
+    }
+
+    #[test]
+    fn spans_beyond_a_double_are_refused() {
+        let message = UnitCubeFit::checked_around([0.0; 3], [1e120, 0.0, 0.0], 0.8).unwrap_err().to_string();
+        assert!(message.contains("span 1e120 file units"), "{message}");
+        assert!(UnitCubeFit::checked_around([0.0; 3], [1e-110, 0.0, 0.0], 0.8).is_err());
+        assert!(UnitCubeFit::checked_around([0.0; 3], [1.0; 3], 0.0).is_err());
+        assert!(UnitCubeFit::checked_around([0.0; 3], [1.0; 3], 0.8).is_ok());
     }
 
     #[test]

@@ -20,10 +20,11 @@
 use std::sync::Arc;
 
 use glam::DVec3;
-use voxstream_core::{quantize, CoreError, NodeContent, NodeKey, ProduceError, Produced, Producer, TreeShape};
+use voxstream_core::{quantize, NodeContent, NodeKey, ProduceError, Produced, Producer, TreeShape};
 use voxstream_procedural::brick_fill::voxel_centre;
 use voxstream_procedural::noise::{fbm, fbm_bound};
 
+use crate::error::GeometryError;
 use crate::mesh_distance::{MeshDistance, UnitCubeFit};
 use crate::triangle_mesh::TriangleMesh;
 
@@ -83,9 +84,20 @@ pub struct MeshProducer {
 
 impl MeshProducer {
     /// Places `mesh` in the unit cube and builds its distance hierarchy.
-    pub fn new(mesh: &TriangleMesh, settings: MeshTreeSettings) -> Result<MeshProducer, CoreError> {
+    pub fn new(mesh: &TriangleMesh, settings: MeshTreeSettings) -> Result<MeshProducer, GeometryError> {
+        let invalid = |message: String| GeometryError::Invalid { message };
+        if !(settings.band_voxels.is_finite() && settings.band_voxels >= 1.0) {
+            return Err(invalid(format!("band of {} voxels: it must be at least 1", settings.band_voxels)));
+        }
+        if let Some(a) = settings.amplify {
+            if !(a.amplitude.is_finite() && a.amplitude >= 0.0 && a.base_frequency.is_finite() && a.gain.is_finite()) {
+                return Err(invalid(format!("amplification {a:?} must be finite and non-negative")));
+            }
+        }
+        // The brick size is checked before it divides anything.
+        TreeShape::new(2, settings.brick_size, 0).map_err(|error| invalid(error.to_string()))?;
         let (lower, upper) = mesh.bounds();
-        let fit = UnitCubeFit::around(lower, upper, settings.fill);
+        let fit = UnitCubeFit::checked_around(lower, upper, settings.fill)?;
         let field = MeshDistance::new(mesh, fit);
         let resolution = settings.resolution.unwrap_or_else(|| {
             let wanted = (4.0 / field.median_edge.max(1e-9)).clamp(512.0, 16384.0) as u64;
@@ -97,7 +109,7 @@ impl MeshProducer {
         });
         let bricks = resolution.div_ceil(u64::from(settings.brick_size)).max(1);
         let max_level = 64 - (bricks - 1).leading_zeros();
-        let shape = TreeShape::new(2, settings.brick_size, max_level)?;
+        let shape = TreeShape::new(2, settings.brick_size, max_level).map_err(|error| invalid(error.to_string()))?;
         Ok(MeshProducer { shape, field: Arc::new(field), settings, fit })
     }
 
@@ -167,12 +179,13 @@ impl Producer for MeshProducer {
     fn produce(&self, key: NodeKey, voxels: &mut [u16]) -> Result<Produced, ProduceError> {
         let b = self.shape.stored_brick_size() as usize;
         let band = self.band(key.level);
-        let slack = band * 0.5 + self.noise_bound();
+        // Beyond the band's half (and the noise), values saturate; the search also reaches at least one voxel, so
+        // that a voxel with nothing found and its neighbour are together farther from the surface than the step.
+        let slack = (band * 0.5 + self.noise_bound()).max(self.shape.voxel_size(key.level) * (1.0 + 1e-9));
         // Each voxel searches only within `slack`: beyond it the value is 0 or 1 and only the sign matters. A voxel
         // with nothing within `slack` has the sign of its neighbour one voxel away (x, else y, else z): the
         // distance is 1-Lipschitz, so the surface cannot pass between two points whose distances sum to more than
-        // the step between them, and `slack` ≥ band/2 > half a voxel. Only the first voxel needs a full search.
-        debug_assert!(self.settings.band_voxels > 1.0);
+        // the step between them, and `slack` exceeds one voxel. Only the first voxel needs a full search.
         let mut inside = vec![false; b * b * b];
         let mut index = 0;
         for k in 0..b {

@@ -257,7 +257,15 @@ impl ParticleProducer {
             });
         }
         let (lower, upper) = particles.bounds();
-        let fit = UnitCubeFit::around(lower, upper, settings.fill);
+        let fit = UnitCubeFit::checked_around(lower, upper, settings.fill)?;
+        if !(settings.smoothing_scale.is_finite() && settings.smoothing_scale > 0.0) {
+            return Err(GeometryError::Invalid {
+                message: format!("smoothing scale {} must be positive", settings.smoothing_scale),
+            });
+        }
+        // The brick size is checked before it divides anything.
+        TreeShape::new(2, settings.brick_size, 0)
+            .map_err(|error| GeometryError::Invalid { message: error.to_string() })?;
         let count = particles.len();
         let unit: Vec<DVec3> = particles.positions().iter().map(|p| fit.to_unit(*p)).collect();
         let masses: Vec<f64> = if particles.masses().is_empty() {

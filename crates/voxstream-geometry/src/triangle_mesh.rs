@@ -44,6 +44,18 @@ impl TriangleMesh {
                 ),
             });
         }
+        // Vertices at bit-identical positions become one (−0 counts as +0): the sign of the distance comes from
+        // normals shared across edges and vertices, which a flat-shaded file (each face its own vertices) would
+        // otherwise not share.
+        let mut first_at: std::collections::HashMap<[u32; 3], u32> = std::collections::HashMap::new();
+        let remap: Vec<u32> = positions
+            .iter()
+            .enumerate()
+            .map(|(i, p)| *first_at.entry(p.map(|c| (c + 0.0).to_bits())).or_insert(i as u32))
+            .collect();
+        for t in &mut triangles {
+            *t = t.map(|i| remap[i as usize]);
+        }
         let before = triangles.len();
         triangles.retain(|t| {
             let [a, b, c] = t.map(|i| glam::DVec3::from(positions[i as usize].map(f64::from)));
@@ -109,5 +121,14 @@ mod tests {
         assert!(range.contains("uses vertex 7 but the mesh has 3 vertices"), "{range}");
         let flat = TriangleMesh::new(raw(good, vec![[0, 0, 1]])).unwrap_err().to_string();
         assert!(flat.contains("zero area"), "{flat}");
+    }
+
+    #[test]
+    fn coincident_vertices_are_welded() {
+        // Two triangles sharing an edge through duplicated vertices (and a −0).
+        let positions =
+            vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 0.0, -0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0]];
+        let mesh = TriangleMesh::new(raw(positions, vec![[0, 1, 2], [3, 5, 4]])).unwrap();
+        assert_eq!(mesh.triangles(), &[[0, 1, 2], [1, 5, 2]]);
     }
 }

@@ -3,7 +3,7 @@
 //! The baked volume is the box around the object (plus the band or kernel margin) at the finest level of the tree
 //! `--resolution` asks for, read as z slices by the store importer like any volume file. Slices are made a brick row
 //! at a time: every brick of the row is produced on the worker threads (bricks the oracle knows constant are filled
-//! without producing), so memory stays at one row of bricks. Values are `f32`: a mesh's 0 (outside) to 1 (inside),
+//! without producing), so memory stays at one row of bricks (refused above [`MAX_ROW_BYTES`]). Values are `f32`: a mesh's 0 (outside) to 1 (inside),
 //! the surface at ½; particles' density in the file's mass per cubic file unit.
 
 use rayon::prelude::*;
@@ -11,6 +11,9 @@ use voxstream_core::{NodeContent, NodeKey, Producer};
 use voxstream_store::{DType, StoreError, VolumeInfo, VolumeSource};
 
 use crate::geometry_source::GeometryProducer;
+
+/// The most memory one row of bricks may take while baking (the rest of the import streams).
+pub const MAX_ROW_BYTES: u64 = 4 << 30;
 
 /// The resolution `voxstream import` bakes a geometry file at unless `--resolution` says otherwise.
 pub const DEFAULT_BAKE_RESOLUTION: u64 = 512;
@@ -22,7 +25,9 @@ pub struct BakedGeometry {
     /// First voxel (at the finest level) of the crop.
     lower: [u64; 3],
     level: u32,
-    value_scale: f32,
+    /// The values the voxel values 0 and 1 stand for: `lower + v·span`.
+    value_lower: f32,
+    value_span: f32,
     /// Next slice to hand out (0-based within the crop).
     next_slice: u64,
     /// The brick row holding slices `row_first..row_first + brick_size` of the crop (global z), x fastest.
@@ -31,9 +36,13 @@ pub struct BakedGeometry {
 }
 
 impl BakedGeometry {
-    /// Bakes `producer`'s finest level around the object's `bounds` (file units); `value_scale` turns the normalised
-    /// voxels into the source's values.
-    pub fn new(producer: GeometryProducer, value_scale: f64, bounds: ([f64; 3], [f64; 3])) -> BakedGeometry {
+    /// Bakes `producer`'s finest level around the object's `bounds` (file units); the voxel values 0 and 1 stand for
+    /// `value_range`. Refuses a resolution whose brick row would not fit in [`MAX_ROW_BYTES`].
+    pub fn new(
+        producer: GeometryProducer,
+        value_range: [f64; 2],
+        bounds: ([f64; 3], [f64; 3]),
+    ) -> anyhow::Result<BakedGeometry> {
         let shape = producer.shape();
         let level = shape.max_level;
         let resolution = shape.virtual_resolution();
@@ -57,16 +66,30 @@ impl BakedGeometry {
             // Voxel i of the level is centred at (i + ½)·voxel in the cube.
             origin: [0, 1, 2].map(|a| fit.origin[a] + (first[a] as f64 + 0.5) * voxel * size),
         };
-        BakedGeometry {
+        // A row of slices (f32) and, while it is made, its bricks (u16 with borders, about 2× more per voxel).
+        let m = u64::from(shape.brick_size);
+        let row_bytes = dims[0].saturating_mul(dims[1]).saturating_mul(m).saturating_mul(4 + 2 * 2);
+        if row_bytes > MAX_ROW_BYTES {
+            anyhow::bail!(
+                "baking {}x{}x{} voxels needs {} MiB for one row of bricks, more than {} MiB: lower --resolution",
+                dims[0],
+                dims[1],
+                dims[2],
+                row_bytes >> 20,
+                MAX_ROW_BYTES >> 20
+            );
+        }
+        Ok(BakedGeometry {
             producer,
             info,
             lower: first,
             level,
-            value_scale: value_scale as f32,
+            value_lower: value_range[0] as f32,
+            value_span: (value_range[1] - value_range[0]) as f32,
             next_slice: 0,
             row: Vec::new(),
             row_first: None,
-        }
+        })
     }
 
     /// Fills `self.row` with the brick row holding global voxel slice `z`.
@@ -119,7 +142,7 @@ impl BakedGeometry {
                             None => constant,
                         };
                         let at = (k * dy + (gy - self.lower[1]) as usize) * dx + (gx - self.lower[0]) as usize;
-                        self.row[at] = normalised * self.value_scale;
+                        self.row[at] = self.value_lower + normalised * self.value_span;
                     }
                 }
             }

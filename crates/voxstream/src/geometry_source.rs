@@ -157,13 +157,14 @@ pub fn open(path: &Path, args: &GeometryOptions) -> Result<GeometrySource> {
                 started.elapsed().as_secs_f64()
             );
             let index_bytes = producer.field().heap_bytes();
+            let camera = default_camera(&producer.fit(), producer.margin(), (lower, upper), args);
             Ok(GeometrySource {
                 producer: GeometryProducer::Mesh(producer),
                 value_range: [0.0, 1.0],
                 default_surfaces: vec![IsoSurface { value: 0.5, color: [0.85, 0.78, 0.68], opacity: 1.0 }],
-                transfer_function: mesh_transfer_function(),
+                transfer_function: mesh_transfer_function()?,
                 placement: placement(fit),
-                camera: frame_box(lower, upper, args.width, args.height, GEOMETRY_VIEW_DIRECTION, [0.0, 1.0, 0.0]),
+                camera,
                 index_bytes,
                 bounds: (lower, upper),
                 description,
@@ -208,10 +209,11 @@ pub fn open(path: &Path, args: &GeometryOptions) -> Result<GeometrySource> {
                 started.elapsed().as_secs_f64(),
             );
             let transfer_function = if args.attribute {
-                attribute_transfer_function(value_range)
+                attribute_transfer_function(value_range)?
             } else {
-                particle_transfer_function(producer.typical_density(), value_range[1])
+                particle_transfer_function(producer.typical_density(), value_range[1])?
             };
+            let (fit, margin) = (producer.fit(), producer.margin());
             Ok(GeometrySource {
                 index_bytes: producer.heap_bytes(),
                 placement: placement(producer.fit()),
@@ -219,12 +221,26 @@ pub fn open(path: &Path, args: &GeometryOptions) -> Result<GeometrySource> {
                 value_range,
                 default_surfaces,
                 transfer_function,
-                camera: frame_box(lower, upper, args.width, args.height, GEOMETRY_VIEW_DIRECTION, [0.0, 1.0, 0.0]),
+                camera: default_camera(&fit, margin, (lower, upper), args),
                 bounds: (lower, upper),
                 description,
             })
         }
     }
+}
+
+/// The default view of the object's bounds widened by its margin (the band or the kernels), so that a single
+/// particle or a flat mesh is framed too.
+fn default_camera(
+    fit: &UnitCubeFit,
+    margin: f64,
+    (lower, upper): ([f64; 3], [f64; 3]),
+    args: &GeometryOptions,
+) -> Camera {
+    let pad = margin * fit.size;
+    let lower = lower.map(|v| v - pad);
+    let upper = upper.map(|v| v + pad);
+    frame_box(lower, upper, args.width, args.height, GEOMETRY_VIEW_DIRECTION, [0.0, 1.0, 0.0])
 }
 
 /// The tree's unit cube in file units.
@@ -233,8 +249,8 @@ fn placement(fit: UnitCubeFit) -> VolumePlacement {
 }
 
 /// A mesh as a volume: a soft solid (values above ½ are inside).
-fn mesh_transfer_function() -> TransferFunction {
-    TransferFunction::new(
+fn mesh_transfer_function() -> Result<TransferFunction> {
+    Ok(TransferFunction::new(
         vec![
             [0.0, 0.0, 0.0, 0.0, 0.0],
             [0.45, 0.85, 0.6, 0.4, 0.0],
@@ -242,13 +258,12 @@ fn mesh_transfer_function() -> TransferFunction {
             [1.0, 1.0, 0.95, 0.9, 0.8],
         ],
         None,
-    )
-    .expect("the built-in transfer function is valid")
+    )?)
 }
 
 /// Particle density: transparent below a tenth of the median density at the particles, blue to orange up to four
 /// times it, then white and more opaque up to the peak (often orders of magnitude above the median).
-fn particle_transfer_function(typical: f64, max_density: f64) -> TransferFunction {
+fn particle_transfer_function(typical: f64, max_density: f64) -> Result<TransferFunction> {
     let mut points = vec![[0.0, 0.0, 0.0, 0.0, 0.0]];
     for (f, r, g, b, a) in [(0.1, 0.2, 0.3, 0.8, 0.0), (1.0, 0.9, 0.5, 0.2, 0.05), (4.0, 1.0, 0.8, 0.5, 0.2)] {
         if typical * f < max_density {
@@ -256,12 +271,12 @@ fn particle_transfer_function(typical: f64, max_density: f64) -> TransferFunctio
         }
     }
     points.push([max_density, 1.0, 0.95, 0.85, 0.4]);
-    TransferFunction::new(points, None).expect("the built-in transfer function is valid")
+    TransferFunction::new(points, None).context("no density ramp fits the particles' densities")
 }
 
 /// A particle attribute: transparent at 0 (where no particle reaches), blue towards negative values, orange towards
 /// positive ones.
-fn attribute_transfer_function([lower, upper]: [f64; 2]) -> TransferFunction {
+fn attribute_transfer_function([lower, upper]: [f64; 2]) -> Result<TransferFunction> {
     let mut points = Vec::new();
     if lower < 0.0 {
         points.push([lower, 0.2, 0.4, 1.0, 0.25]);
@@ -270,5 +285,5 @@ fn attribute_transfer_function([lower, upper]: [f64; 2]) -> TransferFunction {
     if upper > 0.0 {
         points.push([upper, 1.0, 0.55, 0.15, 0.25]);
     }
-    TransferFunction::new(points, None).expect("a transfer function over the attribute's range is valid")
+    TransferFunction::new(points, None).context("no colour map fits the attribute's range")
 }

@@ -33,7 +33,7 @@ pub fn run(args: &ImportArgs) -> Result<()> {
         if !args.quiet {
             eprintln!("{}", geometry.description);
         }
-        let mut source = BakedGeometry::new(geometry.producer, geometry.value_range[1], geometry.bounds);
+        let mut source = BakedGeometry::new(geometry.producer, geometry.value_range, geometry.bounds)?;
         return import_source(args, &mut source);
     }
     let raw = match (&args.dims, &args.dtype) {

@@ -310,7 +310,7 @@ fn mistakes_in_flags_and_files_are_named_in_the_user_s_terms() {
     // A NumPy file of shape (48, 56, 64), C order: x = 64 varies fastest.
     let raw = std::fs::read(dir.join("ball.raw")).unwrap();
     let mut header = "{'descr': '<u2', 'fortran_order': False, 'shape': (48, 56, 64), }".to_string();
-    while (10 + header.len() + 1) % 64 != 0 {
+    while !(10 + header.len() + 1).is_multiple_of(64) {
         header.push(' ');
     }
     header.push('\n');

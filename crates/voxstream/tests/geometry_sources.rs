@@ -348,7 +348,8 @@ fn bad_geometry_files_get_one_clear_line() {
     let mut stl = vec![0u8; 80];
     stl.extend(1000u32.to_le_bytes());
     stl.extend([0u8; 100]);
-    let files: [(&str, &[u8], &str); 7] = [
+    let files: [(&str, &[u8], &str); 8] = [
+        ("far.xyz", b"0 0 0\n1e120 0 0\n", "the coordinates span 1e120 file units"),
         ("nan.obj", b"v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n", "vertex 1 has a non-finite coordinate"),
         (
             "huge.ply",
@@ -435,6 +436,19 @@ fn a_mesh_baked_into_a_store_renders_like_the_mesh() {
         both as f64 / either as f64 >= 0.99,
         "baked and produced silhouettes differ: IoU {}",
         both as f64 / either as f64
+    );
+    // A resolution whose brick rows cannot be held is refused before anything is produced.
+    assert_fails(
+        &[
+            "import",
+            sphere.to_str().unwrap(),
+            "--out",
+            dir.join("z.zarr").to_str().unwrap(),
+            "--resolution",
+            "1048576",
+            "--quiet",
+        ],
+        "lower --resolution",
     );
     // Volume flags make no sense for a mesh; geometry flags none for a volume.
     assert_fails(&["import", sphere.to_str().unwrap(), "--out", "x.zarr", "--spacing", "1,1,1"], "keeps its own units");
