@@ -14,7 +14,7 @@ use voxstream_geometry::{
     Amplification, MeshProducer, MeshTreeSettings, ParticleProducer, ParticleSet, ParticleTreeSettings, TriangleMesh,
 };
 
-fn measure(producer: &(impl Producer + Sync), level: u32) {
+fn measure(producer: &impl Producer, level: u32) {
     let shape = producer.shape();
     let per_axis = shape.nodes_per_axis(level);
     let started = Instant::now();
