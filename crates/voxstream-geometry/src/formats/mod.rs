@@ -33,6 +33,7 @@ pub mod ply;
 pub mod stl;
 pub mod vtk_legacy;
 pub mod vtp;
+pub mod words;
 pub mod xyz;
 
 /// The largest file read, after decompression: geometry files are parsed whole in memory.

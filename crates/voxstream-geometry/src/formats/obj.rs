@@ -14,6 +14,7 @@
 
 use std::path::Path;
 
+use super::words::{shown_bytes as shown, text};
 use crate::error::GeometryError;
 use crate::triangle_mesh::RawMesh;
 
@@ -82,22 +83,6 @@ fn corner(word: &[u8], vertices: usize) -> Result<u32, String> {
         }
     };
     u32::try_from(zero_based).map_err(|_| format!("uses vertex {index}: voxstream reads at most 2^32 vertices"))
-}
-
-/// A word as text for parsing (words that are not UTF-8 parse as nothing).
-fn text(word: &[u8]) -> &str {
-    std::str::from_utf8(word).unwrap_or("\u{fffd}")
-}
-
-/// A word for an error message, cut to 40 characters.
-fn shown(word: &[u8]) -> String {
-    let text = String::from_utf8_lossy(word);
-    let mut chars = text.chars();
-    let mut out: String = chars.by_ref().take(40).collect();
-    if chars.next().is_some() {
-        out.push('…');
-    }
-    out
 }
 
 #[cfg(test)]

@@ -12,6 +12,7 @@
 
 use std::path::Path;
 
+use super::words::{shown_bytes as shown, text};
 use crate::error::GeometryError;
 use crate::triangle_mesh::RawMesh;
 
@@ -166,22 +167,6 @@ impl<'a> Lines<'a> {
             }
         }
     }
-}
-
-/// A word as text for parsing (words that are not UTF-8 parse as nothing).
-fn text(word: &[u8]) -> &str {
-    std::str::from_utf8(word).unwrap_or("\u{fffd}")
-}
-
-/// A word for an error message, cut to 40 characters.
-fn shown(word: &[u8]) -> String {
-    let text = String::from_utf8_lossy(word);
-    let mut chars = text.chars();
-    let mut out: String = chars.by_ref().take(40).collect();
-    if chars.next().is_some() {
-        out.push('…');
-    }
-    out
 }
 
 #[cfg(test)]

@@ -20,6 +20,7 @@
 
 use std::path::Path;
 
+use super::words::shown;
 use super::RawGeometry;
 use crate::error::GeometryError;
 use crate::particles::RawParticles;
@@ -142,18 +143,6 @@ struct Header {
 }
 
 /// At most this many characters of a file's word are quoted in an error.
-const SHOWN_CHARS: usize = 40;
-
-/// `text` for an error message, cut to [`SHOWN_CHARS`].
-fn shown(text: &str) -> String {
-    let mut chars = text.chars();
-    let mut out: String = chars.by_ref().take(SHOWN_CHARS).collect();
-    if chars.next().is_some() {
-        out.push('…');
-    }
-    out
-}
-
 fn parse_header(bytes: &[u8], path: &Path) -> Result<Header, GeometryError> {
     let at = |line: u64, message: String| GeometryError::format(path, Some(line), message);
     let first_line = bytes.split(|&b| b == b'\n').next().unwrap_or_default();

@@ -19,6 +19,7 @@
 use std::collections::HashMap;
 use std::path::Path;
 
+use super::words::shown;
 use crate::error::GeometryError;
 use crate::triangle_mesh::RawMesh;
 
@@ -196,16 +197,6 @@ impl Welder {
             next
         }))
     }
-}
-
-/// `text` for an error message, cut to 40 characters.
-fn shown(text: &str) -> String {
-    let mut chars = text.chars();
-    let mut out: String = chars.by_ref().take(40).collect();
-    if chars.next().is_some() {
-        out.push('…');
-    }
-    out
 }
 
 #[cfg(test)]
