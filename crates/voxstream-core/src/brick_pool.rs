@@ -11,10 +11,10 @@ use crate::key::{TreeShape, BLOCK_CELLS};
 use crate::lru::{Allocation, LruSlots};
 use crate::node::{BrickSlot, NodeId};
 
-/// Bytes of the per-slot records (the owning node, the brick's value range and its blocks' ranges), counted in the
-/// budget.
+/// Bytes of the per-slot records (the owning node, the brick's value range, its blocks' ranges and its blending
+/// caps), counted in the budget.
 pub fn brick_record_bytes(shape: &TreeShape) -> usize {
-    4 + 4 + 4 * shape.blocks_per_brick()
+    4 + 4 + 4 * shape.blocks_per_brick() + crate::level_blending::BLEND_BYTES_PER_BRICK
 }
 
 /// Largest voxel value; stands for 1.0.

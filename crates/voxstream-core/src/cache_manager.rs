@@ -40,7 +40,8 @@ use crate::budget::PoolCapacities;
 use crate::error::{CoreError, ProduceError};
 use crate::feedback::{FeedbackBuffer, Request, RequestKind};
 use crate::key::{NodeKey, TreeShape};
-use crate::node::{Node, NodeData, NodeId, TileId};
+use crate::level_blending::LevelBlending;
+use crate::node::{BrickSlot, Node, NodeData, NodeId, TileId};
 use crate::node_pool::{NodePool, ROOT_TILE};
 use crate::producer::{NodeContent, Produced, Producer};
 use crate::request_queue::RequestQueue;
@@ -120,6 +121,8 @@ pub struct CacheManager<P: Producer> {
     feedback: FeedbackBuffer,
     frame: u32,
     failed: HashSet<NodeKey>,
+    /// Thiele et al.'s temporal and spatial blending, when on ([`CacheManager::set_blending`]).
+    blending: Option<LevelBlending>,
 }
 
 impl<P: Producer> CacheManager<P> {
@@ -139,6 +142,7 @@ impl<P: Producer> CacheManager<P> {
             feedback,
             frame: 1,
             failed: HashSet::new(),
+            blending: None,
         })
     }
 
@@ -176,6 +180,30 @@ impl<P: Producer> CacheManager<P> {
     /// [`CacheManager::feedback`], and finish with [`CacheManager::end_frame`].
     pub fn begin_frame(&mut self) {
         self.feedback.reset(self.node_pool.tiles_allocated(), self.brick_pool.allocated());
+        if let Some(blending) = &mut self.blending {
+            let bricks = &self.brick_pool;
+            let owner_of = |slot: BrickSlot| bricks.is_in_use(slot).then(|| bricks.owner(slot));
+            blending.update(self.frame, &self.node_pool, bricks.allocated(), owner_of);
+        }
+    }
+
+    /// Turns level blending on with a fade-in of `fade_frames` frames (see [`crate::level_blending`]), or off with
+    /// `None`. Off, the view carries no caps and frames are as without blending.
+    pub fn set_blending(&mut self, fade_frames: Option<u32>) {
+        self.blending = fade_frames.map(LevelBlending::new);
+    }
+
+    /// Ends any blending in progress: the next frame shows what is resident as it is (after an exact frame).
+    pub fn settle_blending(&mut self) {
+        if let Some(blending) = &mut self.blending {
+            blending.settle();
+        }
+    }
+
+    /// Whether the current frame's view blends some brick towards its parent (something arrived within the fade, or
+    /// the rays wait for a finer level beside a resident brick): the image is not final yet.
+    pub fn is_blending(&self) -> bool {
+        self.blending.as_ref().is_some_and(LevelBlending::is_active)
     }
 
     /// The pools as renderers read them.
@@ -186,6 +214,7 @@ impl<P: Producer> CacheManager<P> {
             voxels: self.brick_pool.voxels(),
             brick_ranges: self.brick_pool.ranges(),
             block_ranges: self.brick_pool.block_ranges(),
+            brick_blends: self.blending.as_ref().map_or(&[], LevelBlending::caps),
         }
     }
 
@@ -240,7 +269,10 @@ impl<P: Producer> CacheManager<P> {
             }
         }
         report.pending = work.len();
+        // What this frame leaves unserved: past the bound, or deferred for want of room.
+        let mut unserved: Vec<(Request, NodeKey)> = Vec::new();
         if let Some(limit) = limit {
+            unserved.extend(work.iter().skip(limit).copied());
             report.deferred += work.len().saturating_sub(limit);
             // Let the producer fetch the deferred bricks in the background while the next frame renders.
             let deferred: Vec<NodeKey> = work
@@ -293,11 +325,20 @@ impl<P: Producer> CacheManager<P> {
                     report.served += 1;
                 } else {
                     report.deferred += 1;
+                    unserved.push((request, key));
                 }
             }
         }
         if options.prefetch_new_children {
             self.prefetch_children(&new_tiles, &mut report);
+        }
+        if let Some(blending) = &mut self.blending {
+            // The regions the rays want finer than resident: a missing node at its level, a childless one a level
+            // below it.
+            blending.set_pending(unserved.iter().map(|&(request, key)| match request.kind {
+                RequestKind::Produce => (key, key.level),
+                RequestKind::Subdivide => (key, key.level + 1),
+            }));
         }
         self.frame += 1;
         report
@@ -380,6 +421,9 @@ impl<P: Producer> CacheManager<P> {
                 }
                 if let Some(range) = brick.subtree_range {
                     self.brick_pool.widen_range(slot, range);
+                }
+                if let Some(blending) = &mut self.blending {
+                    blending.arrived(slot, node_id, self.frame);
                 }
                 let node = self.node_pool.node_mut(node_id);
                 node.set_brick(Some(slot));

@@ -13,6 +13,7 @@
 //! - [`FeedbackBuffer`]: what rays used and what they missed; [`RequestQueue`]: dedup, parent-first, bounded.
 //! - [`CacheManager`]: serves requests by calling a [`Producer`] on worker threads; LRU recycling.
 //! - [`TreeView`]: the immutable flat view renderers read during a frame.
+//! - [`LevelBlending`]: Thiele et al.'s fade-in of arriving bricks and caps towards coarser neighbours.
 //!
 //! ```
 //! use voxstream_core::{CacheManager, NodeContent, NodeKey, Produced, Producer, ProduceError, ServeOptions, TreeShape};
@@ -43,6 +44,7 @@ pub mod cache_manager;
 pub mod error;
 pub mod feedback;
 pub mod key;
+pub mod level_blending;
 pub mod lru;
 pub mod node;
 pub mod node_pool;
@@ -56,6 +58,7 @@ pub use cache_manager::{CacheManager, Residency, ServeOptions, ServeReport};
 pub use error::{CoreError, ProduceError};
 pub use feedback::{FeedbackBuffer, Request, RequestKind};
 pub use key::{NodeKey, TreeShape, BLOCK_CELLS, BRICK_BORDER};
+pub use level_blending::{BrickBlend, LevelBlending, DEFAULT_FADE_FRAMES};
 pub use node::{BrickSlot, Node, NodeData, NodeId, TileId};
 pub use node_pool::NodePool;
 pub use producer::{NodeContent, Produced, Producer};

@@ -4,7 +4,7 @@
 //! same layout. The view borrows the pools immutably: while a frame renders, the borrow checker guarantees that the
 //! cache manager cannot change them.
 
-use voxstream_layout::TreeHeader;
+use voxstream_layout::{BrickBlend, TreeHeader};
 
 use crate::brick_pool::dequantize;
 use crate::key::{TreeShape, BLOCK_CELLS};
@@ -23,6 +23,9 @@ pub struct TreeView<'a> {
     pub brick_ranges: &'a [[u16; 2]],
     /// `[min, max]` voxel of each occupancy block, [`TreeShape::blocks_per_brick`] per slot.
     pub block_ranges: &'a [[u16; 2]],
+    /// Per brick slot, the caps on its weight against its parent at its corners (Thiele et al.'s blending,
+    /// [`crate::level_blending`]); empty when nothing is blended this frame.
+    pub brick_blends: &'a [BrickBlend],
 }
 
 impl<'a> TreeView<'a> {
@@ -100,7 +103,7 @@ mod tests {
         let voxels = vec![0u16; 3 * shape.voxels_per_brick()];
         let ranges = vec![[0u16, 0]; 3];
         let blocks = vec![[0u16, 0]; 3 * shape.blocks_per_brick()];
-        let view = TreeView { shape, nodes: &nodes, voxels: &voxels, brick_ranges: &ranges, block_ranges: &blocks };
+        let view = TreeView { shape, nodes: &nodes, voxels: &voxels, brick_ranges: &ranges, block_ranges: &blocks, brick_blends: &[] };
         let header = view.header();
         assert_eq!((header.n, header.nodes_per_tile, header.brick_size, header.stored_brick_size), (3, 27, 16, 18));
         // 17 cells between the 18 stored voxels, in blocks of 8: three blocks per axis, the last one smaller.

@@ -9,9 +9,11 @@
 //! - [`FrameRenderer`]: what the loop needs from a renderer (one pass over a `TreeView`, writing the feedback);
 //!   [`CpuRenderer`] is the CPU ray caster of `voxstream-render`; a GPU backend implements the same trait.
 //! - [`MemoryBudget`] / [`MemoryPlan`]: one budget split among the image, a store's host cache and the pools.
+//! - [`PoppingSummary`]: how much an interactive sequence pops and shows seams against the exact images (Thiele
+//!   et al.'s evaluation made a number).
 //!
 //! No command-line parsing here: the optional `clap` and `serde` features derive `ValueEnum` and `Serialize` on
-//! [`Mode`] for front ends that want them.
+//! [`Mode`] (and `Serialize` on [`PoppingSummary`]) for front ends that want them.
 //!
 //! ```
 //! use voxstream_core::{NodeContent, NodeKey, ProduceError, Produced, Producer, TreeShape};
@@ -38,6 +40,7 @@
 pub mod error;
 pub mod frame_renderer;
 pub mod memory_budget;
+pub mod popping;
 pub mod session;
 
 pub use error::EngineError;
@@ -45,4 +48,5 @@ pub use frame_renderer::{CpuRenderer, FrameRenderer};
 pub use memory_budget::{
     machine_memory_bytes, BudgetError, MemoryBudget, MemoryPlan, MAX_BUDGET_MB, STORE_CACHE_SHARE,
 };
+pub use popping::{frame_popping, seam_error, PoppingSummary, Rgb8};
 pub use session::{FrameResult, LoopLimits, Mode, PassProgress, Session, CONVERGED_REQUESTS_PER_RAY};

@@ -16,7 +16,7 @@
 
 use std::time::Instant;
 
-use voxstream_core::{CacheManager, ProduceError, Producer, Residency, ServeOptions};
+use voxstream_core::{CacheManager, ProduceError, Producer, Residency, ServeOptions, DEFAULT_FADE_FRAMES};
 use voxstream_render::{Camera, Image, ProgressiveImage, RenderSettings, TransferFunction, TransferLut};
 
 use crate::error::EngineError;
@@ -55,6 +55,9 @@ pub struct LoopLimits {
     /// resident, so the image is the same; the early passes cost a quarter. A frame after one that needed no data
     /// starts with every pixel.
     pub gather_sparsely: bool,
+    /// Interactive mode only: Thiele et al.'s level blending ([`voxstream_core::level_blending`]) with a fade-in of
+    /// this many frames; `None` turns it off. Converged frames never blend (their image is exact either way).
+    pub blending_fade_frames: Option<u32>,
 }
 
 /// The pixel stride of the request-gathering passes of a converged frame ([`LoopLimits::gather_sparsely`]).
@@ -62,7 +65,13 @@ pub const GATHER_STRIDE: u32 = 4;
 
 impl Default for LoopLimits {
     fn default() -> Self {
-        LoopLimits { requests_per_frame: 1024, max_passes: 400, prefetch_new_children: true, gather_sparsely: true }
+        LoopLimits {
+            requests_per_frame: 1024,
+            max_passes: 400,
+            prefetch_new_children: true,
+            gather_sparsely: true,
+            blending_fade_frames: Some(DEFAULT_FADE_FRAMES),
+        }
     }
 }
 
@@ -89,6 +98,9 @@ pub struct FrameResult {
     pub bricks_prefetched: u64,
     /// Requests still pending after the last pass: 0 = the image is exact.
     pub pending: usize,
+    /// Whether the frame blended some brick towards its parent (a fade-in, or a finer neighbour still missing):
+    /// the next frames still change the image.
+    pub blended: bool,
     /// Producer failures met in this frame.
     pub failures: Vec<ProduceError>,
 }
@@ -97,6 +109,11 @@ impl FrameResult {
     /// Whether no ray of the final pass missed anything.
     pub fn is_converged(&self) -> bool {
         self.pending == 0
+    }
+
+    /// Whether the image is final: converged, and no brick blended towards its parent.
+    pub fn is_final(&self) -> bool {
+        self.is_converged() && !self.blended
     }
 }
 
@@ -168,7 +185,8 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
         let shape = producer.shape();
         let finest_voxel = settings.placement.mean_scale() * shape.voxel_size(shape.max_level);
         let lut = TransferLut::new(transfer_function, value_range[0] as f32, value_range[1] as f32, finest_voxel);
-        let cache = CacheManager::new(producer, budget_bytes)?;
+        let mut cache = CacheManager::new(producer, budget_bytes)?;
+        cache.set_blending(limits.blending_fade_frames);
         Ok(Session { cache, renderer, lut, settings, limits, peak_resident_bytes: 0, gather_sparsely_next: true })
     }
 
@@ -221,6 +239,7 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
             bricks_produced: 0,
             bricks_prefetched: 0,
             pending: 0,
+            blended: false,
             failures: Vec::new(),
         };
         let mut progressive = ProgressiveImage::new(self.settings.width, self.settings.height);
@@ -235,8 +254,13 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
         loop {
             self.cache.begin_frame();
             let render_start = Instant::now();
+            let mut view = self.cache.view();
+            if mode == Mode::Converged {
+                view.brick_blends = &[];
+            }
+            result.blended = !view.brick_blends.is_empty();
             let (stats, _) = self.renderer.render_pass(
-                self.cache.view(),
+                view,
                 self.cache.feedback(),
                 camera,
                 &self.lut,
@@ -280,13 +304,15 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
         }
         if mode == Mode::Converged {
             self.gather_sparsely_next = result.requests > 0;
+            self.cache.settle_blending();
         }
         result.image = progressive.image;
         result.elapsed_ms = start.elapsed().as_secs_f64() * 1e3;
         Ok(result)
     }
 
-    /// Renders `frames` interactive frames from `camera` (or until converged if `frames` is 0).
+    /// Renders interactive frames from `camera` until one is final ([`FrameResult::is_final`]) or `max_frames` were
+    /// rendered; returns how many and the last.
     pub fn render_until_converged_interactively(
         &mut self,
         camera: &Camera,
@@ -299,7 +325,7 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
         loop {
             let result = self.render(camera, Mode::Interactive)?;
             frames += 1;
-            if result.is_converged() || frames >= max_frames {
+            if result.is_final() || frames >= max_frames {
                 return Ok((frames, result));
             }
         }

@@ -65,3 +65,15 @@ struct RequestRecord {
     node: u32,
     kind: u32,
 }
+
+// brick_blend.rs: per brick slot, the cap on its weight against its parent at its eight corners (x + 2y + 4z).
+struct BrickBlend {
+    corner0: f32,
+    corner1: f32,
+    corner2: f32,
+    corner3: f32,
+    corner4: f32,
+    corner5: f32,
+    corner6: f32,
+    corner7: f32,
+}

@@ -14,6 +14,7 @@
 //! | [`FeedbackCounters`] | 16 | the request list's fill level, written with atomics ([P09] §5) |
 //! | [`UsageFlag`] | 4 | one tile or brick slot used by some ray this frame ([P09] §5) |
 //! | [`RequestRecord`] | 8 | one ray's request: a node to produce or to subdivide ([P09] §5) |
+//! | [`BrickBlend`] | 32 | per brick slot: the cap on its weight against its parent at its corners (Thiele et al.'s blending) |
 //!
 //! Every struct is padded to a multiple of 16 bytes where a shader binds it as a uniform, and its WGSL mirror is
 //! `src/layout.wgsl` (`tests/wgsl_mirror.rs` checks that both agree: field names, order, offsets and sizes). Each
@@ -33,11 +34,13 @@
 
 #![cfg_attr(not(test), no_std)]
 
+pub mod brick_blend;
 pub mod feedback_records;
 pub mod node;
 pub mod transfer_table;
 pub mod tree_header;
 
+pub use brick_blend::BrickBlend;
 pub use feedback_records::{FeedbackCounters, RequestRecord, UsageFlag, REQUEST_PRODUCE, REQUEST_SUBDIVIDE};
 pub use node::{BrickSlot, Node, NodeData, NodeId, TileId, CHILD_MASK, CONSTANT_BIT, MAX_TILE_INDEX, TERMINAL_BIT};
 pub use transfer_table::{TransferTableEntry, TransferTableHeader, TABLE_HOLDS_EXTINCTION, TABLE_HOLDS_STEP_OPACITY};

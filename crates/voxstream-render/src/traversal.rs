@@ -31,7 +31,7 @@
 use std::ops::ControlFlow;
 
 use glam::DVec3;
-use voxstream_core::{BrickSlot, FeedbackBuffer, Node, NodeData, NodeId, Request, RequestKind, TreeView, BLOCK_CELLS};
+use voxstream_core::{BrickBlend, BrickSlot, FeedbackBuffer, Node, NodeData, NodeId, Request, RequestKind, TreeView, BLOCK_CELLS};
 
 use crate::integrand::{BrickSpan, Integrand, Sample};
 use crate::sampler::{values_along, values_and_gradients_along, Cell, LANES};
@@ -339,10 +339,25 @@ impl<'a> Traversal<'a> {
                     if count == 0 {
                         ControlFlow::Continue(())
                     } else {
-                        let coarse = coarse.filter(|_| blend_level).and_then(|c| {
-                            let weight =
-                                (self.level_at(0.5 * (t + t_exit), ray.spread) - c.level as f64).clamp(0.0, 1.0);
-                            (weight < 1.0).then_some((c, weight as f32))
+                        let coarse = coarse.and_then(|c| {
+                            // The cone's level weight (1 where only coarser data exists), capped by the fine brick's
+                            // blending caps (Thiele et al.: fade-in, coarser neighbours) at the first and the last
+                            // sample, and ramped linearly between them.
+                            let cone = if blend_level {
+                                (self.level_at(0.5 * (t + t_exit), ray.spread) - c.level as f64).clamp(0.0, 1.0) as f32
+                            } else {
+                                1.0
+                            };
+                            let (cap_first, cap_last) = match self.view.brick_blends.get(fine.slot.0 as usize) {
+                                Some(blend) if !blend.is_full() => {
+                                    let last = first + (count - 1) as f64 * dt;
+                                    (self.cap_at(ray, &fine, blend, first), self.cap_at(ray, &fine, blend, last))
+                                }
+                                _ => (1.0, 1.0),
+                            };
+                            let (w_first, w_last) = (cone.min(cap_first), cone.min(cap_last));
+                            let step = if count > 1 { (w_last - w_first) / (count - 1) as f32 } else { 0.0 };
+                            (w_first < 1.0 || w_last < 1.0).then_some((c, WeightRamp { first: w_first, step }))
                         });
                         self.march_bricks(ray, fine, coarse, first, dt, count, integrand, stats)
                     }
@@ -355,6 +370,15 @@ impl<'a> Traversal<'a> {
         }
     }
 
+    /// The blending cap of `fine` (interpolated between its corners) where the ray is at `t`.
+    #[inline]
+    fn cap_at(&self, ray: &Ray, fine: &BrickRef, blend: &BrickBlend, t: f64) -> f32 {
+        let s = self.scale[fine.level as usize];
+        let p = ray.origin + ray.direction * t;
+        let (pa, ijk) = (p.to_array(), fine.ijk);
+        blend.at(std::array::from_fn(|a| (pa[a] * s - ijk[a] as f64) as f32))
+    }
+
     /// Samples `count` points `first + k·dt` inside the bricks of one segment, skipping the runs that lie in
     /// occupancy blocks the integrand cannot use.
     #[allow(clippy::too_many_arguments)]
@@ -363,7 +387,7 @@ impl<'a> Traversal<'a> {
         &self,
         ray: &Ray,
         fine: BrickRef,
-        coarse: Option<(BrickRef, f32)>,
+        coarse: Option<(BrickRef, WeightRamp)>,
         first: f64,
         dt: f64,
         count: u64,
@@ -421,7 +445,7 @@ impl<'a> Traversal<'a> {
             // One loop per combination, so that the loop itself holds no test of either.
             let (coarse, weight) = match &coarse_line {
                 Some((line, weight)) => (line, *weight),
-                None => (&fine_line, 1.0),
+                None => (&fine_line, WeightRamp::FINE),
             };
             let run = (first, dt, k, run_end);
             let flow = match (gradient, coarse_line.is_some()) {
@@ -449,7 +473,7 @@ impl<'a> Traversal<'a> {
         &self,
         fine: &BrickLine<'_>,
         coarse: &BrickLine<'_>,
-        weight: f32,
+        weight: WeightRamp,
         (first, dt, k, end): (f64, f64, u32, u32),
         integrand: &mut I,
     ) -> RunFlow {
@@ -469,8 +493,8 @@ impl<'a> Traversal<'a> {
                 };
                 if COARSE {
                     let coarse_values = values_along(coarse.voxels, b, coarse.start, coarse.delta, kf);
-                    for (value, coarse_value) in values.iter_mut().zip(coarse_values) {
-                        *value = coarse_value + (*value - coarse_value) * weight;
+                    for (j, (value, coarse_value)) in values.iter_mut().zip(coarse_values).enumerate() {
+                        *value = coarse_value + (*value - coarse_value) * weight.at(kf + j as f32);
                     }
                 }
                 for (j, (&value, &gradient)) in values.iter().zip(&gradients).enumerate() {
@@ -489,7 +513,7 @@ impl<'a> Traversal<'a> {
                 if GRADIENT { cell.value_and_gradient(fine.voxels, b) } else { (cell.value(fine.voxels, b), [0.0; 3]) };
             if COARSE {
                 let coarse_value = Cell::locate(b, coarse.at(kf)).value(coarse.voxels, b);
-                value = coarse_value + (value - coarse_value) * weight;
+                value = coarse_value + (value - coarse_value) * weight.at(kf);
             }
             let sample = Sample { t: first + s as f64 * dt, value, gradient };
             if integrand.sample(sample).is_break() {
@@ -654,6 +678,24 @@ impl<'a> Traversal<'a> {
             },
         };
         (data, deepest as u32, last.ijk)
+    }
+}
+
+/// The fine brick's weight against its parent along a segment: `first + k·step` at sample `k` (a constant when
+/// `step` is 0, the same bits as a plain weight).
+#[derive(Clone, Copy, Debug)]
+struct WeightRamp {
+    first: f32,
+    step: f32,
+}
+
+impl WeightRamp {
+    /// The fine brick alone.
+    const FINE: WeightRamp = WeightRamp { first: 1.0, step: 0.0 };
+
+    #[inline(always)]
+    fn at(self, k: f32) -> f32 {
+        self.first + k * self.step
     }
 }
 

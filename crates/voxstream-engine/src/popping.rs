@@ -1,0 +1,167 @@
+//! Measuring popping and seams: how much an interactive image sequence changes for reasons the camera does not
+//! explain, and how much its images differ from the exact ones at brick-like discontinuities.
+//!
+//! Thiele et al. (seed 003, `../shared/notes/thiele-lod-blending.md` §"Numbers and evaluation") show popping and
+//! boundary artifacts as pictures; these two numbers make them comparable between runs:
+//!
+//! - **Popping** between interactive frames `k` and `k+1` at cameras `c_k`, `c_{k+1}`: per pixel
+//!   `max(0, |I_{k+1} − I_k| − |C_{k+1} − C_k|)`, where `C` are the converged (exact) images at the same cameras, so
+//!   that what camera motion explains is subtracted; averaged over pixels and the three colour channels. A sequence
+//!   reports the mean over frame pairs and the 99th percentile.
+//! - **Seams** of interactive frame `k`: the edges the interactive image has and the converged one does not, per
+//!   pixel `max(0, |∂x I_k| − |∂x C_k|) + max(0, |∂y I_k| − |∂y C_k|)` (forward differences), averaged. A seam between
+//!   bricks drawn at different levels is such an edge; so is a brick boundary where a finer brick meets a coarser
+//!   stand-in. (It is taken over every pixel, not only those on projected brick boundaries: a spurious edge
+//!   elsewhere is an artifact too.)
+//!
+//! Both are in 8-bit levels (0–255) of the written images.
+
+/// An 8-bit RGB image as written: `width × height × 3` bytes, row-major.
+#[derive(Clone, Copy, Debug)]
+pub struct Rgb8<'a> {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// The bytes.
+    pub bytes: &'a [u8],
+}
+
+/// Popping between two consecutive interactive frames, given the converged frames at the same cameras (8-bit
+/// levels, averaged over pixels and channels).
+pub fn frame_popping(previous: Rgb8<'_>, next: Rgb8<'_>, previous_exact: Rgb8<'_>, next_exact: Rgb8<'_>) -> f64 {
+    let n = previous.bytes.len().min(next.bytes.len()).min(previous_exact.bytes.len()).min(next_exact.bytes.len());
+    if n == 0 {
+        return 0.0;
+    }
+    let mut total = 0u64;
+    for i in 0..n {
+        let seen = previous.bytes[i].abs_diff(next.bytes[i]);
+        let explained = previous_exact.bytes[i].abs_diff(next_exact.bytes[i]);
+        total += seen.saturating_sub(explained) as u64;
+    }
+    total as f64 / n as f64
+}
+
+/// Seam error of an interactive frame against the converged frame at the same camera (8-bit levels per pixel and
+/// channel).
+pub fn seam_error(frame: Rgb8<'_>, exact: Rgb8<'_>) -> f64 {
+    let (w, h) = (frame.width as usize, frame.height as usize);
+    if w < 2 || h < 2 || frame.bytes.len() < w * h * 3 || exact.bytes.len() < w * h * 3 {
+        return 0.0;
+    }
+    let at = |image: &[u8], x: usize, y: usize, c: usize| image[(y * w + x) * 3 + c];
+    let mut total = 0u64;
+    for y in 0..h - 1 {
+        for x in 0..w - 1 {
+            for c in 0..3 {
+                let here = at(frame.bytes, x, y, c);
+                let exact_here = at(exact.bytes, x, y, c);
+                let dx = here.abs_diff(at(frame.bytes, x + 1, y, c));
+                let dy = here.abs_diff(at(frame.bytes, x, y + 1, c));
+                let exact_dx = exact_here.abs_diff(at(exact.bytes, x + 1, y, c));
+                let exact_dy = exact_here.abs_diff(at(exact.bytes, x, y + 1, c));
+                total += dx.saturating_sub(exact_dx) as u64 + dy.saturating_sub(exact_dy) as u64;
+            }
+        }
+    }
+    total as f64 / ((w - 1) * (h - 1) * 3) as f64
+}
+
+/// Popping and seams of a whole interactive sequence.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize))]
+pub struct PoppingSummary {
+    /// Frame pairs measured.
+    pub frame_pairs: usize,
+    /// Mean popping over frame pairs, 8-bit levels.
+    pub popping_mean: f64,
+    /// 99th percentile of popping over frame pairs.
+    pub popping_p99: f64,
+    /// Largest popping of a frame pair.
+    pub popping_max: f64,
+    /// Mean seam error over frames, 8-bit levels.
+    pub seam_mean: f64,
+}
+
+impl PoppingSummary {
+    /// Summarises an interactive sequence `frames` against the converged images `exact` at the same cameras (both
+    /// in order; the shorter length counts).
+    pub fn measure(frames: &[Rgb8<'_>], exact: &[Rgb8<'_>]) -> PoppingSummary {
+        let count = frames.len().min(exact.len());
+        let mut popping: Vec<f64> = (1..count)
+            .map(|k| frame_popping(frames[k - 1], frames[k], exact[k - 1], exact[k]))
+            .collect();
+        let seams: Vec<f64> = (0..count).map(|k| seam_error(frames[k], exact[k])).collect();
+        let mean = |values: &[f64]| if values.is_empty() { 0.0 } else { values.iter().sum::<f64>() / values.len() as f64 };
+        let popping_mean = mean(&popping);
+        let seam_mean = mean(&seams);
+        popping.sort_by(f64::total_cmp);
+        let percentile = |p: f64| {
+            if popping.is_empty() {
+                0.0
+            } else {
+                popping[((popping.len() - 1) as f64 * p).ceil() as usize]
+            }
+        };
+        PoppingSummary {
+            frame_pairs: popping.len(),
+            popping_mean,
+            popping_p99: percentile(0.99),
+            popping_max: percentile(1.0),
+            seam_mean,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn image(bytes: &[u8], width: u32) -> Rgb8<'_> {
+        Rgb8 { width, height: (bytes.len() / 3) as u32 / width, bytes }
+    }
+
+    #[test]
+    fn change_explained_by_the_camera_is_not_popping() {
+        let a = [10u8, 10, 10, 200, 200, 200];
+        let b = [20u8, 20, 20, 200, 200, 200];
+        // The exact images change the same way: nothing unexplained.
+        assert_eq!(frame_popping(image(&a, 2), image(&b, 2), image(&a, 2), image(&b, 2)), 0.0);
+        // The exact images do not change: the whole change is popping, 10 levels on half of the values.
+        assert_eq!(frame_popping(image(&a, 2), image(&b, 2), image(&a, 2), image(&a, 2)), 5.0);
+        // Less change than the camera explains is not negative popping.
+        let c = [0u8, 0, 0, 255, 255, 255];
+        assert_eq!(frame_popping(image(&a, 2), image(&a, 2), image(&a, 2), image(&c, 2)), 0.0);
+    }
+
+    #[test]
+    fn a_spurious_edge_is_a_seam_and_an_exact_edge_is_not() {
+        // 3×2 images: the exact one is flat, the interactive one has a step between columns 0 and 1.
+        let flat = [50u8; 18];
+        let mut step = flat;
+        for y in 0..2 {
+            for c in 0..3 {
+                step[(y * 3) * 3 + c] = 110;
+            }
+        }
+        let seam = seam_error(image(&step, 3), image(&flat, 3));
+        // (w−1)(h−1)·3 = 6 terms; the step shows in the x difference at (0,0) for three channels: 3·60 / 6.
+        assert_eq!(seam, 30.0);
+        assert_eq!(seam_error(image(&step, 3), image(&step, 3)), 0.0);
+        assert_eq!(seam_error(image(&flat, 3), image(&step, 3)), 0.0, "a missing edge is not a seam");
+    }
+
+    #[test]
+    fn the_summary_reports_mean_and_tail() {
+        let frames: Vec<[u8; 3]> = vec![[0; 3], [0; 3], [30; 3], [30; 3]];
+        let exact = [[0u8; 3]; 4];
+        let views: Vec<Rgb8<'_>> = frames.iter().map(|f| image(f, 1)).collect();
+        let exact_views: Vec<Rgb8<'_>> = exact.iter().map(|f| image(f, 1)).collect();
+        let summary = PoppingSummary::measure(&views, &exact_views);
+        assert_eq!(summary.frame_pairs, 3);
+        assert_eq!(summary.popping_mean, 10.0);
+        assert_eq!(summary.popping_max, 30.0);
+        assert_eq!(summary.popping_p99, 30.0);
+    }
+}
