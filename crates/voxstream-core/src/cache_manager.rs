@@ -183,7 +183,7 @@ impl<P: Producer> CacheManager<P> {
         if let Some(blending) = &mut self.blending {
             let bricks = &self.brick_pool;
             let owner_of = |slot: BrickSlot| bricks.is_in_use(slot).then(|| bricks.owner(slot));
-            blending.update(self.frame, &self.node_pool, bricks.allocated(), owner_of);
+            blending.update(&self.node_pool, bricks.allocated(), owner_of);
         }
     }
 
@@ -423,7 +423,10 @@ impl<P: Producer> CacheManager<P> {
                     self.brick_pool.widen_range(slot, range);
                 }
                 if let Some(blending) = &mut self.blending {
-                    blending.arrived(slot, node_id, self.frame);
+                    let parent = self.node_pool.record(node_id.tile(self.shape.nodes_per_tile())).parent;
+                    let parent_brick =
+                        (parent != u32::MAX).then(|| self.node_pool.node(NodeId(parent)).brick()).flatten();
+                    blending.arrived(slot, node_id, parent_brick);
                 }
                 let node = self.node_pool.node_mut(node_id);
                 node.set_brick(Some(slot));

@@ -4,8 +4,13 @@
 //! Implements Thiele et al. (seed 003; `../shared/notes/thiele-lod-blending.md` §"Temporal blending" and
 //! §"Spatial (spatiotemporal) blending"), adapted to GigaVoxels' ray-guided cache:
 //!
-//! - **Temporal.** A brick that arrives in frame `f` does not replace its parent at once: in frame `f + k` its
-//!   weight against the parent is at most `t = min(1, k / fade_frames)`, so it fades in over `fade_frames` frames.
+//! - **Temporal.** A brick that arrives does not replace its parent at once: its weight against the parent, `t`,
+//!   rises from 0 by `1 / fade_frames` per frame. A brick whose parent is still fading in waits (it is not drawn:
+//!   the renderer stops at the first brick on a ray's path that is not fully in) and starts when the parent is in,
+//!   so the image never jumps from a half-faded parent to a child that starts from the whole parent. So that a
+//!   chain of levels arriving together (a cold start, a fast zoom) does not take `fade_frames` per level, a brick
+//!   with `g` generations of arrived descendants waiting below it fades `1 + g` times as fast: the whole chain is in
+//!   about `fade_frames` frames after its last brick arrived.
 //! - **Spatial.** Each brick has a cap at each of its eight corners ([`BrickBlend`]), interpolated trilinearly by the
 //!   renderer: the minimum of `t` over the equal-level bricks sharing the corner, and 0 where a region the rays want
 //!   at this brick's level is still coarser (a node whose brick is requested but not yet produced, or a node whose
@@ -24,6 +29,8 @@
 //!   (the LRU never takes a brick the last frame drew), and a ray that stops wanting a level (the cone moves up)
 //!   already reaches it with a level weight that went continuously to zero.
 
+use std::collections::HashMap;
+
 use crate::key::{NodeKey, TreeShape};
 use crate::node::{BrickSlot, Node, NodeId};
 use crate::node_pool::NodePool;
@@ -31,7 +38,7 @@ use crate::node_pool::NodePool;
 pub use voxstream_layout::BrickBlend;
 
 /// The default fade-in, in frames.
-pub const DEFAULT_FADE_FRAMES: u32 = 8;
+pub const DEFAULT_FADE_FRAMES: u32 = 4;
 
 /// Most pending regions kept per frame (the first ones in request priority; the rest get no spatial cap).
 pub const MAX_PENDING_REGIONS: usize = 4096;
@@ -39,12 +46,22 @@ pub const MAX_PENDING_REGIONS: usize = 4096;
 /// Bytes per brick slot of the blending state (its [`BrickBlend`] record), counted in the memory budget.
 pub const BLEND_BYTES_PER_BRICK: usize = std::mem::size_of::<BrickBlend>();
 
+/// A brick in transition: its owner, its parent's brick if that was in transition when it arrived (slot and
+/// owner), its fade so far and its caps so far.
+#[derive(Clone, Copy, Debug)]
+struct Transition {
+    owner: NodeId,
+    parent: Option<(u32, NodeId)>,
+    t: f32,
+    blend: BrickBlend,
+}
+
 /// What the blending state knows between frames.
 #[derive(Clone, Debug)]
 pub struct LevelBlending {
     fade_frames: u32,
-    /// Bricks produced in the last `fade_frames` frames: slot, owner and the frame that produced them.
-    arrivals: Vec<(BrickSlot, NodeId, u32)>,
+    /// Bricks in transition, by slot: arrived, and not yet drawn fully everywhere.
+    transitions: HashMap<u32, Transition>,
     /// Regions the rays want finer than resident: a node and the level they want inside it.
     pending: Vec<(NodeKey, u32)>,
     /// Per brick slot: the caps of the current frame.
@@ -59,7 +76,7 @@ impl LevelBlending {
     pub fn new(fade_frames: u32) -> LevelBlending {
         LevelBlending {
             fade_frames: fade_frames.max(1),
-            arrivals: Vec::new(),
+            transitions: HashMap::new(),
             pending: Vec::new(),
             caps: Vec::new(),
             active: false,
@@ -71,9 +88,11 @@ impl LevelBlending {
         self.fade_frames
     }
 
-    /// Records that `owner`'s brick arrived in `slot` during `frame`.
-    pub fn arrived(&mut self, slot: BrickSlot, owner: NodeId, frame: u32) {
-        self.arrivals.push((slot, owner, frame));
+    /// Records that `owner`'s brick arrived in `slot`; `parent` is the slot of its parent's brick. It fades in from
+    /// the next frame on, or once its parent is in if the parent is still fading; its caps start at 0.
+    pub fn arrived(&mut self, slot: BrickSlot, owner: NodeId, parent: Option<BrickSlot>) {
+        let parent = parent.and_then(|p| self.transitions.get(&p.0).map(|transition| (p.0, transition.owner)));
+        self.transitions.insert(slot.0, Transition { owner, parent, t: 0.0, blend: BrickBlend::uniform(0.0) });
     }
 
     /// Replaces the pending regions by `regions` (node, wanted level), the first [`MAX_PENDING_REGIONS`] of them.
@@ -82,22 +101,22 @@ impl LevelBlending {
         self.pending.extend(regions.into_iter().take(MAX_PENDING_REGIONS));
     }
 
-    /// Forgets every arrival and pending region: what is resident now is shown as it is (after a converged frame,
-    /// whose image is exact and final).
+    /// Forgets every transition and pending region: what is resident now is shown as it is (after a converged
+    /// frame, whose image is exact and final).
     pub fn settle(&mut self) {
-        self.arrivals.clear();
+        self.transitions.clear();
         self.pending.clear();
         self.active = false;
-    }
-
-    /// The fade weight in `frame` of a brick produced in `arrival`.
-    pub fn fade(&self, arrival: u32, frame: u32) -> f32 {
-        (frame.saturating_sub(arrival) as f32 / self.fade_frames as f32).min(1.0)
     }
 
     /// Whether some cap of the current frame is below 1 (the image is still blending towards its final state).
     pub fn is_active(&self) -> bool {
         self.active
+    }
+
+    /// Bricks in transition.
+    pub fn transitions(&self) -> usize {
+        self.transitions.len()
     }
 
     /// The caps of the current frame, one per brick slot; empty when none is below 1 (no blending needed).
@@ -109,61 +128,98 @@ impl LevelBlending {
         }
     }
 
-    /// Computes the caps for `frame` over the current pools; `slots` is the brick pool's allocated slot count and
-    /// `owner_of` tells which node owns a slot in use (`None` if free).
-    pub fn update(
-        &mut self,
-        frame: u32,
-        pool: &NodePool,
-        slots: u32,
-        owner_of: impl Fn(BrickSlot) -> Option<NodeId>,
-    ) {
+    /// Advances the fades by one frame and computes the caps over the current pools; `slots` is the brick pool's
+    /// allocated slot count and `owner_of` tells which node owns a slot in use (`None` if free).
+    ///
+    /// A brick in transition aims at the minimum, per corner, of its own fade, the fades of the equal-level bricks
+    /// in transition that share the corner, and 0 where a pending region touches it; its caps rise towards that
+    /// aim and never fall. A brick drawn in full is never taken back: what a new neighbour changes is the new
+    /// neighbour (it fades in against it), so every pixel moves one way during a transition.
+    pub fn update(&mut self, pool: &NodePool, slots: u32, owner_of: impl Fn(BrickSlot) -> Option<NodeId>) {
         let shape = *pool.shape();
-        // Forget finished fades and bricks recycled since they arrived.
-        let fade_frames = self.fade_frames;
-        self.arrivals.retain(|&(slot, owner, arrival)| {
-            frame.saturating_sub(arrival) < fade_frames && owner_of(slot) == Some(owner)
-        });
-        self.active = false;
-        if self.arrivals.is_empty() && self.pending.is_empty() {
-            return;
-        }
-        self.caps.clear();
-        self.caps.resize(slots as usize, BrickBlend::FULL);
-        let mut caps = std::mem::take(&mut self.caps);
-        let mut active = false;
-        let mut lower = |slot: BrickSlot, corner: usize, cap: f32, caps: &mut Vec<BrickBlend>| {
-            if let Some(blend) = caps.get_mut(slot.0 as usize) {
-                let mut corners = blend.corners();
-                if cap < corners[corner] {
-                    corners[corner] = cap;
-                    *blend = BrickBlend::from_corners(corners);
-                    active = true;
+        self.transitions.retain(|&slot, transition| owner_of(BrickSlot(slot)) == Some(transition.owner));
+        // A parent still in transition (the same brick that was when the child arrived).
+        let transitions = &self.transitions;
+        let parent_of = |transition: &Transition| {
+            transition.parent.filter(|&(slot, owner)| transitions.get(&slot).is_some_and(|p| p.owner == owner))
+        };
+        // Generations of arrived descendants waiting below each brick.
+        let mut waiting: HashMap<u32, u32> = HashMap::new();
+        for transition in transitions.values() {
+            let (mut current, mut generations) = (parent_of(transition), 1u32);
+            while let Some((slot, _)) = current {
+                let entry = waiting.entry(slot).or_insert(0);
+                if *entry >= generations {
+                    break;
                 }
+                *entry = generations;
+                generations += 1;
+                current = transitions.get(&slot).and_then(&parent_of);
+            }
+        }
+        // Advance: a brick whose parent is in (as of the previous frame) rises by (1 + waiting) / fade_frames.
+        let advance: Vec<(u32, f32)> = transitions
+            .iter()
+            .filter(|(_, transition)| parent_of(transition).is_none_or(|(slot, _)| transitions[&slot].t >= 1.0))
+            .map(|(&slot, transition)| {
+                let rate = (1 + waiting.get(&slot).copied().unwrap_or(0)) as f32 / self.fade_frames as f32;
+                (slot, (transition.t + rate).min(1.0))
+            })
+            .collect();
+        for (slot, t) in advance {
+            if let Some(transition) = self.transitions.get_mut(&slot) {
+                transition.t = t;
+            }
+        }
+        // This frame's aims: each brick's own fade, then lowered by its neighbours and the pending regions.
+        let mut aims: HashMap<u32, BrickBlend> =
+            self.transitions.iter().map(|(&slot, transition)| (slot, BrickBlend::uniform(transition.t))).collect();
+        let mut lower = |slot: BrickSlot, corner: usize, cap: f32| {
+            if let Some(aim) = aims.get_mut(&slot.0) {
+                let mut corners = aim.corners();
+                corners[corner] = corners[corner].min(cap);
+                *aim = BrickBlend::new(corners, aim.fade);
             }
         };
-        // Temporal: an arriving brick's own corners, and the corners its equal-level neighbours share with it.
-        for &(slot, owner, arrival) in &self.arrivals {
-            let t = self.fade(arrival, frame);
-            let key = pool.key(owner);
-            for corner in 0..8 {
-                lower(slot, corner, t, &mut caps);
+        for (&slot, transition) in &self.transitions {
+            let t = transition.t;
+            if t >= 1.0 {
+                continue;
             }
-            for_each_touching(&shape, pool, key.ijk, 1, key.level, |neighbour_slot, corner| {
-                lower(neighbour_slot, corner, t, &mut caps)
+            let key = pool.key(transition.owner);
+            for_each_touching(&shape, pool, key.ijk, 1, key.level, |neighbour, corner| {
+                if neighbour.0 != slot {
+                    lower(neighbour, corner, t)
+                }
             });
         }
-        // Spatial: bricks around a region the rays want at their level but which is still coarser go to 0 there.
         for &(key, wanted_level) in &self.pending {
-            let scale = shape.n as u64;
-            let span = scale.pow(wanted_level - key.level);
+            let span = (shape.n as u64).pow(wanted_level - key.level);
             let lower_corner = key.ijk.map(|c| c * span);
-            for_each_touching(&shape, pool, lower_corner, span, wanted_level, |neighbour_slot, corner| {
-                lower(neighbour_slot, corner, 0.0, &mut caps)
+            for_each_touching(&shape, pool, lower_corner, span, wanted_level, |neighbour, corner| {
+                lower(neighbour, corner, 0.0)
             });
         }
-        self.caps = caps;
-        self.active = active;
+        // Rise towards the aims, never fall; a brick drawn in full everywhere leaves the transitions.
+        for (slot, aim) in aims {
+            if let Some(transition) = self.transitions.get_mut(&slot) {
+                let previous = transition.blend.corners();
+                let aimed = aim.corners();
+                let corners: [f32; 8] = std::array::from_fn(|c| previous[c].max(aimed[c]));
+                transition.blend = BrickBlend::new(corners, aim.fade);
+            }
+        }
+        self.transitions.retain(|_, transition| !(transition.blend.is_full() && transition.blend.is_in()));
+        self.active = !self.transitions.is_empty();
+        self.caps.clear();
+        if self.active {
+            self.caps.resize(slots as usize, BrickBlend::FULL);
+            for (&slot, transition) in &self.transitions {
+                if let Some(cap) = self.caps.get_mut(slot as usize) {
+                    *cap = transition.blend;
+                }
+            }
+        }
     }
 }
 

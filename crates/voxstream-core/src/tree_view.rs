@@ -103,7 +103,14 @@ mod tests {
         let voxels = vec![0u16; 3 * shape.voxels_per_brick()];
         let ranges = vec![[0u16, 0]; 3];
         let blocks = vec![[0u16, 0]; 3 * shape.blocks_per_brick()];
-        let view = TreeView { shape, nodes: &nodes, voxels: &voxels, brick_ranges: &ranges, block_ranges: &blocks, brick_blends: &[] };
+        let view = TreeView {
+            shape,
+            nodes: &nodes,
+            voxels: &voxels,
+            brick_ranges: &ranges,
+            block_ranges: &blocks,
+            brick_blends: &[],
+        };
         let header = view.header();
         assert_eq!((header.n, header.nodes_per_tile, header.brick_size, header.stored_brick_size), (3, 27, 16, 18));
         // 17 cells between the 18 stored voxels, in blocks of 8: three blocks per axis, the last one smaller.

@@ -14,7 +14,9 @@
 //!   stand-in. (It is taken over every pixel, not only those on projected brick boundaries: a spurious edge
 //!   elsewhere is an artifact too.)
 //!
-//! Both are in 8-bit levels (0–255) of the written images.
+//! Both are in 8-bit levels (0–255) of the written images. A sequence is measured from its first image that shows
+//! anything: a cold start's first frames are empty until the root arrives, and the root's arrival is the image
+//! appearing, not a level changing.
 
 /// An 8-bit RGB image as written: `width × height × 3` bytes, row-major.
 #[derive(Clone, Copy, Debug)]
@@ -69,9 +71,11 @@ pub fn seam_error(frame: Rgb8<'_>, exact: Rgb8<'_>) -> f64 {
 }
 
 /// Popping and seams of a whole interactive sequence.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize))]
 pub struct PoppingSummary {
+    /// Leading frames left out because they show nothing (a cold start before the root arrived).
+    pub empty_frames_skipped: usize,
     /// Frame pairs measured.
     pub frame_pairs: usize,
     /// Mean popping over frame pairs, 8-bit levels.
@@ -82,6 +86,10 @@ pub struct PoppingSummary {
     pub popping_max: f64,
     /// Mean seam error over frames, 8-bit levels.
     pub seam_mean: f64,
+    /// Popping of each frame pair (`k−1`, `k`), in order.
+    pub popping_per_frame: Vec<f64>,
+    /// Seam error of each frame, in order.
+    pub seam_per_frame: Vec<f64>,
 }
 
 impl PoppingSummary {
@@ -89,13 +97,17 @@ impl PoppingSummary {
     /// in order; the shorter length counts).
     pub fn measure(frames: &[Rgb8<'_>], exact: &[Rgb8<'_>]) -> PoppingSummary {
         let count = frames.len().min(exact.len());
-        let mut popping: Vec<f64> = (1..count)
-            .map(|k| frame_popping(frames[k - 1], frames[k], exact[k - 1], exact[k]))
-            .collect();
+        let skipped = frames[..count].iter().take_while(|f| f.bytes.iter().all(|&b| b == 0)).count();
+        let (frames, exact) = (&frames[skipped..count], &exact[skipped..count]);
+        let count = count - skipped;
+        let mut popping: Vec<f64> =
+            (1..count).map(|k| frame_popping(frames[k - 1], frames[k], exact[k - 1], exact[k])).collect();
         let seams: Vec<f64> = (0..count).map(|k| seam_error(frames[k], exact[k])).collect();
-        let mean = |values: &[f64]| if values.is_empty() { 0.0 } else { values.iter().sum::<f64>() / values.len() as f64 };
+        let mean =
+            |values: &[f64]| if values.is_empty() { 0.0 } else { values.iter().sum::<f64>() / values.len() as f64 };
         let popping_mean = mean(&popping);
         let seam_mean = mean(&seams);
+        let popping_per_frame = popping.clone();
         popping.sort_by(f64::total_cmp);
         let percentile = |p: f64| {
             if popping.is_empty() {
@@ -105,11 +117,14 @@ impl PoppingSummary {
             }
         };
         PoppingSummary {
+            empty_frames_skipped: skipped,
             frame_pairs: popping.len(),
             popping_mean,
             popping_p99: percentile(0.99),
             popping_max: percentile(1.0),
             seam_mean,
+            popping_per_frame,
+            seam_per_frame: seams,
         }
     }
 }
@@ -154,13 +169,15 @@ mod tests {
 
     #[test]
     fn the_summary_reports_mean_and_tail() {
-        let frames: Vec<[u8; 3]> = vec![[0; 3], [0; 3], [30; 3], [30; 3]];
-        let exact = [[0u8; 3]; 4];
+        // Two empty frames (left out), then 0 → 30 → 30 → 0 against an exact image that stays at 0.
+        let frames: Vec<[u8; 3]> = vec![[0; 3], [0; 3], [1; 3], [31; 3], [31; 3], [1; 3]];
+        let exact = [[1u8; 3]; 6];
         let views: Vec<Rgb8<'_>> = frames.iter().map(|f| image(f, 1)).collect();
         let exact_views: Vec<Rgb8<'_>> = exact.iter().map(|f| image(f, 1)).collect();
         let summary = PoppingSummary::measure(&views, &exact_views);
+        assert_eq!(summary.empty_frames_skipped, 2);
         assert_eq!(summary.frame_pairs, 3);
-        assert_eq!(summary.popping_mean, 10.0);
+        assert_eq!(summary.popping_mean, 20.0);
         assert_eq!(summary.popping_max, 30.0);
         assert_eq!(summary.popping_p99, 30.0);
     }

@@ -245,6 +245,9 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
         let mut progressive = ProgressiveImage::new(self.settings.width, self.settings.height);
         // Converged frames let each ray report every miss along its path, so passes are few.
         let mut settings = self.settings.clone();
+        // Interactive frames with level blending step stand-ins as the data they stand in for (see
+        // `RenderSettings::steps_ignore_stand_ins`): arriving data then changes values, never sample positions.
+        settings.steps_ignore_stand_ins = mode == Mode::Interactive && self.limits.blending_fade_frames.is_some();
         if mode == Mode::Converged {
             settings.max_requests_per_ray = settings.max_requests_per_ray.max(CONVERGED_REQUESTS_PER_RAY);
             if self.limits.gather_sparsely && self.gather_sparsely_next {

@@ -9,10 +9,15 @@
 //!
 //! Corner `c` is `x + 2y + 4z` with `x, y, z ∈ {0, 1}` the corner's side along each axis (0 = lower).
 //!
+//! `fade` is the brick's own fade-in. While it is below 1 the renderer draws none of the brick's descendants (it
+//! shows this brick blended with its parent instead): a child can only fade in from a parent that is fully in, so
+//! the image never jumps from a half-faded parent to a child that starts from the whole parent.
+//!
 //! | record | offset | bytes | field | meaning |
 //! |---|---|---|---|---|
 //! | [`BrickBlend`] | 0 | 4 | `corner0` | cap at corner (0, 0, 0), in `[0, 1]` |
 //! | | 4 … 28 | 4 each | `corner1` … `corner7` | caps at the other corners |
+//! | | 32 | 4 | `fade` | the brick's own fade-in, in `[0, 1]`: below 1, its descendants are not drawn |
 
 use bytemuck::{Pod, Zeroable};
 
@@ -36,6 +41,8 @@ pub struct BrickBlend {
     pub corner6: f32,
     /// Cap at corner (1, 1, 1).
     pub corner7: f32,
+    /// The brick's own fade-in: below 1, its descendants are not drawn.
+    pub fade: f32,
 }
 
 impl BrickBlend {
@@ -53,22 +60,29 @@ impl BrickBlend {
             corner5: cap,
             corner6: cap,
             corner7: cap,
+            fade: cap,
         }
     }
 
     /// The caps as an array, corner `x + 2y + 4z`.
     pub fn corners(&self) -> [f32; 8] {
-        bytemuck::cast(*self)
+        [self.corner0, self.corner1, self.corner2, self.corner3, self.corner4, self.corner5, self.corner6, self.corner7]
     }
 
-    /// The record holding `corners`.
-    pub fn from_corners(corners: [f32; 8]) -> BrickBlend {
-        bytemuck::cast(corners)
+    /// The record holding `corners` and `fade`.
+    pub fn new(corners: [f32; 8], fade: f32) -> BrickBlend {
+        let [corner0, corner1, corner2, corner3, corner4, corner5, corner6, corner7] = corners;
+        BrickBlend { corner0, corner1, corner2, corner3, corner4, corner5, corner6, corner7, fade }
     }
 
-    /// Whether every corner is 1 (the brick is used as if there were no blending).
+    /// Whether every corner is 1 (the brick itself is drawn as if there were no blending).
     pub fn is_full(&self) -> bool {
         self.corners().iter().all(|&c| c >= 1.0)
+    }
+
+    /// Whether the brick has faded in completely (its descendants may be drawn).
+    pub fn is_in(&self) -> bool {
+        self.fade >= 1.0
     }
 
     /// The cap at `p` in brick-relative coordinates (`[0, 1]³`), trilinear between the corners.
@@ -95,17 +109,18 @@ mod tests {
 
     #[test]
     fn offsets_are_as_documented() {
-        assert_eq!(size_of::<BrickBlend>(), 32);
+        assert_eq!(size_of::<BrickBlend>(), 36);
         assert_eq!(align_of::<BrickBlend>(), 4);
         assert_eq!(offset_of!(BrickBlend, corner0), 0);
         assert_eq!(offset_of!(BrickBlend, corner1), 4);
         assert_eq!(offset_of!(BrickBlend, corner3), 12);
         assert_eq!(offset_of!(BrickBlend, corner7), 28);
+        assert_eq!(offset_of!(BrickBlend, fade), 32);
     }
 
     #[test]
     fn corners_are_x_plus_2y_plus_4z() {
-        let blend = BrickBlend::from_corners([0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]);
+        let blend = BrickBlend::new([0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0], 0.5);
         assert_eq!(blend.corner5, 5.0);
         assert_eq!(blend.at([0.0, 0.0, 0.0]), 0.0);
         assert_eq!(blend.at([1.0, 0.0, 0.0]), 1.0);
@@ -116,6 +131,7 @@ mod tests {
         assert_eq!(blend.at([0.5, 0.5, 0.5]), 3.5);
         assert!(BrickBlend::FULL.is_full());
         assert!(!blend.is_full());
+        assert!(!blend.is_in() && BrickBlend::FULL.is_in());
         assert_eq!(BrickBlend::FULL.at([0.3, 0.9, 0.1]), 1.0);
     }
 }

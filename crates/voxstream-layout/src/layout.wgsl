@@ -66,7 +66,8 @@ struct RequestRecord {
     kind: u32,
 }
 
-// brick_blend.rs: per brick slot, the cap on its weight against its parent at its eight corners (x + 2y + 4z).
+// brick_blend.rs: per brick slot, the cap on its weight against its parent at its eight corners (x + 2y + 4z), and
+// its own fade-in (below 1, its descendants are not drawn).
 struct BrickBlend {
     corner0: f32,
     corner1: f32,
@@ -76,4 +77,5 @@ struct BrickBlend {
     corner5: f32,
     corner6: f32,
     corner7: f32,
+    fade: f32,
 }

@@ -14,7 +14,7 @@
 //! | [`FeedbackCounters`] | 16 | the request list's fill level, written with atomics ([P09] §5) |
 //! | [`UsageFlag`] | 4 | one tile or brick slot used by some ray this frame ([P09] §5) |
 //! | [`RequestRecord`] | 8 | one ray's request: a node to produce or to subdivide ([P09] §5) |
-//! | [`BrickBlend`] | 32 | per brick slot: the cap on its weight against its parent at its corners (Thiele et al.'s blending) |
+//! | [`BrickBlend`] | 36 | per brick slot: the cap on its weight against its parent at its corners (Thiele et al.'s blending) |
 //!
 //! Every struct is padded to a multiple of 16 bytes where a shader binds it as a uniform, and its WGSL mirror is
 //! `src/layout.wgsl` (`tests/wgsl_mirror.rs` checks that both agree: field names, order, offsets and sizes). Each

@@ -117,7 +117,7 @@ fn every_struct_matches_its_rust_twin() {
         rust_layout!(FeedbackCounters { request_count, request_capacity, dropped_requests, padding }),
         rust_layout!(UsageFlag { used }),
         rust_layout!(RequestRecord { node, kind }),
-        rust_layout!(BrickBlend { corner0, corner1, corner2, corner3, corner4, corner5, corner6, corner7 }),
+        rust_layout!(BrickBlend { corner0, corner1, corner2, corner3, corner4, corner5, corner6, corner7, fade }),
     ]
     .into_iter()
     .collect();

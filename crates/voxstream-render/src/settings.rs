@@ -110,6 +110,13 @@ pub struct RenderSettings {
     /// others stay pending. The frame loop uses 4, then 2, for the passes of a converged frame that only gather
     /// requests.
     pub pixel_stride: u32,
+    /// Volume rendering: step by the cone's footprint wherever a coarser ancestor stands in for data not yet
+    /// resident (missing, not yet subdivided, or still fading in), as if the data were there, instead of by the
+    /// stand-in's coarser voxel (but no finer than the voxel two levels below the stand-in for N = 2, one level
+    /// below for N ≥ 3, at most four times the samples). Then data arriving changes the values of samples, not
+    /// where they fall, unless the wanted level is further away. The frame loop turns it on with level blending
+    /// (interactive frames); a final image is the same either way.
+    pub steps_ignore_stand_ins: bool,
 }
 
 impl Default for RenderSettings {
@@ -133,6 +140,7 @@ impl Default for RenderSettings {
             shadows: false,
             surface_normals: SurfaceNormals::Cell,
             pixel_stride: 1,
+            steps_ignore_stand_ins: false,
         }
     }
 }

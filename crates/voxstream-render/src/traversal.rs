@@ -31,7 +31,9 @@
 use std::ops::ControlFlow;
 
 use glam::DVec3;
-use voxstream_core::{BrickBlend, BrickSlot, FeedbackBuffer, Node, NodeData, NodeId, Request, RequestKind, TreeView, BLOCK_CELLS};
+use voxstream_core::{
+    BrickBlend, BrickSlot, FeedbackBuffer, Node, NodeData, NodeId, Request, RequestKind, TreeView, BLOCK_CELLS,
+};
 
 use crate::integrand::{BrickSpan, Integrand, Sample};
 use crate::sampler::{values_along, values_and_gradients_along, Cell, LANES};
@@ -125,8 +127,9 @@ enum SegmentData {
     Nothing,
     /// A constant node: its samples are all the same value.
     Constant(f32),
-    /// Bricks: the finest with data, and its parent for level blending.
-    Bricks { fine: BrickRef, coarse: Option<BrickRef>, blend_level: bool },
+    /// Bricks: the finest with data, and its parent for level blending; `stand_in` when finer data is wanted but not
+    /// drawable yet (missing, not subdivided, or fading in).
+    Bricks { fine: BrickRef, coarse: Option<BrickRef>, blend_level: bool, stand_in: bool },
 }
 
 /// A brick sampled along a segment: its voxels and the ray's continuous voxel index there, `x_k = start + k·delta`
@@ -163,6 +166,9 @@ pub struct Traversal<'a> {
     max_requests_per_ray: u32,
     skip_empty_space: bool,
     sample_batches: bool,
+    steps_ignore_stand_ins: bool,
+    /// Levels below a stand-in whose voxel may set the step (`N^levels ≤ 4`).
+    stand_in_levels: u32,
     /// `N^d` for every level.
     scale: [f64; MAX_TABLE_LEVELS],
     n: u64,
@@ -196,6 +202,8 @@ impl<'a> Traversal<'a> {
             max_requests_per_ray: settings.max_requests_per_ray,
             skip_empty_space: settings.skip_empty_space,
             sample_batches: settings.sample_batches,
+            steps_ignore_stand_ins: settings.steps_ignore_stand_ins,
+            stand_in_levels: if shape.n <= 2 { 2 } else { 1 },
             scale,
             n: shape.n as u64,
             brick_size: shape.brick_size as f64,
@@ -316,11 +324,20 @@ impl<'a> Traversal<'a> {
                         integrand.span(&self.brick_span(ray, &fine, t, t_exit), &mut stats.samples)
                     }
                 }
-                SegmentData::Bricks { fine, coarse, blend_level } => {
+                SegmentData::Bricks { fine, coarse, blend_level, stand_in } => {
                     // Step by the cone's footprint (the voxel of the continuous level ℓ), or by the sampled voxel
                     // where the data is coarser: a quadrilinear sample is filtered at the footprint, so finer steps
                     // would only re-sample the same filtered signal (GigaVoxels [P09] §6, cone tracing).
-                    let sampled_voxel = 1.0 / (self.scale[fine.level as usize] * self.brick_size);
+                    // With `steps_ignore_stand_ins`, a stand-in is stepped as the data it stands in for will be, down
+                    // to `stand_in_levels` levels below it (a bound on the extra samples where the wanted data is
+                    // still far from resident, e.g. during a fast zoom).
+                    let sampled_voxel = if stand_in && self.steps_ignore_stand_ins {
+                        let level = (fine.level + self.stand_in_levels).min(self.view.shape.max_level);
+                        1.0 / (self.scale[level as usize] * self.brick_size)
+                    } else {
+                        1.0 / (self.scale[fine.level as usize] * self.brick_size)
+                    };
+                    let blend = coarse.and(self.view.brick_blends.get(fine.slot.0 as usize)).filter(|b| !b.is_full());
                     let desired_step = sampled_voxel.max(footprint_voxel) * self.step_factor / speed;
                     let segment_step = match step {
                         Some(current) if current.is_at_most(desired_step) => current,
@@ -348,16 +365,18 @@ impl<'a> Traversal<'a> {
                             } else {
                                 1.0
                             };
-                            let (cap_first, cap_last) = match self.view.brick_blends.get(fine.slot.0 as usize) {
-                                Some(blend) if !blend.is_full() => {
+                            let (cap_first, cap_last) = match blend {
+                                Some(blend) => {
                                     let last = first + (count - 1) as f64 * dt;
                                     (self.cap_at(ray, &fine, blend, first), self.cap_at(ray, &fine, blend, last))
                                 }
-                                _ => (1.0, 1.0),
+                                None => (1.0, 1.0),
                             };
-                            let (w_first, w_last) = (cone.min(cap_first), cone.min(cap_last));
-                            let step = if count > 1 { (w_last - w_first) / (count - 1) as f32 } else { 0.0 };
-                            (w_first < 1.0 || w_last < 1.0).then_some((c, WeightRamp { first: w_first, step }))
+                            let value = WeightRamp::between(cone.min(cap_first), cone.min(cap_last), count);
+                            // Normals blend by the caps alone (the cone's blend keeps the fine brick's normals, as
+                            // without blending), so that they are continuous when a transition ends.
+                            let gradient = blend.map(|_| WeightRamp::between(cap_first, cap_last, count));
+                            (!value.is_fine() || gradient.is_some()).then_some((c, Blend { value, gradient }))
                         });
                         self.march_bricks(ray, fine, coarse, first, dt, count, integrand, stats)
                     }
@@ -387,7 +406,7 @@ impl<'a> Traversal<'a> {
         &self,
         ray: &Ray,
         fine: BrickRef,
-        coarse: Option<(BrickRef, WeightRamp)>,
+        coarse: Option<(BrickRef, Blend)>,
         first: f64,
         dt: f64,
         count: u64,
@@ -445,14 +464,26 @@ impl<'a> Traversal<'a> {
             // One loop per combination, so that the loop itself holds no test of either.
             let (coarse, weight) = match &coarse_line {
                 Some((line, weight)) => (line, *weight),
-                None => (&fine_line, WeightRamp::FINE),
+                None => (&fine_line, Blend::FINE),
             };
             let run = (first, dt, k, run_end);
-            let flow = match (gradient, coarse_line.is_some()) {
-                (false, false) => self.sample_run::<I, false, false>(&fine_line, coarse, weight, run, integrand),
-                (true, false) => self.sample_run::<I, true, false>(&fine_line, coarse, weight, run, integrand),
-                (false, true) => self.sample_run::<I, false, true>(&fine_line, coarse, weight, run, integrand),
-                (true, true) => self.sample_run::<I, true, true>(&fine_line, coarse, weight, run, integrand),
+            let blend_gradients = gradient && weight.gradient.is_some();
+            let flow = match (gradient, coarse_line.is_some(), blend_gradients) {
+                (false, false, _) => {
+                    self.sample_run::<I, false, false, false>(&fine_line, coarse, weight, run, integrand)
+                }
+                (true, false, _) => {
+                    self.sample_run::<I, true, false, false>(&fine_line, coarse, weight, run, integrand)
+                }
+                (false, true, _) => {
+                    self.sample_run::<I, false, true, false>(&fine_line, coarse, weight, run, integrand)
+                }
+                (true, true, false) => {
+                    self.sample_run::<I, true, true, false>(&fine_line, coarse, weight, run, integrand)
+                }
+                (true, true, true) => {
+                    self.sample_run::<I, true, true, true>(&fine_line, coarse, weight, run, integrand)
+                }
             };
             match flow {
                 ControlFlow::Break(taken) => {
@@ -467,17 +498,24 @@ impl<'a> Traversal<'a> {
     }
 
     /// The inner loop: samples `k..end` of a segment (`run = (first, dt, k, end)`), with no skipping checks;
-    /// blended with `coarse` by `weight` when `COARSE`.
+    /// values blended with `coarse` by `blend.value` when `COARSE`, gradients too (by `blend.gradient`) when
+    /// `BLEND_GRADIENTS`.
     #[inline(always)]
-    fn sample_run<I: Integrand, const GRADIENT: bool, const COARSE: bool>(
+    fn sample_run<I: Integrand, const GRADIENT: bool, const COARSE: bool, const BLEND_GRADIENTS: bool>(
         &self,
         fine: &BrickLine<'_>,
         coarse: &BrickLine<'_>,
-        weight: WeightRamp,
+        blend: Blend,
         (first, dt, k, end): (f64, f64, u32, u32),
         integrand: &mut I,
     ) -> RunFlow {
         let b = self.stored;
+        let (weight, gradient_weight) = (blend.value, blend.gradient.unwrap_or(WeightRamp::FINE));
+        // A coarse gradient per coarse voxel, in fine voxels.
+        let coarse_scale = 1.0 / self.n as f32;
+        let blend_gradient = |fine: [f32; 3], coarse: [f32; 3], w: f32| {
+            std::array::from_fn(|a| coarse[a] * coarse_scale + (fine[a] - coarse[a] * coarse_scale) * w)
+        };
         // A float counter (exact below 2²⁴) instead of converting the index per sample: positions are the same
         // bits whichever sample a run starts at.
         let mut kf = k as f32;
@@ -486,12 +524,20 @@ impl<'a> Traversal<'a> {
         // them one by one, in order.
         if self.sample_batches {
             while s + LANES as u32 <= end {
-                let (mut values, gradients) = if GRADIENT {
+                let (mut values, mut gradients) = if GRADIENT {
                     values_and_gradients_along(fine.voxels, b, fine.start, fine.delta, kf)
                 } else {
                     (values_along(fine.voxels, b, fine.start, fine.delta, kf), [[0.0; 3]; LANES])
                 };
-                if COARSE {
+                if BLEND_GRADIENTS {
+                    let (coarse_values, coarse_gradients) =
+                        values_and_gradients_along(coarse.voxels, b, coarse.start, coarse.delta, kf);
+                    for j in 0..LANES {
+                        let x = kf + j as f32;
+                        values[j] = coarse_values[j] + (values[j] - coarse_values[j]) * weight.at(x);
+                        gradients[j] = blend_gradient(gradients[j], coarse_gradients[j], gradient_weight.at(x));
+                    }
+                } else if COARSE {
                     let coarse_values = values_along(coarse.voxels, b, coarse.start, coarse.delta, kf);
                     for (j, (value, coarse_value)) in values.iter_mut().zip(coarse_values).enumerate() {
                         *value = coarse_value + (*value - coarse_value) * weight.at(kf + j as f32);
@@ -509,9 +555,14 @@ impl<'a> Traversal<'a> {
         }
         for s in s..end {
             let cell = Cell::locate(b, fine.at(kf));
-            let (mut value, gradient) =
+            let (mut value, mut gradient) =
                 if GRADIENT { cell.value_and_gradient(fine.voxels, b) } else { (cell.value(fine.voxels, b), [0.0; 3]) };
-            if COARSE {
+            if BLEND_GRADIENTS {
+                let (coarse_value, coarse_gradient) =
+                    Cell::locate(b, coarse.at(kf)).value_and_gradient(coarse.voxels, b);
+                value = coarse_value + (value - coarse_value) * weight.at(kf);
+                gradient = blend_gradient(gradient, coarse_gradient, gradient_weight.at(kf));
+            } else if COARSE {
                 let coarse_value = Cell::locate(b, coarse.at(kf)).value(coarse.voxels, b);
                 value = coarse_value + (value - coarse_value) * weight.at(kf);
             }
@@ -612,7 +663,14 @@ impl<'a> Traversal<'a> {
             let level = (path.len - 1) as u32;
             let PathEntry { id, node, ijk } = path.entries[path.len - 1];
             match node.data() {
-                NodeData::Constant(value) => return (SegmentData::Constant(value), level, ijk),
+                NodeData::Constant(value) => {
+                    // Under a brick still fading in, the brick stands in (as for its other descendants).
+                    if self.view.brick_blends.is_empty() || first_fading(path, self.view.brick_blends, level).is_none()
+                    {
+                        return (SegmentData::Constant(value), level, ijk);
+                    }
+                    break;
+                }
                 NodeData::Brick(_) => {}
                 NodeData::Missing => {
                     request.push(Request { node: id, kind: RequestKind::Produce });
@@ -667,7 +725,16 @@ impl<'a> Traversal<'a> {
                 ijk: path.entries[level].ijk,
             })
         };
-        let fine_level = if last.node.brick().is_some() { Some(deepest) } else { deepest.checked_sub(1) };
+        let mut fine_level = if last.node.brick().is_some() { Some(deepest) } else { deepest.checked_sub(1) };
+        if let (Some(fine), false) = (fine_level, self.view.brick_blends.is_empty()) {
+            // Level blending: the first brick on the path that has not faded in completely is drawn (blended with
+            // its parent), none below it (see `voxstream_core::level_blending`).
+            if let Some(fading) = first_fading(path, self.view.brick_blends, fine as u32) {
+                fine_level = Some(fading);
+            }
+        }
+        // The data is final where the fine brick is the deepest node and either at the wanted level or terminal.
+        let is_final = fine_level == Some(deepest) && (deepest as u32 >= target_level || last.node.is_terminal());
         let data = match fine_level.and_then(|l| brick_at(l).map(|b| (l, b))) {
             None => SegmentData::Nothing,
             Some((l, fine)) => SegmentData::Bricks {
@@ -675,6 +742,7 @@ impl<'a> Traversal<'a> {
                 coarse: l.checked_sub(1).and_then(brick_at),
                 // Blend with the parent only when the finest data is at the level the cone asked for.
                 blend_level: fine.level == target_level,
+                stand_in: !is_final,
             },
         };
         (data, deepest as u32, last.ijk)
@@ -693,10 +761,44 @@ impl WeightRamp {
     /// The fine brick alone.
     const FINE: WeightRamp = WeightRamp { first: 1.0, step: 0.0 };
 
+    /// From `first` at sample 0 to `last` at sample `count − 1`.
+    #[inline]
+    fn between(first: f32, last: f32, count: u64) -> WeightRamp {
+        let step = if count > 1 { (last - first) / (count - 1) as f32 } else { 0.0 };
+        WeightRamp { first, step }
+    }
+
+    /// Whether the ramp is the fine brick alone everywhere.
+    #[inline]
+    fn is_fine(self) -> bool {
+        self.first >= 1.0 && self.first + self.step >= 1.0
+    }
+
     #[inline(always)]
     fn at(self, k: f32) -> f32 {
         self.first + k * self.step
     }
+}
+
+/// The shallowest level above `below` on the path whose brick has not faded in completely.
+#[inline]
+fn first_fading(path: &DescentPath, blends: &[BrickBlend], below: u32) -> Option<usize> {
+    (0..below as usize).find(|&level| {
+        path.entries[level].node.brick().and_then(|slot| blends.get(slot.0 as usize)).is_some_and(|b| !b.is_in())
+    })
+}
+
+/// How a segment's samples blend the fine brick with its parent: values by `value` (the cone's level weight, capped
+/// by level blending), gradients by `gradient` when level blending caps the brick (else the fine brick's).
+#[derive(Clone, Copy, Debug)]
+struct Blend {
+    value: WeightRamp,
+    gradient: Option<WeightRamp>,
+}
+
+impl Blend {
+    /// The fine brick alone.
+    const FINE: Blend = Blend { value: WeightRamp::FINE, gradient: None };
 }
 
 /// How a run of samples ended: `Break(n)` after `n` samples when the integrand stopped the ray.

@@ -57,6 +57,9 @@ pub struct SceneFigures {
 
 /// Runs the benchmark and prints a Markdown table.
 pub fn run(args: &BenchArgs) -> Result<()> {
+    if args.popping {
+        return crate::popping_bench::run(args);
+    }
     let names: Vec<String> =
         if args.scenes.is_empty() { SCENE_NAMES.iter().map(|s| s.to_string()).collect() } else { args.scenes.clone() };
     check_budget(args.budget_mb, args.size, args.size, "--size")?;

@@ -80,9 +80,105 @@ pub fn orbit(frames: usize, target: [f64; 3], distance: f64, elevation: f64, fov
         .collect()
 }
 
+/// A camera path generated around a view: what `--path orbit:N`, `zoom:N` and `fly:N` name.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PathKind {
+    /// A quarter turn around the target at the view's distance and elevation.
+    Orbit,
+    /// Straight towards the target, the distance shrinking geometrically to a thousandth: from the whole volume
+    /// down to single voxels of a 512³ volume.
+    Zoom,
+    /// Through the volume: from the eye past the target to 80% of the way to the other side, looking ahead.
+    Fly,
+}
+
+impl PathKind {
+    /// The three kinds, in the order the benchmarks report them.
+    pub const ALL: [PathKind; 3] = [PathKind::Orbit, PathKind::Zoom, PathKind::Fly];
+
+    /// The name on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            PathKind::Orbit => "orbit",
+            PathKind::Zoom => "zoom",
+            PathKind::Fly => "fly",
+        }
+    }
+}
+
+/// Most cameras a generated path may have.
+pub const MAX_GENERATED_FRAMES: usize = 100_000;
+
+/// Parses `orbit:N`, `zoom:N` or `fly:N`; `None` if `text` is not of that form, an error if `N` is not a count.
+pub fn parse_generated_path(text: &str) -> Option<Result<(PathKind, usize)>> {
+    let (kind, frames) = text.split_once(':')?;
+    let kind = PathKind::ALL.into_iter().find(|k| k.name() == kind)?;
+    Some(match frames.parse::<usize>() {
+        Ok(n) if (2..=MAX_GENERATED_FRAMES).contains(&n) => Ok((kind, n)),
+        _ => Err(anyhow!(
+            "--path {text}: the frame count must be a whole number from 2 to {MAX_GENERATED_FRAMES} (e.g. {}:60)",
+            kind.name()
+        )),
+    })
+}
+
+/// `frames` cameras of `kind` around the view `from`.
+pub fn generated_path(kind: PathKind, frames: usize, from: &Camera) -> Vec<Camera> {
+    let eye = glam::DVec3::from(from.eye);
+    let target = glam::DVec3::from(from.target);
+    let up = glam::DVec3::from(from.up).normalize_or(glam::DVec3::Y);
+    let offset = eye - target;
+    let last = (frames.max(2) - 1) as f64;
+    (0..frames)
+        .map(|i| {
+            let s = i as f64 / last;
+            let (eye, target) = match kind {
+                PathKind::Orbit => {
+                    let rotation = glam::DQuat::from_axis_angle(up, s * std::f64::consts::FRAC_PI_2);
+                    (target + rotation * offset, target)
+                }
+                PathKind::Zoom => (target + offset * 1e-3f64.powf(s), target),
+                PathKind::Fly => {
+                    let eye = eye - offset * (1.8 * s);
+                    (eye, eye - offset)
+                }
+            };
+            Camera { eye: eye.to_array(), target: target.to_array(), up: from.up, fov: from.fov }
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn generated_paths_start_at_the_view_and_go_where_they_say() {
+        let view = Camera { eye: [0.5, 0.5, 3.0], target: [0.5, 0.5, 0.5], up: [0.0, 1.0, 0.0], fov: 30.0 };
+        let distance = |c: &Camera| glam::DVec3::from(c.eye).distance(glam::DVec3::from(c.target));
+        for kind in PathKind::ALL {
+            let path = generated_path(kind, 11, &view);
+            assert_eq!(path.len(), 11);
+            assert!(glam::DVec3::from(path[0].eye).distance(glam::DVec3::from(view.eye)) < 1e-12, "{kind:?}");
+            assert!(path.iter().all(|c| c.frame(8, 8).is_ok()), "{kind:?}: every camera is valid");
+        }
+        let orbit = generated_path(PathKind::Orbit, 11, &view);
+        assert!(orbit.iter().all(|c| (distance(c) - 2.5).abs() < 1e-9));
+        // A quarter turn about +y: from +z to +x.
+        assert!((orbit[10].eye[0] - 3.0).abs() < 1e-9 && (orbit[10].eye[2] - 0.5).abs() < 1e-9);
+        let zoom = generated_path(PathKind::Zoom, 11, &view);
+        assert!((distance(&zoom[10]) - 2.5e-3).abs() < 1e-12);
+        let fly = generated_path(PathKind::Fly, 11, &view);
+        // 80% of the way beyond the target, still looking along -z.
+        assert!((fly[10].eye[2] - (0.5 - 2.0)).abs() < 1e-9);
+        assert!(fly[10].target[2] < fly[10].eye[2]);
+        assert!(matches!(parse_generated_path("zoom:40"), Some(Ok((PathKind::Zoom, 40)))));
+        assert!(parse_generated_path("path.json").is_none());
+        assert!(parse_generated_path("spin:3").is_none());
+        let error = parse_generated_path("fly:x").unwrap().unwrap_err().to_string();
+        assert!(error.contains("fly:60"), "{error}");
+        assert!(parse_generated_path("orbit:1").unwrap().is_err());
+    }
 
     #[test]
     fn parses_both_forms_and_rejects_bad_cameras() {

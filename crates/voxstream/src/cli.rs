@@ -133,9 +133,17 @@ pub struct RenderArgs {
     /// Interactive mode: requests served per frame.
     #[arg(long, default_value_t = 1024)]
     pub requests_per_frame: usize,
-    /// Camera path JSON (a list of cameras), rendered in sequence reusing the cache.
+    /// Camera path JSON (a list of cameras), rendered in sequence reusing the cache; or a path generated around the
+    /// view: orbit:N (a quarter turn), zoom:N (down to a thousandth of the distance), fly:N (through the volume).
     #[arg(long)]
     pub path: Option<PathBuf>,
+    /// Interactive mode: level blending (Thiele et al.): bricks fade in from their parents over --fade-frames frames
+    /// and blend towards coarser neighbours still loading, so nothing pops. Converged frames are the same either way.
+    #[arg(long, value_enum, default_value_t = Switch::On)]
+    pub blending: Switch,
+    /// Interactive mode with --blending on: frames over which an arriving brick fades in.
+    #[arg(long, default_value_t = voxstream_core::DEFAULT_FADE_FRAMES)]
+    pub fade_frames: u32,
     /// Write statistics JSON here.
     #[arg(long)]
     pub stats: Option<PathBuf>,
@@ -152,6 +160,15 @@ pub struct RenderArgs {
     /// No progress bar, no list of files written and no summary line (warnings and errors are still printed).
     #[arg(long)]
     pub quiet: bool,
+}
+
+/// On or off.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Switch {
+    /// On.
+    On,
+    /// Off.
+    Off,
 }
 
 /// Byte order of a raw file.
@@ -242,6 +259,19 @@ pub struct BenchArgs {
     /// Also write the figures as JSON here.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Instead of speed: popping and seams (Thiele et al.) along three camera paths from a cold cache (orbit, zoom,
+    /// fly-through), with level blending off and on, against the converged images at the same cameras.
+    #[arg(long)]
+    pub popping: bool,
+    /// --popping: also measure this store (a folder made by `voxstream import`).
+    #[arg(long, value_name = "STORE")]
+    pub store: Option<PathBuf>,
+    /// --popping: requests served per interactive frame (bounded, so that detail arrives over many frames).
+    #[arg(long, default_value_t = 64)]
+    pub requests_per_frame: usize,
+    /// --popping: write a strip of consecutive frames without (top) and with (bottom) blending here (PNG).
+    #[arg(long, value_name = "PNG")]
+    pub strip: Option<PathBuf>,
 }
 
 /// Parses `x,y,z` positive integers.

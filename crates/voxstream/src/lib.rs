@@ -19,6 +19,8 @@ pub mod iso_flags;
 pub mod memory;
 pub mod output_file;
 pub mod png_output;
+pub mod popping_bench;
+pub mod popping_run;
 pub mod render_budget;
 pub mod render_command;
 pub mod render_progress;

@@ -81,6 +81,8 @@ fn unreachable_default() -> RenderArgs {
         frames: 1,
         requests_per_frame: 1024,
         path: None,
+        blending: voxstream::cli::Switch::On,
+        fade_frames: voxstream_core::DEFAULT_FADE_FRAMES,
         stats: None,
         step: 0.5,
         in_memory: false,

@@ -13,14 +13,15 @@ use voxstream_render::{
 };
 use voxstream_store::{InMemoryVolume, StoreProducer, StoreReader};
 
-use crate::camera_path::read_camera_path;
-use crate::cli::{NormalsArg, RenderArgs, ShadingArg};
+use crate::camera_path::{generated_path, parse_generated_path, read_camera_path};
+use crate::cli::{NormalsArg, RenderArgs, ShadingArg, Switch};
 use crate::exit_status::IncompleteImage;
 use crate::geometry_source;
 use crate::iso_flags;
 use crate::memory::{bytes_read, peak_rss_bytes};
 use crate::output_file::write_atomically;
 use crate::png_output::{numbered_path, write_png};
+use crate::popping_run::FrameRecorder;
 use crate::render_budget::{check_budget, plan_budget};
 use crate::render_progress::RenderProgress;
 use crate::render_warnings::{empty_image, transfer_function_mismatch};
@@ -173,6 +174,9 @@ fn check_flags(args: &RenderArgs) -> Result<()> {
     if args.requests_per_frame == 0 {
         bail!("--requests-per-frame must be at least 1");
     }
+    if args.fade_frames == 0 {
+        bail!("--fade-frames must be at least 1 (1 replaces a parent at once; use --blending off for no blending)");
+    }
     Ok(())
 }
 
@@ -291,25 +295,29 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
         ..RenderSettings::default()
     };
     settings.validate().context("invalid flags")?;
+    let mut view = source.camera;
+    if let Some(eye) = args.eye {
+        view.eye = eye;
+    }
+    if let Some(target) = args.target {
+        view.target = target;
+    }
+    if let Some(up) = args.up {
+        view.up = up;
+    }
+    if let Some(fov) = args.fov {
+        view.fov = fov;
+    }
+    view.frame(args.width, args.height).context("invalid camera")?;
     let cameras = match &args.path {
-        Some(path) => read_camera_path(path)?,
-        None => {
-            let mut camera = source.camera;
-            if let Some(eye) = args.eye {
-                camera.eye = eye;
+        Some(path) => match path.to_str().filter(|_| !path.exists()).and_then(parse_generated_path) {
+            Some(generated) => {
+                let (kind, frames) = generated?;
+                generated_path(kind, frames, &view)
             }
-            if let Some(target) = args.target {
-                camera.target = target;
-            }
-            if let Some(up) = args.up {
-                camera.up = up;
-            }
-            if let Some(fov) = args.fov {
-                camera.fov = fov;
-            }
-            camera.frame(args.width, args.height).context("invalid camera")?;
-            vec![camera]
-        }
+            None => read_camera_path(path)?,
+        },
+        None => vec![view],
     };
     if let Some(parent) = args.out.parent().filter(|p| !p.as_os_str().is_empty()) {
         if !parent.is_dir() {
@@ -318,7 +326,11 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
     }
 
     let budget_bytes = budget.total_bytes();
-    let limits = LoopLimits { requests_per_frame: args.requests_per_frame, ..LoopLimits::default() };
+    let limits = LoopLimits {
+        requests_per_frame: args.requests_per_frame,
+        blending_fade_frames: (args.blending == Switch::On).then_some(args.fade_frames),
+        ..LoopLimits::default()
+    };
     let plan = plan_budget(budget, &source.producer.shape(), source.producer_cache_bytes)?;
     let mut session = Session::with_value_range(
         source.producer,
@@ -344,6 +356,15 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
     if let Some(warning) = mismatch.filter(|_| !drawing_surfaces) {
         progress.warn(&warning);
     }
+    // Interactive runs with --stats measure popping and seams against the converged images afterwards.
+    let mut recorder = None;
+    if args.stats.is_some() && args.mode == Mode::Interactive {
+        match FrameRecorder::new(args.width, args.height, cameras.len() as u64 * u64::from(repeats)) {
+            Ok(r) => recorder = Some(r),
+            Err(warning) => progress.warn(&warning),
+        }
+    }
+    stats.blending = args.mode == Mode::Interactive && args.blending == Switch::On;
     let mut empty_images = 0usize;
     let mut reported_failures = 0usize;
     let mut written = Vec::new();
@@ -364,8 +385,12 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
             stats.requests += result.requests;
             stats.bricks_produced += result.bricks_produced;
             stats.converged = result.is_converged();
-            // A single camera stops early once a frame needed nothing more: later frames would be identical.
-            if repeat + 1 == repeats || (!sequence && stats.converged) {
+            if let Some(recorder) = &mut recorder {
+                recorder.record(camera, &result.image);
+            }
+            // A single camera stops early once a frame is final (nothing missing, nothing blending): later frames
+            // would be identical.
+            if repeat + 1 == repeats || (!sequence && result.is_final()) {
                 let out = if sequence { numbered_path(&args.out, index) } else { args.out.clone() };
                 write_png(&result.image, &out)?;
                 if let Some(warning) = empty_image(&result.image, drawing_surfaces) {
@@ -382,6 +407,9 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
             }
             progress.frame_done(None);
         }
+    }
+    if let Some(recorder) = &recorder {
+        stats.popping = Some(recorder.measure(&mut session)?);
     }
     let residency = session.residency();
     stats.bricks_resident = residency.bricks as u64;

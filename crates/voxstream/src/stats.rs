@@ -48,4 +48,9 @@ pub struct RunStats {
     /// The first camera rendered (the source's default unless flags or a path gave one): a camera path made of it
     /// reproduces the view.
     pub camera: Option<voxstream_render::Camera>,
+    /// Whether level blending was on (interactive mode with `--blending on`).
+    pub blending: bool,
+    /// Interactive mode: popping and seams of the frames against the converged images at the same cameras (8-bit
+    /// levels; see `voxstream_engine::popping`).
+    pub popping: Option<voxstream_engine::PoppingSummary>,
 }
