@@ -641,6 +641,98 @@ mod tests {
         (0..8).map(|c| NodeId::new(tile, c, 8)).collect()
     }
 
+    /// The blending caps of the node's brick in the current frame's view (all 1 when the view carries none).
+    fn caps_of(cache: &CacheManager<Ramp>, node: NodeId) -> crate::BrickBlend {
+        let slot = cache.node_pool().node(node).brick().expect("a brick");
+        cache.view().brick_blends.get(slot.0 as usize).copied().unwrap_or(crate::BrickBlend::FULL)
+    }
+
+    #[test]
+    fn an_arriving_brick_fades_in_to_1_its_children_wait_for_it_and_speed_it_up() {
+        let mut cache = CacheManager::new(Ramp, 16 << 20).unwrap();
+        cache.set_blending(Some(4));
+        request(&mut cache, NodeId::ROOT, RequestKind::Produce, false);
+        request(&mut cache, NodeId::ROOT, RequestKind::Subdivide, false);
+        assert_eq!(caps_of(&cache, NodeId::ROOT).fade, 0.25, "a quarter per frame");
+        let child = root_children(&cache)[1];
+        // The child arrives while the root is at 0.5.
+        request(&mut cache, child, RequestKind::Produce, false);
+        let mut root_fades = Vec::new();
+        let mut child_fades = Vec::new();
+        for _ in 0..7 {
+            cache.begin_frame();
+            root_fades.push(caps_of(&cache, NodeId::ROOT).fade);
+            child_fades.push(caps_of(&cache, child).fade);
+            cache.end_frame(ServeOptions::ALL);
+        }
+        // With a generation waiting below it, the root rises by two quarters: in at once.
+        assert_eq!(root_fades, [1.0; 7]);
+        // The child waited at 0 while the root was below 1, then rises by a quarter per frame to 1.
+        assert_eq!(child_fades[..5], [0.0, 0.25, 0.5, 0.75, 1.0]);
+        assert!(!cache.is_blending(), "all in: the view carries no caps");
+        assert!(cache.view().brick_blends.is_empty());
+    }
+
+    #[test]
+    fn a_brick_drawn_in_full_is_never_taken_back_by_an_arriving_neighbour() {
+        let mut cache = CacheManager::new(Ramp, 16 << 20).unwrap();
+        cache.set_blending(Some(4));
+        request(&mut cache, NodeId::ROOT, RequestKind::Produce, false);
+        request(&mut cache, NodeId::ROOT, RequestKind::Subdivide, false);
+        let children = root_children(&cache);
+        request(&mut cache, children[1], RequestKind::Produce, false);
+        for _ in 0..6 {
+            cache.begin_frame();
+            cache.end_frame(ServeOptions::ALL);
+        }
+        assert!(!cache.is_blending());
+        // Child 3 is child 1's neighbour along y: it arrives, and child 1 (drawn in full) keeps its caps at 1.
+        request(&mut cache, children[3], RequestKind::Produce, false);
+        cache.begin_frame();
+        assert!(caps_of(&cache, children[1]).is_full() && caps_of(&cache, children[1]).is_in());
+        let arriving = caps_of(&cache, children[3]);
+        assert_eq!((arriving.fade, arriving.corners()), (0.25, [0.25; 8]));
+        cache.end_frame(ServeOptions::ALL);
+    }
+
+    #[test]
+    fn corners_touching_a_region_still_waiting_for_data_stay_at_0() {
+        let mut cache = CacheManager::new(Ramp, 16 << 20).unwrap();
+        cache.set_blending(Some(2));
+        request(&mut cache, NodeId::ROOT, RequestKind::Produce, false);
+        request(&mut cache, NodeId::ROOT, RequestKind::Subdivide, false);
+        for _ in 0..3 {
+            cache.begin_frame();
+            cache.end_frame(ServeOptions::ALL);
+        }
+        let children = root_children(&cache);
+        // Child 1 (x = 1, y = 0, z = 0) and child 3 (x = 1, y = 1, z = 0) share a face; both are asked for in a
+        // frame that serves one request: the other waits, and the served one's corners on that face stay at 0.
+        cache.begin_frame();
+        cache.feedback().push_requests(&[
+            Request { node: children[1], kind: RequestKind::Produce },
+            Request { node: children[3], kind: RequestKind::Produce },
+        ]);
+        cache.end_frame(ServeOptions { limit: Some(1), prefetch_new_children: false });
+        let first_served = cache.node_pool().node(children[1]).brick().is_some();
+        let (served, waiting) = if first_served { (children[1], children[3]) } else { (children[3], children[1]) };
+        // Corner c has y = (c >> 1) & 1; the shared face is y = 1 of child 1, y = 0 of child 3.
+        let touches = |c: usize| ((c >> 1) & 1 == 1) == first_served;
+        for _ in 0..3 {
+            cache.begin_frame();
+            let corners = caps_of(&cache, served).corners();
+            for c in (0..8).filter(|&c| touches(c)) {
+                assert_eq!(corners[c], 0.0, "corner {c}");
+            }
+            // The other child is still wanted: asked for again, served never.
+            cache.feedback().push_requests(&[Request { node: waiting, kind: RequestKind::Produce }]);
+            cache.end_frame(ServeOptions { limit: Some(0), prefetch_new_children: false });
+        }
+        let corners = caps_of(&cache, served).corners();
+        assert!((0..8).filter(|&c| !touches(c)).all(|c| corners[c] == 1.0), "the other corners are in: {corners:?}");
+        assert!(cache.is_blending(), "the served brick is not drawn in full while its neighbour waits");
+    }
+
     #[test]
     fn a_subdivision_produces_the_children_the_oracle_does_not_know_when_asked_to() {
         for prefetch in [false, true] {

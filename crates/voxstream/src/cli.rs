@@ -144,6 +144,10 @@ pub struct RenderArgs {
     /// Interactive mode with --blending on: frames over which an arriving brick fades in.
     #[arg(long, default_value_t = voxstream_core::DEFAULT_FADE_FRAMES)]
     pub fade_frames: u32,
+    /// Interactive mode: measure popping and seams against the converged images at the same cameras (rendered after
+    /// the run), into the --stats file. Keeps every frame as 8-bit RGB until then, outside --budget-mb.
+    #[arg(long)]
+    pub popping: bool,
     /// Write statistics JSON here.
     #[arg(long)]
     pub stats: Option<PathBuf>,

@@ -83,6 +83,7 @@ fn unreachable_default() -> RenderArgs {
         path: None,
         blending: voxstream::cli::Switch::On,
         fade_frames: voxstream_core::DEFAULT_FADE_FRAMES,
+        popping: false,
         stats: None,
         step: 0.5,
         in_memory: false,

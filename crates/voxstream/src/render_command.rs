@@ -174,6 +174,9 @@ fn check_flags(args: &RenderArgs) -> Result<()> {
     if args.requests_per_frame == 0 {
         bail!("--requests-per-frame must be at least 1");
     }
+    if args.popping && (args.mode != Mode::Interactive || args.stats.is_none()) {
+        bail!("--popping measures interactive frames into the stats file: add --mode interactive and --stats FILE");
+    }
     if args.fade_frames == 0 {
         bail!("--fade-frames must be at least 1 (1 replaces a parent at once; use --blending off for no blending)");
     }
@@ -356,9 +359,9 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
     if let Some(warning) = mismatch.filter(|_| !drawing_surfaces) {
         progress.warn(&warning);
     }
-    // Interactive runs with --stats measure popping and seams against the converged images afterwards.
+    // --popping: popping and seams against the converged images, rendered afterwards.
     let mut recorder = None;
-    if args.stats.is_some() && args.mode == Mode::Interactive {
+    if args.popping {
         match FrameRecorder::new(args.width, args.height, cameras.len() as u64 * u64::from(repeats)) {
             Ok(r) => recorder = Some(r),
             Err(warning) => progress.warn(&warning),
