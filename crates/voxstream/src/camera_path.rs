@@ -80,9 +80,11 @@ pub fn orbit(frames: usize, target: [f64; 3], distance: f64, elevation: f64, fov
         .collect()
 }
 
-/// A camera path generated around a view: what `--path orbit:N`, `zoom:N` and `fly:N` name.
+/// A camera path generated around a view: what `--path rest:N`, `orbit:N`, `zoom:N` and `fly:N` name.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum PathKind {
+    /// The view itself, N times: a camera at rest (from a cold cache, the data arriving is all that changes).
+    Rest,
     /// A quarter turn around the target at the view's distance and elevation.
     Orbit,
     /// Straight towards the target, the distance shrinking geometrically to a thousandth: from the whole volume
@@ -93,12 +95,13 @@ pub enum PathKind {
 }
 
 impl PathKind {
-    /// The three kinds, in the order the benchmarks report them.
-    pub const ALL: [PathKind; 3] = [PathKind::Orbit, PathKind::Zoom, PathKind::Fly];
+    /// The kinds, in the order the benchmarks report them.
+    pub const ALL: [PathKind; 4] = [PathKind::Rest, PathKind::Orbit, PathKind::Zoom, PathKind::Fly];
 
     /// The name on the command line.
     pub fn name(self) -> &'static str {
         match self {
+            PathKind::Rest => "rest",
             PathKind::Orbit => "orbit",
             PathKind::Zoom => "zoom",
             PathKind::Fly => "fly",
@@ -133,6 +136,7 @@ pub fn generated_path(kind: PathKind, frames: usize, from: &Camera) -> Vec<Camer
         .map(|i| {
             let s = i as f64 / last;
             let (eye, target) = match kind {
+                PathKind::Rest => (eye, target),
                 PathKind::Orbit => {
                     let rotation = glam::DQuat::from_axis_angle(up, s * std::f64::consts::FRAC_PI_2);
                     (target + rotation * offset, target)
@@ -162,6 +166,7 @@ mod tests {
             assert!(glam::DVec3::from(path[0].eye).distance(glam::DVec3::from(view.eye)) < 1e-12, "{kind:?}");
             assert!(path.iter().all(|c| c.frame(8, 8).is_ok()), "{kind:?}: every camera is valid");
         }
+        assert!(generated_path(PathKind::Rest, 11, &view).iter().all(|c| *c == view));
         let orbit = generated_path(PathKind::Orbit, 11, &view);
         assert!(orbit.iter().all(|c| (distance(c) - 2.5).abs() < 1e-9));
         // A quarter turn about +y: from +z to +x.

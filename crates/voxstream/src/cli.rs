@@ -134,7 +134,8 @@ pub struct RenderArgs {
     #[arg(long, default_value_t = 1024)]
     pub requests_per_frame: usize,
     /// Camera path JSON (a list of cameras), rendered in sequence reusing the cache; or a path generated around the
-    /// view: orbit:N (a quarter turn), zoom:N (down to a thousandth of the distance), fly:N (through the volume).
+    /// view: rest:N (the view N times), orbit:N (a quarter turn), zoom:N (down to a thousandth of the distance),
+    /// fly:N (through the volume).
     #[arg(long)]
     pub path: Option<PathBuf>,
     /// Interactive mode: level blending (Thiele et al.): bricks fade in from their parents over --fade-frames frames
@@ -263,8 +264,8 @@ pub struct BenchArgs {
     /// Also write the figures as JSON here.
     #[arg(long)]
     pub json: Option<PathBuf>,
-    /// Instead of speed: popping and seams (Thiele et al.) along three camera paths from a cold cache (orbit, zoom,
-    /// fly-through), with level blending off and on, against the converged images at the same cameras.
+    /// Instead of speed: popping and seams (Thiele et al.) along camera paths from a cold cache (at rest, orbit,
+    /// zoom, fly-through), with level blending off and on, against the converged images at the same cameras.
     #[arg(long)]
     pub popping: bool,
     /// --popping: also measure this store (a folder made by `voxstream import`).

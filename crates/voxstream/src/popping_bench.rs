@@ -1,5 +1,5 @@
 //! `voxstream bench --popping`: popping and seams (Thiele et al.'s evaluation, [`voxstream_engine::popping`]) along
-//! three camera paths (orbit, zoom, fly-through; [`crate::camera_path::PathKind`]), each from a cold cache with a
+//! four camera paths (at rest, orbit, zoom, fly-through; [`crate::camera_path::PathKind`]), each from a cold cache with a
 //! bounded number of requests per frame, level blending off and on, against the converged images at the same
 //! cameras; with the frame times, so the cost of blending shows next to what it buys.
 
@@ -30,7 +30,7 @@ const STRIP_FRAMES: usize = 6;
 pub struct PathFigures {
     /// Scene or store.
     pub source: String,
-    /// orbit, zoom or fly.
+    /// rest, orbit, zoom or fly.
     pub path: String,
     /// Frames of the path.
     pub frames: usize,
