@@ -31,7 +31,7 @@ pub struct SceneFigures {
     pub converged_ms: f64,
     /// Cold converged frame: render passes.
     pub converged_passes: u32,
-    /// Interactive frames until a frame needed nothing more.
+    /// Interactive frames until a frame is final (needed nothing more, and nothing was blending in).
     pub frames_to_converge: u32,
     /// Warm frame (data resident): median ms.
     pub warm_frame_ms: f64,
@@ -115,7 +115,11 @@ fn new_session(scene: &Scene, args: &BenchArgs) -> Result<Session<crate::scenes:
     // The same split as `render`: the frame's buffers count, and a budget beyond the machine is refused.
     let budget = check_budget(args.budget_mb, args.size, args.size, "--size")?;
     let plan = plan_budget(&budget, &scene.producer.shape(), 0)?;
-    Ok(Session::new(scene.producer, &scene.transfer_function, settings, plan.pool_bytes, LoopLimits::default())?)
+    let limits = LoopLimits {
+        blending_fade_frames: (args.blending == crate::cli::Switch::On).then_some(voxstream_core::DEFAULT_FADE_FRAMES),
+        ..LoopLimits::default()
+    };
+    Ok(Session::new(scene.producer, &scene.transfer_function, settings, plan.pool_bytes, limits)?)
 }
 
 fn bench_scene(scene: &Scene, args: &BenchArgs, bound_ns: f64) -> Result<SceneFigures> {

@@ -268,6 +268,9 @@ pub struct BenchArgs {
     /// zoom, fly-through), with level blending off and on, against the converged images at the same cameras.
     #[arg(long)]
     pub popping: bool,
+    /// Level blending in the interactive frames (--popping measures both and ignores this).
+    #[arg(long, value_enum, default_value_t = Switch::On)]
+    pub blending: Switch,
     /// --popping: also measure this store (a folder made by `voxstream import`).
     #[arg(long, value_name = "STORE")]
     pub store: Option<PathBuf>,

@@ -10,12 +10,17 @@ use crate::output_file::write_atomically;
 
 /// Writes `image` as 8-bit RGB PNG at `path`.
 pub fn write_png(image: &Image, path: &Path) -> Result<()> {
+    write_rgb8_png(&image.to_rgb8(), image.width, image.height, path)
+}
+
+/// Writes `width × height` 8-bit RGB pixels (row-major, top row first) as a PNG at `path`.
+pub fn write_rgb8_png(pixels: &[u8], width: u32, height: u32, path: &Path) -> Result<()> {
     write_atomically(path, |file| {
-        let mut encoder = png::Encoder::new(file, image.width, image.height);
+        let mut encoder = png::Encoder::new(file, width, height);
         encoder.set_color(png::ColorType::Rgb);
         encoder.set_depth(png::BitDepth::Eight);
         let mut writer = encoder.write_header().with_context(|| format!("cannot write {}", path.display()))?;
-        writer.write_image_data(&image.to_rgb8()).with_context(|| format!("cannot write {}", path.display()))?;
+        writer.write_image_data(pixels).with_context(|| format!("cannot write {}", path.display()))?;
         writer.finish().with_context(|| format!("cannot write {}", path.display()))
     })
 }

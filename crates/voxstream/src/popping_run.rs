@@ -3,12 +3,12 @@
 
 use std::path::Path;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use voxstream_core::Producer;
 use voxstream_engine::{FrameRenderer, Mode, PoppingSummary, Rgb8, Session};
 use voxstream_render::{Camera, Image};
 
-use crate::output_file::write_atomically;
+use crate::png_output::write_rgb8_png;
 
 /// Most bytes of 8-bit frames kept for the measurement.
 pub const MAX_RECORDED_BYTES: u64 = 1 << 30;
@@ -92,12 +92,5 @@ pub fn write_strip(rows: &[Vec<&[u8]>], width: u32, height: u32, path: &Path) ->
             }
         }
     }
-    write_atomically(path, |file| {
-        let mut encoder = png::Encoder::new(file, strip_width as u32, strip_height as u32);
-        encoder.set_color(png::ColorType::Rgb);
-        encoder.set_depth(png::BitDepth::Eight);
-        let mut writer = encoder.write_header().with_context(|| format!("cannot write {}", path.display()))?;
-        writer.write_image_data(&pixels).with_context(|| format!("cannot write {}", path.display()))?;
-        writer.finish().with_context(|| format!("cannot write {}", path.display()))
-    })
+    write_rgb8_png(&pixels, strip_width as u32, strip_height as u32, path)
 }
