@@ -200,8 +200,8 @@ impl<P: Producer> CacheManager<P> {
         }
     }
 
-    /// Whether the current frame's view blends some brick towards its parent (something arrived within the fade, or
-    /// the rays wait for a finer level beside a resident brick): the image is not final yet.
+    /// Whether the current frame's view blends some brick towards its parent (some brick is still in transition:
+    /// fading in, or capped beside a region waiting for data): the image is not final yet.
     pub fn is_blending(&self) -> bool {
         self.blending.as_ref().is_some_and(LevelBlending::is_active)
     }

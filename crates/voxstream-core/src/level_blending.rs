@@ -11,14 +11,16 @@
 //!   chain of levels arriving together (a cold start, a fast zoom) does not take `fade_frames` per level, a brick
 //!   with `g` generations of arrived descendants waiting below it fades `1 + g` times as fast: the whole chain is in
 //!   about `fade_frames` frames after its last brick arrived.
-//! - **Spatial.** Each brick has a cap at each of its eight corners ([`BrickBlend`]), interpolated trilinearly by the
-//!   renderer: the minimum of `t` over the equal-level bricks sharing the corner, and 0 where a region the rays want
-//!   at this brick's level is still coarser (a node whose brick is requested but not yet produced, or a node whose
-//!   children are requested but not yet created). There the brick's weight goes to zero, i.e. it shows its parent,
-//!   which is what the rays on the other side show: no seam.
+//! - **Spatial.** Each brick in transition has a cap at each of its eight corners ([`BrickBlend`]), interpolated
+//!   trilinearly by the renderer. It aims at the minimum of `t` over the equal-level bricks in transition sharing
+//!   the corner, and at 0 where a region the rays want at this brick's level is still coarser (a node whose brick
+//!   was requested but not produced this frame, or a node whose children were requested but not created). There the
+//!   brick's weight goes to zero, i.e. it shows its parent, which is what the rays on the other side show: no seam.
+//!   Caps rise towards their aim and never fall, so a brick drawn in full is never taken back by a neighbour that
+//!   arrives later (the newcomer fades in against it instead).
 //! - **The renderer** uses `min(cone weight, cap)` where the cone weight is its usual quadrilinear level blend. With
-//!   every cap at 1 (nothing arriving, nothing pending) the view carries no caps at all and the renderer takes its
-//!   usual path: a camera at rest converges to the same bytes with blending on and off.
+//!   no brick in transition the view carries no caps at all and the renderer takes its usual path: a camera at rest
+//!   converges to the same bytes with blending on and off.
 //!
 //! Differences from Thiele et al., on purpose:
 //! - Their renderer samples one "cut" of the tree; here each ray's cone picks the level and already blends
@@ -171,6 +173,12 @@ impl LevelBlending {
                 transition.t = t;
             }
         }
+        self.caps.clear();
+        self.active = !self.transitions.is_empty();
+        if !self.active {
+            // Nothing to cap: no neighbour or pending-region lookups.
+            return;
+        }
         // This frame's aims: each brick's own fade, then lowered by its neighbours and the pending regions.
         let mut aims: HashMap<u32, BrickBlend> =
             self.transitions.iter().map(|(&slot, transition)| (slot, BrickBlend::uniform(transition.t))).collect();
@@ -211,7 +219,6 @@ impl LevelBlending {
         }
         self.transitions.retain(|_, transition| !(transition.blend.is_full() && transition.blend.is_in()));
         self.active = !self.transitions.is_empty();
-        self.caps.clear();
         if self.active {
             self.caps.resize(slots as usize, BrickBlend::FULL);
             for (&slot, transition) in &self.transitions {

@@ -331,12 +331,12 @@ impl<'a> Traversal<'a> {
                     // With `steps_ignore_stand_ins`, a stand-in is stepped as the data it stands in for will be, down
                     // to `stand_in_levels` levels below it (a bound on the extra samples where the wanted data is
                     // still far from resident, e.g. during a fast zoom).
-                    let sampled_voxel = if stand_in && self.steps_ignore_stand_ins {
-                        let level = (fine.level + self.stand_in_levels).min(self.view.shape.max_level);
-                        1.0 / (self.scale[level as usize] * self.brick_size)
+                    let sampled_level = if stand_in && self.steps_ignore_stand_ins {
+                        (fine.level + self.stand_in_levels).min(self.view.shape.max_level)
                     } else {
-                        1.0 / (self.scale[fine.level as usize] * self.brick_size)
+                        fine.level
                     };
+                    let sampled_voxel = self.level_voxel[sampled_level as usize];
                     let blend = coarse.and(self.view.brick_blends.get(fine.slot.0 as usize)).filter(|b| !b.is_full());
                     let desired_step = sampled_voxel.max(footprint_voxel) * self.step_factor / speed;
                     let segment_step = match step {

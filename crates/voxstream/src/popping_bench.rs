@@ -60,7 +60,8 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let budget = check_budget(args.budget_mb, args.size, args.size, "--size")?;
     let settings = RenderSettings { width: args.size, height: args.size, ..RenderSettings::default() };
     let mut figures = Vec::new();
-    let mut strip_source: Option<(FrameRecorder, FrameRecorder, Vec<f64>)> = None;
+    // The first path's recordings and the first frame of the strip.
+    let mut strip_source: Option<(FrameRecorder, FrameRecorder, usize)> = None;
     for name in &scenes {
         let scene = builtin(name).with_context(|| format!("unknown scene '{name}'"))?;
         let settings = RenderSettings { shading: scene.shading, light_direction: scene.light, ..settings.clone() };
@@ -73,8 +74,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             };
             let (figure, off, on) = study(name, &scene.camera, kind, frames, args, &mut make)?;
             if strip_source.is_none() {
-                let popping = off_popping_per_frame(&figure);
-                strip_source = Some((off, on, popping));
+                strip_source = Some((off, on, strip_start(&figure)));
             }
             figures.push(figure);
         }
@@ -105,18 +105,14 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             };
             let (figure, off, on) = study(&name, &camera, kind, frames, args, &mut make)?;
             if strip_source.is_none() {
-                let popping = off_popping_per_frame(&figure);
-                strip_source = Some((off, on, popping));
+                strip_source = Some((off, on, strip_start(&figure)));
             }
             figures.push(figure);
         }
     }
     print_table(&figures, args, frames);
-    if let (Some(path), Some((off, on, popping))) = (&args.strip, &strip_source) {
-        // The frames around the largest pop without blending.
-        let peak = popping.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).map_or(0, |(i, _)| i);
-        let skipped = figures.first().map_or(0, |f| f.off.empty_frames_skipped);
-        let start = (skipped + peak).saturating_sub(STRIP_FRAMES / 2 - 1);
+    if let (Some(path), Some((off, on, start))) = (&args.strip, &strip_source) {
+        let start = *start;
         let rows = [off, on].map(|recorder| recorder.frames().skip(start).take(STRIP_FRAMES).collect::<Vec<&[u8]>>());
         write_strip(&rows, args.size, args.size, path)?;
         eprintln!(
@@ -132,8 +128,11 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     Ok(())
 }
 
-fn off_popping_per_frame(figure: &PathFigures) -> Vec<f64> {
-    figure.off.popping_per_frame.clone()
+/// The first recorded frame of a strip centred on the path's largest pop without blending.
+fn strip_start(figure: &PathFigures) -> usize {
+    let popping = &figure.off.popping_per_frame;
+    let peak = popping.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).map_or(0, |(i, _)| i);
+    (figure.off.empty_frames_skipped + peak).saturating_sub(STRIP_FRAMES / 2 - 1)
 }
 
 /// One path from `view` over a source, blending off then on, each from a cold session made by `make`.
