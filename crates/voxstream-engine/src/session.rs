@@ -255,6 +255,10 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
             }
         }
         loop {
+            if mode == Mode::Converged {
+                // Converged frames never blend: no transitions to track between their passes.
+                self.cache.settle_blending();
+            }
             self.cache.begin_frame();
             let render_start = Instant::now();
             let mut view = self.cache.view();
