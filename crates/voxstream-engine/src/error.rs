@@ -15,4 +15,8 @@ pub enum EngineError {
     /// A render was asked for zero frames.
     #[error("at least one frame is needed")]
     NoFrames,
+    /// New settings moved the volume in the world, which a session cannot follow (its transfer function's unit
+    /// distance was derived from the placement): start a new session instead.
+    #[error("the volume's placement cannot change within a session; start a new session")]
+    PlacementChanged,
 }

@@ -103,6 +103,9 @@ pub struct FrameResult {
     pub blended: bool,
     /// Producer failures met in this frame.
     pub failures: Vec<ProduceError>,
+    /// Per pixel, row by row: whether its ray missed data in the last pass (coarser data stood in, or, in a
+    /// converged frame that gave up, nothing better could be loaded).
+    pub missing: Vec<bool>,
 }
 
 impl FrameResult {
@@ -137,6 +140,10 @@ pub struct Session<P: Producer, R: FrameRenderer = CpuRenderer> {
     lut: TransferLut,
     settings: RenderSettings,
     limits: LoopLimits,
+    /// Data values the normalised voxel values 0 and 1 stand for (the transfer function is written in data values).
+    value_range: [f64; 2],
+    /// World length of one finest voxel: the transfer function's default unit distance.
+    finest_voxel: f64,
     peak_resident_bytes: u64,
     /// Whether the next converged frame starts with sparse passes: yes unless the last one needed no data (a warm
     /// view, where the sparse pass would only add a pass).
@@ -187,7 +194,17 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
         let lut = TransferLut::new(transfer_function, value_range[0] as f32, value_range[1] as f32, finest_voxel);
         let mut cache = CacheManager::new(producer, budget_bytes)?;
         cache.set_blending(limits.blending_fade_frames);
-        Ok(Session { cache, renderer, lut, settings, limits, peak_resident_bytes: 0, gather_sparsely_next: true })
+        Ok(Session {
+            cache,
+            renderer,
+            lut,
+            settings,
+            limits,
+            value_range,
+            finest_voxel,
+            peak_resident_bytes: 0,
+            gather_sparsely_next: true,
+        })
     }
 
     /// The cache.
@@ -203,6 +220,37 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
     /// The render settings.
     pub fn settings(&self) -> &RenderSettings {
         &self.settings
+    }
+
+    /// Replaces the transfer function for the next frames (an editor's change). The cache is kept: bricks hold
+    /// data, not colours.
+    pub fn set_transfer_function(&mut self, transfer_function: &TransferFunction) {
+        self.lut = TransferLut::new(
+            transfer_function,
+            self.value_range[0] as f32,
+            self.value_range[1] as f32,
+            self.finest_voxel,
+        );
+        // What was needed under the old function says nothing about the new one.
+        self.gather_sparsely_next = true;
+    }
+
+    /// Replaces the render settings for the next frames (image size, shading, level-of-detail bias, …), after
+    /// validating them. The placement must stay the session's: the transfer function's unit distance was derived
+    /// from it.
+    pub fn set_settings(&mut self, settings: RenderSettings) -> Result<()> {
+        settings.validate()?;
+        if settings.placement != self.settings.placement {
+            return Err(EngineError::PlacementChanged);
+        }
+        self.settings = settings;
+        self.gather_sparsely_next = true;
+        Ok(())
+    }
+
+    /// The data values the voxel values 0 and 1 stand for.
+    pub fn value_range(&self) -> [f64; 2] {
+        self.value_range
     }
 
     /// Highest resident pool bytes seen.
@@ -241,6 +289,7 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
             pending: 0,
             blended: false,
             failures: Vec::new(),
+            missing: Vec::new(),
         };
         let mut progressive = ProgressiveImage::new(self.settings.width, self.settings.height);
         // Converged frames let each ray report every miss along its path, so passes are few.
@@ -314,6 +363,7 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
             self.cache.settle_blending();
         }
         result.image = progressive.image;
+        result.missing = progressive.pending;
         result.elapsed_ms = start.elapsed().as_secs_f64() * 1e3;
         Ok(result)
     }

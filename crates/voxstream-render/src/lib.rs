@@ -36,6 +36,7 @@ pub mod instruction_set;
 pub mod integrand;
 pub mod isosurface;
 pub mod lighting;
+pub mod paraview_colormap;
 pub mod ray_caster;
 pub mod sampler;
 pub mod settings;

@@ -80,6 +80,21 @@ impl TransferFunction {
         TransferFunction::new(points, file.unit_distance)
     }
 
+    /// Parses either this crate's JSON format or a ParaView colour-map preset (rescaled onto `value_range`, see
+    /// [`crate::paraview_colormap`]).
+    pub fn from_json_or_paraview(text: &str, value_range: [f64; 2]) -> Result<TransferFunction, RenderError> {
+        let looks_like_paraview = serde_json::from_str::<serde_json::Value>(text).is_ok_and(|value| match &value {
+            serde_json::Value::Object(object) => object.contains_key("RGBPoints"),
+            serde_json::Value::Array(list) => list.iter().any(|v| v.get("RGBPoints").is_some()),
+            _ => false,
+        });
+        if looks_like_paraview {
+            crate::paraview_colormap::from_paraview_json(text, value_range)
+        } else {
+            TransferFunction::from_json(text)
+        }
+    }
+
     /// `[r, g, b, alpha]` at `value`, linear between points, clamped outside; NaN maps as the first point.
     pub fn evaluate(&self, value: f64) -> [f64; 4] {
         let first = &self.points[0];

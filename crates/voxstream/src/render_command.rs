@@ -267,7 +267,7 @@ pub fn default_store_transfer_function(range: [f64; 2]) -> Result<TransferFuncti
 
 fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &MemoryBudget) -> Result<()> {
     let transfer_function = match &args.tf {
-        Some(path) => read_transfer_function(path)?,
+        Some(path) => read_transfer_function(path, source.value_range)?,
         None => source.transfer_function.clone(),
     };
     let mut surfaces = iso_flags::surfaces(args, source.value_range)?;
@@ -471,8 +471,9 @@ fn summary_line(written: &[std::path::PathBuf], args: &RenderArgs, stats: &RunSt
     )
 }
 
-fn read_transfer_function(path: &Path) -> Result<TransferFunction> {
+/// Reads `--tf`: voxstream's JSON, or a ParaView colour-map preset rescaled onto `value_range`.
+fn read_transfer_function(path: &Path, value_range: [f64; 2]) -> Result<TransferFunction> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("cannot read transfer function {}", path.display()))?;
-    TransferFunction::from_json(&text).with_context(|| format!("in {}", path.display()))
+    TransferFunction::from_json_or_paraview(&text, value_range).with_context(|| format!("in {}", path.display()))
 }

@@ -1,0 +1,539 @@
+//! The window: the image, the controls, the status line, and the scripted session, on the window's thread. It only
+//! posts requests to the [`RenderWorker`] and shows what comes back, so it never waits for a frame or a brick.
+//!
+//! While the view moves, frames are drawn at a fraction of the render size (halved again while they take longer
+//! than [`MOVING_FRAME_MS`]); once the pointer and keys rest for [`REST_AFTER`], the full size is asked for and
+//! refined until final (GigaVoxels' interactive frames with Thiele et al.'s level blending, as `voxstream render
+//! --mode interactive` draws them).
+
+use std::collections::VecDeque;
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::{Duration, Instant};
+
+use eframe::egui::{self, Color32, ColorImage, Key, TextureHandle, TextureOptions};
+use voxstream_render::{Camera, RenderSettings, Shading, TransferFunction};
+
+use crate::files::{camera_json, load_transfer_function, save_png, transfer_function_json, write_atomically};
+use crate::histogram::ValueHistogram;
+use crate::orbit::OrbitCamera;
+use crate::render_worker::{RenderWorker, ShownFrame, ViewRequest, WorkerEvent};
+use crate::script::{Script, ScriptCommand};
+use crate::tf_editor::TransferFunctionEditor;
+
+/// Time without input after which the view is at rest and drawn at full size.
+pub const REST_AFTER: Duration = Duration::from_millis(250);
+
+/// Frame time above which moving frames are drawn smaller (and below a third of which, larger again).
+pub const MOVING_FRAME_MS: f64 = 60.0;
+
+/// Largest divisor of the render size while moving.
+const MAX_MOVING_DIVISOR: u32 = 8;
+
+/// Degrees of orbit per point dragged.
+const ORBIT_DEGREES_PER_POINT: f64 = 0.4;
+
+/// How the viewer was started.
+pub struct ViewerConfig {
+    /// Window title.
+    pub title: String,
+    /// The starting camera (also the one `reset` returns to).
+    pub camera: Camera,
+    /// The starting transfer function.
+    pub transfer_function: TransferFunction,
+    /// The render settings at full size.
+    pub settings: RenderSettings,
+    /// Data values the voxel values 0 and 1 stand for.
+    pub value_range: [f64; 2],
+    /// Transfer-function presets offered besides the starting one.
+    pub presets: Vec<(String, TransferFunction)>,
+    /// A scripted session to run.
+    pub script: Option<Script>,
+    /// The pools' budget (bytes), for the status line.
+    pub pool_budget_bytes: u64,
+}
+
+/// The window's state.
+pub struct ViewerApp {
+    worker: RenderWorker,
+    config: ViewerConfig,
+    orbit: OrbitCamera,
+    editor: TransferFunctionEditor,
+    settings: RenderSettings,
+    histogram: Option<ValueHistogram>,
+    revision: u64,
+    last_request: Option<ViewRequest>,
+    last_input: Option<Instant>,
+    moving_divisor: u32,
+    shown: Option<ShownFrame>,
+    texture: Option<TextureHandle>,
+    overlay_missing: bool,
+    show_help: bool,
+    messages: Vec<String>,
+    frame_times: VecDeque<(Instant, u64)>,
+    script: Option<ScriptRun>,
+    script_failure: Arc<Mutex<Option<String>>>,
+    tf_path: String,
+    camera_path: String,
+    screenshot_path: String,
+}
+
+struct ScriptRun {
+    script: Script,
+    next: usize,
+    started: Instant,
+}
+
+impl ViewerApp {
+    /// A window over `worker`; a failing script's message is left in `script_failure`.
+    pub fn new(worker: RenderWorker, config: ViewerConfig, script_failure: Arc<Mutex<Option<String>>>) -> ViewerApp {
+        let script = config.script.clone().map(|script| ScriptRun { script, next: 0, started: Instant::now() });
+        ViewerApp {
+            worker,
+            orbit: OrbitCamera::from_camera(&config.camera),
+            editor: TransferFunctionEditor::new(&config.transfer_function),
+            settings: config.settings.clone(),
+            histogram: None,
+            revision: 0,
+            last_request: None,
+            last_input: None,
+            moving_divisor: 2,
+            shown: None,
+            texture: None,
+            overlay_missing: false,
+            show_help: false,
+            messages: Vec::new(),
+            frame_times: VecDeque::new(),
+            script,
+            script_failure,
+            tf_path: "transfer-function.json".into(),
+            camera_path: "camera.json".into(),
+            screenshot_path: "screenshot.png".into(),
+            config,
+        }
+    }
+
+    fn moving(&self) -> bool {
+        self.last_input.is_some_and(|t| t.elapsed() < REST_AFTER)
+    }
+
+    fn note_input(&mut self) {
+        self.last_input = Some(Instant::now());
+    }
+
+    /// The request for the current state: full size at rest, smaller while moving.
+    fn desired_request(&self) -> ViewRequest {
+        let mut settings = self.settings.clone();
+        if self.moving() {
+            settings.width = (settings.width / self.moving_divisor).max(1);
+            settings.height = (settings.height / self.moving_divisor).max(1);
+        }
+        ViewRequest {
+            revision: self.revision,
+            camera: self.orbit.to_camera(),
+            transfer_function: self.editor.transfer_function(),
+            settings,
+        }
+    }
+
+    fn post_request_if_changed(&mut self) {
+        let mut request = self.desired_request();
+        let changed = self.last_request.as_ref().is_none_or(|last| {
+            last.camera != request.camera
+                || last.transfer_function != request.transfer_function
+                || last.settings != request.settings
+        });
+        if changed {
+            self.revision += 1;
+            request.revision = self.revision;
+            self.worker.request(request.clone());
+            self.last_request = Some(request);
+        }
+    }
+
+    fn receive(&mut self, ctx: &egui::Context) {
+        for event in self.worker.events() {
+            match event {
+                WorkerEvent::Frame(frame) => {
+                    let now = Instant::now();
+                    self.frame_times.push_back((now, frame.bricks_produced));
+                    while self.frame_times.front().is_some_and(|(t, _)| now.duration_since(*t) > Duration::from_secs(1)) {
+                        self.frame_times.pop_front();
+                    }
+                    if frame.size[0] < self.settings.width {
+                        // A moving frame: adapt the divisor to keep moving frames short.
+                        if frame.frame_ms > MOVING_FRAME_MS {
+                            self.moving_divisor = (self.moving_divisor * 2).min(MAX_MOVING_DIVISOR);
+                        } else if frame.frame_ms < MOVING_FRAME_MS / 3.0 {
+                            self.moving_divisor = (self.moving_divisor / 2).max(2);
+                        }
+                    }
+                    if !frame.failures.is_empty() {
+                        self.message(format!(
+                            "{} brick(s) could not be produced; coarser data stands in. First: {}",
+                            frame.failures.len(),
+                            frame.failures[0]
+                        ));
+                    }
+                    self.upload(ctx, &frame);
+                    self.shown = Some(*frame);
+                }
+                WorkerEvent::Histogram(histogram) => self.histogram = Some(histogram),
+                WorkerEvent::Error(message) => self.message(message),
+            }
+        }
+        if self.worker.has_ended() && self.messages.iter().all(|m| !m.starts_with("the render thread")) {
+            self.message("the render thread stopped unexpectedly; restart the viewer".into());
+        }
+    }
+
+    fn upload(&mut self, ctx: &egui::Context, frame: &ShownFrame) {
+        let mut rgb = frame.rgb.clone();
+        if self.overlay_missing {
+            for (pixel, &missing) in rgb.chunks_exact_mut(3).zip(&frame.missing) {
+                if missing {
+                    pixel[0] = pixel[0] / 2 + 127;
+                    pixel[1] /= 2;
+                    pixel[2] = pixel[2] / 2 + 127;
+                }
+            }
+        }
+        let image = ColorImage::from_rgb([frame.size[0] as usize, frame.size[1] as usize], &rgb);
+        match &mut self.texture {
+            Some(texture) => texture.set(image, TextureOptions::LINEAR),
+            None => self.texture = Some(ctx.load_texture("voxstream-frame", image, TextureOptions::LINEAR)),
+        }
+    }
+
+    fn message(&mut self, message: String) {
+        if self.messages.last() != Some(&message) {
+            self.messages.push(message);
+        }
+        if self.messages.len() > 5 {
+            self.messages.remove(0);
+        }
+    }
+
+    fn keyboard(&mut self, ctx: &egui::Context) {
+        if ctx.egui_wants_keyboard_input() {
+            return;
+        }
+        let (dt, keys) = ctx.input(|i| {
+            let down = |k: Key| i.key_down(k);
+            let pressed = |k: Key| i.key_pressed(k);
+            (
+                i.stable_dt.min(0.1) as f64,
+                [
+                    down(Key::W) as i32 - down(Key::S) as i32,
+                    down(Key::D) as i32 - down(Key::A) as i32,
+                    down(Key::E) as i32 - down(Key::Q) as i32,
+                    down(Key::ArrowRight) as i32 - down(Key::ArrowLeft) as i32,
+                    down(Key::ArrowUp) as i32 - down(Key::ArrowDown) as i32,
+                    pressed(Key::R) as i32,
+                    (pressed(Key::H) || pressed(Key::F1)) as i32,
+                    pressed(Key::M) as i32,
+                ],
+            )
+        });
+        let [forward, right, up, yaw, pitch, reset, help, overlay] = keys;
+        if forward != 0 || right != 0 || up != 0 {
+            // Half the eye's distance to the target per second.
+            let speed = self.orbit.distance * 0.5 * dt;
+            self.orbit.fly(forward as f64 * speed, right as f64 * speed, up as f64 * speed);
+            self.note_input();
+        }
+        if yaw != 0 || pitch != 0 {
+            self.orbit.orbit(yaw as f64 * 90.0 * dt, pitch as f64 * 90.0 * dt);
+            self.note_input();
+        }
+        if reset != 0 {
+            self.orbit = OrbitCamera::from_camera(&self.config.camera);
+        }
+        if help != 0 {
+            self.show_help = !self.show_help;
+        }
+        if overlay != 0 {
+            self.overlay_missing = !self.overlay_missing;
+        }
+    }
+
+    fn controls(&mut self, ui: &mut egui::Ui) {
+        ui.heading("Transfer function");
+        let histogram = self.histogram.as_ref();
+        self.editor.show(ui, histogram, self.config.value_range);
+        ui.horizontal(|ui| {
+            egui::ComboBox::from_id_salt("presets").selected_text("presets").show_ui(ui, |ui| {
+                if ui.selectable_label(false, "the source's default").clicked() {
+                    self.editor.set(&self.config.transfer_function);
+                }
+                for (name, preset) in &self.config.presets {
+                    if ui.selectable_label(false, name.as_str()).clicked() {
+                        self.editor.set(preset);
+                    }
+                }
+            });
+            ui.label(format!("{} points", self.editor.points().len()));
+        });
+        ui.horizontal(|ui| {
+            ui.add(egui::TextEdit::singleline(&mut self.tf_path).desired_width(150.0));
+            if ui.button("load").on_hover_text("voxstream's JSON or a ParaView colour map").clicked() {
+                let path = PathBuf::from(&self.tf_path);
+                self.load_tf(&path);
+            }
+            if ui.button("save").on_hover_text("for voxstream render --tf").clicked() {
+                let path = PathBuf::from(&self.tf_path);
+                self.save_tf(&path);
+            }
+        });
+        ui.separator();
+        ui.heading("Rendering");
+        let mut phong = self.settings.shading == Shading::Phong;
+        if ui.checkbox(&mut phong, "Phong shading").changed() {
+            self.settings.shading = if phong { Shading::Phong } else { Shading::None };
+        }
+        ui.add(egui::Slider::new(&mut self.settings.lod_bias, -2.0..=4.0).text("level-of-detail bias"));
+        ui.add(egui::Slider::new(&mut self.settings.step_factor, 0.25..=2.0).text("step (voxels)"));
+        ui.checkbox(&mut self.overlay_missing, "mark pixels still missing data (M)");
+        ui.label(format!(
+            "render size {}×{}, budget {:.0} MiB",
+            self.settings.width,
+            self.settings.height,
+            self.config.pool_budget_bytes as f64 / (1 << 20) as f64
+        ));
+        ui.separator();
+        ui.heading("Save");
+        ui.horizontal(|ui| {
+            ui.add(egui::TextEdit::singleline(&mut self.screenshot_path).desired_width(150.0));
+            if ui.button("screenshot").clicked() {
+                let path = PathBuf::from(&self.screenshot_path);
+                if let Err(message) = self.screenshot(&path) {
+                    self.message(message);
+                }
+            }
+        });
+        ui.horizontal(|ui| {
+            ui.add(egui::TextEdit::singleline(&mut self.camera_path).desired_width(150.0));
+            if ui.button("camera").on_hover_text("for voxstream render --camera").clicked() {
+                let path = PathBuf::from(&self.camera_path);
+                if let Err(message) = write_atomically(&path, camera_json(&self.orbit.to_camera()).as_bytes()) {
+                    self.message(message);
+                }
+            }
+        });
+        ui.separator();
+        ui.horizontal(|ui| {
+            if ui.button("reset view (R)").clicked() {
+                self.orbit = OrbitCamera::from_camera(&self.config.camera);
+            }
+            if ui.button("help (H)").clicked() {
+                self.show_help = !self.show_help;
+            }
+        });
+    }
+
+    fn status_line(&self, ui: &mut egui::Ui) {
+        let frames = self.frame_times.len();
+        let bricks: u64 = self.frame_times.iter().map(|(_, b)| b).sum();
+        let mut parts = vec![format!("{frames} frames/s"), format!("{bricks} bricks/s")];
+        if let Some(shown) = &self.shown {
+            let [resident, budget] = shown.resident_bytes;
+            let mib = |b: u64| b as f64 / (1 << 20) as f64;
+            parts.push(format!("resident {:.1} of {:.0} MiB", mib(resident), mib(budget)));
+            parts.push(format!("{} requests pending", shown.pending));
+            let state = if shown.size[0] < self.settings.width {
+                format!("moving: {}×{}", shown.size[0], shown.size[1])
+            } else if shown.is_final && shown.revision == self.revision {
+                "final".to_string()
+            } else {
+                "refining".to_string()
+            };
+            parts.push(state);
+            parts.push(format!("{:.0} ms/frame", shown.frame_ms));
+        } else {
+            parts.push("first frame…".into());
+        }
+        parts.push("H: help".into());
+        ui.label(parts.join(" · "));
+    }
+
+    fn image(&mut self, ui: &mut egui::Ui) {
+        let available = ui.available_rect_before_wrap();
+        let aspect = self.settings.width as f32 / self.settings.height.max(1) as f32;
+        let mut size = available.size();
+        if size.x / size.y.max(1.0) > aspect {
+            size.x = size.y * aspect;
+        } else {
+            size.y = size.x / aspect;
+        }
+        let rect = egui::Rect::from_center_size(available.center(), size);
+        let response = ui.allocate_rect(rect, egui::Sense::click_and_drag());
+        ui.painter().rect_filled(rect, 0.0, Color32::BLACK);
+        if let Some(texture) = &self.texture {
+            ui.painter().image(
+                texture.id(),
+                rect,
+                egui::Rect::from_min_max(egui::pos2(0.0, 0.0), egui::pos2(1.0, 1.0)),
+                Color32::WHITE,
+            );
+        }
+        let delta = response.drag_delta();
+        if response.dragged() && delta != egui::Vec2::ZERO {
+            let panning = response.dragged_by(egui::PointerButton::Secondary)
+                || response.dragged_by(egui::PointerButton::Middle)
+                || ui.input(|i| i.modifiers.shift);
+            if panning {
+                let height = rect.height().max(1.0) as f64;
+                self.orbit.pan(-delta.x as f64 / height, delta.y as f64 / height);
+            } else {
+                self.orbit.orbit(-delta.x as f64 * ORBIT_DEGREES_PER_POINT, delta.y as f64 * ORBIT_DEGREES_PER_POINT);
+            }
+            self.note_input();
+        }
+        if response.hovered() {
+            let scroll = ui.input(|i| i.smooth_scroll_delta.y);
+            if scroll != 0.0 {
+                self.orbit.zoom((-scroll as f64 * 0.002).exp());
+                self.note_input();
+            }
+        }
+        if response.double_clicked() {
+            self.orbit = OrbitCamera::from_camera(&self.config.camera);
+        }
+        if self.show_help {
+            let text = "left drag: orbit · right/middle drag or shift+drag: pan · wheel: zoom\n\
+                        W/S: fly forward/back · A/D: left/right · Q/E: down/up · arrows: orbit\n\
+                        R or double-click: reset · M: mark missing data · H/F1: this help";
+            ui.painter().text(
+                rect.left_top() + egui::vec2(8.0, 8.0),
+                egui::Align2::LEFT_TOP,
+                text,
+                egui::FontId::proportional(14.0),
+                Color32::WHITE,
+            );
+        }
+    }
+
+    fn load_tf(&mut self, path: &std::path::Path) {
+        match load_transfer_function(path, self.config.value_range) {
+            Ok(tf) => self.editor.set(&tf),
+            Err(message) => self.message(message),
+        }
+    }
+
+    fn save_tf(&mut self, path: &std::path::Path) {
+        if let Err(message) = write_atomically(path, transfer_function_json(&self.editor.transfer_function()).as_bytes()) {
+            self.message(message);
+        }
+    }
+
+    fn screenshot(&self, path: &std::path::Path) -> Result<(), String> {
+        let shown = self.shown.as_ref().ok_or("no image yet")?;
+        save_png(path, shown.size, &shown.rgb)
+    }
+
+    /// Runs the script's next commands; returns whether it waits (and wants a repaint soon).
+    fn run_script(&mut self, ctx: &egui::Context) {
+        let Some(run) = &mut self.script else { return };
+        let Some((line, command)) = run.script.commands.get(run.next).cloned() else {
+            self.script = None;
+            return;
+        };
+        let name = run.script.name.clone();
+        let since = run.started;
+        let mut advance = true;
+        let mut failure: Option<String> = None;
+        match command {
+            ScriptCommand::WaitFinal(timeout) => {
+                let done = self.shown.as_ref().is_some_and(|s| {
+                    s.is_final && s.revision == self.revision && s.size == [self.settings.width, self.settings.height]
+                }) && !self.moving();
+                if !done {
+                    advance = false;
+                    if since.elapsed() > timeout {
+                        failure = Some(format!("the image was not final after {} s", timeout.as_secs_f64()));
+                    }
+                }
+            }
+            ScriptCommand::Wait(duration) => advance = since.elapsed() >= duration,
+            ScriptCommand::Screenshot(path) => failure = self.screenshot(&path).err(),
+            ScriptCommand::Orbit(yaw, pitch) => self.orbit.orbit(yaw, pitch),
+            ScriptCommand::Pan(right, up) => self.orbit.pan(right, up),
+            ScriptCommand::Zoom(factor) => self.orbit.zoom(factor),
+            ScriptCommand::Fly(forward, right, up) => self.orbit.fly(forward, right, up),
+            ScriptCommand::Reset => self.orbit = OrbitCamera::from_camera(&self.config.camera),
+            ScriptCommand::TfPoint([value, r, g, b, alpha]) => {
+                if let Some(index) = self.editor.add_point(value, alpha) {
+                    self.editor.set_color(index, [r, g, b]);
+                }
+            }
+            ScriptCommand::TfDelete(index) => {
+                if !self.editor.delete_point(index) {
+                    failure = Some(format!("no point {index} to delete (or it is the last one)"));
+                }
+            }
+            ScriptCommand::LoadTf(path) => match load_transfer_function(&path, self.config.value_range) {
+                Ok(tf) => self.editor.set(&tf),
+                Err(message) => failure = Some(message),
+            },
+            ScriptCommand::SaveTf(path) => {
+                failure =
+                    write_atomically(&path, transfer_function_json(&self.editor.transfer_function()).as_bytes()).err()
+            }
+            ScriptCommand::SaveCamera(path) => {
+                failure = write_atomically(&path, camera_json(&self.orbit.to_camera()).as_bytes()).err()
+            }
+            ScriptCommand::Phong(on) => self.settings.shading = if on { Shading::Phong } else { Shading::None },
+            ScriptCommand::LodBias(bias) => self.settings.lod_bias = bias,
+            ScriptCommand::Overlay(on) => self.overlay_missing = on,
+            ScriptCommand::Quit => ctx.send_viewport_cmd(egui::ViewportCommand::Close),
+        }
+        if let Some(message) = failure {
+            let message = format!("{name} line {line}: {message}");
+            *self.script_failure.lock().unwrap_or_else(PoisonError::into_inner) = Some(message.clone());
+            self.message(message);
+            self.script = None;
+            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+            return;
+        }
+        if let Some(run) = &mut self.script {
+            if advance {
+                run.next += 1;
+                run.started = Instant::now();
+            }
+        }
+        // One command per pass: a change is posted (and its revision known) before the next command looks.
+        ctx.request_repaint_after(Duration::from_millis(20));
+    }
+}
+
+impl eframe::App for ViewerApp {
+    fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+        let ctx = ui.ctx().clone();
+        self.receive(&ctx);
+        self.keyboard(&ctx);
+        egui::Panel::bottom("status").show(ui, |ui| self.status_line(ui));
+        if !self.messages.is_empty() {
+            egui::Panel::top("messages").show(ui, |ui| {
+                for message in &self.messages {
+                    ui.colored_label(Color32::from_rgb(255, 120, 100), message);
+                }
+                if ui.small_button("dismiss").clicked() {
+                    self.messages.clear();
+                }
+            });
+        }
+        egui::Panel::right("controls").default_size(340.0).show(ui, |ui| {
+            egui::ScrollArea::vertical().show(ui, |ui| self.controls(ui));
+        });
+        egui::CentralPanel::default().show(ui, |ui| self.image(ui));
+        self.run_script(&ctx);
+        self.post_request_if_changed();
+        if self.moving() {
+            // Ask for the full-size frame once the view rests.
+            ctx.request_repaint_after(REST_AFTER);
+        }
+        if self.shown.as_ref().is_some_and(|s| s.size[0] < self.settings.width) && !self.moving() {
+            ctx.request_repaint_after(Duration::from_millis(50));
+        }
+    }
+}

@@ -1,0 +1,71 @@
+//! # voxstream-viewer: fly through a volume larger than memory, edit its transfer function, see what is resident
+//!
+//! `voxstream view SOURCE` opens this window over the same frame loop as `voxstream render`
+//! ([`voxstream_engine::Session`]): rays ask for data, the cache manager serves a bounded number of requests per
+//! frame, coarser data stands in and detail fades in (GigaVoxels [P09] §5's interactive frames, Thiele et al.'s
+//! blending). The parts:
+//!
+//! - [`render_worker`]: the render thread that owns the session, so the window never blocks;
+//! - [`app`]: the window (image, controls, status line), reduced resolution while moving, full size at rest;
+//! - [`orbit`]: orbit, pan, zoom and fly, converted to and from the renderer's camera;
+//! - [`tf_editor`] over [`histogram`]: control points drawn over the source's value histogram;
+//! - [`files`]: screenshots, cameras and transfer functions saved for `voxstream render --camera/--tf`;
+//! - [`script`]: scripted sessions for demonstrations and end-to-end tests.
+//!
+//! The window is eframe (egui on winit) with its OpenGL backend; the CPU renders the image and OpenGL only shows it.
+
+pub mod app;
+pub mod error;
+pub mod files;
+pub mod histogram;
+pub mod orbit;
+pub mod render_worker;
+pub mod script;
+pub mod tf_editor;
+
+use std::sync::{Arc, Mutex, PoisonError};
+
+pub use app::{ViewerApp, ViewerConfig};
+pub use error::ViewerError;
+use voxstream_core::Producer;
+use voxstream_engine::Session;
+
+/// Room around the image for the controls and the status line (points).
+const CONTROLS_WIDTH: f32 = 360.0;
+
+/// Opens the viewer's window on `session` and returns when it is closed: `Err` when no window could be opened or a
+/// script failed.
+pub fn run_viewer<P: Producer + 'static>(session: Session<P>, config: ViewerConfig) -> Result<(), ViewerError> {
+    let has_display = ["DISPLAY", "WAYLAND_DISPLAY"].iter().any(|v| std::env::var_os(v).is_some_and(|s| !s.is_empty()));
+    if !has_display {
+        return Err(ViewerError::NoDisplay);
+    }
+    let failure = Arc::new(Mutex::new(None));
+    let app_failure = failure.clone();
+    let size = [
+        (config.settings.width as f32).clamp(320.0, 1600.0) + CONTROLS_WIDTH,
+        (config.settings.height as f32).clamp(240.0, 1000.0) + 60.0,
+    ];
+    let options = eframe::NativeOptions {
+        viewport: eframe::egui::ViewportBuilder::default().with_inner_size(size).with_title(config.title.clone()),
+        ..Default::default()
+    };
+    let title = config.title.clone();
+    let mut config = Some(config);
+    eframe::run_native(
+        &title,
+        options,
+        Box::new(move |cc| {
+            let context = cc.egui_ctx.clone();
+            let worker = render_worker::RenderWorker::start(session, move || context.request_repaint())?;
+            let config = config.take().ok_or("the viewer was started twice")?;
+            Ok(Box::new(ViewerApp::new(worker, config, app_failure)))
+        }),
+    )
+    .map_err(|e| ViewerError::Window(e.to_string()))?;
+    let failure = failure.lock().unwrap_or_else(PoisonError::into_inner).take();
+    match failure {
+        Some(message) => Err(ViewerError::Script(message)),
+        None => Ok(()),
+    }
+}
