@@ -98,6 +98,9 @@ pub struct FrameResult {
     pub bricks_prefetched: u64,
     /// Requests still pending after the last pass: 0 = the image is exact.
     pub pending: usize,
+    /// Requests served over all passes (0 with some pending: the budget cannot hold what the view needs, or the
+    /// producer fails).
+    pub served: u64,
     /// Whether the frame blended some brick towards its parent (a fade-in, or a finer neighbour still missing):
     /// the next frames still change the image.
     pub blended: bool,
@@ -287,6 +290,7 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
             bricks_produced: 0,
             bricks_prefetched: 0,
             pending: 0,
+            served: 0,
             blended: false,
             failures: Vec::new(),
             missing: Vec::new(),
@@ -341,6 +345,7 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
             result.bricks_produced += report.bricks_produced as u64;
             result.bricks_prefetched += report.bricks_prefetched as u64;
             result.pending = report.pending;
+            result.served += report.served as u64;
             result.failures.extend(report.failures);
             observe(&PassProgress {
                 pass: result.passes,

@@ -27,6 +27,12 @@ pub const REST_AFTER: Duration = Duration::from_millis(250);
 /// Frame time above which moving frames are drawn smaller (and below a third of which, larger again).
 pub const MOVING_FRAME_MS: f64 = 60.0;
 
+/// The window over which frames and bricks per second are measured.
+const RATE_WINDOW: Duration = Duration::from_secs(3);
+
+/// How often a waiting script looks again (frames arriving wake it too).
+const SCRIPT_POLL: Duration = Duration::from_millis(100);
+
 /// Largest divisor of the render size while moving.
 const MAX_MOVING_DIVISOR: u32 = 8;
 
@@ -157,7 +163,7 @@ impl ViewerApp {
                 WorkerEvent::Frame(frame) => {
                     let now = Instant::now();
                     self.frame_times.push_back((now, frame.bricks_produced));
-                    while self.frame_times.front().is_some_and(|(t, _)| now.duration_since(*t) > Duration::from_secs(1)) {
+                    while self.frame_times.front().is_some_and(|(t, _)| now.duration_since(*t) > RATE_WINDOW) {
                         self.frame_times.pop_front();
                     }
                     if frame.size[0] < self.settings.width {
@@ -332,9 +338,18 @@ impl ViewerApp {
     }
 
     fn status_line(&self, ui: &mut egui::Ui) {
-        let frames = self.frame_times.len();
-        let bricks: u64 = self.frame_times.iter().map(|(_, b)| b).sum();
-        let mut parts = vec![format!("{frames} frames/s"), format!("{bricks} bricks/s")];
+        // Rates between the first and the last frame of the window (the first frame's bricks came before it).
+        let mut parts = match (self.frame_times.front(), self.frame_times.back()) {
+            (Some((first, _)), Some((last, _))) if last > first => {
+                let seconds = last.duration_since(*first).as_secs_f64();
+                let bricks: u64 = self.frame_times.iter().skip(1).map(|(_, b)| b).sum();
+                vec![
+                    format!("{:.1} frames/s", (self.frame_times.len() - 1) as f64 / seconds),
+                    format!("{:.0} bricks/s", bricks as f64 / seconds),
+                ]
+            }
+            _ => vec!["— frames/s".to_string()],
+        };
         if let Some(shown) = &self.shown {
             let [resident, budget] = shown.resident_bytes;
             let mib = |b: u64| b as f64 / (1 << 20) as f64;
@@ -501,8 +516,9 @@ impl ViewerApp {
                 run.started = Instant::now();
             }
         }
-        // One command per pass: a change is posted (and its revision known) before the next command looks.
-        ctx.request_repaint_after(Duration::from_millis(20));
+        // One command per pass: a change is posted (and its revision known) before the next command looks. A waiting
+        // command looks again now and then (each new frame wakes the window too).
+        ctx.request_repaint_after(if advance { Duration::ZERO } else { SCRIPT_POLL });
     }
 }
 

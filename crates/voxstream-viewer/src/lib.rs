@@ -33,11 +33,15 @@ use voxstream_engine::Session;
 /// Room around the image for the controls and the status line (points).
 const CONTROLS_WIDTH: f32 = 360.0;
 
+/// Whether a display server is named in the environment (`DISPLAY` or `WAYLAND_DISPLAY`).
+pub fn has_display() -> bool {
+    ["DISPLAY", "WAYLAND_DISPLAY"].iter().any(|v| std::env::var_os(v).is_some_and(|s| !s.is_empty()))
+}
+
 /// Opens the viewer's window on `session` and returns when it is closed: `Err` when no window could be opened or a
 /// script failed.
 pub fn run_viewer<P: Producer + 'static>(session: Session<P>, config: ViewerConfig) -> Result<(), ViewerError> {
-    let has_display = ["DISPLAY", "WAYLAND_DISPLAY"].iter().any(|v| std::env::var_os(v).is_some_and(|s| !s.is_empty()));
-    if !has_display {
+    if !has_display() {
         return Err(ViewerError::NoDisplay);
     }
     let failure = Arc::new(Mutex::new(None));

@@ -17,7 +17,7 @@ use voxstream_render::{Camera, RenderSettings, TransferFunction};
 
 use crate::histogram::{sample_histogram, ValueHistogram};
 
-/// Frames in a row that load nothing and leave requests pending before the thread stops refining (a budget too
+/// Frames in a row that serve no request and leave some pending before the thread stops refining (a budget too
 /// small for the view, or bricks that fail).
 const STALLED_FRAMES: u32 = 3;
 
@@ -173,7 +173,7 @@ fn render_loop<P: Producer, R: FrameRenderer>(
         let Some(request) = &current else { continue };
         match session.render(&request.camera, Mode::Interactive) {
             Ok(frame) => {
-                let stalled = frame.pending > 0 && frame.bricks_produced == 0 && !frame.blended;
+                let stalled = frame.pending > 0 && frame.served == 0 && !frame.blended;
                 stalled_frames = if stalled { stalled_frames + 1 } else { 0 };
                 refining = !frame.is_final() && stalled_frames < STALLED_FRAMES;
                 let residency = session.residency();

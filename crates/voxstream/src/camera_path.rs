@@ -14,6 +14,30 @@ pub fn read_camera_path(path: &Path) -> Result<Vec<Camera>> {
     parse_camera_path(&text).with_context(|| format!("invalid camera path {}", path.display()))
 }
 
+/// Reads one camera (`render --camera`, as `voxstream view` saves it): an object `{"eye": …, "target": …, "up": …,
+/// "fov": …}`, or a path holding exactly one camera.
+pub fn read_camera_file(path: &Path) -> Result<Camera> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read camera {}", path.display()))?;
+    parse_camera_file(&text).with_context(|| format!("invalid camera {}", path.display()))
+}
+
+/// Parses one camera: an object, or a path of one camera.
+pub fn parse_camera_file(text: &str) -> Result<Camera> {
+    let value: Value = serde_json::from_str(text)
+        .map_err(|e| anyhow!(r#"not valid JSON ({e}): expected {{"eye": [x,y,z], "target": [x,y,z], "up": [x,y,z], "fov": 40}}"#))?;
+    if let Value::Object(object) = &value {
+        if !object.contains_key("cameras") {
+            let camera = parse_camera(&value)?;
+            camera.frame(2, 2)?;
+            return Ok(camera);
+        }
+    }
+    match parse_camera_path(text)?.as_slice() {
+        [one] => Ok(*one),
+        many => bail!("{} cameras given; --camera takes one (use --path for a sequence)", many.len()),
+    }
+}
+
 /// Parses a camera path: each camera on its own, so that an error names the camera and the field.
 pub fn parse_camera_path(text: &str) -> Result<Vec<Camera>> {
     const EXPECTED: &str = r#"expected a list of cameras [{"eye": [x,y,z], "target": [x,y,z], "up": [x,y,z], "fov": 40}, …] or {"cameras": [...]}"#;

@@ -30,6 +30,69 @@ pub enum Command {
     Scenes,
     /// Measure converged time, frames to converge, interactive frame times and throughput per scene.
     Bench(BenchArgs),
+    /// Open a window on a built-in scene, a store, or a mesh or particle file: orbit, zoom and fly through it while
+    /// data streams in, edit the transfer function, save screenshots, cameras and transfer functions for `render`.
+    View(ViewArgs),
+}
+
+/// `voxstream view`.
+#[derive(Args, Debug, Clone)]
+pub struct ViewArgs {
+    /// What to show: as `voxstream render`'s SOURCE.
+    #[arg(default_value = crate::scenes::DEFAULT_SCENE)]
+    pub source: String,
+    /// A scripted session: one camera move or action per line (see the README's "Viewer" section), e.g. for
+    /// demonstrations and end-to-end tests.
+    #[arg(long, value_name = "FILE")]
+    pub script: Option<PathBuf>,
+    /// Starting camera JSON (as saved by the viewer or read by `render --camera`).
+    #[arg(long, value_name = "FILE")]
+    pub camera: Option<PathBuf>,
+    /// Starting transfer function (as `render --tf`).
+    #[arg(long)]
+    pub tf: Option<PathBuf>,
+    /// Render size in pixels (the image is scaled to the window; moving frames are smaller).
+    #[arg(long, default_value_t = 640)]
+    pub width: u32,
+    /// Render height in pixels.
+    #[arg(long, default_value_t = 640)]
+    pub height: u32,
+    /// Memory budget of the node and brick pools, MiB.
+    #[arg(long, default_value_t = 512)]
+    pub budget_mb: u64,
+    /// Requests served per frame (more: detail arrives in fewer frames, each frame takes longer).
+    #[arg(long, default_value_t = 256)]
+    pub requests_per_frame: usize,
+    /// Level blending (Thiele et al.): arriving bricks fade in instead of popping.
+    #[arg(long, value_enum, default_value_t = Switch::On)]
+    pub blending: Switch,
+    /// Lighting (default: the scene's).
+    #[arg(long, value_enum)]
+    pub shading: Option<ShadingArg>,
+    /// Direction towards the light x,y,z (default: a headlight).
+    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
+    pub light: Option<[f64; 3]>,
+    /// Draw isosurfaces of these data values (as `render --iso`).
+    #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_name = "V1,V2,...")]
+    pub iso: Vec<f64>,
+    /// Ray-march step as a fraction of the sampled voxel.
+    #[arg(long, default_value_t = 0.5)]
+    pub step: f64,
+    /// Level-of-detail bias (positive = finer than one voxel per pixel).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub lod_bias: f64,
+    /// Mesh files: noise amplitude (as `render --amplify`).
+    #[arg(long, value_name = "AMPLITUDE")]
+    pub amplify: Option<f64>,
+    /// Mesh and particle files: voxels per axis of the finest level (as `render --resolution`).
+    #[arg(long, value_name = "VOXELS")]
+    pub resolution: Option<u64>,
+    /// Particle files: show the scalar attribute (as `render --attribute`).
+    #[arg(long)]
+    pub attribute: bool,
+    /// Stores only: decode every level into RAM first (as `render --in-memory`).
+    #[arg(long)]
+    pub in_memory: bool,
 }
 
 /// Shading choice on the command line.
@@ -77,6 +140,10 @@ pub struct RenderArgs {
     /// Image height in pixels.
     #[arg(long, default_value_t = 512)]
     pub height: u32,
+    /// Camera JSON {"eye": [x,y,z], "target": [x,y,z], "up": [x,y,z], "fov": 30}, as `voxstream view` saves it;
+    /// --eye, --target, --up and --fov override its fields.
+    #[arg(long, value_name = "FILE")]
+    pub camera: Option<PathBuf>,
     /// Eye position x,y,z (world units; the built-in scenes fill the unit cube [0,1]^3).
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     pub eye: Option<[f64; 3]>,
@@ -89,7 +156,8 @@ pub struct RenderArgs {
     /// Vertical field of view in degrees.
     #[arg(long)]
     pub fov: Option<f64>,
-    /// Transfer function JSON: {"points": [[value, r, g, b, alpha], ...], "unit_distance": u}.
+    /// Transfer function JSON: {"points": [[value, r, g, b, alpha], ...], "unit_distance": u}, or a ParaView
+    /// colour-map preset (RGBPoints, optional Points), rescaled onto the data's value range.
     #[arg(long)]
     pub tf: Option<PathBuf>,
     /// Draw isosurfaces of these data values instead of the volume (exact ray-cell intersection, Knoll et al.):

@@ -29,3 +29,4 @@ pub mod scenes;
 pub mod source_path;
 pub mod stats;
 pub mod trilinear_bound;
+pub mod view_command;

@@ -6,7 +6,7 @@ use std::process::ExitCode;
 
 use clap::Parser;
 use voxstream::cli::{Cli, Command, RenderArgs};
-use voxstream::{bench, import_command, info_command, render_command, scenes};
+use voxstream::{bench, import_command, info_command, render_command, scenes, view_command};
 
 fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
@@ -43,6 +43,7 @@ fn main() -> ExitCode {
         Some(Command::Bench(args)) => bench::run(&args),
         Some(Command::Import(args)) => import_command::run(&args),
         Some(Command::Info(args)) => info_command::run(&args),
+        Some(Command::View(args)) => view_command::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -63,6 +64,7 @@ fn unreachable_default() -> RenderArgs {
         out: "frame.png".into(),
         width: 512,
         height: 512,
+        camera: None,
         eye: None,
         target: None,
         up: None,

@@ -13,7 +13,7 @@ use voxstream_render::{
 };
 use voxstream_store::{InMemoryVolume, StoreProducer, StoreReader};
 
-use crate::camera_path::{generated_path, parse_generated_path, read_camera_path};
+use crate::camera_path::{generated_path, parse_generated_path, read_camera_file, read_camera_path};
 use crate::cli::{NormalsArg, RenderArgs, ShadingArg, Switch};
 use crate::exit_status::IncompleteImage;
 use crate::geometry_source;
@@ -29,31 +29,72 @@ use crate::scenes::builtin;
 use crate::source_path::check_store_path;
 use crate::stats::RunStats;
 
-/// What `voxstream render` draws: a built-in scene or a store, with its defaults.
-struct Source<P> {
-    name: String,
-    producer: P,
-    transfer_function: TransferFunction,
-    shading: Shading,
-    camera: Camera,
-    placement: VolumePlacement,
-    value_range: [f64; 2],
+/// What `voxstream render` and `voxstream view` draw: a built-in scene, a store, or a mesh or particle file, with
+/// its defaults.
+pub struct Source<P> {
+    /// The name given on the command line.
+    pub name: String,
+    /// The producer of its bricks.
+    pub producer: P,
+    /// Its default transfer function.
+    pub transfer_function: TransferFunction,
+    /// Its default shading.
+    pub shading: Shading,
+    /// Its default camera.
+    pub camera: Camera,
+    /// Where its tree cube sits in the world.
+    pub placement: VolumePlacement,
+    /// Data values the voxel values 0 and 1 stand for.
+    pub value_range: [f64; 2],
     /// Span of the bulk of the values (0.5th to 99.5th percentile where the store keeps them).
-    typical_range: [f64; 2],
+    pub typical_range: [f64; 2],
     /// Bytes of the budget taken by the producer's own cache (the rest goes to the pools).
-    producer_cache_bytes: u64,
+    pub producer_cache_bytes: u64,
     /// Bytes per sample of the source data.
-    sample_bytes: u64,
+    pub sample_bytes: u64,
     /// Direction towards the light unless `--light` is given (`None`: a headlight).
-    light: Option<[f64; 3]>,
+    pub light: Option<[f64; 3]>,
     /// Surfaces drawn when neither `--iso` nor `--tf` is given (empty: the volume).
-    default_surfaces: Vec<IsoSurface>,
+    pub default_surfaces: Vec<IsoSurface>,
+}
+
+/// The transfer function, settings and camera the flags make of a source's defaults.
+pub struct PreparedView {
+    /// `--tf`, or the source's.
+    pub transfer_function: TransferFunction,
+    /// The render settings.
+    pub settings: RenderSettings,
+    /// `--camera` with `--eye/--target/--up/--fov` over it, or the source's camera.
+    pub camera: Camera,
+    /// Whether isosurfaces are drawn instead of the volume.
+    pub drawing_surfaces: bool,
 }
 
 /// Runs `voxstream render`.
 pub fn run(args: &RenderArgs) -> Result<()> {
     check_flags(args)?;
     let budget = check_budget(args.budget_mb, args.width, args.height, "--width/--height")?;
+    open_source(args, &budget, RenderToFiles)
+}
+
+/// What is done with an opened source: `render` draws it to files, `view` shows it in a window.
+pub trait SourceUser {
+    /// Uses `source`, opened from `args.source` within `budget`.
+    fn use_source<P: Producer + 'static>(self, args: &RenderArgs, source: Source<P>, budget: &MemoryBudget) -> Result<()>;
+}
+
+/// `render`'s use: frames to PNG files, statistics.
+struct RenderToFiles;
+
+impl SourceUser for RenderToFiles {
+    fn use_source<P: Producer + 'static>(self, args: &RenderArgs, source: Source<P>, budget: &MemoryBudget) -> Result<()> {
+        render_source(args, source, budget)
+    }
+}
+
+/// Opens `args.source` (a built-in scene, a mesh or particle file, or a store) with its defaults, and hands it to
+/// `user`.
+pub fn open_source(args: &RenderArgs, budget: &MemoryBudget, user: impl SourceUser) -> Result<()> {
     if let Some(scene) = builtin(&args.source) {
         let source = Source {
             name: scene.name.to_string(),
@@ -70,7 +111,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             default_surfaces: Vec::new(),
         };
         check_geometry_flags(args, &source.name)?;
-        return render_source(args, source, &budget);
+        return user.use_source(args, source, budget);
     }
     let path = Path::new(&args.source);
     if path.is_file() && is_geometry_file_name(path) {
@@ -100,7 +141,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             light: None,
             default_surfaces: geometry.default_surfaces,
         };
-        return render_source(args, source, &budget);
+        return user.use_source(args, source, budget);
     }
     if is_geometry_file_name(path) && !path.exists() {
         bail!("mesh or particle file {} not found (check the path)", path.display());
@@ -114,10 +155,10 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     if args.in_memory {
         let volume = Arc::new(InMemoryVolume::load(&reader)?);
         let source = store_source(args, &reader, StoreProducer::new(volume)?, 0, transfer_function);
-        return render_source(args, source, &budget);
+        return user.use_source(args, source, budget);
     }
     let source = store_source(args, &reader, StoreProducer::new(reader.clone())?, cache_bytes, transfer_function);
-    render_source(args, source, &budget)
+    user.use_source(args, source, budget)
 }
 
 fn store_source<P>(
@@ -265,7 +306,8 @@ pub fn default_store_transfer_function(range: [f64; 2]) -> Result<TransferFuncti
     )?)
 }
 
-fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &MemoryBudget) -> Result<()> {
+/// Applies the flags to a source's defaults.
+pub fn prepare_view<P>(args: &RenderArgs, source: &Source<P>) -> Result<PreparedView> {
     let transfer_function = match &args.tf {
         Some(path) => read_transfer_function(path, source.value_range)?,
         None => source.transfer_function.clone(),
@@ -298,7 +340,10 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
         ..RenderSettings::default()
     };
     settings.validate().context("invalid flags")?;
-    let mut view = source.camera;
+    let mut view = match &args.camera {
+        Some(path) => read_camera_file(path)?,
+        None => source.camera,
+    };
     if let Some(eye) = args.eye {
         view.eye = eye;
     }
@@ -312,6 +357,11 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
         view.fov = fov;
     }
     view.frame(args.width, args.height).context("invalid camera")?;
+    Ok(PreparedView { transfer_function, settings, camera: view, drawing_surfaces })
+}
+
+fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &MemoryBudget) -> Result<()> {
+    let PreparedView { transfer_function, settings, camera: view, drawing_surfaces } = prepare_view(args, &source)?;
     let cameras = match &args.path {
         Some(path) => match path.to_str().filter(|_| !path.exists()).and_then(parse_generated_path) {
             Some(generated) => {

@@ -1,0 +1,233 @@
+//! The viewer end to end, in a real X server (Xvfb) with Mesa's software OpenGL: a scripted session on a store
+//! rotates the view and edits the transfer function, and the saved camera and transfer function reproduce its
+//! images byte for byte with `voxstream render`; a real pointer drag (xdotool) turns the camera while the window
+//! keeps answering; errors are `render`'s, one line, before any window.
+//!
+//! Needs `xvfb-run` and `xdotool` (Debian: `apt-get install xvfb xauth xdotool libgl1-mesa-dri`); `.ci/run` installs
+//! them.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn voxstream(args: &[&str], dir: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_voxstream")).args(args).current_dir(dir).output().expect("run voxstream")
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("voxstream-viewer-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn require(tool: &str) {
+    let found = Command::new("sh").args(["-c", &format!("command -v {tool}")]).output().is_ok_and(|o| o.status.success());
+    assert!(found, "{tool} is needed for the viewer tests (Debian: apt-get install xvfb xauth xdotool libgl1-mesa-dri)");
+}
+
+/// A 48×40×36 u16 NRRD: a large ball and a small one off to the side, so that turning the view changes the image.
+fn write_two_balls(path: &Path) {
+    let (nx, ny, nz) = (48usize, 40usize, 36usize);
+    let mut bytes = format!(
+        "NRRD0004\ntype: ushort\ndimension: 3\nsizes: {nx} {ny} {nz}\nspacings: 1 1 1\nencoding: raw\nendian: little\n\n"
+    )
+    .into_bytes();
+    for k in 0..nz {
+        for j in 0..ny {
+            for i in 0..nx {
+                let ball = |c: [f64; 3], r: f64| {
+                    let d = ((i as f64 - c[0]).powi(2) + (j as f64 - c[1]).powi(2) + (k as f64 - c[2]).powi(2)).sqrt() / r;
+                    if d < 1.0 { 1.0 - d * d } else { 0.0 }
+                };
+                let v = 3000.0 * ball([18.0, 20.0, 18.0], 13.0) + 4000.0 * ball([38.0, 12.0, 26.0], 7.0);
+                bytes.extend((v as u16).to_le_bytes());
+            }
+        }
+    }
+    std::fs::write(path, bytes).unwrap();
+}
+
+fn store(dir: &Path) -> PathBuf {
+    write_two_balls(&dir.join("balls.nrrd"));
+    let out = voxstream(&["import", "balls.nrrd", "--out", "balls.zarr", "--quiet"], dir);
+    assert!(out.status.success(), "import: {}", String::from_utf8_lossy(&out.stderr));
+    dir.join("balls.zarr")
+}
+
+fn pixels(path: &Path) -> Vec<u8> {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buffer = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut buffer).unwrap();
+    buffer.truncate(info.buffer_size());
+    buffer
+}
+
+fn mean_difference(a: &[u8], b: &[u8]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    a.iter().zip(b).map(|(&x, &y)| (x as f64 - y as f64).abs()).sum::<f64>() / a.len() as f64
+}
+
+fn camera(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+/// Yaw and pitch (degrees) of a camera's eye around its target, about +z (the up axis of store views).
+fn yaw_pitch(c: &serde_json::Value) -> (f64, f64) {
+    assert_eq!(c["up"], serde_json::json!([0.0, 0.0, 1.0]), "store views have +z up");
+    let v: Vec<f64> = (0..3).map(|i| c["eye"][i].as_f64().unwrap() - c["target"][i].as_f64().unwrap()).collect();
+    let n = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+    (v[1].atan2(v[0]).to_degrees(), (v[2] / n).asin().to_degrees())
+}
+
+/// The change of yaw and pitch from camera `a` to camera `b`, yaw wrapped into (−180°, 180°].
+fn turn(a: &serde_json::Value, b: &serde_json::Value) -> (f64, f64) {
+    let ((yaw_a, pitch_a), (yaw_b, pitch_b)) = (yaw_pitch(a), yaw_pitch(b));
+    let mut yaw = yaw_b - yaw_a;
+    while yaw > 180.0 {
+        yaw -= 360.0;
+    }
+    while yaw <= -180.0 {
+        yaw += 360.0;
+    }
+    (yaw, pitch_b - pitch_a)
+}
+
+fn under_xvfb(dir: &Path, command: &str) -> Output {
+    Command::new("xvfb-run")
+        .args(["-a", "-s", "-screen 0 1280x900x24", "bash", "-c", command])
+        .current_dir(dir)
+        .output()
+        .expect("run xvfb-run")
+}
+
+#[test]
+fn a_scripted_session_rotates_edits_and_saves_what_render_reproduces() {
+    require("xvfb-run");
+    let dir = scratch("script");
+    store(&dir);
+    std::fs::write(
+        dir.join("session.txt"),
+        "wait-final 600\nscreenshot a.png\nsave-camera a.json\nsave-tf tf-a.json\n\
+         orbit 40 10\nwait-final 600\nscreenshot b.png\nsave-camera b.json\n\
+         tf-point 1500 1 0.1 0.1 0.4\nwait-final 600\nscreenshot c.png\nsave-tf tf-c.json\nquit\n",
+    )
+    .unwrap();
+    let viewer = env!("CARGO_BIN_EXE_voxstream");
+    let out = under_xvfb(
+        &dir,
+        &format!("{viewer} view balls.zarr --width 160 --height 120 --budget-mb 64 --script session.txt"),
+    );
+    assert!(out.status.success(), "viewer: {}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    let (a, b, c) = (pixels(&dir.join("a.png")), pixels(&dir.join("b.png")), pixels(&dir.join("c.png")));
+    assert_eq!(a.len(), 160 * 120 * 3, "screenshots are at the render size");
+    assert!(a.iter().any(|&v| v > 20), "the volume is visible");
+    assert!(mean_difference(&a, &b) > 1.0, "the orbit changed the image");
+    assert!(mean_difference(&b, &c) > 1.0, "the transfer-function edit changed the image");
+    // The camera turned as the script said: 40° about the up axis and 10° towards it.
+    let (yaw, pitch) = turn(&camera(&dir.join("a.json")), &camera(&dir.join("b.json")));
+    assert!((yaw - 40.0).abs() < 1e-6 && (pitch - 10.0).abs() < 1e-6, "turned by yaw {yaw}°, pitch {pitch}°");
+    // `render` with the saved files draws the same bytes.
+    for (image, camera, tf) in [("a", "a.json", "tf-a.json"), ("b", "b.json", "tf-a.json"), ("c", "b.json", "tf-c.json")] {
+        let out = voxstream(
+            &["render", "balls.zarr", "--width", "160", "--height", "120", "--camera", camera, "--tf", tf, "--out",
+              &format!("render-{image}.png"), "--quiet"],
+            &dir,
+        );
+        assert!(out.status.success(), "render: {}", String::from_utf8_lossy(&out.stderr));
+        assert_eq!(
+            pixels(&dir.join(format!("render-{image}.png"))),
+            pixels(&dir.join(format!("{image}.png"))),
+            "the viewer's final image {image} and render's differ"
+        );
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_pointer_drag_turns_the_camera_while_frames_render_in_the_background() {
+    require("xvfb-run");
+    require("xdotool");
+    let dir = scratch("drag");
+    store(&dir);
+    // The script saves the camera once the first image is final, waits while xdotool drags, then saves it again.
+    std::fs::write(
+        dir.join("session.txt"),
+        "wait-final 600\nsave-camera before.json\nwait 8\nwait-final 600\nsave-camera after.json\nscreenshot after.png\nquit\n",
+    )
+    .unwrap();
+    let viewer = env!("CARGO_BIN_EXE_voxstream");
+    let harness = format!(
+        r#"{viewer} view balls.zarr --width 320 --height 240 --budget-mb 64 --script session.txt & pid=$!
+for i in $(seq 600); do [ -f before.json ] && break; sleep 0.1; done
+[ -f before.json ] || {{ echo "the first image never became final"; kill $pid; exit 1; }}
+window=$(xdotool search --sync --name "voxstream view" | head -1)
+xdotool windowactivate --sync $window 2>/dev/null || true
+eval $(xdotool getwindowgeometry --shell $window)
+x=$((X + 100)); y=$((Y + HEIGHT / 2))
+xdotool mousemove $x $y mousedown 1
+for step in $(seq 1 20); do xdotool mousemove $((x + step * 5)) $y; sleep 0.02; done
+xdotool mouseup 1
+wait $pid"#
+    );
+    let out = under_xvfb(&dir, &harness);
+    assert!(out.status.success(), "viewer: {}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    // 100 pixels dragged to the right at 0.4° per point: the eye goes about 40° the other way about the up axis (the
+    // first pixels start the drag), and no pitch.
+    let (yaw, pitch) = turn(&camera(&dir.join("before.json")), &camera(&dir.join("after.json")));
+    assert!((-45.0..-25.0).contains(&yaw) && pitch.abs() < 1e-9, "the drag turned the camera by yaw {yaw}°, pitch {pitch}°");
+    assert_eq!(pixels(&dir.join("after.png")).len(), 320 * 240 * 3, "the full-size image came back after the drag");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn view_errors_are_one_line_before_any_window() {
+    let dir = scratch("errors");
+    // A broken script names its line, without a display.
+    std::fs::write(dir.join("bad.txt"), "wait-final\norbt 30 0\n").unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_voxstream"))
+        .args(["view", "shell", "--script", "bad.txt"])
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr.contains("bad.txt line 2: unknown command `orbt`"), "{stderr}");
+    assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
+    // A missing store: the same message as render's.
+    let view = Command::new(env!("CARGO_BIN_EXE_voxstream"))
+        .args(["view", "missing.zarr"])
+        .env_remove("DISPLAY")
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    let render = voxstream(&["render", "missing.zarr"], &dir);
+    assert_eq!(view.status.code(), Some(1));
+    let first_line = |o: &Output| String::from_utf8_lossy(&o.stderr).lines().next().unwrap_or("").to_string();
+    assert_eq!(first_line(&view), first_line(&render));
+    // No display: one line saying what to do.
+    let out = Command::new(env!("CARGO_BIN_EXE_voxstream"))
+        .args(["view", "shell"])
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr.contains("no display") && stderr.contains("xvfb-run"), "{stderr}");
+    // A malformed transfer function: render's message.
+    std::fs::write(dir.join("tf.json"), "{\"points\": [[0, 0, 0]]}").unwrap();
+    let view = Command::new(env!("CARGO_BIN_EXE_voxstream"))
+        .args(["view", "shell", "--tf", "tf.json"])
+        .env_remove("DISPLAY")
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    let render = voxstream(&["render", "shell", "--tf", "tf.json"], &dir);
+    assert_eq!(view.status.code(), Some(1));
+    assert_eq!(first_line(&view), first_line(&render));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
