@@ -12,7 +12,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
 use eframe::egui::{self, Color32, ColorImage, Key, TextureHandle, TextureOptions};
-use voxstream_render::{Camera, RenderSettings, Shading, TransferFunction};
+use voxstream_render::{Camera, IsoSurface, RenderSettings, Shading, TransferFunction};
 
 use crate::files::{camera_json, load_transfer_function, save_png, transfer_function_json, write_atomically};
 use crate::histogram::ValueHistogram;
@@ -299,6 +299,7 @@ impl ViewerApp {
         }
         ui.add(egui::Slider::new(&mut self.settings.lod_bias, -2.0..=4.0).text("level-of-detail bias"));
         ui.add(egui::Slider::new(&mut self.settings.step_factor, 0.25..=2.0).text("step (voxels)"));
+        self.isosurface_controls(ui);
         ui.checkbox(&mut self.overlay_missing, "mark pixels still missing data (M)");
         ui.label(format!(
             "render size {}×{}, budget {:.0} MiB",
@@ -335,6 +336,42 @@ impl ViewerApp {
                 self.show_help = !self.show_help;
             }
         });
+    }
+
+    /// One exact isosurface (Knoll et al.) instead of the volume, its value on a slider over the value range.
+    fn isosurface_controls(&mut self, ui: &mut egui::Ui) {
+        let [lo, hi] = self.config.value_range;
+        let mut on = !self.settings.surfaces.is_empty();
+        let mut surface = self.settings.surfaces.first().copied().unwrap_or(IsoSurface {
+            value: lo + (hi - lo) * 0.5,
+            color: [0.9, 0.8, 0.7],
+            opacity: 1.0,
+        });
+        let mut changed = ui.checkbox(&mut on, "isosurface instead of the volume").changed();
+        if on {
+            ui.horizontal(|ui| {
+                changed |= ui.add(egui::Slider::new(&mut surface.value, lo..=hi).text("isovalue")).changed();
+                changed |= ui.color_edit_button_rgb(&mut surface.color).changed();
+            });
+        }
+        if changed {
+            self.set_isosurface(on.then_some(surface));
+        }
+    }
+
+    fn set_isosurface(&mut self, surface: Option<IsoSurface>) {
+        match surface {
+            Some(surface) => {
+                if self.settings.surfaces.is_empty() {
+                    self.settings.shading = Shading::Phong;
+                }
+                self.settings.surfaces = vec![surface];
+            }
+            None => {
+                self.settings.surfaces.clear();
+                self.settings.shading = self.config.settings.shading;
+            }
+        }
     }
 
     fn status_line(&self, ui: &mut egui::Ui) {
@@ -500,6 +537,11 @@ impl ViewerApp {
             ScriptCommand::Phong(on) => self.settings.shading = if on { Shading::Phong } else { Shading::None },
             ScriptCommand::LodBias(bias) => self.settings.lod_bias = bias,
             ScriptCommand::Overlay(on) => self.overlay_missing = on,
+            ScriptCommand::Iso(value) => self.set_isosurface(value.map(|value| IsoSurface {
+                value,
+                color: [0.9, 0.8, 0.7],
+                opacity: 1.0,
+            })),
             ScriptCommand::Quit => ctx.send_viewport_cmd(egui::ViewportCommand::Close),
         }
         if let Some(message) = failure {

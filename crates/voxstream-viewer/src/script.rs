@@ -18,6 +18,7 @@
 //! shading phong           # or none
 //! lod-bias 1              # coarser (positive) or finer (negative) level of detail
 //! overlay on              # mark the pixels still missing data
+//! iso 1500                # an exact isosurface at this data value instead of the volume (`iso off`: the volume)
 //! wait 0.5                # seconds
 //! quit                    # close the window
 //! ```
@@ -35,7 +36,7 @@ pub const DEFAULT_WAIT_FINAL: Duration = Duration::from_secs(120);
 /// The commands, with what each takes.
 const COMMANDS: &str = "wait-final [SECONDS], wait SECONDS, screenshot PNG, orbit YAW PITCH, pan RIGHT UP, zoom FACTOR, \
                         fly FORWARD RIGHT UP, reset, tf-point VALUE R G B OPACITY, tf-delete INDEX, load-tf FILE, \
-                        save-tf FILE, save-camera FILE, shading phong|none, lod-bias BIAS, overlay on|off, quit";
+                        save-tf FILE, save-camera FILE, shading phong|none, lod-bias BIAS, overlay on|off, iso VALUE|off, quit";
 
 /// One scripted action.
 #[derive(Clone, Debug, PartialEq)]
@@ -72,6 +73,8 @@ pub enum ScriptCommand {
     LodBias(f64),
     /// The missing-data overlay on or off.
     Overlay(bool),
+    /// An isosurface at this value instead of the volume, or the volume again.
+    Iso(Option<f64>),
     /// Close the window.
     Quit,
 }
@@ -188,6 +191,10 @@ fn parse_line(line: &str) -> Result<ScriptCommand, String> {
         "shading" => ScriptCommand::Phong(switch("phong", "none")?),
         "lod-bias" => ScriptCommand::LodBias(numbers(1)?[0]),
         "overlay" => ScriptCommand::Overlay(switch("on", "off")?),
+        "iso" => match rest.as_slice() {
+            ["off"] => ScriptCommand::Iso(None),
+            _ => ScriptCommand::Iso(Some(numbers(1).map_err(|_| "`iso` takes a data value or `off`".to_string())?[0])),
+        },
         "quit" if rest.is_empty() => ScriptCommand::Quit,
         "reset" | "quit" => return Err(format!("`{verb}` takes nothing")),
         other => return Err(format!("unknown command `{other}` (expected one of: {COMMANDS})")),
@@ -228,5 +235,7 @@ mod tests {
         assert!(message("wait 1e300").contains("not a number of seconds"));
         assert!(message("shading flat").contains("`shading` takes `phong` or `none`"));
         assert!(message("quit now").contains("`quit` takes nothing"));
+        assert!(message("iso x").contains("`iso` takes a data value or `off`"));
+        assert_eq!(Script::parse("iso off\niso 2.5", "s").unwrap().commands[1].1, ScriptCommand::Iso(Some(2.5)));
     }
 }

@@ -110,7 +110,8 @@ fn a_scripted_session_rotates_edits_and_saves_what_render_reproduces() {
         dir.join("session.txt"),
         "wait-final 600\nscreenshot a.png\nsave-camera a.json\nsave-tf tf-a.json\n\
          orbit 40 10\nwait-final 600\nscreenshot b.png\nsave-camera b.json\n\
-         tf-point 1500 1 0.1 0.1 0.4\nwait-final 600\nscreenshot c.png\nsave-tf tf-c.json\nquit\n",
+         tf-point 1500 1 0.1 0.1 0.4\nwait-final 600\nscreenshot c.png\nsave-tf tf-c.json\n\
+         iso 1500\nwait-final 600\nscreenshot d.png\nquit\n",
     )
     .unwrap();
     let viewer = env!("CARGO_BIN_EXE_voxstream");
@@ -141,6 +142,15 @@ fn a_scripted_session_rotates_edits_and_saves_what_render_reproduces() {
             "the viewer's final image {image} and render's differ"
         );
     }
+    // The isosurface is the same integrand of the same loop as `render --iso`.
+    let out = voxstream(
+        &["render", "balls.zarr", "--width", "160", "--height", "120", "--camera", "b.json", "--iso", "1500",
+          "--iso-color", "0.9,0.8,0.7", "--out", "render-d.png", "--quiet"],
+        &dir,
+    );
+    assert!(out.status.success(), "render --iso: {}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(pixels(&dir.join("render-d.png")), pixels(&dir.join("d.png")), "the viewer's isosurface and render's differ");
+    assert!(mean_difference(&c, &pixels(&dir.join("d.png"))) > 1.0, "the isosurface replaced the volume");
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
