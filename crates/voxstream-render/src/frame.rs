@@ -205,7 +205,10 @@ fn render_tile<T: PixelTracer>(
     result.raw_requests = requests.len();
     requests.sort_unstable();
     requests.dedup();
-    feedback.push_requests(&requests);
+    // Tiles near the focus vote more than once (the order of loading only).
+    for _ in 0..crate::settings::focus_weight(settings.focus, [x0, y0, x1, y1], width, height) {
+        feedback.push_requests(&requests);
+    }
     result
 }
 

@@ -117,6 +117,27 @@ pub struct RenderSettings {
     /// where they fall, unless the wanted level is further away. The frame loop turns it on with level blending
     /// (interactive frames); a final image is the same either way.
     pub steps_ignore_stand_ins: bool,
+    /// Where loading is prioritised: a point of the image in `[0, 1]²` (x right, y down), e.g. the centre of the
+    /// view or the cursor. Within a level, requests from the image tiles near it count up to
+    /// [`MAX_FOCUS_WEIGHT`] times (the screen area waiting on a node, weighted by closeness), so detail arrives
+    /// there first. `None`: every tile counts once. Only the order of loading changes, never an image.
+    pub focus: Option<[f32; 2]>,
+}
+
+/// The most a tile's requests count when it lies at [`RenderSettings::focus`] (1 at half the image's diagonal or
+/// further).
+pub const MAX_FOCUS_WEIGHT: usize = 4;
+
+/// How many times the requests of the tile covering `[x0, x1) × [y0, y1)` of a `width × height` image count, with
+/// `focus` in `[0, 1]²`: [`MAX_FOCUS_WEIGHT`] at the focus, falling linearly to 1 at half the diagonal.
+pub fn focus_weight(focus: Option<[f32; 2]>, tile: [u32; 4], width: u32, height: u32) -> usize {
+    let Some([fx, fy]) = focus else { return 1 };
+    let [x0, y0, x1, y1] = tile;
+    let cx = (x0 + x1) as f32 * 0.5 / width.max(1) as f32;
+    let cy = (y0 + y1) as f32 * 0.5 / height.max(1) as f32;
+    let distance = ((cx - fx).powi(2) + (cy - fy).powi(2)).sqrt();
+    let closeness = (1.0 - distance / std::f32::consts::FRAC_1_SQRT_2).clamp(0.0, 1.0);
+    1 + (closeness * (MAX_FOCUS_WEIGHT - 1) as f32).round() as usize
 }
 
 impl Default for RenderSettings {
@@ -141,6 +162,7 @@ impl Default for RenderSettings {
             surface_normals: SurfaceNormals::Cell,
             pixel_stride: 1,
             steps_ignore_stand_ins: false,
+            focus: None,
         }
     }
 }

@@ -74,6 +74,8 @@ pub struct ViewerApp {
     shown: Option<ShownFrame>,
     texture: Option<TextureHandle>,
     overlay_missing: bool,
+    /// Where loading is prioritised: the cursor over the image, else the centre (`RenderSettings::focus`).
+    focus: [f32; 2],
     show_help: bool,
     messages: Vec<String>,
     frame_times: VecDeque<(Instant, u64)>,
@@ -107,6 +109,7 @@ impl ViewerApp {
             shown: None,
             texture: None,
             overlay_missing: false,
+            focus: [0.5, 0.5],
             show_help: false,
             messages: Vec::new(),
             frame_times: VecDeque::new(),
@@ -130,6 +133,7 @@ impl ViewerApp {
     /// The request for the current state: full size at rest, smaller while moving.
     fn desired_request(&self) -> ViewRequest {
         let mut settings = self.settings.clone();
+        settings.focus = Some(self.focus);
         if self.moving() {
             settings.width = (settings.width / self.moving_divisor).max(1);
             settings.height = (settings.height / self.moving_divisor).max(1);
@@ -144,10 +148,15 @@ impl ViewerApp {
 
     fn post_request_if_changed(&mut self) {
         let mut request = self.desired_request();
+        let refining = self.shown.as_ref().is_none_or(|s| !s.is_final || s.revision != self.revision);
         let changed = self.last_request.as_ref().is_none_or(|last| {
+            let mut unfocused = last.settings.clone();
+            unfocused.focus = request.settings.focus;
             last.camera != request.camera
                 || last.transfer_function != request.transfer_function
-                || last.settings != request.settings
+                || unfocused != request.settings
+                // A new focus matters only while data is still loading.
+                || (last.settings.focus != request.settings.focus && refining)
         });
         if changed {
             self.revision += 1;
@@ -441,6 +450,14 @@ impl ViewerApp {
             }
             self.note_input();
         }
+        // Loading goes first where the cursor is (in steps of an eighth of the image), else at the centre.
+        self.focus = match response.hover_pos() {
+            Some(pointer) => {
+                let quantise = |v: f32| ((v * 8.0).floor().clamp(0.0, 7.0) + 0.5) / 8.0;
+                [quantise((pointer.x - rect.left()) / rect.width()), quantise((pointer.y - rect.top()) / rect.height())]
+            }
+            None => [0.5, 0.5],
+        };
         if response.hovered() {
             let scroll = ui.input(|i| i.smooth_scroll_delta.y);
             if scroll != 0.0 {
