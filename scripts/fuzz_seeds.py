@@ -144,6 +144,10 @@ put("store_metadata", "foreign-ome", json.dumps({"zarr_format": 3, "node_type": 
         {"path": "0", "coordinateTransformations": [{"type": "scale", "scale": [1, 1, 1]}]}]}]}}}))
 with open(os.path.join(os.path.dirname(__file__), "..", "docs", "examples", "frog-tf.json"), "rb") as f:
     put("transfer_function", "frog", f.read())
+put("transfer_function", "paraview", json.dumps([{"Name": "Cool to Warm", "ColorSpace": "Diverging",
+                                                 "RGBPoints": [0, 0.23, 0.3, 0.75, 0.5, 0.87, 0.87, 0.87,
+                                                               1, 0.71, 0.02, 0.15],
+                                                 "Points": [0, 0, 0.5, 0, 1, 0.3, 0.5, 0]}]))
 put("camera_path", "list", json.dumps([{"eye": [0, 0, 3], "target": [0, 0, 0], "up": [0, 1, 0], "fov": 40},
                                        {"eye": [3, 0, 0], "target": [0, 0, 0], "up": [0, 1, 0], "fov": 35}]))
 put("camera_path", "object", json.dumps({"cameras": [{"eye": [1, 2, 3], "target": [0, 0, 0], "up": [0, 0, 1],

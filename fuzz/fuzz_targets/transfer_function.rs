@@ -1,4 +1,5 @@
-//! A transfer-function JSON file (`--tf`): parsed, evaluated, and turned into the renderer's lookup tables.
+//! A transfer-function JSON file (`--tf`: voxstream's format or a ParaView colour-map preset): parsed, evaluated, and
+//! turned into the renderer's lookup tables.
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
@@ -7,7 +8,7 @@ use voxstream_render::transfer_function::{TransferFunction, TransferLut};
 
 fuzz_target!(|data: &[u8]| {
     let Ok(text) = std::str::from_utf8(data) else { return };
-    let Ok(tf) = TransferFunction::from_json(text) else { return };
+    let Ok(tf) = TransferFunction::from_json_or_paraview(text, [-3.0, 1e6]) else { return };
     for value in [-1.0, 0.0, 0.5, 1.0, 1e9, f64::NAN] {
         let _ = tf.evaluate(value);
     }

@@ -239,3 +239,31 @@ mod tests {
         assert_eq!(Script::parse("iso off\niso 2.5", "s").unwrap().commands[1].1, ScriptCommand::Iso(Some(2.5)));
     }
 }
+
+#[cfg(test)]
+mod properties {
+    use proptest::prelude::*;
+
+    use super::*;
+
+    proptest! {
+        /// Any text parses or fails with a message naming a line: never a panic.
+        #[test]
+        fn any_text_parses_or_names_a_line(text in "(?s).{0,400}") {
+            if let Err(error) = Script::parse(&text, "s") {
+                prop_assert!(error.to_string().starts_with("s line "));
+            }
+        }
+
+        /// Lines of known words with arbitrary arguments, likewise.
+        #[test]
+        fn command_words_with_any_arguments(lines in proptest::collection::vec(
+            ("(wait-final|wait|screenshot|orbit|pan|zoom|fly|reset|tf-point|tf-delete|load-tf|save-tf|save-camera|shading|lod-bias|overlay|iso|quit)",
+             proptest::collection::vec("[-+0-9.eEnaifNA ]{0,8}|on|off|phong|none|x.png", 0..6)), 0..12)) {
+            let text: String = lines.iter().map(|(verb, args)| format!("{verb} {}\n", args.join(" "))).collect();
+            if let Err(error) = Script::parse(&text, "s") {
+                prop_assert!(error.to_string().starts_with("s line "));
+            }
+        }
+    }
+}

@@ -29,4 +29,5 @@ pub mod scenes;
 pub mod source_path;
 pub mod stats;
 pub mod trilinear_bound;
+#[cfg(feature = "viewer")]
 pub mod view_command;

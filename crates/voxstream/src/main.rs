@@ -6,7 +6,7 @@ use std::process::ExitCode;
 
 use clap::Parser;
 use voxstream::cli::{Cli, Command, RenderArgs};
-use voxstream::{bench, import_command, info_command, render_command, scenes, view_command};
+use voxstream::{bench, import_command, info_command, render_command, scenes};
 
 fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
@@ -43,7 +43,13 @@ fn main() -> ExitCode {
         Some(Command::Bench(args)) => bench::run(&args),
         Some(Command::Import(args)) => import_command::run(&args),
         Some(Command::Info(args)) => info_command::run(&args),
-        Some(Command::View(args)) => view_command::run(&args),
+        #[cfg(feature = "viewer")]
+        Some(Command::View(args)) => voxstream::view_command::run(&args),
+        #[cfg(not(feature = "viewer"))]
+        Some(Command::View(_)) => Err(anyhow::anyhow!(
+            "this voxstream was built without the viewer: build it with `cargo build --release` (the `viewer` feature \
+             is on by default)"
+        )),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
