@@ -251,6 +251,16 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
         Ok(())
     }
 
+    /// The loop's limits.
+    pub fn limits(&self) -> &LoopLimits {
+        &self.limits
+    }
+
+    /// Changes how many requests interactive frames serve (at least 1), e.g. more while the view rests.
+    pub fn set_requests_per_frame(&mut self, requests: usize) {
+        self.limits.requests_per_frame = requests.max(1);
+    }
+
     /// The data values the voxel values 0 and 1 stand for.
     pub fn value_range(&self) -> [f64; 2] {
         self.value_range

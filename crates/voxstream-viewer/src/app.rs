@@ -57,6 +57,23 @@ pub struct ViewerConfig {
     pub script: Option<Script>,
     /// The pools' budget (bytes), for the status line.
     pub pool_budget_bytes: u64,
+    /// Where to write the frame log when the window closes (`view --stats`).
+    pub stats_path: Option<PathBuf>,
+}
+
+/// One frame as the window received it (`view --stats`).
+#[derive(Clone, Copy, Debug)]
+struct FrameLog {
+    /// Milliseconds since the window opened.
+    at_ms: f64,
+    /// Render and production time of the frame.
+    frame_ms: f64,
+    size: [u32; 2],
+    is_final: bool,
+    pending: usize,
+    bricks_produced: u64,
+    /// Milliseconds since the last input (pointer, keys or a scripted move), if any.
+    since_input_ms: Option<f64>,
 }
 
 /// The window's state.
@@ -81,6 +98,8 @@ pub struct ViewerApp {
     frame_times: VecDeque<(Instant, u64)>,
     script: Option<ScriptRun>,
     script_failure: Arc<Mutex<Option<String>>>,
+    opened: Instant,
+    frame_log: Vec<FrameLog>,
     tf_path: String,
     camera_path: String,
     screenshot_path: String,
@@ -115,6 +134,8 @@ impl ViewerApp {
             frame_times: VecDeque::new(),
             script,
             script_failure,
+            opened: Instant::now(),
+            frame_log: Vec::new(),
             tf_path: "transfer-function.json".into(),
             camera_path: "camera.json".into(),
             screenshot_path: "screenshot.png".into(),
@@ -143,6 +164,7 @@ impl ViewerApp {
             camera: self.orbit.to_camera(),
             transfer_function: self.editor.transfer_function(),
             settings,
+            at_rest: !self.moving(),
         }
     }
 
@@ -153,6 +175,7 @@ impl ViewerApp {
             let mut unfocused = last.settings.clone();
             unfocused.focus = request.settings.focus;
             last.camera != request.camera
+                || last.at_rest != request.at_rest
                 || last.transfer_function != request.transfer_function
                 || unfocused != request.settings
                 // A new focus matters only while data is still loading.
@@ -190,6 +213,15 @@ impl ViewerApp {
                             frame.failures[0]
                         ));
                     }
+                    self.frame_log.push(FrameLog {
+                        at_ms: self.opened.elapsed().as_secs_f64() * 1e3,
+                        frame_ms: frame.frame_ms,
+                        size: frame.size,
+                        is_final: frame.is_final,
+                        pending: frame.pending,
+                        bricks_produced: frame.bricks_produced,
+                        since_input_ms: self.last_input.map(|t| t.elapsed().as_secs_f64() * 1e3),
+                    });
                     self.upload(ctx, &frame);
                     self.shown = Some(*frame);
                 }
@@ -525,10 +557,22 @@ impl ViewerApp {
             }
             ScriptCommand::Wait(duration) => advance = since.elapsed() >= duration,
             ScriptCommand::Screenshot(path) => failure = self.screenshot(&path).err(),
-            ScriptCommand::Orbit(yaw, pitch) => self.orbit.orbit(yaw, pitch),
-            ScriptCommand::Pan(right, up) => self.orbit.pan(right, up),
-            ScriptCommand::Zoom(factor) => self.orbit.zoom(factor),
-            ScriptCommand::Fly(forward, right, up) => self.orbit.fly(forward, right, up),
+            ScriptCommand::Orbit(yaw, pitch) => {
+                self.orbit.orbit(yaw, pitch);
+                self.note_input();
+            }
+            ScriptCommand::Pan(right, up) => {
+                self.orbit.pan(right, up);
+                self.note_input();
+            }
+            ScriptCommand::Zoom(factor) => {
+                self.orbit.zoom(factor);
+                self.note_input();
+            }
+            ScriptCommand::Fly(forward, right, up) => {
+                self.orbit.fly(forward, right, up);
+                self.note_input();
+            }
             ScriptCommand::Reset => self.orbit = OrbitCamera::from_camera(&self.config.camera),
             ScriptCommand::TfPoint([value, r, g, b, alpha]) => {
                 if let Some(index) = self.editor.add_point(value, alpha) {
@@ -581,7 +625,56 @@ impl ViewerApp {
     }
 }
 
+impl ViewerApp {
+    /// The frame log as JSON: every frame received, and the times a user feels (first image, first final image,
+    /// frames while moving, from the last input to the final image).
+    fn stats_json(&self) -> serde_json::Value {
+        let frames: Vec<serde_json::Value> = self
+            .frame_log
+            .iter()
+            .map(|f| {
+                serde_json::json!({
+                    "at_ms": f.at_ms, "frame_ms": f.frame_ms, "width": f.size[0], "height": f.size[1],
+                    "final": f.is_final, "pending": f.pending, "bricks_produced": f.bricks_produced,
+                    "since_input_ms": f.since_input_ms,
+                })
+            })
+            .collect();
+        let full = [self.settings.width, self.settings.height];
+        let moving: Vec<f64> = self.frame_log.iter().filter(|f| f.size != full).map(|f| f.frame_ms).collect();
+        let median = |mut v: Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            v.get(v.len() / 2).copied()
+        };
+        // From the last input before each final frame to that frame.
+        let rest_to_final: Vec<f64> = self
+            .frame_log
+            .windows(2)
+            .filter(|w| w[1].is_final && !w[0].is_final)
+            .filter_map(|w| w[1].since_input_ms)
+            .collect();
+        serde_json::json!({
+            "render_size": full,
+            "first_image_ms": self.frame_log.first().map(|f| f.at_ms),
+            "first_final_ms": self.frame_log.iter().find(|f| f.is_final).map(|f| f.at_ms),
+            "moving_frames": moving.len(),
+            "moving_frame_ms_median": median(moving),
+            "input_to_final_ms": rest_to_final,
+            "frames": frames,
+        })
+    }
+}
+
 impl eframe::App for ViewerApp {
+    fn on_exit(&mut self, _gl: Option<&eframe::glow::Context>) {
+        if let Some(path) = &self.config.stats_path {
+            let text = format!("{:#}\n", self.stats_json());
+            if let Err(message) = write_atomically(path, text.as_bytes()) {
+                eprintln!("warning: {message}");
+            }
+        }
+    }
+
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
         let ctx = ui.ctx().clone();
         self.receive(&ctx);

@@ -32,7 +32,18 @@ pub struct ViewRequest {
     pub transfer_function: TransferFunction,
     /// The settings, with the image size of this request (smaller while the view moves).
     pub settings: RenderSettings,
+    /// Whether the view rests (no input for a moment): frames may then serve more requests, up to
+    /// [`REST_PRODUCTION_MS`] of production each.
+    pub at_rest: bool,
 }
+
+/// While the view rests, the requests served per frame double while a frame's production takes less than half of
+/// this, and halve (down to the session's own number) when it takes more: detail arrives in fewer, longer frames,
+/// and a new input still waits for at most about this long.
+pub const REST_PRODUCTION_MS: f64 = 400.0;
+
+/// The most requests a frame at rest serves.
+const MAX_REST_REQUESTS: usize = 1 << 16;
 
 /// A frame ready to show.
 #[derive(Clone, Debug)]
@@ -144,6 +155,7 @@ fn render_loop<P: Producer, R: FrameRenderer>(
     events: &Sender<WorkerEvent>,
     notify: &dyn Fn(),
 ) {
+    let base_requests = session.limits().requests_per_frame;
     let mut current: Option<ViewRequest> = None;
     let mut refining = false;
     let mut stalled_frames = 0;
@@ -166,6 +178,9 @@ fn render_loop<P: Producer, R: FrameRenderer>(
                 refining = false;
                 continue;
             }
+            if !request.at_rest {
+                session.set_requests_per_frame(base_requests);
+            }
             current = Some(request);
             refining = true;
             stalled_frames = 0;
@@ -174,6 +189,15 @@ fn render_loop<P: Producer, R: FrameRenderer>(
         match session.render(&request.camera, Mode::Interactive) {
             Ok(frame) => {
                 let stalled = frame.pending > 0 && frame.served == 0 && !frame.blended;
+                if request.at_rest {
+                    let limit = session.limits().requests_per_frame;
+                    let production_ms = frame.elapsed_ms - frame.render_ms;
+                    if frame.served as usize >= limit && production_ms < REST_PRODUCTION_MS / 2.0 {
+                        session.set_requests_per_frame((limit * 2).min(MAX_REST_REQUESTS));
+                    } else if production_ms > REST_PRODUCTION_MS {
+                        session.set_requests_per_frame((limit / 2).max(base_requests));
+                    }
+                }
                 stalled_frames = if stalled { stalled_frames + 1 } else { 0 };
                 refining = !frame.is_final() && stalled_frames < STALLED_FRAMES;
                 let residency = session.residency();

@@ -48,6 +48,10 @@ pub struct ViewArgs {
     /// Starting camera JSON (as saved by the viewer or read by `render --camera`).
     #[arg(long, value_name = "FILE")]
     pub camera: Option<PathBuf>,
+    /// When the window closes, write a frame log here (JSON: every frame's time, size and state; the first image,
+    /// the first final image, the median moving frame, and input-to-final times).
+    #[arg(long, value_name = "FILE")]
+    pub stats: Option<PathBuf>,
     /// Starting transfer function (as `render --tf`).
     #[arg(long)]
     pub tf: Option<PathBuf>,

@@ -25,13 +25,18 @@ pub fn run(args: &ViewArgs) -> Result<()> {
     if args.requests_per_frame == 0 {
         bail!("--requests-per-frame must be at least 1");
     }
+    if let Some(parent) = args.stats.as_ref().and_then(|p| p.parent()).filter(|p| !p.as_os_str().is_empty()) {
+        if !parent.is_dir() {
+            bail!("--stats: folder {} does not exist", parent.display());
+        }
+    }
     // The script is checked before anything is opened: a typo on line 12 should not wait for a window.
     let script = match &args.script {
         Some(path) => Some(Script::read(path)?),
         None => None,
     };
     let budget = check_budget(args.budget_mb, args.width, args.height, "--width/--height")?;
-    open_source(&render_args, &budget, ShowInWindow { script })
+    open_source(&render_args, &budget, ShowInWindow { script, stats: args.stats.clone() })
 }
 
 /// `render`'s arguments with `view`'s values, so that the source, the flags and their errors are `render`'s.
@@ -62,6 +67,7 @@ fn render_args(args: &ViewArgs) -> Result<RenderArgs> {
 
 struct ShowInWindow {
     script: Option<Script>,
+    stats: Option<std::path::PathBuf>,
 }
 
 impl SourceUser for ShowInWindow {
@@ -87,6 +93,7 @@ impl SourceUser for ShowInWindow {
             presets,
             script: self.script,
             pool_budget_bytes: plan.pool_bytes,
+            stats_path: self.stats,
         };
         let session = Session::with_value_range(
             source.producer,
