@@ -14,6 +14,7 @@
 //!
 //! The renderer is any [`FrameRenderer`]: [`CpuRenderer`] by default, a GPU backend later.
 
+use std::ops::ControlFlow;
 use std::time::Instant;
 
 use voxstream_core::{CacheManager, ProduceError, Producer, Residency, ServeOptions, DEFAULT_FADE_FRAMES};
@@ -288,6 +289,21 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
         mode: Mode,
         observe: &mut dyn FnMut(&PassProgress),
     ) -> Result<FrameResult> {
+        self.render_interruptible(camera, mode, &mut |progress| {
+            observe(progress);
+            ControlFlow::Continue(())
+        })
+    }
+
+    /// [`Session::render_observed`], where `observe` may stop a converged frame after any pass
+    /// (`ControlFlow::Break`): the frame then returns what it has, with requests still pending (not converged). A
+    /// viewer refines a view at rest this way and still answers the next input within one pass.
+    pub fn render_interruptible(
+        &mut self,
+        camera: &Camera,
+        mode: Mode,
+        observe: &mut dyn FnMut(&PassProgress) -> ControlFlow<()>,
+    ) -> Result<FrameResult> {
         let start = Instant::now();
         let mut result = FrameResult {
             image: Image::new(0, 0),
@@ -357,12 +373,15 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
             result.pending = report.pending;
             result.served += report.served as u64;
             result.failures.extend(report.failures);
-            observe(&PassProgress {
+            let flow = observe(&PassProgress {
                 pass: result.passes,
                 pixels_pending: progressive.pending_count(),
                 pixels: progressive.pending.len(),
                 bricks_produced: result.bricks_produced,
             });
+            if flow.is_break() {
+                break;
+            }
             let stalled = report.pending > 0 && report.served == 0;
             if settings.pixel_stride > 1 && report.pending == 0 && report.requests == 0 && !stalled {
                 // The sparse rays need nothing more: trace more of the pixels still pending (4×4, 2×2, all).
@@ -482,6 +501,24 @@ mod tests {
         let reference = cpu.render(&camera, Mode::Converged).unwrap();
         assert_eq!(frame.image.pixels, reference.image.pixels);
         assert!(reference.image.pixels.iter().any(|&p| p != reference.image.pixels[0]), "the ball is visible");
+    }
+
+    #[test]
+    fn an_interrupted_converged_frame_is_incomplete_and_the_next_one_exact() {
+        let (tf, settings, camera) = parts();
+        let mut session = Session::new(Ball, &tf, settings.clone(), 16 << 20, LoopLimits::default()).unwrap();
+        let mut passes = 0;
+        let interrupted = session
+            .render_interruptible(&camera, Mode::Converged, &mut |_| {
+                passes += 1;
+                ControlFlow::Break(())
+            })
+            .unwrap();
+        assert_eq!((passes, interrupted.passes), (1, 1));
+        assert!(!interrupted.is_converged(), "stopped after one pass with requests pending");
+        let resumed = session.render(&camera, Mode::Converged).unwrap();
+        let mut fresh = Session::new(Ball, &tf, settings, 16 << 20, LoopLimits::default()).unwrap();
+        assert_eq!(resumed.image.pixels, fresh.render(&camera, Mode::Converged).unwrap().image.pixels);
     }
 
     #[test]

@@ -21,6 +21,8 @@ pub struct EmissionAbsorptionSettings {
     lighting: LightingSettings,
     /// Transmittance below which a ray stops.
     stop_below: f32,
+    /// Colour samples by their data's tree level ([`RenderSettings::colour_by_level`]).
+    colour_by_level: bool,
 }
 
 impl EmissionAbsorptionSettings {
@@ -29,6 +31,7 @@ impl EmissionAbsorptionSettings {
         EmissionAbsorptionSettings {
             lighting: LightingSettings::new(settings),
             stop_below: 1.0 - settings.opacity_cutoff,
+            colour_by_level: settings.colour_by_level,
         }
     }
 }
@@ -40,6 +43,10 @@ pub struct EmissionAbsorption<'a> {
     light: Option<RayLight>,
     gradient_scale: Vec3,
     stop_below: f32,
+    /// Whether samples take their level's colour.
+    colour_by_level: bool,
+    /// With `colour_by_level`: the colour of the current segment's level.
+    tint: Option<Vec3>,
     /// Premultiplied colour so far.
     color: Vec3,
     transmittance: f32,
@@ -58,6 +65,8 @@ impl<'a> EmissionAbsorption<'a> {
             light: settings.lighting.ray(volume_direction),
             gradient_scale: settings.lighting.gradient_scale,
             stop_below: settings.stop_below,
+            colour_by_level: settings.colour_by_level,
+            tint: None,
             color: Vec3::ZERO,
             transmittance: 1.0,
         }
@@ -85,6 +94,13 @@ impl Integrand for EmissionAbsorption<'_> {
         self.table = Some(self.lut.step_table(step));
     }
 
+    #[inline]
+    fn set_level(&mut self, level: u32) {
+        if self.colour_by_level {
+            self.tint = Some(Vec3::from(crate::settings::level_colour(level)));
+        }
+    }
+
     #[inline(always)]
     fn sample(&mut self, sample: Sample) -> ControlFlow<()> {
         let Some(table) = self.table else { return ControlFlow::Continue(()) };
@@ -92,9 +108,13 @@ impl Integrand for EmissionAbsorption<'_> {
         if entry.w <= 0.0 {
             return ControlFlow::Continue(());
         }
-        let color = match &self.light {
-            Some(light) => light.shade(entry.truncate(), entry.w, Vec3::from(sample.gradient) * self.gradient_scale),
+        let premultiplied = match self.tint {
             None => entry.truncate(),
+            Some(tint) => tint * entry.w,
+        };
+        let color = match &self.light {
+            Some(light) => light.shade(premultiplied, entry.w, Vec3::from(sample.gradient) * self.gradient_scale),
+            None => premultiplied,
         };
         self.color += self.transmittance * color;
         self.transmittance *= 1.0 - entry.w;
@@ -113,7 +133,7 @@ impl Integrand for EmissionAbsorption<'_> {
         }
         // One `exp` per constant node, not per sample: α = 1 − exp(−σ·length), colour unshaded.
         let alpha = -(-(entry.sigma as f64) * (to - from)).exp_m1() as f32;
-        self.color += self.transmittance * alpha * Vec3::from(entry.color);
+        self.color += self.transmittance * alpha * self.tint.unwrap_or(Vec3::from(entry.color));
         self.transmittance *= 1.0 - alpha;
         if self.transmittance <= self.stop_below {
             ControlFlow::Break(())

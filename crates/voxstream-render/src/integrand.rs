@@ -77,6 +77,13 @@ pub trait Integrand {
     /// A constant `value` (a constant node) over the distances `[from, to)`, to integrate analytically.
     fn constant(&mut self, from: f64, to: f64, value: f32) -> ControlFlow<()>;
 
+    /// The tree level of the data the following samples or constant come from (called once per segment). Only
+    /// diagnostic integrands use it ([`RenderSettings::colour_by_level`](crate::RenderSettings::colour_by_level)).
+    #[inline(always)]
+    fn set_level(&mut self, level: u32) {
+        let _ = level;
+    }
+
     /// A whole brick segment (only when [`Integrand::TAKES_SPANS`]); adds the work done (cells examined) to `work`.
     fn span(&mut self, span: &BrickSpan<'_>, work: &mut u64) -> ControlFlow<()> {
         let _ = (span, work);

@@ -55,6 +55,6 @@ pub use instruction_set::InstructionSet;
 pub use integrand::{BrickSpan, Integrand, Sample};
 pub use isosurface::{IsoSurface, SurfaceNormals, MAX_SURFACES};
 pub use ray_caster::RayCaster;
-pub use settings::{PhongCoefficients, RenderSettings, Shading, VolumePlacement};
+pub use settings::{level_colour, PhongCoefficients, RenderSettings, Shading, VolumePlacement};
 pub use transfer_function::{TransferFunction, TransferLut};
 pub use traversal::{DescentPath, Ray, RayStats, Traversal};

@@ -122,6 +122,26 @@ pub struct RenderSettings {
     /// [`MAX_FOCUS_WEIGHT`] times (the screen area waiting on a node, weighted by closeness), so detail arrives
     /// there first. `None`: every tile counts once. Only the order of loading changes, never an image.
     pub focus: Option<[f32; 2]>,
+    /// Volume rendering, a diagnostic: each sample takes the colour of the tree level its data comes from
+    /// ([`level_colour`]) instead of the transfer function's (opacity and shading stay), so the image shows which
+    /// level each part of each pixel used.
+    pub colour_by_level: bool,
+}
+
+/// The colour [`RenderSettings::colour_by_level`] gives tree level `level`: eight hues around the colour wheel,
+/// repeating.
+pub fn level_colour(level: u32) -> [f32; 3] {
+    const PALETTE: [[f32; 3]; 8] = [
+        [0.85, 0.2, 0.2],
+        [0.95, 0.6, 0.1],
+        [0.9, 0.9, 0.2],
+        [0.3, 0.8, 0.2],
+        [0.1, 0.75, 0.75],
+        [0.2, 0.4, 0.95],
+        [0.6, 0.3, 0.9],
+        [0.95, 0.4, 0.75],
+    ];
+    PALETTE[level as usize % PALETTE.len()]
 }
 
 /// The most a tile's requests count when it lies at [`RenderSettings::focus`] (1 at half the image's diagonal or
@@ -163,6 +183,7 @@ impl Default for RenderSettings {
             pixel_stride: 1,
             steps_ignore_stand_ins: false,
             focus: None,
+            colour_by_level: false,
         }
     }
 }

@@ -300,6 +300,7 @@ impl<'a> Traversal<'a> {
                     ControlFlow::Continue(())
                 }
                 SegmentData::Constant(value) => {
+                    integrand.set_level(box_level);
                     // Integrated over exactly the distance not yet accounted for.
                     let from = covered;
                     covered = covered.max(t_exit);
@@ -337,6 +338,7 @@ impl<'a> Traversal<'a> {
                         fine.level
                     };
                     let sampled_voxel = self.level_voxel[sampled_level as usize];
+                    integrand.set_level(fine.level);
                     let blend = coarse.and(self.view.brick_blends.get(fine.slot.0 as usize)).filter(|b| !b.is_full());
                     let desired_step = sampled_voxel.max(footprint_voxel) * self.step_factor / speed;
                     let segment_step = match step {

@@ -59,6 +59,8 @@ pub struct ViewerConfig {
     pub pool_budget_bytes: u64,
     /// Where to write the frame log when the window closes (`view --stats`).
     pub stats_path: Option<PathBuf>,
+    /// How a view at rest is refined.
+    pub refinement: crate::render_worker::Refinement,
 }
 
 /// One frame as the window received it (`view --stats`).
@@ -279,10 +281,14 @@ impl ViewerApp {
                     pressed(Key::R) as i32,
                     (pressed(Key::H) || pressed(Key::F1)) as i32,
                     pressed(Key::M) as i32,
+                    pressed(Key::L) as i32,
                 ],
             )
         });
-        let [forward, right, up, yaw, pitch, reset, help, overlay] = keys;
+        let [forward, right, up, yaw, pitch, reset, help, overlay, levels] = keys;
+        if levels != 0 {
+            self.settings.colour_by_level = !self.settings.colour_by_level;
+        }
         if forward != 0 || right != 0 || up != 0 {
             // Half the eye's distance to the target per second.
             let speed = self.orbit.distance * 0.5 * dt;
@@ -342,6 +348,16 @@ impl ViewerApp {
         ui.add(egui::Slider::new(&mut self.settings.step_factor, 0.25..=2.0).text("step (voxels)"));
         self.isosurface_controls(ui);
         ui.checkbox(&mut self.overlay_missing, "mark pixels still missing data (M)");
+        ui.checkbox(&mut self.settings.colour_by_level, "colour by the level used (L)");
+        if self.settings.colour_by_level {
+            ui.horizontal_wrapped(|ui| {
+                ui.label("levels:");
+                for level in 0..8u32 {
+                    let [r, g, b] = voxstream_render::level_colour(level).map(|c| (c * 255.0) as u8);
+                    ui.colored_label(Color32::from_rgb(r, g, b), format!("{level} {}", level + 8));
+                }
+            });
+        }
         ui.label(format!(
             "render size {}×{}, budget {:.0} MiB",
             self.settings.width,
@@ -503,7 +519,7 @@ impl ViewerApp {
         if self.show_help {
             let text = "left drag: orbit · right/middle drag or shift+drag: pan · wheel: zoom\n\
                         W/S: fly forward/back · A/D: left/right · Q/E: down/up · arrows: orbit\n\
-                        R or double-click: reset · M: mark missing data · H/F1: this help";
+                        R or double-click: reset · M: mark missing data · L: colour by level · H/F1: this help";
             ui.painter().text(
                 rect.left_top() + egui::vec2(8.0, 8.0),
                 egui::Align2::LEFT_TOP,
@@ -598,6 +614,7 @@ impl ViewerApp {
             ScriptCommand::Phong(on) => self.settings.shading = if on { Shading::Phong } else { Shading::None },
             ScriptCommand::LodBias(bias) => self.settings.lod_bias = bias,
             ScriptCommand::Overlay(on) => self.overlay_missing = on,
+            ScriptCommand::Levels(on) => self.settings.colour_by_level = on,
             ScriptCommand::Iso(value) => self.set_isosurface(value.map(|value| IsoSurface {
                 value,
                 color: [0.9, 0.8, 0.7],
@@ -646,11 +663,11 @@ impl ViewerApp {
             v.sort_by(f64::total_cmp);
             v.get(v.len() / 2).copied()
         };
-        // From the last input before each final frame to that frame.
+        // From the last input before each full-size final frame to that frame.
         let rest_to_final: Vec<f64> = self
             .frame_log
             .windows(2)
-            .filter(|w| w[1].is_final && !w[0].is_final)
+            .filter(|w| w[1].is_final && w[1].size == full && !(w[0].is_final && w[0].size == full))
             .filter_map(|w| w[1].since_input_ms)
             .collect();
         serde_json::json!({

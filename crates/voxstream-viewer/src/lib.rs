@@ -27,6 +27,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 
 pub use app::{ViewerApp, ViewerConfig};
 pub use error::ViewerError;
+pub use render_worker::Refinement;
 use voxstream_core::Producer;
 use voxstream_engine::Session;
 
@@ -61,8 +62,9 @@ pub fn run_viewer<P: Producer + 'static>(session: Session<P>, config: ViewerConf
         options,
         Box::new(move |cc| {
             let context = cc.egui_ctx.clone();
-            let worker = render_worker::RenderWorker::start(session, move || context.request_repaint())?;
             let config = config.take().ok_or("the viewer was started twice")?;
+            let worker =
+                render_worker::RenderWorker::start(session, config.refinement, move || context.request_repaint())?;
             Ok(Box::new(ViewerApp::new(worker, config, app_failure)))
         }),
     )

@@ -5,8 +5,10 @@
 //! arrives while a frame renders replaces any older one still waiting). The thread renders GigaVoxels' interactive
 //! frames ([`Mode::Interactive`]: one pass with what is resident, then a bounded number of requests served), posts
 //! each as a [`ShownFrame`], and goes on until a frame is final (nothing missing, nothing fading in) or the loading
-//! stalls; then it sleeps until the next request.
+//! stalls; then it sleeps until the next request. A view at rest is refined as [`Refinement`] says: by converged
+//! passes that any new request interrupts (the default), or by more blended interactive frames.
 
+use std::ops::ControlFlow;
 use std::sync::mpsc::{self, Receiver, Sender};
 use std::sync::{Arc, Condvar, Mutex, PoisonError};
 use std::thread::JoinHandle;
@@ -20,6 +22,19 @@ use crate::histogram::{sample_histogram, ValueHistogram};
 /// Frames in a row that serve no request and leave some pending before the thread stops refining (a budget too
 /// small for the view, or bricks that fail).
 const STALLED_FRAMES: u32 = 3;
+
+/// How a view at rest is refined to its final image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Refinement {
+    /// One interactive frame (what is resident), then converged passes that trace again only the pixels still
+    /// missing data, stopped between passes by any new request; the final image replaces the interactive one at
+    /// once. Fastest to the final image (the time of `voxstream render`), one visible change.
+    #[default]
+    Converged,
+    /// Interactive frames with level blending until one is final: detail fades in, never pops, but each frame
+    /// re-traces every pixel, so the final image comes several times later.
+    Blended,
+}
 
 /// What the window wants drawn.
 #[derive(Clone, Debug, PartialEq)]
@@ -103,7 +118,11 @@ pub struct RenderWorker {
 
 impl RenderWorker {
     /// Starts the thread on `session`; `notify` is called after each event (the window's repaint request).
-    pub fn start<P, R>(session: Session<P, R>, notify: impl Fn() + Send + 'static) -> std::io::Result<RenderWorker>
+    pub fn start<P, R>(
+        session: Session<P, R>,
+        refinement: Refinement,
+        notify: impl Fn() + Send + 'static,
+    ) -> std::io::Result<RenderWorker>
     where
         P: Producer + 'static,
         R: FrameRenderer + Send + 'static,
@@ -113,7 +132,7 @@ impl RenderWorker {
         let thread_shared = shared.clone();
         let thread = std::thread::Builder::new()
             .name("voxstream-render".into())
-            .spawn(move || render_loop(session, &thread_shared, &sender, &notify))?;
+            .spawn(move || render_loop(session, refinement, &thread_shared, &sender, &notify))?;
         Ok(RenderWorker { shared, events, thread: Some(thread) })
     }
 
@@ -151,6 +170,7 @@ impl Drop for RenderWorker {
 
 fn render_loop<P: Producer, R: FrameRenderer>(
     mut session: Session<P, R>,
+    refinement: Refinement,
     shared: &Shared,
     events: &Sender<WorkerEvent>,
     notify: &dyn Fn(),
@@ -160,6 +180,8 @@ fn render_loop<P: Producer, R: FrameRenderer>(
     let mut refining = false;
     let mut stalled_frames = 0;
     let mut histogram_sent = false;
+    // Whether the current request has had its first (interactive) frame.
+    let mut shown_once = false;
     loop {
         let next = {
             let mut inbox = shared.inbox.lock().unwrap_or_else(PoisonError::into_inner);
@@ -184,8 +206,37 @@ fn render_loop<P: Producer, R: FrameRenderer>(
             current = Some(request);
             refining = true;
             stalled_frames = 0;
+            shown_once = false;
         }
         let Some(request) = &current else { continue };
+        if refinement == Refinement::Converged && request.at_rest && shown_once {
+            let mut interrupted = false;
+            let result = session.render_interruptible(&request.camera, Mode::Converged, &mut |_| {
+                let inbox = shared.inbox.lock().unwrap_or_else(PoisonError::into_inner);
+                interrupted = inbox.stop || inbox.latest.is_some();
+                if interrupted {
+                    ControlFlow::Break(())
+                } else {
+                    ControlFlow::Continue(())
+                }
+            });
+            // An interrupted frame is dropped (some of its pixels were never traced); the next request follows.
+            refining = false;
+            match result {
+                Ok(frame) if !interrupted => {
+                    let residency = session.residency();
+                    let shown = shown_frame(request, frame, [residency.bytes, residency.budget_bytes]);
+                    let _ = events.send(WorkerEvent::Frame(Box::new(shown)));
+                }
+                Ok(_) => {}
+                Err(error) => {
+                    let _ = events.send(WorkerEvent::Error(format!("cannot render this view: {error}")));
+                }
+            }
+            notify();
+            continue;
+        }
+        shown_once = true;
         match session.render(&request.camera, Mode::Interactive) {
             Ok(frame) => {
                 let stalled = frame.pending > 0 && frame.served == 0 && !frame.blended;

@@ -18,6 +18,7 @@
 //! shading phong           # or none
 //! lod-bias 1              # coarser (positive) or finer (negative) level of detail
 //! overlay on              # mark the pixels still missing data
+//! levels on              # colour the volume by the tree level each sample's data came from
 //! iso 1500                # an exact isosurface at this data value instead of the volume (`iso off`: the volume)
 //! wait 0.5                # seconds
 //! quit                    # close the window
@@ -36,7 +37,7 @@ pub const DEFAULT_WAIT_FINAL: Duration = Duration::from_secs(120);
 /// The commands, with what each takes.
 const COMMANDS: &str = "wait-final [SECONDS], wait SECONDS, screenshot PNG, orbit YAW PITCH, pan RIGHT UP, zoom FACTOR, \
                         fly FORWARD RIGHT UP, reset, tf-point VALUE R G B OPACITY, tf-delete INDEX, load-tf FILE, \
-                        save-tf FILE, save-camera FILE, shading phong|none, lod-bias BIAS, overlay on|off, iso VALUE|off, quit";
+                        save-tf FILE, save-camera FILE, shading phong|none, lod-bias BIAS, overlay on|off, levels on|off, iso VALUE|off, quit";
 
 /// One scripted action.
 #[derive(Clone, Debug, PartialEq)]
@@ -73,6 +74,8 @@ pub enum ScriptCommand {
     LodBias(f64),
     /// The missing-data overlay on or off.
     Overlay(bool),
+    /// Colour by the level used, on or off.
+    Levels(bool),
     /// An isosurface at this value instead of the volume, or the volume again.
     Iso(Option<f64>),
     /// Close the window.
@@ -191,6 +194,7 @@ fn parse_line(line: &str) -> Result<ScriptCommand, String> {
         "shading" => ScriptCommand::Phong(switch("phong", "none")?),
         "lod-bias" => ScriptCommand::LodBias(numbers(1)?[0]),
         "overlay" => ScriptCommand::Overlay(switch("on", "off")?),
+        "levels" => ScriptCommand::Levels(switch("on", "off")?),
         "iso" => match rest.as_slice() {
             ["off"] => ScriptCommand::Iso(None),
             _ => ScriptCommand::Iso(Some(numbers(1).map_err(|_| "`iso` takes a data value or `off`".to_string())?[0])),
@@ -258,7 +262,7 @@ mod properties {
         /// Lines of known words with arbitrary arguments, likewise.
         #[test]
         fn command_words_with_any_arguments(lines in proptest::collection::vec(
-            ("(wait-final|wait|screenshot|orbit|pan|zoom|fly|reset|tf-point|tf-delete|load-tf|save-tf|save-camera|shading|lod-bias|overlay|iso|quit)",
+            ("(wait-final|wait|screenshot|orbit|pan|zoom|fly|reset|tf-point|tf-delete|load-tf|save-tf|save-camera|shading|lod-bias|overlay|levels|iso|quit)",
              proptest::collection::vec("[-+0-9.eEnaifNA ]{0,8}|on|off|phong|none|x.png", 0..6)), 0..12)) {
             let text: String = lines.iter().map(|(verb, args)| format!("{verb} {}\n", args.join(" "))).collect();
             if let Err(error) = Script::parse(&text, "s") {

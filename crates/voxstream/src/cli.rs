@@ -70,6 +70,11 @@ pub struct ViewArgs {
     /// Level blending (Thiele et al.): arriving bricks fade in instead of popping.
     #[arg(long, value_enum, default_value_t = Switch::On)]
     pub blending: Switch,
+    /// How a view at rest reaches its final image: converged (passes that trace again only what still misses data,
+    /// interrupted by any input; the final image appears at once, as fast as `render`) or blended (interactive
+    /// frames until final: detail fades in, several times slower).
+    #[arg(long, value_enum, default_value_t = RefineArg::Converged)]
+    pub refine: RefineArg,
     /// Lighting (default: the scene's).
     #[arg(long, value_enum)]
     pub shading: Option<ShadingArg>,
@@ -234,9 +239,22 @@ pub struct RenderArgs {
     /// Level-of-detail bias (positive = finer than one voxel per pixel).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub lod_bias: f64,
+    /// A diagnostic: colour the volume by the tree level each sample's data came from (eight hues, repeating),
+    /// keeping the transfer function's opacity.
+    #[arg(long)]
+    pub colour_by_level: bool,
     /// No progress bar, no list of files written and no summary line (warnings and errors are still printed).
     #[arg(long)]
     pub quiet: bool,
+}
+
+/// `view --refine`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum RefineArg {
+    /// Converged passes, interrupted by input.
+    Converged,
+    /// Blended interactive frames.
+    Blended,
 }
 
 /// On or off.

@@ -96,6 +96,7 @@ fn unreachable_default() -> RenderArgs {
         step: 0.5,
         in_memory: false,
         lod_bias: 0.0,
+        colour_by_level: false,
         quiet: false,
     }
 }

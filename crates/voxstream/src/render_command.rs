@@ -336,6 +336,7 @@ pub fn prepare_view<P>(args: &RenderArgs, source: &Source<P>) -> Result<Prepared
         background: args.background.map(|c| c as f32),
         step_factor: args.step,
         lod_bias: args.lod_bias,
+        colour_by_level: args.colour_by_level,
         placement: source.placement,
         ..RenderSettings::default()
     };

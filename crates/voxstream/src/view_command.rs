@@ -7,9 +7,9 @@ use voxstream_core::Producer;
 use voxstream_engine::{LoopLimits, MemoryBudget, Session, MAX_BUDGET_MB};
 use voxstream_render::TransferFunction;
 use voxstream_viewer::script::Script;
-use voxstream_viewer::{run_viewer, ViewerConfig};
+use voxstream_viewer::{run_viewer, Refinement, ViewerConfig};
 
-use crate::cli::{Cli, Command, RenderArgs, Switch, ViewArgs};
+use crate::cli::{Cli, Command, RefineArg, RenderArgs, Switch, ViewArgs};
 use crate::render_budget::{check_budget, plan_budget};
 use crate::render_command::{open_source, prepare_view, Source, SourceUser};
 
@@ -36,7 +36,11 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         None => None,
     };
     let budget = check_budget(args.budget_mb, args.width, args.height, "--width/--height")?;
-    open_source(&render_args, &budget, ShowInWindow { script, stats: args.stats.clone() })
+    let refinement = match args.refine {
+        RefineArg::Converged => Refinement::Converged,
+        RefineArg::Blended => Refinement::Blended,
+    };
+    open_source(&render_args, &budget, ShowInWindow { script, stats: args.stats.clone(), refinement })
 }
 
 /// `render`'s arguments with `view`'s values, so that the source, the flags and their errors are `render`'s.
@@ -68,6 +72,7 @@ fn render_args(args: &ViewArgs) -> Result<RenderArgs> {
 struct ShowInWindow {
     script: Option<Script>,
     stats: Option<std::path::PathBuf>,
+    refinement: Refinement,
 }
 
 impl SourceUser for ShowInWindow {
@@ -94,6 +99,7 @@ impl SourceUser for ShowInWindow {
             script: self.script,
             pool_budget_bytes: plan.pool_bytes,
             stats_path: self.stats,
+            refinement: self.refinement,
         };
         let session = Session::with_value_range(
             source.producer,

@@ -151,6 +151,14 @@ fn a_scripted_session_rotates_edits_and_saves_what_render_reproduces() {
     assert!(out.status.success(), "render --iso: {}", String::from_utf8_lossy(&out.stderr));
     assert_eq!(pixels(&dir.join("render-d.png")), pixels(&dir.join("d.png")), "the viewer's isosurface and render's differ");
     assert!(mean_difference(&c, &pixels(&dir.join("d.png"))) > 1.0, "the isosurface replaced the volume");
+    // Refined by blended interactive frames instead of converged passes: the same final image.
+    std::fs::write(dir.join("blended.txt"), "orbit 40 10\nwait-final 600\nscreenshot e.png\nquit\n").unwrap();
+    let out = under_xvfb(
+        &dir,
+        &format!("{viewer} view balls.zarr --width 160 --height 120 --budget-mb 64 --refine blended --script blended.txt"),
+    );
+    assert!(out.status.success(), "viewer --refine blended: {}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(pixels(&dir.join("e.png")), pixels(&dir.join("render-b.png")), "blended refinement ends at render's image");
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
