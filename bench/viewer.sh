@@ -2,13 +2,14 @@
 # Measures what a user of `voxstream view` feels, in a virtual X server (Xvfb, Mesa's software OpenGL): the first
 # image, the first final image, frames while the view moves (a scripted drag: 60 turns of 1.5°, 50 ms apart), and the
 # time from the last input to the final image. Usage:
-#   bench/viewer.sh SOURCE [SIZE] [OUT.json]      e.g. bench/viewer.sh hypertexture 512
+#   bench/viewer.sh SOURCE [SIZE] [OUT.json] [VIEW FLAGS…]   e.g. bench/viewer.sh hypertexture 512 out.json --refine blended
 # Needs xvfb-run (Debian: xvfb xauth libgl1-mesa-dri) and a release build (cargo build --release).
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 source="${1:?usage: bench/viewer.sh SOURCE [SIZE] [OUT.json]}"
 size="${2:-512}"
 out="${3:-target/viewer-bench.json}"
+shift $(( $# < 3 ? $# : 3 ))
 command -v xvfb-run >/dev/null || { echo "xvfb-run is needed (Debian: apt-get install xvfb xauth libgl1-mesa-dri)" >&2; exit 1; }
 script="$(mktemp --suffix=.txt)"
 trap 'rm -f "$script"' EXIT
@@ -19,7 +20,7 @@ trap 'rm -f "$script"' EXIT
     echo "quit"
 } > "$script"
 xvfb-run -a -s "-screen 0 1600x1200x24" ./target/release/voxstream view "$source" --width "$size" --height "$size" \
-    --script "$script" --stats "$out"
+    --script "$script" --stats "$out" "$@"
 python3 - "$out" <<'PY'
 import json, sys
 s = json.load(open(sys.argv[1]))
