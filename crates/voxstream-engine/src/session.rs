@@ -107,15 +107,18 @@ pub struct FrameResult {
     pub blended: bool,
     /// Producer failures met in this frame.
     pub failures: Vec<ProduceError>,
+    /// Whether [`Session::render_interruptible`]'s observer stopped the frame early (then it is not converged,
+    /// whatever `pending` says: some pixels may never have been traced).
+    pub interrupted: bool,
     /// Per pixel, row by row: whether its ray missed data in the last pass (coarser data stood in, or, in a
     /// converged frame that gave up, nothing better could be loaded).
     pub missing: Vec<bool>,
 }
 
 impl FrameResult {
-    /// Whether no ray of the final pass missed anything.
+    /// Whether no ray of the final pass missed anything (and the frame was not interrupted).
     pub fn is_converged(&self) -> bool {
-        self.pending == 0
+        self.pending == 0 && !self.interrupted
     }
 
     /// Whether the image is final: converged, and no brick blended towards its parent.
@@ -319,6 +322,7 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
             served: 0,
             blended: false,
             failures: Vec::new(),
+            interrupted: false,
             missing: Vec::new(),
         };
         let mut progressive = ProgressiveImage::new(self.settings.width, self.settings.height);
@@ -380,6 +384,7 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
                 bricks_produced: result.bricks_produced,
             });
             if flow.is_break() {
+                result.interrupted = true;
                 break;
             }
             let stalled = report.pending > 0 && report.served == 0;
@@ -515,7 +520,7 @@ mod tests {
             })
             .unwrap();
         assert_eq!((passes, interrupted.passes), (1, 1));
-        assert!(!interrupted.is_converged(), "stopped after one pass with requests pending");
+        assert!(interrupted.interrupted && !interrupted.is_converged(), "stopped after one pass");
         let resumed = session.render(&camera, Mode::Converged).unwrap();
         let mut fresh = Session::new(Ball, &tf, settings, 16 << 20, LoopLimits::default()).unwrap();
         assert_eq!(resumed.image.pixels, fresh.render(&camera, Mode::Converged).unwrap().image.pixels);

@@ -41,6 +41,9 @@ pub fn from_paraview_json(text: &str, value_range: [f64; 2]) -> Result<TransferF
     }
     let [lo, hi] = value_range;
     let (lo, hi) = if hi > lo && lo.is_finite() && hi.is_finite() { (lo, hi) } else { (0.0, 1.0) };
+    if !(x1 - x0).is_finite() {
+        return Err(invalid(format!("RGBPoints spans too wide a range: first x {x0}, last x {x1}")));
+    }
     let rescale = |x: f64| lo + (x - x0) / (x1 - x0) * (hi - lo);
     let colour_points: Vec<(f64, [f64; 3])> = colours.iter().map(|p| (rescale(p[0]), [p[1], p[2], p[3]])).collect();
     let opacity_points: Vec<(f64, [f64; 1])> = match &opacities {
@@ -48,6 +51,9 @@ pub fn from_paraview_json(text: &str, value_range: [f64; 2]) -> Result<TransferF
         _ => vec![(lo, [0.0]), (hi, [DEFAULT_RAMP_OPACITY])],
     };
     let mut xs: Vec<f64> = colour_points.iter().map(|p| p.0).chain(opacity_points.iter().map(|p| p.0)).collect();
+    if xs.iter().any(|x| !x.is_finite()) {
+        return Err(invalid("the points cannot be rescaled onto the data's range (x values too far apart)"));
+    }
     xs.sort_by(f64::total_cmp);
     let tolerance = (hi - lo) * 1e-12;
     xs.dedup_by(|b, a| (*b - *a).abs() <= tolerance);
@@ -59,7 +65,7 @@ pub fn from_paraview_json(text: &str, value_range: [f64; 2]) -> Result<TransferF
         .map(|&x| {
             let [r, g, b] = piecewise_linear(&colour_points, x);
             let [alpha] = piecewise_linear(&opacity_points, x);
-            [x, r, g, b, alpha].map(|c| if c == x { c } else { c.clamp(0.0, 1.0) })
+            [x, r.clamp(0.0, 1.0), g.clamp(0.0, 1.0), b.clamp(0.0, 1.0), alpha.clamp(0.0, 1.0)]
         })
         .collect();
     TransferFunction::new(points, None)
@@ -105,7 +111,7 @@ fn piecewise_linear<const C: usize>(points: &[(f64, [f64; C])], x: f64) -> [f64;
     if x >= last.0 {
         return last.1;
     }
-    let i = points.partition_point(|p| p.0 <= x);
+    let i = points.partition_point(|p| p.0 <= x).clamp(1, points.len() - 1);
     let (a, b) = (points[i - 1], points[i]);
     if b.0 <= a.0 {
         return b.1;
@@ -150,5 +156,9 @@ mod tests {
         assert!(message(r#"{"RGBPoints": [0, "a", 0, 0, 1, 1, 1, 1]}"#).contains("RGBPoints[1] is not a finite number"));
         assert!(message(r#"{"Name": "x"}"#).contains("no ParaView preset"));
         assert!(message("[1, 2").contains("malformed JSON"));
+        assert!(message(r#"{"RGBPoints": [-1e308, 0, 0, 0, 1e308, 1, 1, 1]}"#).contains("too wide"));
+        // A colour equal to its x, outside [0, 1], is clamped like any other.
+        let tf = from_paraview_json(r#"{"RGBPoints": [0, 0, 0, 0, 1.5, 1.5, 1, 1]}"#, [0.0, 1.5]).unwrap();
+        assert_eq!(tf.points[1][1], 1.0);
     }
 }

@@ -153,11 +153,18 @@ impl ViewerApp {
         self.last_input = Some(Instant::now());
     }
 
+    /// Back to the starting view (counts as input).
+    fn reset_view(&mut self) {
+        self.orbit = OrbitCamera::from_camera(&self.config.camera);
+        self.note_input();
+    }
+
     /// The request for the current state: full size at rest, smaller while moving.
     fn desired_request(&self) -> ViewRequest {
         let mut settings = self.settings.clone();
         settings.focus = Some(self.focus);
-        if self.moving() {
+        let moving = self.moving();
+        if moving {
             settings.width = (settings.width / self.moving_divisor).max(1);
             settings.height = (settings.height / self.moving_divisor).max(1);
         }
@@ -166,7 +173,7 @@ impl ViewerApp {
             camera: self.orbit.to_camera(),
             transfer_function: self.editor.transfer_function(),
             settings,
-            at_rest: !self.moving(),
+            at_rest: !moving,
         }
     }
 
@@ -180,8 +187,11 @@ impl ViewerApp {
                 || last.at_rest != request.at_rest
                 || last.transfer_function != request.transfer_function
                 || unfocused != request.settings
-                // A new focus matters only while data is still loading.
-                || (last.settings.focus != request.settings.focus && refining)
+                // A new focus matters only while data is still loading frame by frame (converged passes at rest
+                // serve every request anyway, and a new request would interrupt them).
+                || (last.settings.focus != request.settings.focus
+                    && refining
+                    && (!request.at_rest || self.config.refinement == crate::render_worker::Refinement::Blended))
         });
         if changed {
             self.revision += 1;
@@ -300,7 +310,7 @@ impl ViewerApp {
             self.note_input();
         }
         if reset != 0 {
-            self.orbit = OrbitCamera::from_camera(&self.config.camera);
+            self.reset_view();
         }
         if help != 0 {
             self.show_help = !self.show_help;
@@ -387,7 +397,7 @@ impl ViewerApp {
         ui.separator();
         ui.horizontal(|ui| {
             if ui.button("reset view (R)").clicked() {
-                self.orbit = OrbitCamera::from_camera(&self.config.camera);
+                self.reset_view();
             }
             if ui.button("help (H)").clicked() {
                 self.show_help = !self.show_help;
@@ -514,7 +524,7 @@ impl ViewerApp {
             }
         }
         if response.double_clicked() {
-            self.orbit = OrbitCamera::from_camera(&self.config.camera);
+            self.reset_view();
         }
         if self.show_help {
             let text = "left drag: orbit · right/middle drag or shift+drag: pan · wheel: zoom\n\
@@ -589,7 +599,7 @@ impl ViewerApp {
                 self.orbit.fly(forward, right, up);
                 self.note_input();
             }
-            ScriptCommand::Reset => self.orbit = OrbitCamera::from_camera(&self.config.camera),
+            ScriptCommand::Reset => self.reset_view(),
             ScriptCommand::TfPoint([value, r, g, b, alpha]) => {
                 if let Some(index) = self.editor.add_point(value, alpha) {
                     self.editor.set_color(index, [r, g, b]);
@@ -694,6 +704,7 @@ impl eframe::App for ViewerApp {
 
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
         let ctx = ui.ctx().clone();
+        let overlay_before = self.overlay_missing;
         self.receive(&ctx);
         self.keyboard(&ctx);
         egui::Panel::bottom("status").show(ui, |ui| self.status_line(ui));
@@ -712,6 +723,13 @@ impl eframe::App for ViewerApp {
         });
         egui::CentralPanel::default().show(ui, |ui| self.image(ui));
         self.run_script(&ctx);
+        if self.overlay_missing != overlay_before {
+            // The image shown now, with or without the marks (frames may have stopped coming).
+            if let Some(shown) = self.shown.take() {
+                self.upload(&ctx, &shown);
+                self.shown = Some(shown);
+            }
+        }
         self.post_request_if_changed();
         if self.moving() {
             // Ask for the full-size frame once the view rests.

@@ -20,8 +20,8 @@ use voxstream_render::{Camera, RenderSettings, TransferFunction};
 use crate::histogram::{sample_histogram, ValueHistogram};
 
 /// Frames in a row that serve no request and leave some pending before the thread stops refining (a budget too
-/// small for the view, or bricks that fail).
-const STALLED_FRAMES: u32 = 3;
+/// small for the view, or bricks that fail); enough for fades under way to finish.
+const STALLED_FRAMES: u32 = 3 + voxstream_core::DEFAULT_FADE_FRAMES;
 
 /// How a view at rest is refined to its final image.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -195,6 +195,8 @@ fn render_loop<P: Producer, R: FrameRenderer>(
         };
         if let Some(request) = next {
             if let Err(message) = apply(&mut session, current.as_ref(), &request) {
+                // The session may hold part of the refused request (its transfer function): compare with nothing.
+                current = None;
                 let _ = events.send(WorkerEvent::Error(message));
                 notify();
                 refining = false;
@@ -239,7 +241,9 @@ fn render_loop<P: Producer, R: FrameRenderer>(
         shown_once = true;
         match session.render(&request.camera, Mode::Interactive) {
             Ok(frame) => {
-                let stalled = frame.pending > 0 && frame.served == 0 && !frame.blended;
+                // Nothing served with requests pending: nothing more will arrive (fades may still finish within
+                // the allowance).
+                let stalled = frame.pending > 0 && frame.served == 0;
                 if request.at_rest {
                     let limit = session.limits().requests_per_frame;
                     let production_ms = frame.elapsed_ms - frame.render_ms;

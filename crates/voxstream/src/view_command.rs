@@ -19,8 +19,12 @@ pub fn run(args: &ViewArgs) -> Result<()> {
     if args.width == 0 || args.height == 0 {
         bail!("image size must be positive, got {}x{}", args.width, args.height);
     }
-    if args.budget_mb == 0 || args.budget_mb > MAX_BUDGET_MB {
-        bail!("--budget-mb must be between 1 and {MAX_BUDGET_MB}, got {}", args.budget_mb);
+    // `render`'s messages.
+    if args.budget_mb == 0 {
+        bail!("--budget-mb must be at least 1");
+    }
+    if args.budget_mb > MAX_BUDGET_MB {
+        bail!("--budget-mb {} is larger than 1 TiB", args.budget_mb);
     }
     if args.requests_per_frame == 0 {
         bail!("--requests-per-frame must be at least 1");
