@@ -92,11 +92,18 @@ fn numbers(value: Option<&Value>, name: &str, group: usize) -> Result<Vec<Vec<f6
     let flat: Vec<f64> = list
         .iter()
         .enumerate()
-        .map(|(i, v)| v.as_f64().filter(|f| f.is_finite()).ok_or_else(|| invalid(format!("{name}[{i}] is not a finite number"))))
+        .map(|(i, v)| {
+            v.as_f64().filter(|f| f.is_finite()).ok_or_else(|| invalid(format!("{name}[{i}] is not a finite number")))
+        })
         .collect::<Result<_, _>>()?;
     let groups: Vec<Vec<f64>> = flat.chunks(group).map(<[f64]>::to_vec).collect();
     if let Some(i) = groups.windows(2).position(|w| w[1][0] < w[0][0]) {
-        return Err(invalid(format!("{name}: x must not decrease (point {} at {} follows {})", i + 1, groups[i + 1][0], groups[i][0])));
+        return Err(invalid(format!(
+            "{name}: x must not decrease (point {} at {} follows {})",
+            i + 1,
+            groups[i + 1][0],
+            groups[i][0]
+        )));
     }
     Ok(groups)
 }
@@ -140,7 +147,8 @@ mod tests {
 
     #[test]
     fn opacity_points_merge_with_the_colour_points() {
-        let text = r#"{"RGBPoints": [-1, 0, 0, 0, 1, 1, 1, 1], "Points": [-1, 0, 0.5, 0, 0, 0.5, 0.5, 0, 1, 0.2, 0.5, 0]}"#;
+        let text =
+            r#"{"RGBPoints": [-1, 0, 0, 0, 1, 1, 1, 1], "Points": [-1, 0, 0.5, 0, 0, 0.5, 0.5, 0, 1, 0.2, 0.5, 0]}"#;
         let tf = from_paraview_json(text, [0.0, 10.0]).unwrap();
         assert_eq!(tf.points.iter().map(|p| p[0]).collect::<Vec<_>>(), vec![0.0, 5.0, 10.0]);
         assert_eq!(tf.points[1], [5.0, 0.5, 0.5, 0.5, 0.5]);

@@ -548,7 +548,9 @@ impl ViewerApp {
     }
 
     fn save_tf(&mut self, path: &std::path::Path) {
-        if let Err(message) = write_atomically(path, transfer_function_json(&self.editor.transfer_function()).as_bytes()) {
+        if let Err(message) =
+            write_atomically(path, transfer_function_json(&self.editor.transfer_function()).as_bytes())
+        {
             self.message(message);
         }
     }
@@ -625,11 +627,9 @@ impl ViewerApp {
             ScriptCommand::LodBias(bias) => self.settings.lod_bias = bias,
             ScriptCommand::Overlay(on) => self.overlay_missing = on,
             ScriptCommand::Levels(on) => self.settings.colour_by_level = on,
-            ScriptCommand::Iso(value) => self.set_isosurface(value.map(|value| IsoSurface {
-                value,
-                color: [0.9, 0.8, 0.7],
-                opacity: 1.0,
-            })),
+            ScriptCommand::Iso(value) => {
+                self.set_isosurface(value.map(|value| IsoSurface { value, color: [0.9, 0.8, 0.7], opacity: 1.0 }))
+            }
             ScriptCommand::Quit => ctx.send_viewport_cmd(egui::ViewportCommand::Close),
         }
         if let Some(message) = failure {

@@ -45,7 +45,8 @@ pub fn sample_histogram<P: Producer>(producer: &P, value_range: [f64; 2]) -> Val
     let stored = shape.stored_brick_size() as usize;
     let border = BRICK_BORDER as usize;
     let mut counts = vec![0u64; HISTOGRAM_BINS];
-    let bin_of = |normalised: f64| ((normalised.clamp(0.0, 1.0) * HISTOGRAM_BINS as f64) as usize).min(HISTOGRAM_BINS - 1);
+    let bin_of =
+        |normalised: f64| ((normalised.clamp(0.0, 1.0) * HISTOGRAM_BINS as f64) as usize).min(HISTOGRAM_BINS - 1);
     let brick_voxels = (m * m * m) as u64;
     let mut voxels = vec![0u16; stored * stored * stored];
     for k in 0..per_axis {

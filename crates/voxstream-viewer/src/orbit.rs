@@ -96,10 +96,7 @@ impl OrbitCamera {
 pub fn reference_axes(up: DVec3) -> (DVec3, DVec3) {
     // The world axis least aligned with `up`, projected into the plane perpendicular to it.
     let candidates = [DVec3::X, DVec3::Y, DVec3::Z];
-    let least = candidates
-        .into_iter()
-        .min_by(|a, b| a.dot(up).abs().total_cmp(&b.dot(up).abs()))
-        .unwrap_or(DVec3::X);
+    let least = candidates.into_iter().min_by(|a, b| a.dot(up).abs().total_cmp(&b.dot(up).abs())).unwrap_or(DVec3::X);
     let first = (least - up * least.dot(up)).normalize();
     let second = up.cross(first);
     (first, second)
@@ -119,10 +116,9 @@ mod tests {
 
     #[test]
     fn a_camera_round_trips_through_the_orbit() {
-        for camera in [
-            scene_camera(),
-            Camera { eye: [3.0, -4.0, 2.0], target: [0.2, 0.1, 0.4], up: [0.0, 0.0, 1.0], fov: 30.0 },
-        ] {
+        for camera in
+            [scene_camera(), Camera { eye: [3.0, -4.0, 2.0], target: [0.2, 0.1, 0.4], up: [0.0, 0.0, 1.0], fov: 30.0 }]
+        {
             let back = OrbitCamera::from_camera(&camera).to_camera();
             assert!(close(back.eye, camera.eye), "{:?} != {:?}", back.eye, camera.eye);
             assert_eq!(back.target, camera.target);

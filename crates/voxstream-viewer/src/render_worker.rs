@@ -286,7 +286,10 @@ fn apply<P: Producer, R: FrameRenderer>(
     if session.settings() != &request.settings {
         session.set_settings(request.settings.clone()).map_err(|e| format!("invalid settings: {e}"))?;
     }
-    request.camera.frame(request.settings.width, request.settings.height).map_err(|e| format!("invalid camera: {e}"))?;
+    request
+        .camera
+        .frame(request.settings.width, request.settings.height)
+        .map_err(|e| format!("invalid camera: {e}"))?;
     Ok(())
 }
 

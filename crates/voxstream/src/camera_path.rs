@@ -23,8 +23,9 @@ pub fn read_camera_file(path: &Path) -> Result<Camera> {
 
 /// Parses one camera: an object, or a path of one camera.
 pub fn parse_camera_file(text: &str) -> Result<Camera> {
-    let value: Value = serde_json::from_str(text)
-        .map_err(|e| anyhow!(r#"not valid JSON ({e}): expected {{"eye": [x,y,z], "target": [x,y,z], "up": [x,y,z], "fov": 40}}"#))?;
+    let value: Value = serde_json::from_str(text).map_err(|e| {
+        anyhow!(r#"not valid JSON ({e}): expected {{"eye": [x,y,z], "target": [x,y,z], "up": [x,y,z], "fov": 40}}"#)
+    })?;
     if let Value::Object(object) = &value {
         if !object.contains_key("cameras") {
             let camera = parse_camera(&value)?;

@@ -80,14 +80,24 @@ pub fn run(args: &RenderArgs) -> Result<()> {
 /// What is done with an opened source: `render` draws it to files, `view` shows it in a window.
 pub trait SourceUser {
     /// Uses `source`, opened from `args.source` within `budget`.
-    fn use_source<P: Producer + 'static>(self, args: &RenderArgs, source: Source<P>, budget: &MemoryBudget) -> Result<()>;
+    fn use_source<P: Producer + 'static>(
+        self,
+        args: &RenderArgs,
+        source: Source<P>,
+        budget: &MemoryBudget,
+    ) -> Result<()>;
 }
 
 /// `render`'s use: frames to PNG files, statistics.
 struct RenderToFiles;
 
 impl SourceUser for RenderToFiles {
-    fn use_source<P: Producer + 'static>(self, args: &RenderArgs, source: Source<P>, budget: &MemoryBudget) -> Result<()> {
+    fn use_source<P: Producer + 'static>(
+        self,
+        args: &RenderArgs,
+        source: Source<P>,
+        budget: &MemoryBudget,
+    ) -> Result<()> {
         render_source(args, source, budget)
     }
 }

@@ -80,7 +80,12 @@ struct ShowInWindow {
 }
 
 impl SourceUser for ShowInWindow {
-    fn use_source<P: Producer + 'static>(self, args: &RenderArgs, source: Source<P>, budget: &MemoryBudget) -> Result<()> {
+    fn use_source<P: Producer + 'static>(
+        self,
+        args: &RenderArgs,
+        source: Source<P>,
+        budget: &MemoryBudget,
+    ) -> Result<()> {
         let prepared = prepare_view(args, &source)?;
         // After the source and the flags (their errors are `render`'s), before the pools are allocated.
         if !voxstream_viewer::has_display() {

@@ -21,8 +21,12 @@ fn scratch(name: &str) -> PathBuf {
 }
 
 fn require(tool: &str) {
-    let found = Command::new("sh").args(["-c", &format!("command -v {tool}")]).output().is_ok_and(|o| o.status.success());
-    assert!(found, "{tool} is needed for the viewer tests (Debian: apt-get install xvfb xauth xdotool libgl1-mesa-dri)");
+    let found =
+        Command::new("sh").args(["-c", &format!("command -v {tool}")]).output().is_ok_and(|o| o.status.success());
+    assert!(
+        found,
+        "{tool} is needed for the viewer tests (Debian: apt-get install xvfb xauth xdotool libgl1-mesa-dri)"
+    );
 }
 
 /// A 48×40×36 u16 NRRD: a large ball and a small one off to the side, so that turning the view changes the image.
@@ -36,8 +40,13 @@ fn write_two_balls(path: &Path) {
         for j in 0..ny {
             for i in 0..nx {
                 let ball = |c: [f64; 3], r: f64| {
-                    let d = ((i as f64 - c[0]).powi(2) + (j as f64 - c[1]).powi(2) + (k as f64 - c[2]).powi(2)).sqrt() / r;
-                    if d < 1.0 { 1.0 - d * d } else { 0.0 }
+                    let d =
+                        ((i as f64 - c[0]).powi(2) + (j as f64 - c[1]).powi(2) + (k as f64 - c[2]).powi(2)).sqrt() / r;
+                    if d < 1.0 {
+                        1.0 - d * d
+                    } else {
+                        0.0
+                    }
                 };
                 let v = 3000.0 * ball([18.0, 20.0, 18.0], 13.0) + 4000.0 * ball([38.0, 12.0, 26.0], 7.0);
                 bytes.extend((v as u16).to_le_bytes());
@@ -119,7 +128,12 @@ fn a_scripted_session_rotates_edits_and_saves_what_render_reproduces() {
         &dir,
         &format!("{viewer} view balls.zarr --width 160 --height 120 --budget-mb 64 --script session.txt"),
     );
-    assert!(out.status.success(), "viewer: {}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "viewer: {}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
     let (a, b, c) = (pixels(&dir.join("a.png")), pixels(&dir.join("b.png")), pixels(&dir.join("c.png")));
     assert_eq!(a.len(), 160 * 120 * 3, "screenshots are at the render size");
     assert!(a.iter().any(|&v| v > 20), "the volume is visible");
@@ -129,10 +143,25 @@ fn a_scripted_session_rotates_edits_and_saves_what_render_reproduces() {
     let (yaw, pitch) = turn(&camera(&dir.join("a.json")), &camera(&dir.join("b.json")));
     assert!((yaw - 40.0).abs() < 1e-6 && (pitch - 10.0).abs() < 1e-6, "turned by yaw {yaw}°, pitch {pitch}°");
     // `render` with the saved files draws the same bytes.
-    for (image, camera, tf) in [("a", "a.json", "tf-a.json"), ("b", "b.json", "tf-a.json"), ("c", "b.json", "tf-c.json")] {
+    for (image, camera, tf) in
+        [("a", "a.json", "tf-a.json"), ("b", "b.json", "tf-a.json"), ("c", "b.json", "tf-c.json")]
+    {
         let out = voxstream(
-            &["render", "balls.zarr", "--width", "160", "--height", "120", "--camera", camera, "--tf", tf, "--out",
-              &format!("render-{image}.png"), "--quiet"],
+            &[
+                "render",
+                "balls.zarr",
+                "--width",
+                "160",
+                "--height",
+                "120",
+                "--camera",
+                camera,
+                "--tf",
+                tf,
+                "--out",
+                &format!("render-{image}.png"),
+                "--quiet",
+            ],
             &dir,
         );
         assert!(out.status.success(), "render: {}", String::from_utf8_lossy(&out.stderr));
@@ -144,21 +173,46 @@ fn a_scripted_session_rotates_edits_and_saves_what_render_reproduces() {
     }
     // The isosurface is the same integrand of the same loop as `render --iso`.
     let out = voxstream(
-        &["render", "balls.zarr", "--width", "160", "--height", "120", "--camera", "b.json", "--iso", "1500",
-          "--iso-color", "0.9,0.8,0.7", "--out", "render-d.png", "--quiet"],
+        &[
+            "render",
+            "balls.zarr",
+            "--width",
+            "160",
+            "--height",
+            "120",
+            "--camera",
+            "b.json",
+            "--iso",
+            "1500",
+            "--iso-color",
+            "0.9,0.8,0.7",
+            "--out",
+            "render-d.png",
+            "--quiet",
+        ],
         &dir,
     );
     assert!(out.status.success(), "render --iso: {}", String::from_utf8_lossy(&out.stderr));
-    assert_eq!(pixels(&dir.join("render-d.png")), pixels(&dir.join("d.png")), "the viewer's isosurface and render's differ");
+    assert_eq!(
+        pixels(&dir.join("render-d.png")),
+        pixels(&dir.join("d.png")),
+        "the viewer's isosurface and render's differ"
+    );
     assert!(mean_difference(&c, &pixels(&dir.join("d.png"))) > 1.0, "the isosurface replaced the volume");
     // Refined by blended interactive frames instead of converged passes: the same final image.
     std::fs::write(dir.join("blended.txt"), "orbit 40 10\nwait-final 600\nscreenshot e.png\nquit\n").unwrap();
     let out = under_xvfb(
         &dir,
-        &format!("{viewer} view balls.zarr --width 160 --height 120 --budget-mb 64 --refine blended --script blended.txt"),
+        &format!(
+            "{viewer} view balls.zarr --width 160 --height 120 --budget-mb 64 --refine blended --script blended.txt"
+        ),
     );
     assert!(out.status.success(), "viewer --refine blended: {}", String::from_utf8_lossy(&out.stderr));
-    assert_eq!(pixels(&dir.join("e.png")), pixels(&dir.join("render-b.png")), "blended refinement ends at render's image");
+    assert_eq!(
+        pixels(&dir.join("e.png")),
+        pixels(&dir.join("render-b.png")),
+        "blended refinement ends at render's image"
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
@@ -189,11 +243,19 @@ xdotool mouseup 1
 wait $pid"#
     );
     let out = under_xvfb(&dir, &harness);
-    assert!(out.status.success(), "viewer: {}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "viewer: {}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
     // 100 pixels dragged to the right at 0.4° per point: the eye goes about 40° the other way about the up axis (the
     // first pixels start the drag), and no pitch.
     let (yaw, pitch) = turn(&camera(&dir.join("before.json")), &camera(&dir.join("after.json")));
-    assert!((-45.0..-25.0).contains(&yaw) && pitch.abs() < 1e-9, "the drag turned the camera by yaw {yaw}°, pitch {pitch}°");
+    assert!(
+        (-45.0..-25.0).contains(&yaw) && pitch.abs() < 1e-9,
+        "the drag turned the camera by yaw {yaw}°, pitch {pitch}°"
+    );
     assert_eq!(pixels(&dir.join("after.png")).len(), 320 * 240 * 3, "the full-size image came back after the drag");
     std::fs::remove_dir_all(&dir).unwrap();
 }
