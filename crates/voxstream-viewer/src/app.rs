@@ -15,7 +15,7 @@ use eframe::egui::{self, Color32, ColorImage, Key, TextureHandle, TextureOptions
 use voxstream_render::{Camera, IsoSurface, RenderSettings, Shading, TransferFunction};
 
 use crate::files::{camera_json, load_transfer_function, save_png, transfer_function_json, write_atomically};
-use crate::histogram::ValueHistogram;
+use crate::histogram::SampledHistogram;
 use crate::orbit::OrbitCamera;
 use crate::render_worker::{RenderWorker, ShownFrame, ViewRequest, WorkerEvent};
 use crate::script::{Script, ScriptCommand};
@@ -85,7 +85,7 @@ pub struct ViewerApp {
     orbit: OrbitCamera,
     editor: TransferFunctionEditor,
     settings: RenderSettings,
-    histogram: Option<ValueHistogram>,
+    histogram: Option<SampledHistogram>,
     revision: u64,
     last_request: Option<ViewRequest>,
     last_input: Option<Instant>,

@@ -15,7 +15,7 @@ pub const HISTOGRAM_BINS: usize = 128;
 
 /// Counts of voxel values over the producer's value range.
 #[derive(Clone, Debug, PartialEq)]
-pub struct ValueHistogram {
+pub struct SampledHistogram {
     /// Data values of the first bin's lower edge and the last bin's upper edge.
     pub value_range: [f64; 2],
     /// Voxels per bin, equal widths.
@@ -24,7 +24,7 @@ pub struct ValueHistogram {
     pub level: u32,
 }
 
-impl ValueHistogram {
+impl SampledHistogram {
     /// The largest count (0 when empty).
     pub fn max_count(&self) -> u64 {
         self.counts.iter().copied().max().unwrap_or(0)
@@ -33,7 +33,7 @@ impl ValueHistogram {
 
 /// Samples the histogram of `producer`, whose voxel values 0 and 1 stand for `value_range`. Nodes that fail to
 /// produce are left out (the renderer reports them).
-pub fn sample_histogram<P: Producer>(producer: &P, value_range: [f64; 2]) -> ValueHistogram {
+pub fn sample_histogram<P: Producer>(producer: &P, value_range: [f64; 2]) -> SampledHistogram {
     let shape = producer.shape();
     let n = shape.n as u64;
     let mut level = 0;
@@ -77,7 +77,7 @@ pub fn sample_histogram<P: Producer>(producer: &P, value_range: [f64; 2]) -> Val
             }
         }
     }
-    ValueHistogram { value_range, counts, level }
+    SampledHistogram { value_range, counts, level }
 }
 
 #[cfg(test)]

@@ -17,7 +17,7 @@ use voxstream_core::Producer;
 use voxstream_engine::{FrameRenderer, FrameResult, Mode, Session};
 use voxstream_render::{Camera, RenderSettings, TransferFunction};
 
-use crate::histogram::{sample_histogram, ValueHistogram};
+use crate::histogram::{sample_histogram, SampledHistogram};
 
 /// Frames in a row that serve no request and leave some pending before the thread stops refining (a budget too
 /// small for the view, or bricks that fail); enough for fades under way to finish.
@@ -93,7 +93,7 @@ pub enum WorkerEvent {
     /// A frame.
     Frame(Box<ShownFrame>),
     /// The value histogram of the source, sampled once after the first frame.
-    Histogram(ValueHistogram),
+    Histogram(SampledHistogram),
     /// A request could not be rendered (the message is for the window; the thread goes on with the next request).
     Error(String),
 }

@@ -11,7 +11,7 @@
 use eframe::egui::{self, Color32, Pos2, Rect, Sense, Stroke, Vec2};
 use voxstream_render::TransferFunction;
 
-use crate::histogram::ValueHistogram;
+use crate::histogram::SampledHistogram;
 
 /// Pixels within which a click picks a point.
 const PICK_RADIUS: f32 = 8.0;
@@ -119,7 +119,7 @@ impl TransferFunctionEditor {
 
     /// Draws the editor over `histogram` (when sampled) and handles the pointer; returns whether the function
     /// changed. `value_range` is the source's.
-    pub fn show(&mut self, ui: &mut egui::Ui, histogram: Option<&ValueHistogram>, value_range: [f64; 2]) -> bool {
+    pub fn show(&mut self, ui: &mut egui::Ui, histogram: Option<&SampledHistogram>, value_range: [f64; 2]) -> bool {
         let before = self.points.clone();
         let width = ui.available_width().max(120.0);
         let (response, painter) = ui.allocate_painter(Vec2::new(width, 150.0), Sense::click_and_drag());
@@ -216,7 +216,7 @@ impl TransferFunctionEditor {
     }
 }
 
-fn draw_histogram(painter: &egui::Painter, rect: Rect, histogram: &ValueHistogram, lo: f64, span: f64) {
+fn draw_histogram(painter: &egui::Painter, rect: Rect, histogram: &SampledHistogram, lo: f64, span: f64) {
     let max = histogram.max_count();
     if max == 0 {
         return;

@@ -209,7 +209,8 @@ fn check_geometry_flags(args: &RenderArgs, source: &str) -> Result<()> {
     Ok(())
 }
 
-fn check_flags(args: &RenderArgs) -> Result<()> {
+/// `render`'s checks of the flags (also `view`'s, on the arguments it builds).
+pub fn check_flags(args: &RenderArgs) -> Result<()> {
     if args.width == 0 || args.height == 0 {
         bail!("image size must be positive, got {}x{}", args.width, args.height);
     }

@@ -4,31 +4,20 @@
 use anyhow::{bail, Context, Result};
 use clap::Parser;
 use voxstream_core::Producer;
-use voxstream_engine::{LoopLimits, MemoryBudget, Session, MAX_BUDGET_MB};
+use voxstream_engine::{LoopLimits, MemoryBudget, Session};
 use voxstream_render::TransferFunction;
 use voxstream_viewer::script::Script;
 use voxstream_viewer::{run_viewer, Refinement, ViewerConfig};
 
 use crate::cli::{Cli, Command, RefineArg, RenderArgs, Switch, ViewArgs};
 use crate::render_budget::{check_budget, plan_budget};
-use crate::render_command::{open_source, prepare_view, Source, SourceUser};
+use crate::render_command::{check_flags, open_source, prepare_view, Source, SourceUser};
 
 /// Runs `voxstream view`.
 pub fn run(args: &ViewArgs) -> Result<()> {
     let render_args = render_args(args)?;
-    if args.width == 0 || args.height == 0 {
-        bail!("image size must be positive, got {}x{}", args.width, args.height);
-    }
-    // `render`'s messages.
-    if args.budget_mb == 0 {
-        bail!("--budget-mb must be at least 1");
-    }
-    if args.budget_mb > MAX_BUDGET_MB {
-        bail!("--budget-mb {} is larger than 1 TiB", args.budget_mb);
-    }
-    if args.requests_per_frame == 0 {
-        bail!("--requests-per-frame must be at least 1");
-    }
+    // `render`'s checks and messages (size, budget, requests per frame).
+    check_flags(&render_args)?;
     if let Some(parent) = args.stats.as_ref().and_then(|p| p.parent()).filter(|p| !p.as_os_str().is_empty()) {
         if !parent.is_dir() {
             bail!("--stats: folder {} does not exist", parent.display());
