@@ -79,9 +79,14 @@ impl<'a> EmissionAbsorption<'a> {
 }
 
 impl Integrand for EmissionAbsorption<'_> {
-    #[inline]
+    #[inline(always)]
     fn can_contribute(&self, lower: f32, upper: f32) -> bool {
         self.lut.is_visible_in(lower, upper)
+    }
+
+    #[inline(always)]
+    fn contributes_throughout(&self, lower: f32, upper: f32) -> bool {
+        self.lut.is_visible_throughout(lower, upper)
     }
 
     #[inline]

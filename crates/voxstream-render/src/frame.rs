@@ -12,6 +12,7 @@ use crate::error::RenderError;
 use crate::image::Image;
 use crate::isosurface::SurfaceSettings;
 use crate::ray_caster::RayCaster;
+use crate::sampler::LANES;
 use crate::settings::RenderSettings;
 use crate::surface_caster::SurfaceCaster;
 use crate::transfer_function::TransferLut;
@@ -35,6 +36,27 @@ pub trait PixelTracer: Sync {
         requests: &mut Vec<Request>,
         path: &mut DescentPath,
     ) -> ([f32; 3], f32);
+
+    /// Traces the rays `(id, direction)` from `origin` and hands each one's `(id, colour, opacity, made requests)`
+    /// to `emit`, in any order (a tracer may trace several side by side). One after another by default.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn trace_rays(
+        &self,
+        origin: glam::DVec3,
+        rays: impl Iterator<Item = (usize, glam::DVec3)>,
+        spread: f64,
+        stats: &mut RayStats,
+        requests: &mut Vec<Request>,
+        paths: &mut [DescentPath; LANES],
+        mut emit: impl FnMut(usize, [f32; 3], f32, bool),
+    ) {
+        for (id, direction) in rays {
+            let before = requests.len();
+            let (color, alpha) = self.trace(origin, direction, spread, stats, requests, &mut paths[0]);
+            emit(id, color, alpha, requests.len() > before);
+        }
+    }
 }
 
 /// Edge of the square image tiles handed to worker threads.
@@ -184,7 +206,7 @@ fn render_tile<T: PixelTracer>(
         raw_requests: 0,
     };
     let mut requests: Vec<Request> = Vec::new();
-    let mut path = DescentPath::new(caster.view());
+    let mut paths: [DescentPath; LANES] = std::array::from_fn(|_| DescentPath::new(caster.view()));
     // The loop and what it inlines (the whole traversal) are compiled for each instruction set; one is picked here.
     settings.instruction_set.arch().dispatch(TileLoop {
         caster,
@@ -199,7 +221,7 @@ fn render_tile<T: PixelTracer>(
         stride: settings.pixel_stride.max(1),
         result: &mut result,
         requests: &mut requests,
-        path: &mut path,
+        paths: &mut paths,
     });
     // Neighbouring rays miss the same nodes: merge them here so the frame's request list stays small.
     result.raw_requests = requests.len();
@@ -229,7 +251,7 @@ struct TileLoop<'t, T> {
     stride: u32,
     result: &'t mut TileResult,
     requests: &'t mut Vec<Request>,
-    path: &'t mut DescentPath,
+    paths: &'t mut [DescentPath; LANES],
 }
 
 impl<T: PixelTracer> pulp::WithSimd for TileLoop<'_, T> {
@@ -250,31 +272,38 @@ impl<T: PixelTracer> pulp::WithSimd for TileLoop<'_, T> {
             stride,
             result,
             requests,
-            path,
+            paths,
         } = self;
         let (columns, rows) = pixels;
-        for y in rows {
-            for x in columns.clone() {
-                if !pending[(y * width + x) as usize] || x % stride != 0 || y % stride != 0 {
-                    // Not traced this pass: the pixel keeps its value and its pending flag.
-                    result.pixels.push(None);
-                    result.pending.push(false);
-                    continue;
-                }
-                // In volume space, with t still measured in world units.
-                let direction = frame.direction(x, y, width, height) / scale;
-                let before = requests.len();
-                let (color, alpha) =
-                    caster.trace(origin, direction, frame.pixel_spread, &mut result.stats, requests, path);
-                result.pending.push(requests.len() > before);
+        let tile_width = columns.len();
+        let count = tile_width * rows.len();
+        // Pixels not traced this pass keep their value and their pending flag.
+        result.pixels.resize(count, None);
+        result.pending.resize(count, false);
+        let traced = rows
+            .flat_map(|y| columns.clone().map(move |x| (x, y)))
+            .enumerate()
+            .filter(|&(_, (x, y))| pending[(y * width + x) as usize] && x % stride == 0 && y % stride == 0);
+        // In volume space, with t still measured in world units.
+        let rays = traced.map(|(index, (x, y))| (index, frame.direction(x, y, width, height) / scale));
+        let (pixels, flags) = (&mut result.pixels, &mut result.pending);
+        caster.trace_rays(
+            origin,
+            rays,
+            frame.pixel_spread,
+            &mut result.stats,
+            requests,
+            paths,
+            |index, color, alpha, requested| {
+                flags[index] = requested;
                 let t = 1.0 - alpha;
-                result.pixels.push(Some([
+                pixels[index] = Some([
                     color[0] + t * background[0],
                     color[1] + t * background[1],
                     color[2] + t * background[2],
                     alpha,
-                ]));
-            }
-        }
+                ]);
+            },
+        );
     }
 }

@@ -65,6 +65,15 @@ pub trait Integrand {
     /// change a single bit of the result.
     fn can_contribute(&self, lower: f32, upper: f32) -> bool;
 
+    /// Whether every value in `[lower, upper]` can change the result, so that [`Integrand::can_contribute`] holds
+    /// for every range inside it: the traversal then checks no occupancy block of a brick whose values lie there.
+    /// `false` is always correct (the default).
+    #[inline(always)]
+    fn contributes_throughout(&self, lower: f32, upper: f32) -> bool {
+        let _ = (lower, upper);
+        false
+    }
+
     /// Whether [`Sample::gradient`] is needed (it costs a few operations per sample).
     fn wants_gradient(&self) -> bool;
 

@@ -8,6 +8,7 @@ use voxstream_core::{FeedbackBuffer, Request, TreeView};
 
 use crate::emission_absorption::{EmissionAbsorption, EmissionAbsorptionSettings};
 use crate::frame::PixelTracer;
+use crate::sampler::LANES;
 use crate::settings::RenderSettings;
 use crate::transfer_function::TransferLut;
 use crate::traversal::{DescentPath, Ray, RayStats, Traversal};
@@ -17,6 +18,8 @@ pub struct RayCaster<'a> {
     traversal: Traversal<'a>,
     lut: &'a TransferLut,
     integrand: EmissionAbsorptionSettings,
+    /// Whether rays are traced side by side ([`RenderSettings::ray_packets`]).
+    ray_packets: bool,
 }
 
 impl<'a> RayCaster<'a> {
@@ -31,6 +34,7 @@ impl<'a> RayCaster<'a> {
             traversal: Traversal::new(view, feedback, settings),
             lut,
             integrand: EmissionAbsorptionSettings::new(settings),
+            ray_packets: settings.ray_packets,
         }
     }
 }
@@ -53,5 +57,36 @@ impl PixelTracer for RayCaster<'_> {
         let mut integrand = EmissionAbsorption::new(self.lut, &self.integrand, direction);
         self.traversal.trace(&Ray { origin, direction, spread, start: 0.0 }, &mut integrand, stats, requests, path);
         integrand.result()
+    }
+
+    #[inline(always)]
+    fn trace_rays(
+        &self,
+        origin: DVec3,
+        mut rays: impl Iterator<Item = (usize, DVec3)>,
+        spread: f64,
+        stats: &mut RayStats,
+        requests: &mut Vec<Request>,
+        paths: &mut [DescentPath; LANES],
+        mut emit: impl FnMut(usize, [f32; 3], f32, bool),
+    ) {
+        if !self.ray_packets {
+            for (id, direction) in rays {
+                let before = requests.len();
+                let (color, alpha) = self.trace(origin, direction, spread, stats, requests, &mut paths[0]);
+                emit(id, color, alpha, requests.len() > before);
+            }
+            return;
+        }
+        let next_ray = || {
+            let (id, direction) = rays.next()?;
+            let integrand = EmissionAbsorption::new(self.lut, &self.integrand, direction);
+            Some((id, Ray { origin, direction, spread, start: 0.0 }, integrand))
+        };
+        let finish = |id, integrand: EmissionAbsorption<'_>, requested| {
+            let (color, alpha) = integrand.result();
+            emit(id, color, alpha, requested);
+        };
+        self.traversal.trace_stream(next_ray, finish, stats, requests, paths);
     }
 }

@@ -187,6 +187,62 @@ fn corners_along(
     (corners, fraction)
 }
 
+/// One point on each of `LANES` independent lines, each through its own brick of the pool (`voxels`, `b` voxels
+/// per axis, brick `j` starting at `bases[j]`): lane `j` samples `start[·][j] + k[j]·delta[·][j]`. The same
+/// arithmetic as [`Cell::locate`] and [`Cell::value`] per lane, so the same bits as sampling each line alone, with
+/// the lanes in SIMD registers: rays traced side by side (seed 002 §4, Knoll et al.'s packets) rather than points
+/// along one ray. Every lane reads inside its brick whatever its position (positions are clamped), so unused lanes
+/// are harmless; `bases[j] + b³ ≤ voxels.len()` is checked per lane.
+#[inline(always)]
+pub fn values_across(
+    voxels: &[u16],
+    b: usize,
+    bases: &[u32; LANES],
+    start: &[[f32; LANES]; 3],
+    delta: &[[f32; LANES]; 3],
+    k: &[f32; LANES],
+) -> [f32; LANES] {
+    let max = (b - 1) as f32;
+    let last_cell = b as u32 - 2;
+    let (row, slab) = (b, b * b);
+    let mut fraction = [[0f32; LANES]; 3];
+    let mut index = [0u32; LANES];
+    for j in 0..LANES {
+        let mut ijk = [0u32; 3];
+        for a in 0..3 {
+            let c = (start[a][j] + k[j] * delta[a][j]).max(0.0).min(max);
+            // Through `i32`: one SIMD instruction for all lanes before AVX-512 (`c` is in `[0, b−1]`, so the
+            // same integer as a `u32` conversion).
+            let i = (c as i32 as u32).min(last_cell);
+            ijk[a] = i;
+            fraction[a][j] = c - i as i32 as f32;
+        }
+        index[j] = (ijk[2] * b as u32 + ijk[1]) * b as u32 + ijk[0];
+    }
+    let mut corners = [[0f32; LANES]; 8];
+    let offsets = [0, 1, row, row + 1, slab, slab + 1, slab + row, slab + row + 1];
+    for j in 0..LANES {
+        let at = bases[j] as usize + index[j] as usize;
+        let cell = &voxels[at..at + slab + row + 2];
+        for (corner, &offset) in offsets.iter().enumerate() {
+            corners[corner][j] = cell[offset] as f32;
+        }
+    }
+    let [fx, fy, fz] = fraction;
+    let mut out = [0f32; LANES];
+    for j in 0..LANES {
+        let v = |corner: usize| corners[corner][j];
+        let c00 = v(0) + (v(1) - v(0)) * fx[j];
+        let c10 = v(2) + (v(3) - v(2)) * fx[j];
+        let c01 = v(4) + (v(5) - v(4)) * fx[j];
+        let c11 = v(6) + (v(7) - v(6)) * fx[j];
+        let c0 = c00 + (c10 - c00) * fy[j];
+        let c1 = c01 + (c11 - c01) * fy[j];
+        out[j] = dequantize_scale(c0 + (c1 - c0) * fz[j]);
+    }
+    out
+}
+
 /// A value interpolated from stored voxels, normalised like [`voxstream_core::dequantize`].
 #[inline(always)]
 fn dequantize_scale(stored: f32) -> f32 {
@@ -252,6 +308,31 @@ mod tests {
             hi[a] += 0.01;
             let numeric = (trilinear(&brick, b, hi) - trilinear(&brick, b, lo)) / 0.02;
             assert!((numeric - g[a]).abs() < 1e-3, "axis {a}: {numeric} vs {}", g[a]);
+        }
+    }
+
+    #[test]
+    fn values_across_lines_of_different_bricks_are_the_single_point_values_bit_for_bit() {
+        let b = 10;
+        let per_brick = b * b * b;
+        // Three bricks in one pool; lanes read them in turn, each along its own line at its own sample index.
+        let pool: Vec<u16> = (0..3 * per_brick).map(|i| ((i * 7919 + 13) % 65536) as u16).collect();
+        let bases: [u32; LANES] = std::array::from_fn(|j| ((j % 3) * per_brick) as u32);
+        let mut start = [[0f32; LANES]; 3];
+        let mut delta = [[0f32; LANES]; 3];
+        for j in 0..LANES {
+            for a in 0..3 {
+                start[a][j] = ((j * 3 + a) as f32 * 1.37) % 11.0 - 1.0;
+                delta[a][j] = ((j + 2 * a) as f32 * 0.29) % 1.3 - 0.6;
+            }
+        }
+        for k in [[0f32; LANES], std::array::from_fn(|j| (j * j) as f32), [40.0; LANES]] {
+            let values = values_across(&pool, b, &bases, &start, &delta, &k);
+            for j in 0..LANES {
+                let x: [f32; 3] = std::array::from_fn(|a| start[a][j] + k[j] * delta[a][j]);
+                let brick = &pool[bases[j] as usize..bases[j] as usize + per_brick];
+                assert_eq!(values[j].to_bits(), trilinear(brick, b, x).to_bits(), "lane {j} at {x:?}");
+            }
         }
     }
 

@@ -98,6 +98,9 @@ pub struct RenderSettings {
     /// Evaluate samples [`crate::sampler::LANES`] at a time where possible (the same bits as one at a time, which
     /// stays as the reference; off only to test that).
     pub sample_batches: bool,
+    /// Trace [`crate::sampler::LANES`] rays side by side, their samples taken together (the same bits as one ray
+    /// at a time, which stays as the reference; off only to test that). Volume rendering only.
+    pub ray_packets: bool,
     /// Instructions the ray loop uses (detected at run time by default; the image is the same either way).
     pub instruction_set: InstructionSet,
     /// Isosurfaces to draw instead of the volume (Knoll et al.); empty = volume rendering.
@@ -177,6 +180,7 @@ impl Default for RenderSettings {
             skip_empty_space: true,
             instruction_set: InstructionSet::Detect,
             sample_batches: true,
+            ray_packets: true,
             surfaces: Vec::new(),
             shadows: false,
             surface_normals: SurfaceNormals::Cell,

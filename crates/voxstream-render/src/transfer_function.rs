@@ -201,6 +201,7 @@ impl TransferLut {
 
     /// Whether some normalised value in `[lower, upper]` has non-zero extinction (conservative, for empty-space
     /// skipping).
+    #[inline(always)]
     pub fn is_visible_in(&self, lower: f32, upper: f32) -> bool {
         let position = |v: f32| ((v - self.lower) * self.scale).clamp(0.0, (LUT_SIZE - 1) as f32);
         // `lookup` reads entries ⌊x⌋ and ⌊x⌋+1, the latter with weight x − ⌊x⌋. A constant range is sampled exactly
@@ -212,11 +213,60 @@ impl TransferLut {
         let (a, b) = (first, last);
         self.visible_before[b + 1] > self.visible_before[a]
     }
+
+    /// Whether every entry that a normalised value in `[lower, upper]` reads has non-zero extinction. Then
+    /// [`TransferLut::is_visible_in`] holds for every range inside `[lower, upper]`: the entries such a range reads
+    /// (a superset, widened by its slack) always overlap these.
+    #[inline(always)]
+    pub fn is_visible_throughout(&self, lower: f32, upper: f32) -> bool {
+        let position = |v: f32| ((v - self.lower) * self.scale).clamp(0.0, (LUT_SIZE - 1) as f32);
+        let first = position(lower) as u32 as usize;
+        let last = ((position(upper).ceil() as u32) as usize).min(LUT_SIZE - 1);
+        first <= last && (self.visible_before[last + 1] - self.visible_before[first]) as usize == last + 1 - first
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn visible_throughout_a_range_means_visible_in_every_range_inside_it() {
+        // Invisible below 0.3 and in a notch around 0.6; values far outside the table's range too.
+        let tf = TransferFunction::new(
+            vec![
+                [0.0, 1.0, 1.0, 1.0, 0.0],
+                [0.3, 1.0, 1.0, 1.0, 0.0],
+                [0.31, 1.0, 1.0, 1.0, 0.5],
+                [0.59, 1.0, 1.0, 1.0, 0.5],
+                [0.6, 1.0, 1.0, 1.0, 0.0],
+                [0.61, 1.0, 1.0, 1.0, 0.5],
+                [1.0, 1.0, 1.0, 1.0, 0.5],
+            ],
+            Some(1.0),
+        )
+        .expect("valid function");
+        let lut = TransferLut::new(&tf, 0.0, 1.0, 1.0);
+        assert!(lut.is_visible_throughout(0.35, 0.55));
+        assert!(!lut.is_visible_throughout(0.35, 0.65), "the notch");
+        assert!(!lut.is_visible_throughout(0.1, 0.2));
+        let grid: Vec<f32> = (0..=200).map(|i| i as f32 / 200.0).collect();
+        let mut throughout = 0;
+        for (i, &lower) in grid.iter().enumerate() {
+            for &upper in &grid[i..] {
+                if !lut.is_visible_throughout(lower, upper) {
+                    continue;
+                }
+                throughout += 1;
+                for (k, &a) in grid.iter().enumerate().filter(|&(_, &a)| a >= lower && a <= upper) {
+                    for &b in grid[k..].iter().filter(|&&b| b <= upper) {
+                        assert!(lut.is_visible_in(a, b), "[{a}, {b}] inside [{lower}, {upper}]");
+                    }
+                }
+            }
+        }
+        assert!(throughout > 100, "only {throughout} ranges visible throughout");
+    }
 
     #[test]
     fn parses_and_interpolates() {

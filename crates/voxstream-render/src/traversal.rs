@@ -36,7 +36,7 @@ use voxstream_core::{
 };
 
 use crate::integrand::{BrickSpan, Integrand, Sample};
-use crate::sampler::{values_along, values_and_gradients_along, Cell, LANES};
+use crate::sampler::{values_across, values_along, values_and_gradients_along, Cell, LANES};
 use crate::settings::RenderSettings;
 use crate::step_table::StepLength;
 
@@ -44,6 +44,8 @@ use crate::step_table::StepLength;
 const MAX_TABLE_LEVELS: usize = 64;
 /// A ray may not cross more segments than this (guards against any numerical stall).
 const MAX_SEGMENTS: u32 = 1 << 20;
+/// Fewest samples at the end of a run taken as one (partly unused) batch of `LANES`.
+const MIN_PADDED_BATCH: u32 = 3;
 
 /// Counters of one ray batch.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -262,48 +264,235 @@ impl<'a> Traversal<'a> {
         requests: &mut Vec<Request>,
         path: &mut DescentPath,
     ) {
-        let mut sink = RequestSink { requests, remaining: self.max_requests_per_ray };
-        let request = &mut sink;
+        let Some(mut walk) = self.begin(ray, stats, path) else { return };
+        while let Some(march) = self.next_march(&mut walk, integrand, stats, requests, path) {
+            if self.march_bricks(&walk.ray, march, integrand, stats).is_break() {
+                return;
+            }
+        }
+    }
+
+    /// Traces the rays `next_ray` hands out, [`LANES`] side by side (Knoll et al.'s packets, seed 002 §4, as a
+    /// stream): each lane walks its own ray exactly as [`Traversal::trace`] does (same descents, segments, steps,
+    /// skipped blocks and samples, so the same bits), but the samples of all lanes are taken together, one per lane
+    /// per step, by [`values_across`], each lane in its own brick. A lane whose ray ends takes the next ray at
+    /// once, so the lanes stay full until the rays run out; rays therefore finish out of order, and `finish` gets
+    /// each one's id, integrand and whether it made requests. Segments that blend levels or need gradients are
+    /// marched by their lane alone ([`Traversal::march_bricks`]); span integrands ([`Integrand::TAKES_SPANS`]) take
+    /// the whole path of `trace` (one lane at a time). Always inlined, like `trace`.
+    #[inline(always)]
+    pub fn trace_stream<I: Integrand>(
+        &self,
+        mut next_ray: impl FnMut() -> Option<(usize, Ray, I)>,
+        mut finish: impl FnMut(usize, I, bool),
+        stats: &mut RayStats,
+        requests: &mut Vec<Request>,
+        paths: &mut [DescentPath; LANES],
+    ) {
+        let b = self.stored;
+        let per_brick = self.view.shape.voxels_per_brick();
+        let mut lanes: [Option<Lane<'a, I>>; LANES] = std::array::from_fn(|_| None);
+        let mut exhausted = false;
+        // The busy lanes' lines, lane by lane (what `values_across` reads).
+        let mut bases = [0u32; LANES];
+        let mut start = [[0f32; LANES]; 3];
+        let mut delta = [[0f32; LANES]; 3];
+        let mut kf = [0f32; LANES];
+        loop {
+            // Every lane gets samples to take: the rest of its run, the next run of its segment, the next segment
+            // of its ray, or a new ray.
+            let mut burst = u32::MAX;
+            for (j, (lane, path)) in lanes.iter_mut().zip(paths.iter_mut()).enumerate() {
+                let mut sources =
+                    LaneSources { next_ray: &mut next_ray, finish: &mut finish, exhausted: &mut exhausted };
+                if let Some(run) = self.fill_lane(lane, path, &mut sources, stats, requests) {
+                    bases[j] = (run.line.slot.0 as usize * per_brick) as u32;
+                    for a in 0..3 {
+                        start[a][j] = run.line.start[a];
+                        delta[a][j] = run.line.delta[a];
+                    }
+                    kf[j] = run.k as f32;
+                    burst = burst.min(run.end - run.k);
+                }
+            }
+            if burst == u32::MAX {
+                return;
+            }
+            // Until the first lane reaches the end of its run, no lane needs a check: samples only.
+            for _ in 0..burst {
+                let values = values_across(self.view.voxels, b, &bases, &start, &delta, &kf);
+                for (j, slot) in lanes.iter_mut().enumerate() {
+                    let Some(lane) = slot else { continue };
+                    let Some(run) = &mut lane.run else { continue };
+                    let sample = Sample { t: run.first + run.k as f64 * run.dt, value: values[j], gradient: [0.0; 3] };
+                    run.k += 1;
+                    stats.samples += 1;
+                    if lane.integrand.sample(sample).is_break() {
+                        if let Some(lane) = slot.take() {
+                            finish(lane.id, lane.integrand, lane.walk.requested);
+                        }
+                    }
+                }
+                for k in &mut kf {
+                    *k += 1.0;
+                }
+            }
+        }
+    }
+
+    /// Gives `slot` samples to take: the rest of its run, else the next run of its segment, else the next segment
+    /// of its ray (segments that cannot go in a lane are marched here), else a new ray; finishes the rays that end
+    /// on the way. Returns the lane's run, or `None` once the rays have run out.
+    #[inline(always)]
+    fn fill_lane<'l, I: Integrand, N, F>(
+        &self,
+        slot: &'l mut Option<Lane<'a, I>>,
+        path: &mut DescentPath,
+        sources: &mut LaneSources<'_, N, F>,
+        stats: &mut RayStats,
+        requests: &mut Vec<Request>,
+    ) -> Option<&'l LaneRun<'a>>
+    where
+        N: FnMut() -> Option<(usize, Ray, I)>,
+        F: FnMut(usize, I, bool),
+    {
+        loop {
+            let Some(lane) = slot else {
+                if *sources.exhausted {
+                    return None;
+                }
+                let Some((id, ray, integrand)) = (sources.next_ray)() else {
+                    *sources.exhausted = true;
+                    return None;
+                };
+                match self.begin(&ray, stats, path) {
+                    Some(walk) => *slot = Some(Lane { id, walk, integrand, run: None }),
+                    None => (sources.finish)(id, integrand, false),
+                }
+                continue;
+            };
+            let mut ended = false;
+            if let Some(run) = &mut lane.run {
+                if run.k >= run.end {
+                    // The next run of the segment, if any.
+                    let k = run.resume.unwrap_or(run.end);
+                    let segment = (run.first, run.dt, run.count);
+                    match self.next_run(&run.line, None, segment, k, &lane.integrand) {
+                        Some((from, to, resume)) if k < run.count => {
+                            (run.k, run.end, run.resume) = (from, to, resume);
+                        }
+                        _ => lane.run = None,
+                    }
+                }
+            }
+            if lane.run.is_none() {
+                match self.next_march(&mut lane.walk, &mut lane.integrand, stats, requests, path) {
+                    None => ended = true,
+                    Some(march) => {
+                        if march.coarse.is_some() || lane.integrand.wants_gradient() {
+                            ended = self.march_bricks(&lane.walk.ray, march, &mut lane.integrand, stats).is_break();
+                        } else {
+                            lane.run = self.lane_run(&lane.walk.ray, march, &lane.integrand);
+                        }
+                    }
+                }
+            }
+            if ended {
+                if let Some(lane) = slot.take() {
+                    (sources.finish)(lane.id, lane.integrand, lane.walk.requested);
+                }
+                continue;
+            }
+            if let Some(Lane { run: Some(run), .. }) = slot {
+                return Some(run);
+            }
+        }
+    }
+
+    /// The first run of samples of a segment in a lane (`None` when nothing in it can contribute).
+    #[inline(always)]
+    fn lane_run<I: Integrand>(&self, ray: &Ray, march: March, integrand: &I) -> Option<LaneRun<'a>> {
+        let March { fine, first, dt, count, .. } = march;
+        let count = count.min(u32::MAX as u64) as u32;
+        let mut check_blocks = self.skip_empty_space;
+        if self.skip_empty_space {
+            let [lo, hi] = self.view.brick_range(fine.slot);
+            if !integrand.can_contribute(lo, hi) {
+                return None;
+            }
+            check_blocks = !integrand.contributes_throughout(lo, hi);
+        }
+        let line = self.brick_line(ray, &fine, first, dt);
+        let (k, end, resume) =
+            if check_blocks { self.next_run(&line, None, (first, dt, count), 0, integrand)? } else { (0, count, None) };
+        Some(LaneRun { line, first, dt, count, k, end, resume })
+    }
+
+    /// Starts `ray`: counts it, clips it to the volume (`None` when it misses) and resets `path` to the root.
+    #[inline(always)]
+    fn begin(&self, ray: &Ray, stats: &mut RayStats, path: &mut DescentPath) -> Option<RayWalk> {
         stats.rays += 1;
-        let (origin, direction) = (ray.origin, ray.direction);
-        let Some((t_enter, t_leave)) = intersect_aabb(origin, direction, self.clip_lower, self.clip_upper) else {
-            return;
-        };
-        // Volume units travelled per unit of t.
-        let speed = direction.length();
-        let mut t = t_enter.max(ray.start);
-        let inverse_direction = DVec3::ONE / direction;
+        let (t_enter, t_leave) = intersect_aabb(ray.origin, ray.direction, self.clip_lower, self.clip_upper)?;
+        let t = t_enter.max(ray.start);
         path.reset(self.view);
         if let Some(slot) = path.entries[0].node.brick() {
             self.feedback.mark_brick(slot);
         }
-        // The distance up to which samples have accounted for the ray, and the current step (None before the first
-        // brick segment).
-        let mut covered = t;
-        let mut step: Option<StepLength> = None;
-        let mut segments = 0;
-        let mut level_hint = 0;
-        while t < t_leave && segments < MAX_SEGMENTS {
-            segments += 1;
+        Some(RayWalk {
+            ray: *ray,
+            speed: ray.direction.length(),
+            inverse_direction: DVec3::ONE / ray.direction,
+            t,
+            t_leave,
+            covered: t,
+            step: None,
+            segments: 0,
+            level_hint: 0,
+            requests_left: self.max_requests_per_ray,
+            requested: false,
+        })
+    }
+
+    /// Walks on from `walk.t` to the next brick segment whose samples must be taken, and returns it; constant
+    /// nodes, skipped segments and whole-span segments are handed to the integrand on the way. `None` when the ray
+    /// has left the volume or the integrand stopped it.
+    #[inline(always)]
+    fn next_march<I: Integrand>(
+        &self,
+        walk: &mut RayWalk,
+        integrand: &mut I,
+        stats: &mut RayStats,
+        requests: &mut Vec<Request>,
+        path: &mut DescentPath,
+    ) -> Option<March> {
+        let ray = &walk.ray;
+        let (origin, direction, speed) = (ray.origin, ray.direction, walk.speed);
+        while walk.t < walk.t_leave && walk.segments < MAX_SEGMENTS {
+            let t = walk.t;
+            walk.segments += 1;
             stats.descents += 1;
             let p = origin + direction * t;
-            let (footprint_voxel, target_level) = self.footprint_at(t, ray.spread, &mut level_hint);
-            let (data, box_level, box_ijk) = self.descend(p, target_level, path, request, integrand);
+            let (footprint_voxel, target_level) = self.footprint_at(t, ray.spread, &mut walk.level_hint);
+            let mut sink = RequestSink { requests, remaining: walk.requests_left, pushed: false };
+            let (data, box_level, box_ijk) = self.descend(p, target_level, path, &mut sink, integrand);
+            walk.requests_left = sink.remaining;
+            walk.requested |= sink.pushed;
             let node_size = 1.0 / self.scale[box_level as usize];
             let lower = DVec3::new(box_ijk[0] as f64, box_ijk[1] as f64, box_ijk[2] as f64) * node_size;
-            let t_exit = exit_distance(origin, inverse_direction, lower, node_size).min(t_leave);
+            let t_exit = exit_distance(origin, walk.inverse_direction, lower, node_size).min(walk.t_leave);
             // Never stall on a boundary: move at least a sliver of the node, and more than the rounding of p.
             let t_exit = t_exit.max(t + (node_size * 1e-7 + 8e-16 * p.abs().max_element()) / speed + 8e-16 * t);
+            walk.t = t_exit;
             let flow = match data {
                 SegmentData::Nothing => {
-                    covered = covered.max(t_exit);
+                    walk.covered = walk.covered.max(t_exit);
                     ControlFlow::Continue(())
                 }
                 SegmentData::Constant(value) => {
                     integrand.set_level(box_level);
                     // Integrated over exactly the distance not yet accounted for.
-                    let from = covered;
-                    covered = covered.max(t_exit);
+                    let from = walk.covered;
+                    walk.covered = walk.covered.max(t_exit);
                     if from < t_exit {
                         stats.samples += 1;
                         integrand.constant(from, t_exit, value)
@@ -314,7 +503,7 @@ impl<'a> Traversal<'a> {
                 SegmentData::Bricks { fine, .. } if I::TAKES_SPANS => {
                     // The whole segment at the fine brick's level: no level blending (the integrand closes the
                     // seams where the level changes).
-                    covered = covered.max(t_exit);
+                    walk.covered = walk.covered.max(t_exit);
                     let skip = self.skip_empty_space && {
                         let [lo, hi] = self.view.brick_range(fine.slot);
                         !integrand.can_contribute(lo, hi)
@@ -341,20 +530,20 @@ impl<'a> Traversal<'a> {
                     integrand.set_level(fine.level);
                     let blend = coarse.and(self.view.brick_blends.get(fine.slot.0 as usize)).filter(|b| !b.is_full());
                     let desired_step = sampled_voxel.max(footprint_voxel) * self.step_factor / speed;
-                    let segment_step = match step {
+                    let segment_step = match walk.step {
                         Some(current) if current.is_at_most(desired_step) => current,
                         _ => StepLength::at_most(desired_step),
                     };
-                    if step != Some(segment_step) {
-                        step = Some(segment_step);
+                    if walk.step != Some(segment_step) {
+                        walk.step = Some(segment_step);
                         integrand.set_step(segment_step);
                     }
                     let dt = segment_step.world;
                     // Each sample stands for the step around it: samples continue where the last one's step ended
                     // (exact where the step changes), and those before the node's exit belong to this segment.
-                    let first = covered + 0.5 * dt;
+                    let first = walk.covered + 0.5 * dt;
                     let count = if first < t_exit { ((t_exit - first) / dt).ceil().max(1.0) as u64 } else { 0 };
-                    covered += count as f64 * dt;
+                    walk.covered += count as f64 * dt;
                     if count == 0 {
                         ControlFlow::Continue(())
                     } else {
@@ -380,15 +569,15 @@ impl<'a> Traversal<'a> {
                             let gradient = blend.map(|_| WeightRamp::between(cap_first, cap_last, count));
                             (!value.is_fine() || gradient.is_some()).then_some((c, Blend { value, gradient }))
                         });
-                        self.march_bricks(ray, fine, coarse, first, dt, count, integrand, stats)
+                        return Some(March { fine, coarse, first, dt, count });
                     }
                 }
             };
             if flow.is_break() {
-                return;
+                return None;
             }
-            t = t_exit;
         }
+        None
     }
 
     /// The blending cap of `fine` (interpolated between its corners) where the ray is at `t`.
@@ -402,19 +591,17 @@ impl<'a> Traversal<'a> {
 
     /// Samples `count` points `first + k·dt` inside the bricks of one segment, skipping the runs that lie in
     /// occupancy blocks the integrand cannot use.
-    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn march_bricks<I: Integrand>(
         &self,
         ray: &Ray,
-        fine: BrickRef,
-        coarse: Option<(BrickRef, Blend)>,
-        first: f64,
-        dt: f64,
-        count: u64,
+        march: March,
         integrand: &mut I,
         stats: &mut RayStats,
     ) -> ControlFlow<()> {
+        let March { fine, coarse, first, dt, count } = march;
+        // Whether occupancy blocks are checked: not when every value of the bricks can contribute.
+        let mut check_blocks = self.skip_empty_space;
         if self.skip_empty_space {
             // Empty-space skipping: nothing in the bricks (fine, and coarse if blended) can contribute.
             let [mut lo, mut hi] = self.view.brick_range(fine.slot);
@@ -426,43 +613,25 @@ impl<'a> Traversal<'a> {
             if !integrand.can_contribute(lo, hi) {
                 return ControlFlow::Continue(());
             }
+            check_blocks = !integrand.contributes_throughout(lo, hi);
         }
         let fine_line = self.brick_line(ray, &fine, first, dt);
         let coarse_line = coarse.map(|(c, weight)| (self.brick_line(ray, &c, first, dt), weight));
         let gradient = integrand.wants_gradient();
-        let blocks = self.view.shape.blocks_per_axis();
         let count = count.min(u32::MAX as u64) as u32;
+        let coarse_brick_line = coarse_line.as_ref().map(|(line, _)| line);
         let mut k = 0u32;
         while k < count {
-            let run_end = if self.skip_empty_space {
-                // The occupancy blocks of sample k bound every sample in their cells.
-                let x = fine_line.at(k as f32);
-                let fine_cell = Cell::locate(self.stored, x);
-                let [mut lo, mut hi] = self.view.block_range(fine.slot, fine_cell.block(blocks));
-                let mut exit = block_exit(&fine_line, fine_cell.block_ijk());
-                if let Some((line, _)) = &coarse_line {
-                    let coarse_cell = Cell::locate(self.stored, line.at(k as f32));
-                    let [clo, chi] = self.view.block_range(line.slot, coarse_cell.block(blocks));
-                    lo = lo.min(clo);
-                    hi = hi.max(chi);
-                    exit = exit.min(block_exit(line, coarse_cell.block_ijk()));
-                }
-                if !integrand.can_contribute(lo, hi) {
-                    // Every sample before `exit` (less a margin above f32 rounding) is in these blocks.
-                    let next = ((exit - 1e-3 * dt - first) / dt).ceil();
-                    k = if next > k as f64 { (next as u64).min(count as u64) as u32 } else { k + 1 };
-                    continue;
-                }
-                // Samples up to the blocks' exit need no check (one past it would be harmless: it is sampled).
-                let end = ((exit - first) / dt).ceil();
-                if end > k as f64 {
-                    (end as u64).min(count as u64) as u32
-                } else {
-                    k + 1
+            // The next run of samples in blocks that can contribute, and where the one after it may start.
+            let (run_start, run_end, resume) = if check_blocks {
+                match self.next_run(&fine_line, coarse_brick_line, (first, dt, count), k, integrand) {
+                    Some(run) => run,
+                    None => break,
                 }
             } else {
-                count
+                (k, count, None)
             };
+            k = run_start;
             // One loop per combination, so that the loop itself holds no test of either.
             let (coarse, weight) = match &coarse_line {
                 Some((line, weight)) => (line, *weight),
@@ -494,9 +663,73 @@ impl<'a> Traversal<'a> {
                 }
                 ControlFlow::Continue(()) => stats.samples += (run_end - k) as u64,
             }
-            k = run_end;
+            k = resume.unwrap_or(run_end);
         }
         ControlFlow::Continue(())
+    }
+
+    /// Which occupancy blocks (fine, and coarse if blended) hold sample `k` of a segment (`first + k·dt`, `count`
+    /// samples), whether the integrand can use their values, and the first sample past them: `(true, end)` when it
+    /// can (samples up to the blocks' exit need no check; one past it would be harmless, it is sampled),
+    /// `(false, next)` when it cannot (every sample before `next`, the exit less a margin above f32 rounding, is in
+    /// these blocks). Always past `k`.
+    #[inline(always)]
+    fn check_blocks<I: Integrand>(
+        &self,
+        fine: &BrickLine<'_>,
+        coarse: Option<&BrickLine<'_>>,
+        (first, dt, count): (f64, f64, u32),
+        k: u32,
+        integrand: &I,
+    ) -> (bool, u32) {
+        let blocks = self.view.shape.blocks_per_axis();
+        let fine_cell = Cell::locate(self.stored, fine.at(k as f32));
+        let [mut lo, mut hi] = self.view.block_range(fine.slot, fine_cell.block(blocks));
+        let mut exit = block_exit(fine, fine_cell.block_ijk());
+        if let Some(line) = coarse {
+            let coarse_cell = Cell::locate(self.stored, line.at(k as f32));
+            let [clo, chi] = self.view.block_range(line.slot, coarse_cell.block(blocks));
+            lo = lo.min(clo);
+            hi = hi.max(chi);
+            exit = exit.min(block_exit(line, coarse_cell.block_ijk()));
+        }
+        let contributes = integrand.can_contribute(lo, hi);
+        let boundary = if contributes { (exit - first) / dt } else { (exit - 1e-3 * dt - first) / dt }.ceil();
+        let past = if boundary > k as f64 { (boundary as u64).min(count as u64) as u32 } else { k + 1 };
+        (contributes, past)
+    }
+
+    /// The next run of samples at or after `k` whose blocks can contribute, as `(start, end, resume)`: one run
+    /// through every following block that can contribute too (runs as long as the data allows, so that most samples
+    /// are taken LANES at a time), and `resume`, where the next run may start when this one ends at blocks that
+    /// cannot contribute (already checked). `None` when no sample is left.
+    #[inline(always)]
+    fn next_run<I: Integrand>(
+        &self,
+        fine: &BrickLine<'_>,
+        coarse: Option<&BrickLine<'_>>,
+        segment: (f64, f64, u32),
+        mut k: u32,
+        integrand: &I,
+    ) -> Option<(u32, u32, Option<u32>)> {
+        let count = segment.2;
+        while k < count {
+            let (contributes, past) = self.check_blocks(fine, coarse, segment, k, integrand);
+            if !contributes {
+                k = past;
+                continue;
+            }
+            let mut end = past;
+            while end < count {
+                let (contributes, past) = self.check_blocks(fine, coarse, segment, end, integrand);
+                if !contributes {
+                    return Some((k, end, Some(past)));
+                }
+                end = past;
+            }
+            return Some((k, end, None));
+        }
+        None
     }
 
     /// The inner loop: samples `k..end` of a segment (`run = (first, dt, k, end)`), with no skipping checks;
@@ -523,9 +756,12 @@ impl<'a> Traversal<'a> {
         let mut kf = k as f32;
         let mut s = k;
         // LANES samples at a time (the same values, bit for bit: see `values_along`); the integrand still takes
-        // them one by one, in order.
+        // them one by one, in order. A run's last few samples are a batch too, of which only those in the run are
+        // used (positions past the run are clamped into the brick, so reading them is safe); below
+        // `MIN_PADDED_BATCH` samples one at a time is cheaper.
         if self.sample_batches {
-            while s + LANES as u32 <= end {
+            while end - s >= MIN_PADDED_BATCH {
+                let take = (end - s).min(LANES as u32) as usize;
                 let (mut values, mut gradients) = if GRADIENT {
                     values_and_gradients_along(fine.voxels, b, fine.start, fine.delta, kf)
                 } else {
@@ -545,14 +781,14 @@ impl<'a> Traversal<'a> {
                         *value = coarse_value + (*value - coarse_value) * weight.at(kf + j as f32);
                     }
                 }
-                for (j, (&value, &gradient)) in values.iter().zip(&gradients).enumerate() {
+                for (j, (&value, &gradient)) in values.iter().zip(&gradients).take(take).enumerate() {
                     let sample = Sample { t: first + (s + j as u32) as f64 * dt, value, gradient };
                     if integrand.sample(sample).is_break() {
                         return ControlFlow::Break(u64::from(s - k) + j as u64 + 1);
                     }
                 }
-                s += LANES as u32;
-                kf += LANES as f32;
+                s += take as u32;
+                kf += take as f32;
             }
         }
         for s in s..end {
@@ -810,6 +1046,8 @@ type RunFlow = ControlFlow<u64>;
 struct RequestSink<'v> {
     requests: &'v mut Vec<Request>,
     remaining: u32,
+    /// Whether a request was pushed.
+    pushed: bool,
 }
 
 impl RequestSink<'_> {
@@ -818,8 +1056,70 @@ impl RequestSink<'_> {
         if self.remaining > 0 {
             self.remaining -= 1;
             self.requests.push(request);
+            self.pushed = true;
         }
     }
+}
+
+/// One ray on its way through the tree, between segments: what [`Traversal::next_march`] needs to go on.
+#[derive(Clone, Copy, Debug)]
+struct RayWalk {
+    ray: Ray,
+    /// Volume units travelled per unit of `t`.
+    speed: f64,
+    inverse_direction: DVec3,
+    /// Where the next segment starts.
+    t: f64,
+    /// Where the ray leaves the (clipped) volume.
+    t_leave: f64,
+    /// The distance up to which samples have accounted for the ray.
+    covered: f64,
+    /// The current step (None before the first brick segment).
+    step: Option<StepLength>,
+    segments: u32,
+    /// The previous segment's level of detail (where [`Traversal::footprint_at`] starts its search).
+    level_hint: usize,
+    /// Requests this ray may still make this pass.
+    requests_left: u32,
+    /// Whether it made any (its pixel must be traced again).
+    requested: bool,
+}
+
+/// One ray in a lane of [`Traversal::trace_stream`]: its id, walk and integrand, and the run of samples it is in.
+struct Lane<'v, I> {
+    id: usize,
+    walk: RayWalk,
+    integrand: I,
+    run: Option<LaneRun<'v>>,
+}
+
+/// A lane's run of samples: samples `k..end` of a segment of `count` samples `first + k·dt` on `line` need no
+/// block check; `resume` is where the next run may start (see [`Traversal::next_run`]).
+struct LaneRun<'v> {
+    line: BrickLine<'v>,
+    first: f64,
+    dt: f64,
+    count: u32,
+    k: u32,
+    end: u32,
+    resume: Option<u32>,
+}
+
+/// Where a stream's lanes get rays and leave them.
+struct LaneSources<'s, N, F> {
+    next_ray: &'s mut N,
+    finish: &'s mut F,
+    exhausted: &'s mut bool,
+}
+
+/// The samples of one brick segment: `count` points `first + k·dt` in `fine`, blended with `coarse` when given.
+#[derive(Clone, Copy, Debug)]
+struct March {
+    fine: BrickRef,
+    coarse: Option<(BrickRef, Blend)>,
+    first: f64,
+    dt: f64,
+    count: u64,
 }
 
 /// The `t` at which a brick line leaves the occupancy block at `ijk` (block coordinates).

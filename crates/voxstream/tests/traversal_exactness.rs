@@ -5,7 +5,7 @@ mod common;
 
 use voxstream::scenes::builtin;
 use voxstream_engine::{LoopLimits, Mode, Session};
-use voxstream_render::{Image, InstructionSet, RenderSettings};
+use voxstream_render::{Image, InstructionSet, RenderSettings, Shading};
 
 const SIZE: u32 = 64;
 
@@ -80,5 +80,33 @@ fn samples_taken_in_batches_equal_samples_taken_one_by_one() {
         let (single, samples_single) = render_with(scene, 2, |s| s.sample_batches = false);
         assert_eq!(samples_batched, samples_single, "{scene}: the sample counts differ");
         assert!(batched.pixels == single.pixels, "{scene}: batched and single samples give different images");
+    }
+}
+
+#[test]
+fn rays_traced_side_by_side_equal_rays_traced_one_by_one() {
+    // Unshaded, brick segments go through the lanes: the shell (16³ bricks), and the sponge and the level-blended
+    // hypertexture with their shading off (the hypertexture's blended segments are marched by their lane alone, so
+    // its rays mix both). Shaded, every segment is marched by its lane alone: the hypertexture as it is. With and
+    // without empty-space skipping, whose checks the lanes make for themselves.
+    for (scene, unshaded) in [("shell", true), ("sponge", true), ("hypertexture", true), ("hypertexture", false)] {
+        for skip in [true, false] {
+            let render_packets = |packets: bool| {
+                render_with(scene, 2, |s| {
+                    s.ray_packets = packets;
+                    s.skip_empty_space = skip;
+                    if unshaded {
+                        s.shading = Shading::None;
+                    }
+                })
+            };
+            let ((packets, samples_packets), (single, samples_single)) = (render_packets(true), render_packets(false));
+            let case = format!("{scene} (unshaded {unshaded}, skipping {skip})");
+            assert_eq!(samples_packets, samples_single, "{case}: the sample counts differ");
+            let covered = single.pixels.iter().filter(|p| p[3] > 0.01).count();
+            assert!(covered > (SIZE * SIZE / 10) as usize, "{case}: only {covered} pixels show anything");
+            let differing = packets.pixels.iter().zip(&single.pixels).filter(|(a, b)| a != b).count();
+            assert_eq!(differing, 0, "{case}: {differing} pixels differ with ray packets");
+        }
     }
 }
