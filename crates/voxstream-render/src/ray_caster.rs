@@ -9,7 +9,7 @@ use voxstream_core::{FeedbackBuffer, Request, TreeView};
 use crate::emission_absorption::{EmissionAbsorption, EmissionAbsorptionSettings};
 use crate::frame::PixelTracer;
 use crate::sampler::LANES;
-use crate::settings::RenderSettings;
+use crate::settings::{RenderSettings, Shading};
 use crate::transfer_function::TransferLut;
 use crate::traversal::{DescentPath, Ray, RayStats, Traversal};
 
@@ -20,6 +20,8 @@ pub struct RayCaster<'a> {
     integrand: EmissionAbsorptionSettings,
     /// Whether rays are traced side by side ([`RenderSettings::ray_packets`]).
     ray_packets: bool,
+    /// Whether samples need gradients (Phong shading).
+    shaded: bool,
 }
 
 impl<'a> RayCaster<'a> {
@@ -35,6 +37,7 @@ impl<'a> RayCaster<'a> {
             lut,
             integrand: EmissionAbsorptionSettings::new(settings),
             ray_packets: settings.ray_packets,
+            shaded: settings.shading == Shading::Phong,
         }
     }
 }
@@ -87,6 +90,10 @@ impl PixelTracer for RayCaster<'_> {
             let (color, alpha) = integrand.result();
             emit(id, color, alpha, requested);
         };
-        self.traversal.trace_stream(next_ray, finish, stats, requests, paths);
+        if self.shaded {
+            self.traversal.trace_stream::<_, true>(next_ray, finish, stats, requests, paths);
+        } else {
+            self.traversal.trace_stream::<_, false>(next_ray, finish, stats, requests, paths);
+        }
     }
 }

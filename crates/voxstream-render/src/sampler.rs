@@ -101,7 +101,27 @@ pub const LANES: usize = 8;
 /// offers (see [`crate::InstructionSet`]). Seed 002 §4 (Knoll et al.) traces packets of rays for the same reason.
 #[inline(always)]
 pub fn values_along(brick: &[u16], b: usize, start: [f32; 3], delta: [f32; 3], k: f32) -> [f32; LANES] {
-    let (corners, [fx, fy, fz]) = corners_along(brick, b, start, delta, k);
+    let (corners, fractions) = corners_along(brick, b, start, delta, k);
+    interpolate(&corners, &fractions)
+}
+
+/// [`values_along`] with the analytic gradients of [`Cell::value_and_gradient`], bit for bit.
+#[inline(always)]
+pub fn values_and_gradients_along(
+    brick: &[u16],
+    b: usize,
+    start: [f32; 3],
+    delta: [f32; 3],
+    k: f32,
+) -> ([f32; LANES], [[f32; 3]; LANES]) {
+    let (corners, fractions) = corners_along(brick, b, start, delta, k);
+    interpolate_with_gradients(&corners, &fractions)
+}
+
+/// Trilinear values from the corners and cell fractions of `LANES` points, lane by lane: [`Cell::value`]'s
+/// arithmetic.
+#[inline(always)]
+fn interpolate(corners: &[[f32; LANES]; 8], [fx, fy, fz]: &[[f32; LANES]; 3]) -> [f32; LANES] {
     let mut out = [0f32; LANES];
     for j in 0..LANES {
         let v = |corner: usize| corners[corner][j];
@@ -116,16 +136,12 @@ pub fn values_along(brick: &[u16], b: usize, start: [f32; 3], delta: [f32; 3], k
     out
 }
 
-/// [`values_along`] with the analytic gradients of [`Cell::value_and_gradient`], bit for bit.
+/// [`interpolate`] with the analytic gradients: [`Cell::value_and_gradient`]'s arithmetic.
 #[inline(always)]
-pub fn values_and_gradients_along(
-    brick: &[u16],
-    b: usize,
-    start: [f32; 3],
-    delta: [f32; 3],
-    k: f32,
+fn interpolate_with_gradients(
+    corners: &[[f32; LANES]; 8],
+    [fx, fy, fz]: &[[f32; LANES]; 3],
 ) -> ([f32; LANES], [[f32; 3]; LANES]) {
-    let (corners, [fx, fy, fz]) = corners_along(brick, b, start, delta, k);
     let mut values = [0f32; LANES];
     let mut gradients = [[0f32; 3]; LANES];
     let lerp = |a: f32, b: f32, t: f32| a + (b - a) * t;
@@ -202,6 +218,34 @@ pub fn values_across(
     delta: &[[f32; LANES]; 3],
     k: &[f32; LANES],
 ) -> [f32; LANES] {
+    let (corners, fractions) = corners_across(voxels, b, bases, start, delta, k);
+    interpolate(&corners, &fractions)
+}
+
+/// [`values_across`] with the analytic gradients of [`Cell::value_and_gradient`], bit for bit.
+#[inline(always)]
+pub fn values_and_gradients_across(
+    voxels: &[u16],
+    b: usize,
+    bases: &[u32; LANES],
+    start: &[[f32; LANES]; 3],
+    delta: &[[f32; LANES]; 3],
+    k: &[f32; LANES],
+) -> ([f32; LANES], [[f32; 3]; LANES]) {
+    let (corners, fractions) = corners_across(voxels, b, bases, start, delta, k);
+    interpolate_with_gradients(&corners, &fractions)
+}
+
+/// The corners and cell fractions of [`values_across`]'s points.
+#[inline(always)]
+fn corners_across(
+    voxels: &[u16],
+    b: usize,
+    bases: &[u32; LANES],
+    start: &[[f32; LANES]; 3],
+    delta: &[[f32; LANES]; 3],
+    k: &[f32; LANES],
+) -> ([[f32; LANES]; 8], [[f32; LANES]; 3]) {
     let max = (b - 1) as f32;
     let last_cell = b as u32 - 2;
     let (row, slab) = (b, b * b);
@@ -228,19 +272,7 @@ pub fn values_across(
             corners[corner][j] = cell[offset] as f32;
         }
     }
-    let [fx, fy, fz] = fraction;
-    let mut out = [0f32; LANES];
-    for j in 0..LANES {
-        let v = |corner: usize| corners[corner][j];
-        let c00 = v(0) + (v(1) - v(0)) * fx[j];
-        let c10 = v(2) + (v(3) - v(2)) * fx[j];
-        let c01 = v(4) + (v(5) - v(4)) * fx[j];
-        let c11 = v(6) + (v(7) - v(6)) * fx[j];
-        let c0 = c00 + (c10 - c00) * fy[j];
-        let c1 = c01 + (c11 - c01) * fy[j];
-        out[j] = dequantize_scale(c0 + (c1 - c0) * fz[j]);
-    }
-    out
+    (corners, fraction)
 }
 
 /// A value interpolated from stored voxels, normalised like [`voxstream_core::dequantize`].
@@ -328,10 +360,14 @@ mod tests {
         }
         for k in [[0f32; LANES], std::array::from_fn(|j| (j * j) as f32), [40.0; LANES]] {
             let values = values_across(&pool, b, &bases, &start, &delta, &k);
+            let (with_gradients, gradients) = values_and_gradients_across(&pool, b, &bases, &start, &delta, &k);
             for j in 0..LANES {
                 let x: [f32; 3] = std::array::from_fn(|a| start[a][j] + k[j] * delta[a][j]);
                 let brick = &pool[bases[j] as usize..bases[j] as usize + per_brick];
                 assert_eq!(values[j].to_bits(), trilinear(brick, b, x).to_bits(), "lane {j} at {x:?}");
+                let (value, gradient) = trilinear_with_gradient(brick, b, x);
+                assert_eq!(with_gradients[j].to_bits(), value.to_bits(), "lane {j} at {x:?}");
+                assert_eq!(gradients[j].map(f32::to_bits), gradient.map(f32::to_bits), "lane {j} at {x:?}");
             }
         }
     }

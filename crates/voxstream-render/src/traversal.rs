@@ -36,7 +36,9 @@ use voxstream_core::{
 };
 
 use crate::integrand::{BrickSpan, Integrand, Sample};
-use crate::sampler::{values_across, values_along, values_and_gradients_along, Cell, LANES};
+use crate::sampler::{
+    values_across, values_along, values_and_gradients_across, values_and_gradients_along, Cell, LANES,
+};
 use crate::settings::RenderSettings;
 use crate::step_table::StepLength;
 
@@ -280,8 +282,11 @@ impl<'a> Traversal<'a> {
     /// each one's id, integrand and whether it made requests. Segments that blend levels or need gradients are
     /// marched by their lane alone ([`Traversal::march_bricks`]); span integrands ([`Integrand::TAKES_SPANS`]) take
     /// the whole path of `trace` (one lane at a time). Always inlined, like `trace`.
+    ///
+    /// With `GRADIENT`, the lanes take gradients too (for shaded integrands); without, segments of integrands that
+    /// want gradients are marched alone.
     #[inline(always)]
-    pub fn trace_stream<I: Integrand>(
+    pub fn trace_stream<I: Integrand, const GRADIENT: bool>(
         &self,
         mut next_ray: impl FnMut() -> Option<(usize, Ray, I)>,
         mut finish: impl FnMut(usize, I, bool),
@@ -305,7 +310,7 @@ impl<'a> Traversal<'a> {
             for (j, (lane, path)) in lanes.iter_mut().zip(paths.iter_mut()).enumerate() {
                 let mut sources =
                     LaneSources { next_ray: &mut next_ray, finish: &mut finish, exhausted: &mut exhausted };
-                if let Some(run) = self.fill_lane(lane, path, &mut sources, stats, requests) {
+                if let Some(run) = self.fill_lane(lane, path, &mut sources, GRADIENT, stats, requests) {
                     bases[j] = (run.line.slot.0 as usize * per_brick) as u32;
                     for a in 0..3 {
                         start[a][j] = run.line.start[a];
@@ -320,11 +325,16 @@ impl<'a> Traversal<'a> {
             }
             // Until the first lane reaches the end of its run, no lane needs a check: samples only.
             for _ in 0..burst {
-                let values = values_across(self.view.voxels, b, &bases, &start, &delta, &kf);
+                let (values, gradients) = if GRADIENT {
+                    values_and_gradients_across(self.view.voxels, b, &bases, &start, &delta, &kf)
+                } else {
+                    (values_across(self.view.voxels, b, &bases, &start, &delta, &kf), [[0.0; 3]; LANES])
+                };
                 for (j, slot) in lanes.iter_mut().enumerate() {
                     let Some(lane) = slot else { continue };
                     let Some(run) = &mut lane.run else { continue };
-                    let sample = Sample { t: run.first + run.k as f64 * run.dt, value: values[j], gradient: [0.0; 3] };
+                    let sample =
+                        Sample { t: run.first + run.k as f64 * run.dt, value: values[j], gradient: gradients[j] };
                     run.k += 1;
                     stats.samples += 1;
                     if lane.integrand.sample(sample).is_break() {
@@ -349,6 +359,7 @@ impl<'a> Traversal<'a> {
         slot: &'l mut Option<Lane<'a, I>>,
         path: &mut DescentPath,
         sources: &mut LaneSources<'_, N, F>,
+        lanes_take_gradients: bool,
         stats: &mut RayStats,
         requests: &mut Vec<Request>,
     ) -> Option<&'l LaneRun<'a>>
@@ -389,7 +400,7 @@ impl<'a> Traversal<'a> {
                 match self.next_march(&mut lane.walk, &mut lane.integrand, stats, requests, path) {
                     None => ended = true,
                     Some(march) => {
-                        if march.coarse.is_some() || lane.integrand.wants_gradient() {
+                        if march.coarse.is_some() || (lane.integrand.wants_gradient() && !lanes_take_gradients) {
                             ended = self.march_bricks(&lane.walk.ray, march, &mut lane.integrand, stats).is_break();
                         } else {
                             lane.run = self.lane_run(&lane.walk.ray, march, &lane.integrand);
