@@ -6,6 +6,7 @@ frames after one warm-up frame, all tools on both cores; peak memory is each too
 """
 import argparse
 import json
+import os
 import re
 import statistics
 import subprocess
@@ -22,7 +23,8 @@ import metrics  # noqa: E402
 import scenes as scene_list  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
-VOXSTREAM = ROOT / "target/release/voxstream"
+# Another build can be measured with the same harness: VOXSTREAM_BIN=/path/to/voxstream.
+VOXSTREAM = Path(os.environ.get("VOXSTREAM_BIN", ROOT / "target/release/voxstream"))
 REFERENCE = ROOT / "target/release/peers-reference"
 BUDGET_MB = 512
 # A tool whose first frame takes longer than this is timed on that frame alone.

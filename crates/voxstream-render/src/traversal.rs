@@ -324,6 +324,7 @@ impl<'a> Traversal<'a> {
                 return;
             }
             // Until the first lane reaches the end of its run, no lane needs a check: samples only.
+            let mut taken = 0u64;
             for _ in 0..burst {
                 let (values, gradients) = if GRADIENT {
                     values_and_gradients_across(self.view.voxels, b, &bases, &start, &delta, &kf)
@@ -336,7 +337,7 @@ impl<'a> Traversal<'a> {
                     let sample =
                         Sample { t: run.first + run.k as f64 * run.dt, value: values[j], gradient: gradients[j] };
                     run.k += 1;
-                    stats.samples += 1;
+                    taken += 1;
                     if lane.integrand.sample(sample).is_break() {
                         if let Some(lane) = slot.take() {
                             finish(lane.id, lane.integrand, lane.walk.requested);
@@ -347,6 +348,7 @@ impl<'a> Traversal<'a> {
                     *k += 1.0;
                 }
             }
+            stats.samples += taken;
         }
     }
 
