@@ -46,8 +46,11 @@ use crate::step_table::StepLength;
 const MAX_TABLE_LEVELS: usize = 64;
 /// A ray may not cross more segments than this (guards against any numerical stall).
 const MAX_SEGMENTS: u32 = 1 << 20;
-/// Fewest samples at the end of a run taken as one (partly unused) batch of `LANES`.
-const MIN_PADDED_BATCH: u32 = 3;
+/// In a lane of [`Traversal::trace_stream`], a run of samples is extended through the following blocks that can
+/// contribute until it is this long, so that the lanes' runs (the shortest of which ends a burst) are long. One ray
+/// alone extends none: checking blocks ahead costs more than it saves where rays turn opaque within a few samples
+/// (the sponge: about 2 samples per ray).
+const LONG_RUN: u32 = 4 * LANES as u32;
 
 /// Counters of one ray batch.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -390,7 +393,7 @@ impl<'a> Traversal<'a> {
                     // The next run of the segment, if any.
                     let k = run.resume.unwrap_or(run.end);
                     let segment = (run.first, run.dt, run.count);
-                    match self.next_run(&run.line, None, segment, k, &lane.integrand) {
+                    match self.next_run(&run.line, None, segment, k, LONG_RUN, &lane.integrand) {
                         Some((from, to, resume)) if k < run.count => {
                             (run.k, run.end, run.resume) = (from, to, resume);
                         }
@@ -436,8 +439,11 @@ impl<'a> Traversal<'a> {
             check_blocks = !integrand.contributes_throughout(lo, hi);
         }
         let line = self.brick_line(ray, &fine, first, dt);
-        let (k, end, resume) =
-            if check_blocks { self.next_run(&line, None, (first, dt, count), 0, integrand)? } else { (0, count, None) };
+        let (k, end, resume) = if check_blocks {
+            self.next_run(&line, None, (first, dt, count), 0, LONG_RUN, integrand)?
+        } else {
+            (0, count, None)
+        };
         Some(LaneRun { line, first, dt, count, k, end, resume })
     }
 
@@ -637,7 +643,7 @@ impl<'a> Traversal<'a> {
         while k < count {
             // The next run of samples in blocks that can contribute, and where the one after it may start.
             let (run_start, run_end, resume) = if check_blocks {
-                match self.next_run(&fine_line, coarse_brick_line, (first, dt, count), k, integrand) {
+                match self.next_run(&fine_line, coarse_brick_line, (first, dt, count), k, 0, integrand) {
                     Some(run) => run,
                     None => break,
                 }
@@ -713,8 +719,7 @@ impl<'a> Traversal<'a> {
     }
 
     /// The next run of samples at or after `k` whose blocks can contribute, as `(start, end, resume)`: one run
-    /// through every following block that can contribute too (runs as long as the data allows, so that most samples
-    /// are taken LANES at a time), and `resume`, where the next run may start when this one ends at blocks that
+    /// through the following blocks that can contribute too, until it holds `long_run` samples, and `resume`, where the next run may start when this one ends at blocks that
     /// cannot contribute (already checked). `None` when no sample is left.
     #[inline(always)]
     fn next_run<I: Integrand>(
@@ -723,6 +728,7 @@ impl<'a> Traversal<'a> {
         coarse: Option<&BrickLine<'_>>,
         segment: (f64, f64, u32),
         mut k: u32,
+        long_run: u32,
         integrand: &I,
     ) -> Option<(u32, u32, Option<u32>)> {
         let count = segment.2;
@@ -733,7 +739,7 @@ impl<'a> Traversal<'a> {
                 continue;
             }
             let mut end = past;
-            while end < count {
+            while end < count && end - k < long_run {
                 let (contributes, past) = self.check_blocks(fine, coarse, segment, end, integrand);
                 if !contributes {
                     return Some((k, end, Some(past)));
@@ -769,12 +775,10 @@ impl<'a> Traversal<'a> {
         let mut kf = k as f32;
         let mut s = k;
         // LANES samples at a time (the same values, bit for bit: see `values_along`); the integrand still takes
-        // them one by one, in order. A run's last few samples are a batch too, of which only those in the run are
-        // used (positions past the run are clamped into the brick, so reading them is safe); below
-        // `MIN_PADDED_BATCH` samples one at a time is cheaper.
+        // them one by one, in order. (A run's last few samples are taken one at a time: a padded batch costs more
+        // where rays turn opaque within a few samples, as in the sponge.)
         if self.sample_batches {
-            while end - s >= MIN_PADDED_BATCH {
-                let take = (end - s).min(LANES as u32) as usize;
+            while s + LANES as u32 <= end {
                 let (mut values, mut gradients) = if GRADIENT {
                     values_and_gradients_along(fine.voxels, b, fine.start, fine.delta, kf)
                 } else {
@@ -794,14 +798,14 @@ impl<'a> Traversal<'a> {
                         *value = coarse_value + (*value - coarse_value) * weight.at(kf + j as f32);
                     }
                 }
-                for (j, (&value, &gradient)) in values.iter().zip(&gradients).take(take).enumerate() {
+                for (j, (&value, &gradient)) in values.iter().zip(&gradients).enumerate() {
                     let sample = Sample { t: first + (s + j as u32) as f64 * dt, value, gradient };
                     if integrand.sample(sample).is_break() {
                         return ControlFlow::Break(u64::from(s - k) + j as u64 + 1);
                     }
                 }
-                s += take as u32;
-                kf += take as f32;
+                s += LANES as u32;
+                kf += LANES as f32;
             }
         }
         for s in s..end {
