@@ -83,7 +83,7 @@ impl Camera {
 
 impl CameraFrame {
     /// Unit direction of the ray through the centre of pixel `(x, y)` (y down).
-    #[inline]
+    #[inline(always)]
     pub fn direction(&self, x: u32, y: u32, width: u32, height: u32) -> DVec3 {
         let sx = 2.0 * (x as f64 + 0.5) / width as f64 - 1.0;
         let sy = 1.0 - 2.0 * (y as f64 + 0.5) / height as f64;

@@ -54,6 +54,7 @@ pub struct EmissionAbsorption<'a> {
 
 impl<'a> EmissionAbsorption<'a> {
     /// A ray with nothing accumulated; `volume_direction` is the ray's direction in volume units per world unit.
+    #[inline(always)]
     pub fn new(
         lut: &'a TransferLut,
         settings: &EmissionAbsorptionSettings,

@@ -86,7 +86,7 @@ impl PixelTracer for RayCaster<'_> {
             let integrand = EmissionAbsorption::new(self.lut, &self.integrand, direction);
             Some((id, Ray { origin, direction, spread, start: 0.0 }, integrand))
         };
-        let finish = |id, integrand: EmissionAbsorption<'_>, requested| {
+        let finish = |id, integrand: &EmissionAbsorption<'_>, requested| {
             let (color, alpha) = integrand.result();
             emit(id, color, alpha, requested);
         };

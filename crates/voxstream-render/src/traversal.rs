@@ -292,7 +292,7 @@ impl<'a> Traversal<'a> {
     pub fn trace_stream<I: Integrand, const GRADIENT: bool>(
         &self,
         mut next_ray: impl FnMut() -> Option<(usize, Ray, I)>,
-        mut finish: impl FnMut(usize, I, bool),
+        mut finish: impl FnMut(usize, &I, bool),
         stats: &mut RayStats,
         requests: &mut Vec<Request>,
         paths: &mut [DescentPath; LANES],
@@ -342,9 +342,8 @@ impl<'a> Traversal<'a> {
                     run.k += 1;
                     taken += 1;
                     if lane.integrand.sample(sample).is_break() {
-                        if let Some(lane) = slot.take() {
-                            finish(lane.id, lane.integrand, lane.walk.requested);
-                        }
+                        finish(lane.id, &lane.integrand, lane.walk.requested);
+                        *slot = None;
                     }
                 }
                 for k in &mut kf {
@@ -370,7 +369,7 @@ impl<'a> Traversal<'a> {
     ) -> Option<&'l LaneRun<'a>>
     where
         N: FnMut() -> Option<(usize, Ray, I)>,
-        F: FnMut(usize, I, bool),
+        F: FnMut(usize, &I, bool),
     {
         loop {
             let Some(lane) = slot else {
@@ -383,7 +382,7 @@ impl<'a> Traversal<'a> {
                 };
                 match self.begin(&ray, stats, path) {
                     Some(walk) => *slot = Some(Lane { id, walk, integrand, run: None }),
-                    None => (sources.finish)(id, integrand, false),
+                    None => (sources.finish)(id, &integrand, false),
                 }
                 continue;
             };
@@ -414,9 +413,8 @@ impl<'a> Traversal<'a> {
                 }
             }
             if ended {
-                if let Some(lane) = slot.take() {
-                    (sources.finish)(lane.id, lane.integrand, lane.walk.requested);
-                }
+                (sources.finish)(lane.id, &lane.integrand, lane.walk.requested);
+                *slot = None;
                 continue;
             }
             if let Some(Lane { run: Some(run), .. }) = slot {
