@@ -49,13 +49,30 @@ pub trait PixelTracer: Sync {
         stats: &mut RayStats,
         requests: &mut Vec<Request>,
         paths: &mut [DescentPath; LANES],
-        mut emit: impl FnMut(usize, [f32; 3], f32, bool),
+        emit: impl FnMut(usize, [f32; 3], f32, bool),
     ) {
-        for (id, direction) in rays {
-            let before = requests.len();
-            let (color, alpha) = self.trace(origin, direction, spread, stats, requests, &mut paths[0]);
-            emit(id, color, alpha, requests.len() > before);
-        }
+        trace_one_by_one(self, origin, rays, spread, stats, requests, &mut paths[0], emit);
+    }
+}
+
+/// [`PixelTracer::trace_rays`] one ray after another, each with [`PixelTracer::trace`] (the default, and the
+/// reference the tracers that trace rays side by side are tested against).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub fn trace_one_by_one<T: PixelTracer + ?Sized>(
+    tracer: &T,
+    origin: glam::DVec3,
+    rays: impl Iterator<Item = (usize, glam::DVec3)>,
+    spread: f64,
+    stats: &mut RayStats,
+    requests: &mut Vec<Request>,
+    path: &mut DescentPath,
+    mut emit: impl FnMut(usize, [f32; 3], f32, bool),
+) {
+    for (id, direction) in rays {
+        let before = requests.len();
+        let (color, alpha) = tracer.trace(origin, direction, spread, stats, requests, path);
+        emit(id, color, alpha, requests.len() > before);
     }
 }
 

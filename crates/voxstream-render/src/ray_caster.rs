@@ -7,7 +7,7 @@ use glam::DVec3;
 use voxstream_core::{FeedbackBuffer, Request, TreeView};
 
 use crate::emission_absorption::{EmissionAbsorption, EmissionAbsorptionSettings};
-use crate::frame::PixelTracer;
+use crate::frame::{trace_one_by_one, PixelTracer};
 use crate::sampler::LANES;
 use crate::settings::{RenderSettings, Shading};
 use crate::transfer_function::TransferLut;
@@ -74,12 +74,7 @@ impl PixelTracer for RayCaster<'_> {
         mut emit: impl FnMut(usize, [f32; 3], f32, bool),
     ) {
         if !self.ray_packets {
-            for (id, direction) in rays {
-                let before = requests.len();
-                let (color, alpha) = self.trace(origin, direction, spread, stats, requests, &mut paths[0]);
-                emit(id, color, alpha, requests.len() > before);
-            }
-            return;
+            return trace_one_by_one(self, origin, rays, spread, stats, requests, &mut paths[0], emit);
         }
         let next_ray = || {
             let (id, direction) = rays.next()?;

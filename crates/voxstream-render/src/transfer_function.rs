@@ -203,15 +203,20 @@ impl TransferLut {
     /// skipping).
     #[inline(always)]
     pub fn is_visible_in(&self, lower: f32, upper: f32) -> bool {
-        let position = |v: f32| ((v - self.lower) * self.scale).clamp(0.0, (LUT_SIZE - 1) as f32);
         // `lookup` reads entries ⌊x⌋ and ⌊x⌋+1, the latter with weight x − ⌊x⌋. A constant range is sampled exactly
         // (interpolating equal values returns them); otherwise allow samples a rounding error outside the range.
         let slack = if lower == upper { 0.0 } else { 1e-3 };
         // `u32` conversions: one instruction each.
-        let first = (position(lower) - slack).max(0.0) as u32 as usize;
-        let last = (((position(upper) + slack).ceil() as u32) as usize).min(LUT_SIZE - 1);
+        let first = (self.entry_position(lower) - slack).max(0.0) as u32 as usize;
+        let last = (((self.entry_position(upper) + slack).ceil() as u32) as usize).min(LUT_SIZE - 1);
         let (a, b) = (first, last);
         self.visible_before[b + 1] > self.visible_before[a]
+    }
+
+    /// The continuous table position of a normalised value, clamped to the table.
+    #[inline(always)]
+    fn entry_position(&self, value: f32) -> f32 {
+        ((value - self.lower) * self.scale).clamp(0.0, (LUT_SIZE - 1) as f32)
     }
 
     /// Whether every entry that a normalised value in `[lower, upper]` reads has non-zero extinction. Then
@@ -219,9 +224,8 @@ impl TransferLut {
     /// (a superset, widened by its slack) always overlap these.
     #[inline(always)]
     pub fn is_visible_throughout(&self, lower: f32, upper: f32) -> bool {
-        let position = |v: f32| ((v - self.lower) * self.scale).clamp(0.0, (LUT_SIZE - 1) as f32);
-        let first = position(lower) as u32 as usize;
-        let last = ((position(upper).ceil() as u32) as usize).min(LUT_SIZE - 1);
+        let first = self.entry_position(lower) as u32 as usize;
+        let last = ((self.entry_position(upper).ceil() as u32) as usize).min(LUT_SIZE - 1);
         first <= last && (self.visible_before[last + 1] - self.visible_before[first]) as usize == last + 1 - first
     }
 }

@@ -393,10 +393,8 @@ impl<'a> Traversal<'a> {
                     let k = run.resume.unwrap_or(run.end);
                     let segment = (run.first, run.dt, run.count);
                     match self.next_run(&run.line, None, segment, k, LONG_RUN, &lane.integrand) {
-                        Some((from, to, resume)) if k < run.count => {
-                            (run.k, run.end, run.resume) = (from, to, resume);
-                        }
-                        _ => lane.run = None,
+                        Some((from, to, resume)) => (run.k, run.end, run.resume) = (from, to, resume),
+                        None => lane.run = None,
                     }
                 }
             }
