@@ -22,6 +22,38 @@ pub trait FrameRenderer {
         settings: &RenderSettings,
         progressive: &mut ProgressiveImage,
     ) -> Result<(RayStats, usize), RenderError>;
+
+    /// The renderer and the device it runs on, in one line (for `--stats`).
+    fn describe(&self) -> String;
+
+    /// Bytes of pool data copied to the renderer's own memory so far (0 for a renderer that reads the CPU pools in
+    /// place).
+    fn bytes_uploaded(&self) -> u64 {
+        0
+    }
+}
+
+/// A renderer chosen at run time (`--backend`).
+impl FrameRenderer for Box<dyn FrameRenderer + '_> {
+    fn render_pass(
+        &mut self,
+        view: TreeView<'_>,
+        feedback: &FeedbackBuffer,
+        camera: &Camera,
+        lut: &TransferLut,
+        settings: &RenderSettings,
+        progressive: &mut ProgressiveImage,
+    ) -> Result<(RayStats, usize), RenderError> {
+        (**self).render_pass(view, feedback, camera, lut, settings, progressive)
+    }
+
+    fn describe(&self) -> String {
+        (**self).describe()
+    }
+
+    fn bytes_uploaded(&self) -> u64 {
+        (**self).bytes_uploaded()
+    }
 }
 
 /// The CPU cone-tracing ray caster of `voxstream-render` (rayon over image tiles): the reference renderer.
@@ -39,5 +71,9 @@ impl FrameRenderer for CpuRenderer {
         progressive: &mut ProgressiveImage,
     ) -> Result<(RayStats, usize), RenderError> {
         voxstream_render::render_pass(view, feedback, camera, lut, settings, progressive)
+    }
+
+    fn describe(&self) -> String {
+        "cpu: the cone-tracing ray caster on rayon's threads".to_string()
     }
 }

@@ -474,6 +474,10 @@ mod tests {
             self.passes += 1;
             CpuRenderer.render_pass(view, feedback, camera, lut, settings, progressive)
         }
+
+        fn describe(&self) -> String {
+            "counting cpu".to_string()
+        }
     }
 
     fn parts() -> (TransferFunction, RenderSettings, Camera) {

@@ -20,6 +20,8 @@
 //! | | 4 | 4 | `request_capacity` | records the request buffer holds |
 //! | | 8 | 4 | `dropped_requests` | requests that found the buffer full |
 //! | | 12 | 4 | `padding` | zero |
+//! | [`RayCounters`] | 0, 4, 8 | 4 each | `rays`, `samples`, `descents` | what a pass's rays counted |
+//! | | 12 | 4 | `padding` | zero |
 //! | [`UsageFlag`] | 0 | 4 | `used` | 0 = unused this frame, 1 = used |
 //! | [`RequestRecord`] | 0 | 4 | `node` | the node's index in the node buffer |
 //! | | 4 | 4 | `kind` | [`REQUEST_PRODUCE`] or [`REQUEST_SUBDIVIDE`] |
@@ -41,6 +43,21 @@ pub struct FeedbackCounters {
     pub request_capacity: u32,
     /// Requests that found the buffer full (an `atomic<u32>` in WGSL).
     pub dropped_requests: u32,
+    /// Zero; pads the counters to 16 bytes.
+    pub padding: u32,
+}
+
+/// What the rays of one pass counted, for `--stats` (each an `atomic<u32>` in WGSL, added to once per ray; they
+/// wrap past 2³², far above a pass's samples at the image sizes a GPU pass traces).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct RayCounters {
+    /// Rays traced.
+    pub rays: u32,
+    /// Brick samples taken plus constant segments integrated.
+    pub samples: u32,
+    /// Descents from the root.
+    pub descents: u32,
     /// Zero; pads the counters to 16 bytes.
     pub padding: u32,
 }

@@ -57,6 +57,13 @@ struct FeedbackCounters {
     padding: u32,
 }
 
+struct RayCounters {
+    rays: atomic<u32>,
+    samples: atomic<u32>,
+    descents: atomic<u32>,
+    padding: u32,
+}
+
 struct UsageFlag {
     used: u32,
 }
@@ -78,4 +85,60 @@ struct BrickBlend {
     corner6: f32,
     corner7: f32,
     fade: f32,
+}
+
+// ray_frame.rs: the frame's camera and ray settings, flattened (GigaVoxels [P09] §6).
+const RAY_FRAME_PHONG: u32 = 1u;
+const RAY_FRAME_STEPS_IGNORE_STAND_INS: u32 = 2u;
+const RAY_FRAME_COLOUR_BY_LEVEL: u32 = 4u;
+
+struct RayFrame {
+    width: u32,
+    height: u32,
+    pixel_stride: u32,
+    max_requests_per_ray: u32,
+    flags: u32,
+    stand_in_levels: u32,
+    request_capacity: u32,
+    max_segments: u32,
+    eye_x: f32,
+    eye_y: f32,
+    eye_z: f32,
+    pixel_spread: f32,
+    forward_x: f32,
+    forward_y: f32,
+    forward_z: f32,
+    world_per_volume: f32,
+    right_x: f32,
+    right_y: f32,
+    right_z: f32,
+    lod_bias: f32,
+    up_x: f32,
+    up_y: f32,
+    up_z: f32,
+    step_factor: f32,
+    inverse_scale_x: f32,
+    inverse_scale_y: f32,
+    inverse_scale_z: f32,
+    bias_scale: f32,
+    clip_lower_x: f32,
+    clip_lower_y: f32,
+    clip_lower_z: f32,
+    stop_below: f32,
+    clip_upper_x: f32,
+    clip_upper_y: f32,
+    clip_upper_z: f32,
+    ambient: f32,
+    background_r: f32,
+    background_g: f32,
+    background_b: f32,
+    diffuse: f32,
+    light_x: f32,
+    light_y: f32,
+    light_z: f32,
+    specular: f32,
+    shininess: f32,
+    padding0: u32,
+    padding1: u32,
+    padding2: u32,
 }

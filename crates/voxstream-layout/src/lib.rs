@@ -13,6 +13,8 @@
 //! | [`TransferTableEntry`] | 16 | one entry of the transfer-function table: r, g, b and extinction or step opacity |
 //! | [`FeedbackCounters`] | 16 | the request list's fill level, written with atomics ([P09] §5) |
 //! | [`UsageFlag`] | 4 | one tile or brick slot used by some ray this frame ([P09] §5) |
+//! | [`RayCounters`] | 16 | what a pass's rays counted: rays, samples, descents |
+//! | [`RayFrame`] | 192 | the frame's camera and ray settings, flattened: what a GPU ray caster reads beside the header |
 //! | [`RequestRecord`] | 8 | one ray's request: a node to produce or to subdivide ([P09] §5) |
 //! | [`BrickBlend`] | 36 | per brick slot: the cap on its weight against its parent at its corners (Thiele et al.'s blending) |
 //!
@@ -37,11 +39,17 @@
 pub mod brick_blend;
 pub mod feedback_records;
 pub mod node;
+pub mod ray_frame;
 pub mod transfer_table;
 pub mod tree_header;
 
 pub use brick_blend::BrickBlend;
-pub use feedback_records::{FeedbackCounters, RequestRecord, UsageFlag, REQUEST_PRODUCE, REQUEST_SUBDIVIDE};
+pub use feedback_records::{
+    FeedbackCounters, RayCounters, RequestRecord, UsageFlag, REQUEST_PRODUCE, REQUEST_SUBDIVIDE,
+};
 pub use node::{BrickSlot, Node, NodeData, NodeId, TileId, CHILD_MASK, CONSTANT_BIT, MAX_TILE_INDEX, TERMINAL_BIT};
+pub use ray_frame::{
+    RayFrame, RAY_FRAME_BYTES, RAY_FRAME_COLOUR_BY_LEVEL, RAY_FRAME_PHONG, RAY_FRAME_STEPS_IGNORE_STAND_INS,
+};
 pub use transfer_table::{TransferTableEntry, TransferTableHeader, TABLE_HOLDS_EXTINCTION, TABLE_HOLDS_STEP_OPACITY};
 pub use tree_header::TreeHeader;

@@ -14,4 +14,7 @@ pub enum RenderError {
     /// Image size, step or other setting out of range.
     #[error("invalid render setting: {0}")]
     InvalidSetting(String),
+    /// A rendering backend (the GPU) failed or cannot draw what was asked.
+    #[error("{0}")]
+    Backend(String),
 }

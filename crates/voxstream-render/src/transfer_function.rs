@@ -186,6 +186,11 @@ impl TransferLut {
         self.step_tables.get(&self.entries, step)
     }
 
+    /// The [`LUT_SIZE`] entries, evenly spaced over the normalised values `[0, 1]` (what a GPU uploads).
+    pub fn entries(&self) -> &[LutEntry] {
+        &self.entries
+    }
+
     /// Colour and extinction at normalised `value` (linear between entries).
     #[inline(always)]
     pub fn lookup(&self, value: f32) -> LutEntry {

@@ -197,9 +197,13 @@ pub struct RenderArgs {
     /// Background colour r,g,b in [0,1] (linear).
     #[arg(long, value_parser = parse_vec3, default_value = "0,0,0", allow_hyphen_values = true)]
     pub background: [f64; 3],
-    /// Memory budget of the node and brick pools, MiB.
+    /// Memory budget of the node and brick pools, MiB (on the GPU too: the pools are uploaded at this size).
     #[arg(long, default_value_t = 256)]
     pub budget_mb: u64,
+    /// cpu: the cone-tracing ray caster on every core; gpu: the same traversal in a compute shader (wgpu on
+    /// Vulkan; volumes only, interactive frames with --blending off).
+    #[arg(long, value_enum, default_value_t = Backend::Cpu)]
+    pub backend: Backend,
     /// converged: iterate until exact; interactive: bounded production per frame.
     #[arg(long, value_enum, default_value_t = Mode::Converged)]
     pub mode: Mode,
@@ -255,6 +259,15 @@ pub enum RefineArg {
     Converged,
     /// Blended interactive frames.
     Blended,
+}
+
+/// Which renderer draws the passes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Backend {
+    /// The CPU ray caster (the reference).
+    Cpu,
+    /// The GPU ray caster (wgpu, Vulkan).
+    Gpu,
 }
 
 /// On or off.

@@ -85,6 +85,7 @@ fn unreachable_default() -> RenderArgs {
         light: None,
         background: [0.0; 3],
         budget_mb: 256,
+        backend: voxstream::cli::Backend::Cpu,
         mode: voxstream_engine::Mode::Converged,
         frames: 1,
         requests_per_frame: 1024,

@@ -6,15 +6,16 @@ use std::sync::Arc;
 
 use anyhow::{bail, Context, Result};
 use voxstream_core::Producer;
-use voxstream_engine::{LoopLimits, MemoryBudget, Mode, Session, MAX_BUDGET_MB};
+use voxstream_engine::{CpuRenderer, FrameRenderer, LoopLimits, MemoryBudget, Mode, Session, MAX_BUDGET_MB};
 use voxstream_geometry::formats::is_geometry_file_name;
+use voxstream_gpu::GpuRenderer;
 use voxstream_render::{
     Camera, IsoSurface, RenderSettings, Shading, SurfaceNormals, TransferFunction, VolumePlacement,
 };
 use voxstream_store::{InMemoryVolume, StoreProducer, StoreReader};
 
 use crate::camera_path::{generated_path, parse_generated_path, read_camera_file, read_camera_path};
-use crate::cli::{NormalsArg, RenderArgs, ShadingArg, Switch};
+use crate::cli::{Backend, NormalsArg, RenderArgs, ShadingArg, Switch};
 use crate::exit_status::IncompleteImage;
 use crate::geometry_source;
 use crate::iso_flags;
@@ -397,7 +398,12 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
         ..LoopLimits::default()
     };
     let plan = plan_budget(budget, &source.producer.shape(), source.producer_cache_bytes)?;
-    let mut session = Session::with_value_range(
+    let renderer: Box<dyn FrameRenderer> = match args.backend {
+        Backend::Cpu => Box::new(CpuRenderer),
+        Backend::Gpu => Box::new(GpuRenderer::new().context("--backend gpu")?),
+    };
+    let mut session = Session::with_renderer(
+        renderer,
         source.producer,
         &transfer_function,
         settings,
@@ -410,6 +416,7 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
         mode: format!("{:?}", args.mode).to_lowercase(),
         budget_bytes,
         threads: rayon::current_num_threads(),
+        backend: session.renderer().describe(),
         ..RunStats::default()
     };
     stats.camera = cameras.first().copied();
@@ -480,6 +487,7 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
     stats.bricks_resident = residency.bricks as u64;
     stats.nodes_resident = residency.nodes;
     stats.resident_bytes_peak = session.peak_resident_bytes();
+    stats.bytes_uploaded = session.renderer().bytes_uploaded();
     stats.producer_failures = reported_failures;
     stats.peak_rss_bytes = peak_rss_bytes();
     stats.first_frame_ms = stats.frame_ms.first().copied();

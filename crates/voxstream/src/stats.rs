@@ -39,6 +39,10 @@ pub struct RunStats {
     pub producer_failures: usize,
     /// Worker threads used.
     pub threads: usize,
+    /// The renderer and its device (`--backend`): e.g. "gpu: llvmpipe (LLVM 15.0.6, 256 bits) (CPU emulation, …)".
+    pub backend: String,
+    /// Bytes of tiles and bricks uploaded to the renderer's memory (the GPU's; 0 on the CPU).
+    pub bytes_uploaded: u64,
     /// Bytes read from files while rendering (stores only: compressed shards and metadata).
     pub file_bytes_read: Option<u64>,
     /// Bytes of the bricks resident at the end (borders excluded, in the source's sample type): what the frame used.

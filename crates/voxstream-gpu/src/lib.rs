@@ -1,0 +1,29 @@
+//! # voxstream-gpu: the GPU renderer, on wgpu
+//!
+//! GigaVoxels is a GPU system (seeds 000/001, `shared/notes/gigavoxels.md`): the node and brick pools live in GPU
+//! memory, rays run in shaders and write the feedback that drives loading, and the CPU serves requests. This crate
+//! is that renderer behind the frame loop's [`FrameRenderer`](voxstream_engine::FrameRenderer) interface:
+//! [`GpuRenderer`] draws the passes of the same [`Session`](voxstream_engine::Session), cache manager and producers
+//! as the CPU ray caster, whose image is its reference (every GPU stage has a CPU twin).
+//!
+//! - [`context`]: the headless Vulkan device (Mesa's lavapipe in CI) and its description;
+//! - [`pools`]: the node and brick pools as storage buffers, updated by changed tiles and bricks only;
+//! - [`renderer`]: one pass: uniforms, the `ray_caster.wgsl` compute shader, readback, feedback to the CPU.
+//!
+//! The shader reads the `#[repr(C)]` records of `voxstream-layout` (nodes, tree header, transfer-table entries,
+//! feedback records, the frame's [`RayFrame`](voxstream_layout::RayFrame)) through their WGSL mirror
+//! `layout.wgsl`, which is prepended to it.
+//!
+//! Not yet on the GPU (each refused with a clear error or listed in `docs/ARCHITECTURE.md`): isosurfaces, Thiele
+//! et al.'s blended transitions, the brick pool as a 3D texture with hardware filtering, empty-space skipping,
+//! and f64-exact deep zooms (positions are f32: exact to about 2⁻²⁰ of the volume).
+
+pub mod context;
+pub mod error;
+pub mod pools;
+pub mod renderer;
+
+pub use context::GpuContext;
+pub use error::GpuError;
+pub use pools::UploadStats;
+pub use renderer::GpuRenderer;

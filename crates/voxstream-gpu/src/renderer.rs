@@ -1,0 +1,449 @@
+//! [`GpuRenderer`]: one pass of the frame loop on the GPU, behind the same [`FrameRenderer`] interface as the CPU
+//! ray caster, so the same [`Session`](voxstream_engine::Session) (cache manager, producers, budget) drives it.
+//!
+//! A pass (GigaVoxels [P09] §5–6): upload the node tiles and bricks that changed ([`crate::pools`]) and the frame's
+//! uniforms; run `ray_caster.wgsl`, one invocation per pending pixel; read back the pixels, each pixel's "missed
+//! data" flag, the usage flags and the request list; hand the usage and the requests to the CPU's
+//! [`FeedbackBuffer`], which the cache manager serves exactly as it serves the CPU renderer's.
+
+use std::sync::mpsc;
+
+use voxstream_core::{BrickSlot, FeedbackBuffer, Request, TileId, TreeView};
+use voxstream_engine::FrameRenderer;
+use voxstream_layout::{
+    FeedbackCounters, RayCounters, RayFrame, RequestRecord, TransferTableEntry, RAY_FRAME_COLOUR_BY_LEVEL,
+    RAY_FRAME_PHONG, RAY_FRAME_STEPS_IGNORE_STAND_INS,
+};
+use voxstream_render::{Camera, ProgressiveImage, RayStats, RenderError, RenderSettings, Shading, TransferLut};
+use wgpu::util::DeviceExt;
+
+use crate::context::GpuContext;
+use crate::error::GpuError;
+use crate::pools::{GpuPools, UploadStats};
+
+/// The ray caster's WGSL: the shared records of `voxstream-layout`, then the shader.
+pub const RAY_CASTER_WGSL: [&str; 2] =
+    [include_str!("../../voxstream-layout/src/layout.wgsl"), include_str!("ray_caster.wgsl")];
+
+/// Edge of a workgroup's square of pixels (`@workgroup_size(8, 8, 1)` in the shader).
+const WORKGROUP_EDGE: u32 = 8;
+/// Most request records one pass keeps (more are counted as dropped; their rays stay pending and ask again).
+const MAX_REQUEST_RECORDS: u64 = 1 << 18;
+/// A ray may not cross more segments than this (the CPU's bound).
+const MAX_SEGMENTS: u32 = 1 << 20;
+/// Bytes before the request records in the feedback buffer: the request counters and the ray counters.
+const FEEDBACK_HEADER_BYTES: u64 = (size_of::<FeedbackCounters>() + size_of::<RayCounters>()) as u64;
+
+/// The GPU renderer: a device, the compiled ray caster, and the pools on the GPU.
+pub struct GpuRenderer {
+    context: GpuContext,
+    pipeline: wgpu::ComputePipeline,
+    bind_group_layout: wgpu::BindGroupLayout,
+    pools: Option<GpuPools>,
+    table: Option<(Vec<TransferTableEntry>, wgpu::Buffer)>,
+    last_upload: UploadStats,
+    total_upload: UploadStats,
+    passes: u64,
+}
+
+impl GpuRenderer {
+    /// Opens the GPU ([`GpuContext::new`]) and compiles the ray caster.
+    pub fn new() -> Result<GpuRenderer, GpuError> {
+        GpuRenderer::with_context(GpuContext::new()?)
+    }
+
+    /// The ray caster on an already open device.
+    pub fn with_context(context: GpuContext) -> Result<GpuRenderer, GpuError> {
+        let device = &context.device;
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let source = RAY_CASTER_WGSL.concat();
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("ray_caster.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        });
+        let storage = |binding, read_only| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let uniform = |binding| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let bind_group_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("ray caster"),
+            entries: &[
+                uniform(0),
+                uniform(1),
+                storage(2, true),
+                storage(3, true),
+                storage(4, true),
+                storage(5, false),
+                storage(6, false),
+                storage(7, false),
+                storage(8, false),
+            ],
+        });
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("ray caster"),
+            bind_group_layouts: &[Some(&bind_group_layout)],
+            immediate_size: 0,
+        });
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("ray caster"),
+            layout: Some(&layout),
+            module: &module,
+            entry_point: Some("main"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        if let Some(error) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Validation(error.to_string()));
+        }
+        Ok(GpuRenderer {
+            context,
+            pipeline,
+            bind_group_layout,
+            pools: None,
+            table: None,
+            last_upload: UploadStats::default(),
+            total_upload: UploadStats::default(),
+            passes: 0,
+        })
+    }
+
+    /// The adapter, in one line ([`GpuContext::describe`]).
+    pub fn adapter(&self) -> String {
+        self.context.describe()
+    }
+
+    /// What the last pass uploaded.
+    pub fn last_upload(&self) -> UploadStats {
+        self.last_upload
+    }
+
+    /// What every pass so far uploaded.
+    pub fn total_upload(&self) -> UploadStats {
+        self.total_upload
+    }
+
+    /// Passes rendered so far.
+    pub fn passes(&self) -> u64 {
+        self.passes
+    }
+
+    /// GPU memory the pools occupy, bytes (`None` before the first pass).
+    pub fn pool_bytes(&self) -> Option<u64> {
+        self.pools.as_ref().map(|pools| pools.nodes.size() + pools.voxels.size())
+    }
+
+    fn pass(
+        &mut self,
+        view: TreeView<'_>,
+        feedback: &FeedbackBuffer,
+        camera: &Camera,
+        lut: &TransferLut,
+        settings: &RenderSettings,
+        progressive: &mut ProgressiveImage,
+    ) -> Result<(RayStats, usize), RenderError> {
+        settings.validate()?;
+        if !settings.surfaces.is_empty() {
+            return Err(GpuError::Unsupported { what: "an isosurface (--iso)", instead: "--backend cpu" }.into());
+        }
+        if !view.brick_blends.is_empty() {
+            return Err(GpuError::Unsupported {
+                what: "blending arriving bricks in (interactive frames with --blending on)",
+                instead: "--blending off or --backend cpu",
+            }
+            .into());
+        }
+        let (width, height) = (settings.width, settings.height);
+        if progressive.image.width != width || progressive.image.height != height {
+            return Err(RenderError::InvalidSetting("progressive image size differs from the settings".into()));
+        }
+        let frame = camera.frame(width, height)?;
+        let pixel_count = width as u64 * height as u64;
+        let max_storage = self.context.max_storage_bytes();
+        for (what, bytes) in [("image", pixel_count * 16), ("tile and brick usage list", usage_count(&view) * 4)] {
+            if bytes > max_storage {
+                return Err(GpuError::TooLarge { what, bytes, limit: max_storage }.into());
+            }
+        }
+        let device = &self.context.device;
+        let queue = &self.context.queue;
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+
+        // The pools: allocated once at their size, then only what changed is written.
+        if !self.pools.as_ref().is_some_and(|pools| pools.fits(&view)) {
+            self.pools = Some(GpuPools::new(device, &view, max_storage)?);
+        }
+        let Some(pools) = self.pools.as_mut() else { unreachable!("pools were just made") };
+        self.last_upload = pools.update(queue, &view);
+        self.total_upload.add(&self.last_upload);
+
+        // The transfer function's table (extinction per world unit), re-uploaded only when it changed.
+        let entries: Vec<TransferTableEntry> = lut
+            .entries()
+            .iter()
+            .map(|e| TransferTableEntry { r: e.color[0], g: e.color[1], b: e.color[2], a: e.sigma })
+            .collect();
+        if self.table.as_ref().is_none_or(|(uploaded, _)| *uploaded != entries) {
+            let buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("transfer table"),
+                contents: bytemuck::cast_slice(&entries),
+                usage: wgpu::BufferUsages::STORAGE,
+            });
+            self.table = Some((entries, buffer));
+        }
+        let Some((_, table)) = self.table.as_ref() else { unreachable!("the table was just made") };
+
+        let request_capacity =
+            (pixel_count * settings.max_requests_per_ray.max(1) as u64).clamp(1, MAX_REQUEST_RECORDS) as u32;
+        let ray_frame = ray_frame(&frame, settings, view.shape.n, request_capacity);
+        let header = view.header();
+        let init = |label, contents: &[u8], usage| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
+        };
+        let copy_src = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+        let tree_uniform = init("tree header", bytemuck::bytes_of(&header), wgpu::BufferUsages::UNIFORM);
+        let frame_uniform = init("ray frame", bytemuck::bytes_of(&ray_frame), wgpu::BufferUsages::UNIFORM);
+        let pixels = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("pixels"),
+            size: pixel_count * 16,
+            usage: copy_src,
+            mapped_at_creation: false,
+        });
+        let flags: Vec<u32> = progressive.pending.iter().map(|&p| p as u32).collect();
+        let pixel_flags = init("pixel flags", bytemuck::cast_slice(&flags), copy_src);
+        let mut feedback_header = [0u32; (FEEDBACK_HEADER_BYTES / 4) as usize];
+        feedback_header[1] = request_capacity;
+        let feedback_bytes = FEEDBACK_HEADER_BYTES + request_capacity as u64 * size_of::<RequestRecord>() as u64;
+        let feedback_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("feedback"),
+            size: feedback_bytes,
+            usage: copy_src | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        queue.write_buffer(&feedback_buffer, 0, bytemuck::cast_slice(&feedback_header));
+        let usage_bytes = usage_count(&view).max(1) * 4;
+        let usage = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("usage"),
+            size: usage_bytes,
+            usage: copy_src,
+            mapped_at_creation: false,
+        });
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("ray caster"),
+            layout: &self.bind_group_layout,
+            entries: &[
+                entry(0, &tree_uniform),
+                entry(1, &frame_uniform),
+                entry(2, &pools.nodes),
+                entry(3, &pools.voxels),
+                entry(4, table),
+                entry(5, &pixels),
+                entry(6, &pixel_flags),
+                entry(7, &feedback_buffer),
+                entry(8, &usage),
+            ],
+        });
+
+        // One readback buffer: pixels, flags, feedback, usage, one after another.
+        let sizes = [pixel_count * 16, pixel_count * 4, feedback_bytes, usage_bytes];
+        let offsets = [0, sizes[0], sizes[0] + sizes[1], sizes[0] + sizes[1] + sizes[2]];
+        let readback = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size: sizes.iter().sum(),
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pass") });
+        {
+            let mut compute = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
+            compute.set_pipeline(&self.pipeline);
+            compute.set_bind_group(0, &bind_group, &[]);
+            compute.dispatch_workgroups(width.div_ceil(WORKGROUP_EDGE), height.div_ceil(WORKGROUP_EDGE), 1);
+        }
+        for (source, (&offset, &size)) in
+            [&pixels, &pixel_flags, &feedback_buffer, &usage].iter().zip(offsets.iter().zip(&sizes))
+        {
+            encoder.copy_buffer_to_buffer(source, 0, &readback, offset, size);
+        }
+        queue.submit([encoder.finish()]);
+        let (sender, receiver) = mpsc::channel();
+        readback.map_async(wgpu::MapMode::Read, .., move |result| {
+            let _ = sender.send(result);
+        });
+        device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
+        if let Some(error) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Validation(error.to_string()).into());
+        }
+        receiver
+            .recv()
+            .map_err(|e| GpuError::Readback(e.to_string()))?
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        let mapped = readback.get_mapped_range(..).map_err(|e| GpuError::Readback(e.to_string()))?;
+        let bytes: &[u8] = &mapped;
+        let section = |i: usize| &bytes[offsets[i] as usize..(offsets[i] + sizes[i]) as usize];
+        let traced_pixels: &[[f32; 4]] = bytemuck::cast_slice(section(0));
+        let traced_flags: &[u32] = bytemuck::cast_slice(section(1));
+        for (index, (&flag, pixel)) in traced_flags.iter().zip(traced_pixels).enumerate() {
+            if flag != 0 {
+                progressive.image.pixels[index] = *pixel;
+                progressive.pending[index] = flag == 2;
+            }
+        }
+        let feedback_section = section(2);
+        let counters: FeedbackCounters =
+            bytemuck::pod_read_unaligned(&feedback_section[..size_of::<FeedbackCounters>()]);
+        let rays: RayCounters = bytemuck::pod_read_unaligned(
+            &feedback_section[size_of::<FeedbackCounters>()..FEEDBACK_HEADER_BYTES as usize],
+        );
+        let kept = counters.request_count.min(request_capacity) as usize;
+        let records: &[RequestRecord] = bytemuck::cast_slice(
+            &feedback_section[FEEDBACK_HEADER_BYTES as usize..][..kept * size_of::<RequestRecord>()],
+        );
+        let mut requests: Vec<Request> = records.iter().filter_map(|&r| Request::from_record(r)).collect();
+        requests.sort_unstable();
+        requests.dedup();
+        feedback.push_requests(&requests);
+        let usage_flags: &[u32] = bytemuck::cast_slice(section(3));
+        let tiles = view.nodes.len() / view.shape.nodes_per_tile() as usize;
+        for (index, &used) in usage_flags.iter().enumerate() {
+            if used != 0 {
+                if index < tiles {
+                    feedback.mark_tile(TileId(index as u32));
+                } else {
+                    feedback.mark_brick(BrickSlot((index - tiles) as u32));
+                }
+            }
+        }
+        drop(mapped);
+        readback.unmap();
+        self.passes += 1;
+        let stats = RayStats { rays: rays.rays as u64, samples: rays.samples as u64, descents: rays.descents as u64 };
+        Ok((stats, counters.request_count as usize))
+    }
+}
+
+impl FrameRenderer for GpuRenderer {
+    fn render_pass(
+        &mut self,
+        view: TreeView<'_>,
+        feedback: &FeedbackBuffer,
+        camera: &Camera,
+        lut: &TransferLut,
+        settings: &RenderSettings,
+        progressive: &mut ProgressiveImage,
+    ) -> Result<(RayStats, usize), RenderError> {
+        self.pass(view, feedback, camera, lut, settings, progressive)
+    }
+
+    fn describe(&self) -> String {
+        format!("gpu: {}", self.adapter())
+    }
+
+    fn bytes_uploaded(&self) -> u64 {
+        self.total_upload.bytes()
+    }
+}
+
+/// Usage flags of a pass: one per node tile, then one per brick slot.
+fn usage_count(view: &TreeView<'_>) -> u64 {
+    let header = view.header();
+    (view.nodes.len() as u64 / header.nodes_per_tile.max(1) as u64) + header.brick_count as u64
+}
+
+fn entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry { binding, resource: buffer.as_entire_binding() }
+}
+
+/// The frame's camera and settings as the shader reads them.
+fn ray_frame(
+    frame: &voxstream_render::CameraFrame,
+    settings: &RenderSettings,
+    n: u32,
+    request_capacity: u32,
+) -> RayFrame {
+    let placement = &settings.placement;
+    let eye: [f64; 3] = std::array::from_fn(|a| (frame.eye[a] - placement.origin[a]) / placement.scale[a]);
+    let light = settings.light_direction.map_or([0.0; 3], |l| {
+        let length = (l[0] * l[0] + l[1] * l[1] + l[2] * l[2]).sqrt();
+        if length > 0.0 {
+            l.map(|c| (c / length) as f32)
+        } else {
+            [0.0; 3]
+        }
+    });
+    let mut flags = 0;
+    if settings.shading == Shading::Phong {
+        flags |= RAY_FRAME_PHONG;
+    }
+    if settings.steps_ignore_stand_ins {
+        flags |= RAY_FRAME_STEPS_IGNORE_STAND_INS;
+    }
+    if settings.colour_by_level {
+        flags |= RAY_FRAME_COLOUR_BY_LEVEL;
+    }
+    RayFrame {
+        width: settings.width,
+        height: settings.height,
+        pixel_stride: settings.pixel_stride.max(1),
+        max_requests_per_ray: settings.max_requests_per_ray,
+        flags,
+        stand_in_levels: if n <= 2 { 2 } else { 1 },
+        request_capacity,
+        max_segments: MAX_SEGMENTS,
+        eye_x: eye[0] as f32,
+        eye_y: eye[1] as f32,
+        eye_z: eye[2] as f32,
+        pixel_spread: frame.pixel_spread as f32,
+        forward_x: frame.forward.x as f32,
+        forward_y: frame.forward.y as f32,
+        forward_z: frame.forward.z as f32,
+        world_per_volume: placement.mean_scale() as f32,
+        right_x: frame.right.x as f32,
+        right_y: frame.right.y as f32,
+        right_z: frame.right.z as f32,
+        lod_bias: settings.lod_bias as f32,
+        up_x: frame.up.x as f32,
+        up_y: frame.up.y as f32,
+        up_z: frame.up.z as f32,
+        step_factor: settings.step_factor as f32,
+        inverse_scale_x: (1.0 / placement.scale[0]) as f32,
+        inverse_scale_y: (1.0 / placement.scale[1]) as f32,
+        inverse_scale_z: (1.0 / placement.scale[2]) as f32,
+        bias_scale: (-settings.lod_bias * (n as f64).ln()).exp() as f32,
+        clip_lower_x: placement.clip_lower[0] as f32,
+        clip_lower_y: placement.clip_lower[1] as f32,
+        clip_lower_z: placement.clip_lower[2] as f32,
+        stop_below: 1.0 - settings.opacity_cutoff,
+        clip_upper_x: placement.clip_upper[0] as f32,
+        clip_upper_y: placement.clip_upper[1] as f32,
+        clip_upper_z: placement.clip_upper[2] as f32,
+        ambient: settings.phong.ambient,
+        background_r: settings.background[0],
+        background_g: settings.background[1],
+        background_b: settings.background[2],
+        diffuse: settings.phong.diffuse,
+        light_x: light[0],
+        light_y: light[1],
+        light_z: light[2],
+        specular: settings.phong.specular,
+        shininess: settings.phong.shininess,
+        padding0: 0,
+        padding1: 0,
+        padding2: 0,
+    }
+}
