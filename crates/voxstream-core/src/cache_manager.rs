@@ -215,6 +215,10 @@ impl<P: Producer> CacheManager<P> {
             brick_ranges: self.brick_pool.ranges(),
             block_ranges: self.brick_pool.block_ranges(),
             brick_blends: self.blending.as_ref().map_or(&[], LevelBlending::caps),
+            capacity: crate::tree_view::PoolCapacity {
+                tiles: self.node_pool.capacity(),
+                bricks: self.brick_pool.capacity(),
+            },
         }
     }
 

@@ -63,4 +63,4 @@ pub use node::{BrickSlot, Node, NodeData, NodeId, TileId};
 pub use node_pool::NodePool;
 pub use producer::{NodeContent, Produced, Producer};
 pub use request_queue::{QueuedRequest, RequestQueue};
-pub use tree_view::TreeView;
+pub use tree_view::{PoolCapacity, TreeView};

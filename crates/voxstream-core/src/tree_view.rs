@@ -26,6 +26,18 @@ pub struct TreeView<'a> {
     /// Per brick slot, the caps on its weight against its parent at its corners (Thiele et al.'s blending,
     /// [`crate::level_blending`]); empty when nothing is blended this frame.
     pub brick_blends: &'a [BrickBlend],
+    /// The most node tiles and brick slots the pools will ever hold (fixed by the memory budget; `nodes` and
+    /// `voxels` grow up to them with use): what a renderer with memory of its own (a GPU) allocates once.
+    pub capacity: PoolCapacity,
+}
+
+/// The most node tiles and brick slots the pools hold.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PoolCapacity {
+    /// Node tiles.
+    pub tiles: u32,
+    /// Brick slots.
+    pub bricks: u32,
 }
 
 impl<'a> TreeView<'a> {
@@ -110,6 +122,7 @@ mod tests {
             brick_ranges: &ranges,
             block_ranges: &blocks,
             brick_blends: &[],
+            capacity: PoolCapacity { tiles: 2, bricks: 3 },
         };
         let header = view.header();
         assert_eq!((header.n, header.nodes_per_tile, header.brick_size, header.stored_brick_size), (3, 27, 16, 18));

@@ -48,15 +48,21 @@ pub struct GpuPools {
     pub voxels: wgpu::Buffer,
     node_shadow: Vec<Node>,
     voxel_shadow: Vec<u16>,
+    node_capacity: usize,
+    voxel_capacity: usize,
     nodes_per_tile: usize,
     voxels_per_brick: usize,
 }
 
 impl GpuPools {
-    /// Buffers for pools of `view`'s size (everything uploaded on the first [`GpuPools::update`]).
+    /// Buffers for pools of `view`'s capacity (everything resident is uploaded by the first [`GpuPools::update`]).
     pub fn new(device: &wgpu::Device, view: &TreeView<'_>, max_storage_bytes: u64) -> Result<GpuPools, GpuError> {
-        let node_bytes = (view.nodes.len() * size_of::<Node>()) as u64;
-        let voxel_count = view.voxels.len().next_multiple_of(2);
+        let nodes_per_tile = view.shape.nodes_per_tile() as usize;
+        let voxels_per_brick = view.shape.voxels_per_brick();
+        // The pools grow up to their capacity with use; a view may already hold more if built by hand.
+        let node_count = (view.capacity.tiles as usize * nodes_per_tile).max(view.nodes.len());
+        let voxel_count = (view.capacity.bricks as usize * voxels_per_brick).max(view.voxels.len()).next_multiple_of(2);
+        let node_bytes = (node_count * size_of::<Node>()) as u64;
         let voxel_bytes = (voxel_count * 2) as u64;
         for (what, bytes) in [("node pool", node_bytes), ("brick pool", voxel_bytes)] {
             if bytes > max_storage_bytes {
@@ -74,50 +80,50 @@ impl GpuPools {
         Ok(GpuPools {
             nodes: buffer("node pool", node_bytes),
             voxels: buffer("brick pool", voxel_bytes),
-            // Shadows that differ from any pool everywhere, so the first update writes everything: the GPU buffers
-            // start as zeros, and a zero node or voxel would otherwise be taken as already there.
-            node_shadow: vec![Node { child_word: u32::MAX, data_word: u32::MAX }; view.nodes.len()],
-            voxel_shadow: vec![u16::MAX; voxel_count],
-            nodes_per_tile: view.shape.nodes_per_tile() as usize,
-            voxels_per_brick: view.shape.voxels_per_brick(),
-        })
-        .map(|mut pools| {
-            // Voxels past the pool's end (padding) are never read; make them equal so they are never written.
-            if voxel_count > view.voxels.len() {
-                pools.voxel_shadow[voxel_count - 1] = 0;
-            }
-            pools
+            // Empty shadows: what is resident is uploaded on the first update, the rest as the pools grow.
+            node_shadow: Vec::with_capacity(node_count),
+            voxel_shadow: Vec::with_capacity(voxel_count),
+            node_capacity: node_count,
+            voxel_capacity: voxel_count,
+            nodes_per_tile,
+            voxels_per_brick,
         })
     }
 
-    /// Whether these buffers hold pools of `view`'s size and shape.
+    /// Whether these buffers can hold `view`'s pools (same shape, within their capacity).
     pub fn fits(&self, view: &TreeView<'_>) -> bool {
-        self.node_shadow.len() == view.nodes.len()
-            && self.voxel_shadow.len() == view.voxels.len().next_multiple_of(2)
+        view.nodes.len() <= self.node_capacity
+            && view.voxels.len() <= self.voxel_capacity
             && self.nodes_per_tile == view.shape.nodes_per_tile() as usize
             && self.voxels_per_brick == view.shape.voxels_per_brick()
     }
 
-    /// Writes the tiles and bricks of `view` that differ from what was uploaded, merged into runs of neighbours.
+    /// Writes the tiles and bricks of `view` that differ from what was uploaded (or are new since), merged into
+    /// runs of neighbours.
     pub fn update(&mut self, queue: &wgpu::Queue, view: &TreeView<'_>) -> UploadStats {
         let mut stats = UploadStats::default();
         // Nodes, tile by tile.
         let per_tile = self.nodes_per_tile;
-        let runs = changed_runs(view.nodes, &self.node_shadow, per_tile);
-        for (from, to) in runs {
+        for (from, to) in changed_runs(view.nodes, &mut self.node_shadow, per_tile) {
             let (a, b) = (from * per_tile, (to * per_tile).min(view.nodes.len()));
-            self.node_shadow[a..b].copy_from_slice(&view.nodes[a..b]);
             let bytes = bytemuck::cast_slice(&self.node_shadow[a..b]);
             queue.write_buffer(&self.nodes, (a * size_of::<Node>()) as u64, bytes);
             stats.node_bytes += bytes.len() as u64;
             stats.tiles += (to - from) as u64;
         }
-        // Bricks, slot by slot; writes start and end on whole words (the shadow is padded to an even length).
+        // Bricks, slot by slot; writes start and end on whole 32-bit words (the shadow is padded to an even length
+        // with a zero that is never read).
         let per_brick = self.voxels_per_brick;
-        let runs = changed_runs(view.voxels, &self.voxel_shadow[..view.voxels.len()], per_brick);
+        let resident = view.voxels.len();
+        if self.voxel_shadow.len() > resident {
+            self.voxel_shadow.truncate(resident);
+        }
+        let runs = changed_runs(view.voxels, &mut self.voxel_shadow, per_brick);
+        if resident % 2 == 1 {
+            self.voxel_shadow.push(0);
+        }
         for (from, to) in runs {
-            let (a, b) = (from * per_brick, (to * per_brick).min(view.voxels.len()));
-            self.voxel_shadow[a..b].copy_from_slice(&view.voxels[a..b]);
+            let (a, b) = (from * per_brick, (to * per_brick).min(resident));
             let (a, b) = (a & !1, b.next_multiple_of(2));
             let bytes = bytemuck::cast_slice(&self.voxel_shadow[a..b]);
             queue.write_buffer(&self.voxels, (a * 2) as u64, bytes);
@@ -128,18 +134,32 @@ impl GpuPools {
     }
 }
 
-/// The runs `[from, to)` of chunks of `chunk` items where `current` differs from `shadow` (equal lengths), with
-/// neighbouring changed chunks merged.
-fn changed_runs<T: PartialEq>(current: &[T], shadow: &[T], chunk: usize) -> Vec<(usize, usize)> {
+/// The runs `[from, to)` of chunks of `chunk` items where `current` differs from `shadow`, or lies past its end,
+/// with neighbouring changed chunks merged; `shadow` is made equal to `current` on the way.
+fn changed_runs<T: PartialEq + Copy>(current: &[T], shadow: &mut Vec<T>, chunk: usize) -> Vec<(usize, usize)> {
     let mut runs: Vec<(usize, usize)> = Vec::new();
-    for (index, (now, then)) in current.chunks(chunk).zip(shadow.chunks(chunk)).enumerate() {
+    let common = shadow.len().min(current.len());
+    for (index, (now, then)) in current[..common].chunks(chunk).zip(shadow[..common].chunks_mut(chunk)).enumerate() {
         if now != then {
+            then.copy_from_slice(now);
             match runs.last_mut() {
                 Some((_, to)) if *to == index => *to = index + 1,
                 _ => runs.push((index, index + 1)),
             }
         }
     }
+    if current.len() > common {
+        // New chunks (the pool grew); a partly known last chunk was compared above and is written again here.
+        let first_new = common / chunk;
+        shadow.truncate(first_new * chunk);
+        shadow.extend_from_slice(&current[first_new * chunk..]);
+        let last = current.len().div_ceil(chunk);
+        match runs.last_mut() {
+            Some((_, to)) if *to >= first_new => *to = last,
+            _ => runs.push((first_new, last)),
+        }
+    }
+    shadow.truncate(current.len());
     runs
 }
 
@@ -149,14 +169,32 @@ mod tests {
 
     #[test]
     fn changed_chunks_merge_into_runs() {
-        let shadow = [0u16; 10];
-        let mut current = shadow;
-        assert!(changed_runs(&current, &shadow, 2).is_empty());
+        let mut shadow = vec![0u16; 10];
+        let mut current = [0u16; 10];
+        assert!(changed_runs(&current, &mut shadow, 2).is_empty());
         current[0] = 1; // chunk 0
         current[3] = 1; // chunk 1
         current[9] = 1; // chunk 4 (the last)
-        assert_eq!(changed_runs(&current, &shadow, 2), vec![(0, 2), (4, 5)]);
-        // A last chunk shorter than the others.
-        assert_eq!(changed_runs(&current[..9], &shadow[..9], 4), vec![(0, 1)]);
+        assert_eq!(changed_runs(&current, &mut shadow, 2), vec![(0, 2), (4, 5)]);
+        assert_eq!(shadow, current, "the shadow follows");
+        assert!(changed_runs(&current, &mut shadow, 2).is_empty(), "nothing changed since");
+    }
+
+    #[test]
+    fn a_grown_pool_uploads_its_new_chunks() {
+        let mut shadow = vec![0u16; 4];
+        let mut current = vec![0u16; 9];
+        current[8] = 5;
+        // Chunks of 4: chunk 0 is known and equal; chunks 1 and 2 (the last one short) are new.
+        assert_eq!(changed_runs(&current, &mut shadow, 4), vec![(1, 3)]);
+        assert_eq!(shadow, current);
+        // A change in the first chunk, and growth of the last: chunk 1 stays as it was.
+        current[0] = 1;
+        current.extend_from_slice(&[7, 7, 7]);
+        assert_eq!(changed_runs(&current, &mut shadow, 4), vec![(0, 1), (2, 3)]);
+        assert_eq!(shadow, current);
+        // Growth from a shadow ending inside a chunk rewrites that chunk.
+        let mut shadow = vec![0u16; 6];
+        assert_eq!(changed_runs(&[0u16; 10], &mut shadow, 4), vec![(1, 3)]);
     }
 }

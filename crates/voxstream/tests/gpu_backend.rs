@@ -1,0 +1,176 @@
+//! The GPU renderer (`voxstream-gpu`) against its reference, the CPU ray caster: the same scenes, cameras, settings
+//! and budget, drawn by the same frame loop, must give the same images within [`GPU_PSNR_DB`]. These tests need a
+//! Vulkan adapter: CI installs Mesa's lavapipe (`mesa-vulkan-drivers libvulkan1`, adapter "llvmpipe"), which runs the
+//! shader on the CPU. Without one they fail, naming the packages to install (they never skip silently).
+//!
+//! A failing comparison writes the actual (GPU), expected (CPU) and difference images to
+//! `target/gpu-test-failures/`.
+
+mod common;
+
+use std::path::PathBuf;
+
+use voxstream::png_output::write_rgb8_png;
+use voxstream::scenes::{builtin, SceneProducer, SCENE_NAMES};
+use voxstream_engine::{LoopLimits, Mode, Session};
+use voxstream_gpu::GpuRenderer;
+use voxstream_render::{psnr, Camera, Image, RenderSettings};
+
+/// The PSNR a GPU image must reach against the CPU image of the same frame (8-bit RGB). The two differ only by
+/// rounding: f32 positions on the GPU against f64 between segments on the CPU, `exp` per sample against tables.
+const GPU_PSNR_DB: f64 = 40.0;
+
+/// Image edge of the comparisons (lavapipe runs the shader on this machine's two cores).
+const SIZE: u32 = 96;
+
+fn open_gpu() -> GpuRenderer {
+    GpuRenderer::new().unwrap_or_else(|e| {
+        panic!("{e}\n(the GPU tests need a Vulkan driver; CI installs Mesa's lavapipe: apt-get install mesa-vulkan-drivers libvulkan1)")
+    })
+}
+
+fn settings(name: &str, size: u32) -> (RenderSettings, SceneProducer, voxstream_render::TransferFunction, Camera) {
+    let scene = builtin(name).expect("built-in scene");
+    let settings = RenderSettings {
+        width: size,
+        height: size,
+        shading: scene.shading,
+        light_direction: scene.light,
+        ..RenderSettings::default()
+    };
+    (settings, scene.producer, scene.transfer_function, scene.camera)
+}
+
+fn cpu_session(name: &str, size: u32, budget: u64, limits: LoopLimits) -> Session<SceneProducer> {
+    let (settings, producer, tf, _) = settings(name, size);
+    Session::new(producer, &tf, settings, budget, limits).expect("cpu session")
+}
+
+fn gpu_session(name: &str, size: u32, budget: u64, limits: LoopLimits) -> Session<SceneProducer, GpuRenderer> {
+    let (settings, producer, tf, _) = settings(name, size);
+    Session::with_renderer(open_gpu(), producer, &tf, settings, budget, limits, [0.0, 1.0]).expect("gpu session")
+}
+
+/// Asserts PSNR ≥ [`GPU_PSNR_DB`] of `actual` (GPU) against `expected` (CPU), writing both and their difference
+/// as PNGs when it fails. Returns the PSNR.
+fn assert_close(label: &str, actual: &Image, expected: &Image) -> f64 {
+    let (a, e) = (actual.to_rgb8(), expected.to_rgb8());
+    let quality = psnr(&a, &e);
+    println!("{label}: PSNR {quality:.1} dB (GPU against CPU)");
+    if quality < GPU_PSNR_DB {
+        let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("../gpu-test-failures");
+        std::fs::create_dir_all(&dir).expect("failure folder");
+        let difference: Vec<u8> = a.iter().zip(&e).map(|(&x, &y)| x.abs_diff(y).saturating_mul(8)).collect();
+        for (suffix, pixels) in [("actual", &a), ("expected", &e), ("difference", &difference)] {
+            let path = dir.join(format!("{label}-{suffix}.png"));
+            write_rgb8_png(pixels, actual.width, actual.height, &path).expect("write failure image");
+        }
+        panic!("{label}: PSNR {quality:.1} dB < {GPU_PSNR_DB} dB; images in {}", dir.display());
+    }
+    quality
+}
+
+#[test]
+fn every_builtin_scene_matches_the_cpu_image() {
+    for name in SCENE_NAMES {
+        let (_, _, _, camera) = settings(name, SIZE);
+        let mut cpu = cpu_session(name, SIZE, 64 << 20, LoopLimits::default());
+        let expected = common::converged(&mut cpu, &camera);
+        let mut gpu = gpu_session(name, SIZE, 64 << 20, LoopLimits::default());
+        let frame = gpu.render(&camera, Mode::Converged).expect("gpu render");
+        assert!(frame.is_converged(), "{name}: the GPU frame did not converge in {} passes", frame.passes);
+        assert!(expected.pixels.iter().any(|p| p[3] > 0.5), "{name}: the reference shows nothing");
+        assert_close(name, &frame.image, &expected);
+        // The GPU's feedback drove the same loading as the CPU's: the same bricks became resident.
+        assert_eq!(gpu.residency().bricks, cpu.residency().bricks, "{name}: resident bricks differ");
+    }
+}
+
+#[test]
+fn a_close_view_and_a_cut_transfer_function_match_too() {
+    // Deeper levels (the hypertexture close up, N = 2) and a narrow, sharp transfer function on the shell.
+    let camera = Camera { eye: [0.62, 0.58, 0.95], target: [0.5, 0.5, 0.5], up: [0.0, 1.0, 0.0], fov: 30.0 };
+    let mut cpu = cpu_session("hypertexture", SIZE, 64 << 20, LoopLimits::default());
+    let expected = common::converged(&mut cpu, &camera);
+    let mut gpu = gpu_session("hypertexture", SIZE, 64 << 20, LoopLimits::default());
+    let frame = gpu.render(&camera, Mode::Converged).expect("gpu render");
+    assert!(frame.is_converged());
+    assert_close("hypertexture-close", &frame.image, &expected);
+
+    let tf = voxstream_render::TransferFunction::new(
+        vec![
+            [0.0, 0.0, 0.0, 0.0, 0.0],
+            [0.55, 0.2, 0.6, 1.0, 0.0],
+            [0.6, 1.0, 0.9, 0.2, 0.8],
+            [0.65, 0.1, 0.1, 0.9, 0.0],
+        ],
+        None,
+    )
+    .expect("transfer function");
+    let (settings, producer, _, camera) = settings("shell", SIZE);
+    let mut cpu = Session::new(producer, &tf, settings.clone(), 64 << 20, LoopLimits::default()).expect("cpu");
+    let expected = common::converged(&mut cpu, &camera);
+    let mut gpu =
+        Session::with_renderer(open_gpu(), producer, &tf, settings, 64 << 20, LoopLimits::default(), [0.0, 1.0])
+            .expect("gpu");
+    let frame = gpu.render(&camera, Mode::Converged).expect("gpu render");
+    assert_close("shell-cut", &frame.image, &expected);
+}
+
+#[test]
+fn interactive_frames_converge_to_the_converged_image() {
+    // A few requests served per frame, no blending: detail arrives over many frames, each drawn by the GPU from
+    // whatever is resident, until a frame is final.
+    let limits = LoopLimits { requests_per_frame: 64, blending_fade_frames: None, ..LoopLimits::default() };
+    let (_, _, _, camera) = settings("shell", SIZE);
+    let mut gpu = gpu_session("shell", SIZE, 64 << 20, limits);
+    let mut frames = 0;
+    let last = loop {
+        let frame = gpu.render(&camera, Mode::Interactive).expect("interactive frame");
+        frames += 1;
+        if frame.is_final() || frames >= 400 {
+            break frame;
+        }
+    };
+    assert!(last.is_final(), "not final after {frames} interactive frames");
+    assert!(frames > 3, "detail should arrive over several frames, not {frames}");
+    let mut cpu = cpu_session("shell", SIZE, 64 << 20, LoopLimits::default());
+    let expected = common::converged(&mut cpu, &camera);
+    assert_close("shell-interactive", &last.image, &expected);
+}
+
+#[test]
+fn the_gpu_pools_stay_within_the_budget_and_upload_only_changes() {
+    let budget = 6 << 20;
+    let (_, _, _, camera) = settings("hypertexture", SIZE);
+    let mut gpu = gpu_session("hypertexture", SIZE, budget, LoopLimits::default());
+    let first = gpu.render(&camera, Mode::Converged).expect("first frame");
+    let pool_bytes = gpu.renderer().pool_bytes().expect("pools were uploaded");
+    assert!(pool_bytes <= budget, "GPU pools of {pool_bytes} bytes exceed the budget of {budget}");
+    let uploaded = gpu.renderer().total_upload();
+    assert!(uploaded.bricks > 0 && uploaded.tiles > 0, "nothing was uploaded: {uploaded:?}");
+    // The same view again: everything it needs is resident and already on the GPU.
+    let again = gpu.render(&camera, Mode::Converged).expect("second frame");
+    assert_eq!(gpu.renderer().last_upload().bytes(), 0, "an unchanged pool was uploaded again");
+    assert_eq!(again.image.pixels, first.image.pixels, "the same pools and camera gave another image");
+    // A new view loads new bricks; only those (and the tiles that point at them) are uploaded.
+    let before = gpu.renderer().total_upload();
+    let other = Camera { eye: [-0.9, 1.3, 1.6], ..camera };
+    let moved = gpu.render(&other, Mode::Converged).expect("third frame");
+    let after = gpu.renderer().total_upload();
+    let loaded = moved.bricks_produced + moved.bricks_prefetched;
+    assert!(loaded > 0, "the new view should need new bricks");
+    let written = after.bricks - before.bricks;
+    assert!(written > 0 && written <= loaded, "{written} brick slots uploaded for {loaded} bricks loaded");
+}
+
+#[test]
+fn the_shader_counts_what_its_rays_did() {
+    let (_, _, _, camera) = settings("shell", SIZE);
+    let mut gpu = gpu_session("shell", SIZE, 64 << 20, LoopLimits::default());
+    let frame = gpu.render(&camera, Mode::Converged).expect("gpu render");
+    // Every pixel is traced in the first pass, and retraced only while it missed data.
+    assert!(frame.rays >= (SIZE * SIZE) as u64, "{} rays for {} pixels", frame.rays, SIZE * SIZE);
+    assert!(frame.samples > frame.rays, "{} samples for {} rays", frame.samples, frame.rays);
+    assert!(frame.requests > 0, "the shell needs bricks, so the rays asked for some");
+}
