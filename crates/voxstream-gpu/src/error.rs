@@ -8,10 +8,10 @@ use voxstream_render::RenderError;
 pub enum GpuError {
     /// No Vulkan adapter could be opened.
     #[error(
-        "no GPU adapter found ({0}): install a Vulkan driver (on Debian: apt-get install mesa-vulkan-drivers \
-         libvulkan1, whose lavapipe runs on the CPU) or use --backend cpu"
+        "no GPU adapter found (no Vulkan driver could be loaded): install one (on Debian: apt-get install \
+         mesa-vulkan-drivers libvulkan1, whose lavapipe runs on the CPU) or use --backend cpu"
     )]
-    NoAdapter(String),
+    NoAdapter,
     /// The adapter refused to open a device.
     #[error("the GPU adapter {adapter} could not open a device ({reason}); use --backend cpu")]
     Device {

@@ -1,12 +1,15 @@
-//! The node and brick pools in GPU memory: storage buffers the ray caster reads, kept equal to the CPU pools by
-//! uploading, each pass, only the node tiles and brick slots whose contents changed (GigaVoxels [P09] §5: the CPU
-//! serves requests and the GPU copy follows; Reichl's pools, seed 004).
+//! The node and brick pools in GPU memory, kept equal to the CPU pools by uploading, each pass, only the node tiles
+//! and brick slots whose contents changed (GigaVoxels [P09] §5: the CPU serves requests and the GPU copy follows;
+//! Reichl's pools, seed 004). The node pool is a storage buffer of `voxstream_layout::Node`s; the brick pool is a
+//! 3D texture atlas (GigaVoxels [P09] §4), bricks side by side in the voxels' native 16-bit format (`R16Uint`, read
+//! with `textureLoad` and filtered in the shader exactly as the CPU filters; hardware filtering would round the
+//! weights to 8 bits on many GPUs), so it is bounded by the adapter's 3D texture size, not its storage-buffer size.
 //!
 //! The cache manager does not report which slots it rewrote, so each pass compares the pools with the shadow copy
 //! of what was uploaded last, tile by tile and brick by brick, and writes the runs that differ. That comparison reads
 //! the whole pool once per pass on the CPU (memory bandwidth: about 10 ms per 100 MB); dirty lists from the cache
-//! manager would remove it. Bricks are stored as they are in the CPU pool (16-bit voxels, two to a 32-bit word);
-//! the buffers are allocated once at the pools' size, which the memory budget fixed, and never grow past it.
+//! manager would remove it. The buffer and the atlas are allocated once at the pools' capacity, which the memory
+//! budget fixed, and never grow past it.
 
 use voxstream_core::{Node, TreeView};
 
@@ -44,8 +47,10 @@ impl UploadStats {
 pub struct GpuPools {
     /// The node pool (`Node` records).
     pub nodes: wgpu::Buffer,
-    /// The brick pool (16-bit voxels, padded to whole 32-bit words).
-    pub voxels: wgpu::Buffer,
+    /// The brick pool: an atlas of bricks of `(M+2)³` voxels, `R16Uint`.
+    pub bricks: wgpu::Texture,
+    /// Brick slots along x, y and z of the atlas.
+    pub atlas: [u32; 3],
     node_shadow: Vec<Node>,
     voxel_shadow: Vec<u16>,
     node_capacity: usize,
@@ -56,38 +61,57 @@ pub struct GpuPools {
 
 impl GpuPools {
     /// Buffers for pools of `view`'s capacity (everything resident is uploaded by the first [`GpuPools::update`]).
-    pub fn new(device: &wgpu::Device, view: &TreeView<'_>, max_storage_bytes: u64) -> Result<GpuPools, GpuError> {
+    pub fn new(device: &wgpu::Device, view: &TreeView<'_>, limits: &wgpu::Limits) -> Result<GpuPools, GpuError> {
         let nodes_per_tile = view.shape.nodes_per_tile() as usize;
         let voxels_per_brick = view.shape.voxels_per_brick();
         // The pools grow up to their capacity with use; a view may already hold more if built by hand.
         let node_count = (view.capacity.tiles as usize * nodes_per_tile).max(view.nodes.len());
-        let voxel_count = (view.capacity.bricks as usize * voxels_per_brick).max(view.voxels.len()).next_multiple_of(2);
+        let brick_count = (view.capacity.bricks as usize).max(view.voxels.len() / voxels_per_brick).max(1);
         let node_bytes = (node_count * size_of::<Node>()) as u64;
-        let voxel_bytes = (voxel_count * 2) as u64;
-        for (what, bytes) in [("node pool", node_bytes), ("brick pool", voxel_bytes)] {
-            if bytes > max_storage_bytes {
-                return Err(GpuError::TooLarge { what, bytes, limit: max_storage_bytes });
-            }
+        let max_storage = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        if node_bytes > max_storage {
+            return Err(GpuError::TooLarge { what: "node pool", bytes: node_bytes, limit: max_storage });
         }
-        let buffer = |label, size: u64| {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size: size.max(4),
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            })
-        };
+        let b = view.shape.stored_brick_size();
+        let atlas = atlas_shape(brick_count as u64, b, limits.max_texture_dimension_3d).ok_or(GpuError::TooLarge {
+            what: "brick pool",
+            bytes: (brick_count * voxels_per_brick * 2) as u64,
+            limit: (limits.max_texture_dimension_3d as u64 / b as u64).pow(3) * voxels_per_brick as u64 * 2,
+        })?;
+        let nodes = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("node pool"),
+            size: node_bytes.max(8),
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let bricks = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("brick atlas"),
+            size: wgpu::Extent3d { width: atlas[0] * b, height: atlas[1] * b, depth_or_array_layers: atlas[2] * b },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D3,
+            format: wgpu::TextureFormat::R16Uint,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        });
         Ok(GpuPools {
-            nodes: buffer("node pool", node_bytes),
-            voxels: buffer("brick pool", voxel_bytes),
+            nodes,
+            bricks,
+            atlas,
             // Empty shadows: what is resident is uploaded on the first update, the rest as the pools grow.
             node_shadow: Vec::with_capacity(node_count),
-            voxel_shadow: Vec::with_capacity(voxel_count),
+            voxel_shadow: Vec::with_capacity(brick_count * voxels_per_brick),
             node_capacity: node_count,
-            voxel_capacity: voxel_count,
+            voxel_capacity: brick_count * voxels_per_brick,
             nodes_per_tile,
             voxels_per_brick,
         })
+    }
+
+    /// GPU memory the pools occupy, bytes.
+    pub fn bytes(&self) -> u64 {
+        let size = self.bricks.size();
+        self.nodes.size() + size.width as u64 * size.height as u64 * size.depth_or_array_layers as u64 * 2
     }
 
     /// Whether these buffers can hold `view`'s pools (same shape, within their capacity).
@@ -111,27 +135,49 @@ impl GpuPools {
             stats.node_bytes += bytes.len() as u64;
             stats.tiles += (to - from) as u64;
         }
-        // Bricks, slot by slot; writes start and end on whole 32-bit words (the shadow is padded to an even length
-        // with a zero that is never read).
+        // Bricks, slot by slot: each one box of the atlas.
         let per_brick = self.voxels_per_brick;
-        let resident = view.voxels.len();
+        let resident = view.voxels.len() - view.voxels.len() % per_brick;
         if self.voxel_shadow.len() > resident {
             self.voxel_shadow.truncate(resident);
         }
-        let runs = changed_runs(view.voxels, &mut self.voxel_shadow, per_brick);
-        if resident % 2 == 1 {
-            self.voxel_shadow.push(0);
-        }
-        for (from, to) in runs {
-            let (a, b) = (from * per_brick, (to * per_brick).min(resident));
-            let (a, b) = (a & !1, b.next_multiple_of(2));
-            let bytes = bytemuck::cast_slice(&self.voxel_shadow[a..b]);
-            queue.write_buffer(&self.voxels, (a * 2) as u64, bytes);
-            stats.brick_bytes += bytes.len() as u64;
+        let b = view.shape.stored_brick_size();
+        let [ax, ay, _] = self.atlas;
+        for (from, to) in changed_runs(&view.voxels[..resident], &mut self.voxel_shadow, per_brick) {
+            for slot in from as u32..to as u32 {
+                let voxels = &self.voxel_shadow[slot as usize * per_brick..][..per_brick];
+                let origin = [slot % ax, (slot / ax) % ay, slot / (ax * ay)].map(|c| c * b);
+                queue.write_texture(
+                    wgpu::TexelCopyTextureInfo {
+                        texture: &self.bricks,
+                        mip_level: 0,
+                        origin: wgpu::Origin3d { x: origin[0], y: origin[1], z: origin[2] },
+                        aspect: wgpu::TextureAspect::All,
+                    },
+                    bytemuck::cast_slice(voxels),
+                    wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(2 * b), rows_per_image: Some(b) },
+                    wgpu::Extent3d { width: b, height: b, depth_or_array_layers: b },
+                );
+                stats.brick_bytes += (per_brick * 2) as u64;
+            }
             stats.bricks += (to - from) as u64;
         }
         stats
     }
+}
+
+/// Brick slots per axis of an atlas holding `bricks` bricks of `b³` voxels within `max_dimension` voxels per axis:
+/// rows along x as long as the texture allows, then as few rows and slices as hold them all (`None` if they do not
+/// fit).
+fn atlas_shape(bricks: u64, b: u32, max_dimension: u32) -> Option<[u32; 3]> {
+    let per_axis = (max_dimension / b.max(1)) as u64;
+    if per_axis == 0 {
+        return None;
+    }
+    let x = per_axis.min(bricks);
+    let y = per_axis.min(bricks.div_ceil(x));
+    let z = bricks.div_ceil(x * y);
+    (z <= per_axis).then_some([x as u32, y as u32, z as u32])
 }
 
 /// The runs `[from, to)` of chunks of `chunk` items where `current` differs from `shadow`, or lies past its end,
@@ -178,6 +224,20 @@ mod tests {
         assert_eq!(changed_runs(&current, &mut shadow, 2), vec![(0, 2), (4, 5)]);
         assert_eq!(shadow, current, "the shadow follows");
         assert!(changed_runs(&current, &mut shadow, 2).is_empty(), "nothing changed since");
+    }
+
+    #[test]
+    fn the_atlas_holds_every_brick_within_the_texture_size() {
+        assert_eq!(atlas_shape(1, 10, 2048), Some([1, 1, 1]));
+        assert_eq!(atlas_shape(300, 10, 2048), Some([204, 2, 1]));
+        assert_eq!(atlas_shape(204 * 204 + 1, 10, 2048), Some([204, 204, 2]));
+        assert_eq!(atlas_shape(204 * 204 * 204, 10, 2048), Some([204, 204, 204]));
+        assert_eq!(atlas_shape(204 * 204 * 204 + 1, 10, 2048), None);
+        assert_eq!(atlas_shape(5, 4096, 2048), None);
+        for bricks in [1u64, 7, 1000, 99_999] {
+            let [x, y, z] = atlas_shape(bricks, 18, 2048).expect("fits");
+            assert!((x * y * z) as u64 >= bricks && ((x * y * (z - 1)) as u64) < bricks, "{bricks}: {x}x{y}x{z}");
+        }
     }
 
     #[test]

@@ -27,7 +27,8 @@ struct Feedback {
 @group(0) @binding(0) var<uniform> tree: TreeHeader;
 @group(0) @binding(1) var<uniform> frame: RayFrame;
 @group(0) @binding(2) var<storage, read> nodes: array<Node>;
-@group(0) @binding(3) var<storage, read> voxels: array<u32>;
+// The brick pool: bricks of (M+2)³ voxels side by side in a 3D atlas, 16-bit, filtered here as on the CPU.
+@group(0) @binding(3) var bricks: texture_3d<u32>;
 // The transfer function: LUT entries of linear colour and extinction per world unit (TABLE_HOLDS_EXTINCTION).
 @group(0) @binding(4) var<storage, read> table: array<TransferTableEntry>;
 @group(0) @binding(5) var<storage, read_write> pixels: array<vec4<f32>>;
@@ -84,10 +85,16 @@ fn request(state: ptr<function, RayState>, node: u32, kind: u32) {
     }
 }
 
-// One stored voxel, normalised to [0, 1] by the caller; voxels are u16, two to a word, little-endian.
-fn voxel(index: u32) -> f32 {
-    let word = voxels[index >> 1u];
-    return f32((word >> ((index & 1u) * 16u)) & 0xffffu);
+// The atlas position of voxel (0, 0, 0) of the brick in `slot`.
+fn brick_origin(slot: u32) -> vec3<u32> {
+    let x = frame.atlas_bricks_x;
+    let y = frame.atlas_bricks_y;
+    return vec3<u32>(slot % x, (slot / x) % y, slot / (x * y)) * tree.stored_brick_size;
+}
+
+// One stored voxel (0‥65535).
+fn voxel(at: vec3<u32>) -> f32 {
+    return f32(textureLoad(bricks, at, 0).r);
 }
 
 // Trilinear value (normalised) and analytic gradient (value per voxel) at continuous voxel index x of the brick in
@@ -97,17 +104,15 @@ fn sample_brick(slot: u32, x: vec3<f32>) -> vec4<f32> {
     let c = clamp(x, vec3<f32>(0.0), vec3<f32>(f32(b - 1u)));
     let i = min(vec3<u32>(c), vec3<u32>(b - 2u));
     let f = c - vec3<f32>(i);
-    let base = slot * tree.voxels_per_brick + (i.z * b + i.y) * b + i.x;
-    let row = b;
-    let slab = b * b;
+    let base = brick_origin(slot) + i;
     let v000 = voxel(base);
-    let v100 = voxel(base + 1u);
-    let v010 = voxel(base + row);
-    let v110 = voxel(base + row + 1u);
-    let v001 = voxel(base + slab);
-    let v101 = voxel(base + slab + 1u);
-    let v011 = voxel(base + slab + row);
-    let v111 = voxel(base + slab + row + 1u);
+    let v100 = voxel(base + vec3<u32>(1u, 0u, 0u));
+    let v010 = voxel(base + vec3<u32>(0u, 1u, 0u));
+    let v110 = voxel(base + vec3<u32>(1u, 1u, 0u));
+    let v001 = voxel(base + vec3<u32>(0u, 0u, 1u));
+    let v101 = voxel(base + vec3<u32>(1u, 0u, 1u));
+    let v011 = voxel(base + vec3<u32>(0u, 1u, 1u));
+    let v111 = voxel(base + vec3<u32>(1u, 1u, 1u));
     let c00 = mix(v000, v100, f.x);
     let c10 = mix(v010, v110, f.x);
     let c01 = mix(v001, v101, f.x);

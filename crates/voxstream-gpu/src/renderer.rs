@@ -87,7 +87,16 @@ impl GpuRenderer {
                 uniform(0),
                 uniform(1),
                 storage(2, true),
-                storage(3, true),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 3,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Uint,
+                        view_dimension: wgpu::TextureViewDimension::D3,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
                 storage(4, true),
                 storage(5, false),
                 storage(6, false),
@@ -145,7 +154,7 @@ impl GpuRenderer {
 
     /// GPU memory the pools occupy, bytes (`None` before the first pass).
     pub fn pool_bytes(&self) -> Option<u64> {
-        self.pools.as_ref().map(|pools| pools.nodes.size() + pools.voxels.size())
+        self.pools.as_ref().map(GpuPools::bytes)
     }
 
     fn pass(
@@ -186,7 +195,7 @@ impl GpuRenderer {
 
         // The pools: allocated once at their size, then only what changed is written.
         if !self.pools.as_ref().is_some_and(|pools| pools.fits(&view)) {
-            self.pools = Some(GpuPools::new(device, &view, max_storage)?);
+            self.pools = Some(GpuPools::new(device, &view, &self.context.limits)?);
         }
         let Some(pools) = self.pools.as_mut() else { unreachable!("pools were just made") };
         self.last_upload = pools.update(queue, &view);
@@ -210,7 +219,9 @@ impl GpuRenderer {
 
         let request_capacity =
             (pixel_count * settings.max_requests_per_ray.max(1) as u64).clamp(1, MAX_REQUEST_RECORDS) as u32;
-        let ray_frame = ray_frame(&frame, settings, view.shape.n, request_capacity);
+        let mut ray_frame = ray_frame(&frame, settings, view.shape.n, request_capacity);
+        [ray_frame.atlas_bricks_x, ray_frame.atlas_bricks_y] = [pools.atlas[0], pools.atlas[1]];
+        let brick_atlas = pools.bricks.create_view(&wgpu::TextureViewDescriptor::default());
         let header = view.header();
         let init = |label, contents: &[u8], usage| {
             device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
@@ -250,7 +261,7 @@ impl GpuRenderer {
                 entry(0, &tree_uniform),
                 entry(1, &frame_uniform),
                 entry(2, &pools.nodes),
-                entry(3, &pools.voxels),
+                wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(&brick_atlas) },
                 entry(4, table),
                 entry(5, &pixels),
                 entry(6, &pixel_flags),
@@ -442,8 +453,8 @@ fn ray_frame(
         light_z: light[2],
         specular: settings.phong.specular,
         shininess: settings.phong.shininess,
-        padding0: 0,
-        padding1: 0,
-        padding2: 0,
+        atlas_bricks_x: 1,
+        atlas_bricks_y: 1,
+        padding: 0,
     }
 }

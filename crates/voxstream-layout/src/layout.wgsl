@@ -138,7 +138,7 @@ struct RayFrame {
     light_z: f32,
     specular: f32,
     shininess: f32,
-    padding0: u32,
-    padding1: u32,
-    padding2: u32,
+    atlas_bricks_x: u32,
+    atlas_bricks_y: u32,
+    padding: u32,
 }

@@ -19,7 +19,7 @@
 //! | 128 | `clip_upper_*`, `ambient` | the clip box's upper corner; Phong's ambient coefficient |
 //! | 144 | `background_*`, `diffuse` | linear background colour; Phong's diffuse coefficient |
 //! | 160 | `light_*`, `specular` | unit light direction (world; zero: a headlight); Phong's specular coefficient |
-//! | 176 | `shininess`, `padding0..2` | Phong's exponent; zero |
+//! | 176 | `shininess`, `atlas_bricks_x`, `atlas_bricks_y`, `padding` | Phong's exponent; brick slots per row and per column of the brick atlas (slot `s` sits at brick `(s mod x, (s div x) mod y, s div xy)`); zero |
 //!
 //! Size 192 bytes (a multiple of 16, as uniforms need).
 
@@ -83,9 +83,9 @@ pub struct RayFrame {
     pub light_z: f32,
     pub specular: f32,
     pub shininess: f32,
-    pub padding0: u32,
-    pub padding1: u32,
-    pub padding2: u32,
+    pub atlas_bricks_x: u32,
+    pub atlas_bricks_y: u32,
+    pub padding: u32,
 }
 
 /// Bytes of a [`RayFrame`].

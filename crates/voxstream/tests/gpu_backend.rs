@@ -174,3 +174,41 @@ fn the_shader_counts_what_its_rays_did() {
     assert!(frame.samples > frame.rays, "{} samples for {} rays", frame.samples, frame.rays);
     assert!(frame.requests > 0, "the shell needs bricks, so the rays asked for some");
 }
+
+#[test]
+fn the_command_line_names_the_adapter_or_says_why_there_is_none() {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("gpu-cli");
+    std::fs::create_dir_all(&dir).expect("scratch folder");
+    let (image, stats) = (dir.join("shell.png"), dir.join("shell.json"));
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_voxstream"))
+        .args(["render", "shell", "--backend", "gpu", "--width", "64", "--height", "64", "--quiet"])
+        .arg("--out")
+        .arg(&image)
+        .arg("--stats")
+        .arg(&stats)
+        .output()
+        .expect("run voxstream");
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let stats: serde_json::Value = serde_json::from_slice(&std::fs::read(&stats).expect("stats")).expect("json");
+    let backend = stats["backend"].as_str().expect("backend named");
+    assert!(backend.starts_with("gpu: "), "{backend}");
+    assert!(stats["bytes_uploaded"].as_u64().is_some_and(|b| b > 0), "{stats}");
+
+    // No Vulkan driver at all: one line naming the problem and the fix, exit status 1, no image.
+    let missing = dir.join("missing.png");
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_voxstream"))
+        .args(["render", "shell", "--backend", "gpu", "--quiet"])
+        .arg("--out")
+        .arg(&missing)
+        .env("VK_ICD_FILENAMES", dir.join("no-such-driver.json"))
+        .env("VK_DRIVER_FILES", dir.join("no-such-driver.json"))
+        .output()
+        .expect("run voxstream");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(1), "{stderr}");
+    let lines: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error: --backend gpu")).collect();
+    assert_eq!(lines.len(), 1, "{stderr}");
+    assert!(lines[0].contains("no GPU adapter") && lines[0].contains("--backend cpu"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(!missing.exists(), "no image without a renderer");
+}
