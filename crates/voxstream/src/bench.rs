@@ -7,11 +7,12 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use serde::Serialize;
 use voxstream_core::Producer;
-use voxstream_engine::{LoopLimits, Mode, Session};
+use voxstream_engine::{CpuRenderer, FrameRenderer, LoopLimits, Mode, Session};
+use voxstream_gpu::GpuRenderer;
 use voxstream_render::RenderSettings;
 
 use crate::camera_path::orbit;
-use crate::cli::BenchArgs;
+use crate::cli::{Backend, BenchArgs, Switch};
 use crate::memory::peak_rss_bytes;
 use crate::render_budget::{check_budget, plan_budget};
 use crate::scenes::{builtin, Scene, SCENE_NAMES};
@@ -53,6 +54,15 @@ pub struct SceneFigures {
     pub bricks_resident: u32,
     /// Peak pool bytes.
     pub resident_bytes_peak: u64,
+    /// The renderer and its device.
+    pub backend: String,
+    /// Bytes of tiles and bricks uploaded to the renderer's memory (the GPU's; 0 on the CPU) by the cold converged
+    /// frame.
+    pub converged_bytes_uploaded: u64,
+    /// The same per warm frame (nothing changes: 0 when only changes are uploaded).
+    pub warm_bytes_uploaded_per_frame: f64,
+    /// The same per frame of the interactive camera path, mean.
+    pub path_bytes_uploaded_per_frame: f64,
 }
 
 /// Runs the benchmark and prints a Markdown table.
@@ -63,6 +73,11 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let names: Vec<String> =
         if args.scenes.is_empty() { SCENE_NAMES.iter().map(|s| s.to_string()).collect() } else { args.scenes.clone() };
     check_budget(args.budget_mb, args.size, args.size, "--size")?;
+    if args.backend == Backend::Gpu && args.blending == Switch::On {
+        eprintln!(
+            "bench: the GPU backend does not blend arriving bricks yet: interactive frames run with --blending off"
+        );
+    }
     eprintln!("bench: the scalar trilinear bound …");
     let bound_ns = scalar_trilinear_ns_per_sample(BOUND_DURATION);
     let mut figures = Vec::new();
@@ -72,16 +87,17 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         figures.push(bench_scene(&scene, args, bound_ns)?);
     }
     println!(
-        "threads: {}, ray loop: {}, peak RSS: {:.0} MiB, scalar trilinear bound: {bound_ns:.1} ns per sample on one core\n",
+        "backend: {}\nthreads: {}, ray loop: {}, peak RSS: {:.0} MiB, scalar trilinear bound: {bound_ns:.1} ns per sample on one core\n",
+        figures.first().map_or("", |f| f.backend.as_str()),
         rayon::current_num_threads(),
         voxstream_render::InstructionSet::detected(),
         peak_rss_bytes().unwrap_or(0) as f64 / 1048576.0
     );
-    println!("| scene | size | converged (cold) | passes | frames to converge (interactive) | warm frame | warm fps | rays/s | samples/s | ns/sample/core (bound) | path median | path p95 |");
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("| scene | size | converged (cold) | passes | frames to converge (interactive) | warm frame | warm fps | rays/s | samples/s | ns/sample/core (bound) | path median | path p95 | uploaded: cold, per warm frame, per path frame |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for f in &figures {
         println!(
-            "| {} | {}² | {:.0} ms | {} | {} | {:.1} ms | {:.1} | {:.2} M | {:.1} M | {:.1} ({:.1}) | {:.1} ms | {:.1} ms |",
+            "| {} | {}² | {:.0} ms | {} | {} | {:.1} ms | {:.1} | {:.2} M | {:.1} M | {:.1} ({:.1}) | {:.1} ms | {:.1} ms | {:.1} MB, {:.0} B, {:.1} kB |",
             f.scene,
             f.size,
             f.converged_ms,
@@ -94,7 +110,10 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             f.ns_per_sample_per_core,
             f.trilinear_bound_ns,
             f.path_median_ms,
-            f.path_p95_ms
+            f.path_p95_ms,
+            f.converged_bytes_uploaded as f64 / 1e6,
+            f.warm_bytes_uploaded_per_frame,
+            f.path_bytes_uploaded_per_frame / 1e3,
         );
     }
     if let Some(path) = &args.json {
@@ -104,7 +123,10 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     Ok(())
 }
 
-fn new_session(scene: &Scene, args: &BenchArgs) -> Result<Session<crate::scenes::SceneProducer>> {
+fn new_session(
+    scene: &Scene,
+    args: &BenchArgs,
+) -> Result<Session<crate::scenes::SceneProducer, Box<dyn FrameRenderer>>> {
     let settings = RenderSettings {
         width: args.size,
         height: args.size,
@@ -115,17 +137,32 @@ fn new_session(scene: &Scene, args: &BenchArgs) -> Result<Session<crate::scenes:
     // The same split as `render`: the frame's buffers count, and a budget beyond the machine is refused.
     let budget = check_budget(args.budget_mb, args.size, args.size, "--size")?;
     let plan = plan_budget(&budget, &scene.producer.shape(), 0)?;
+    let blending = args.blending == Switch::On && args.backend == Backend::Cpu;
     let limits = LoopLimits {
-        blending_fade_frames: (args.blending == crate::cli::Switch::On).then_some(voxstream_core::DEFAULT_FADE_FRAMES),
+        blending_fade_frames: blending.then_some(voxstream_core::DEFAULT_FADE_FRAMES),
         ..LoopLimits::default()
     };
-    Ok(Session::new(scene.producer, &scene.transfer_function, settings, plan.pool_bytes, limits)?)
+    let renderer: Box<dyn FrameRenderer> = match args.backend {
+        Backend::Cpu => Box::new(CpuRenderer),
+        Backend::Gpu => Box::new(GpuRenderer::new().context("--backend gpu")?),
+    };
+    let session = Session::with_renderer(
+        renderer,
+        scene.producer,
+        &scene.transfer_function,
+        settings,
+        plan.pool_bytes,
+        limits,
+        [0.0, 1.0],
+    )?;
+    Ok(session)
 }
 
 fn bench_scene(scene: &Scene, args: &BenchArgs, bound_ns: f64) -> Result<SceneFigures> {
     // Cold, converged.
     let mut session = new_session(scene, args)?;
     let cold = session.render(&scene.camera, Mode::Converged)?;
+    let converged_bytes_uploaded = session.renderer().bytes_uploaded();
 
     // Warm: everything resident, no request left.
     let mut warm_ms = Vec::new();
@@ -138,6 +175,9 @@ fn bench_scene(scene: &Scene, args: &BenchArgs, bound_ns: f64) -> Result<SceneFi
         samples += frame.samples;
     }
     let warm_seconds = start.elapsed().as_secs_f64();
+    let warm_bytes_uploaded_per_frame =
+        (session.renderer().bytes_uploaded() - converged_bytes_uploaded) as f64 / args.warm_frames.max(1) as f64;
+    let backend = session.renderer().describe();
     let warm_frame_ms = median(&mut warm_ms);
 
     // Interactive from cold: frames until complete.
@@ -150,6 +190,7 @@ fn bench_scene(scene: &Scene, args: &BenchArgs, bound_ns: f64) -> Result<SceneFi
     for camera in orbit(args.path_frames.max(1), scene.camera.target, 2.6, 0.45, scene.camera.fov) {
         path_ms.push(session.render(&camera, Mode::Interactive)?.elapsed_ms);
     }
+    let path_bytes_uploaded_per_frame = session.renderer().bytes_uploaded() as f64 / path_ms.len() as f64;
     let path_median_ms = median(&mut path_ms.clone());
     path_ms.sort_by(f64::total_cmp);
     let path_p95_ms = path_ms[((path_ms.len() as f64 * 0.95) as usize).min(path_ms.len() - 1)];
@@ -170,6 +211,10 @@ fn bench_scene(scene: &Scene, args: &BenchArgs, bound_ns: f64) -> Result<SceneFi
         path_p95_ms,
         bricks_resident: session.residency().bricks,
         resident_bytes_peak: session.peak_resident_bytes(),
+        backend,
+        converged_bytes_uploaded,
+        warm_bytes_uploaded_per_frame,
+        path_bytes_uploaded_per_frame,
     })
 }
 

@@ -364,6 +364,9 @@ pub struct BenchArgs {
     /// Memory budget, MiB.
     #[arg(long, default_value_t = 512)]
     pub budget_mb: u64,
+    /// cpu: the CPU ray caster; gpu: the GPU ray caster (wgpu, Vulkan; interactive frames without blending).
+    #[arg(long, value_enum, default_value_t = Backend::Cpu)]
+    pub backend: Backend,
     /// Also write the figures as JSON here.
     #[arg(long)]
     pub json: Option<PathBuf>,

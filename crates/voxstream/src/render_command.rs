@@ -373,6 +373,11 @@ pub fn prepare_view<P>(args: &RenderArgs, source: &Source<P>) -> Result<Prepared
     Ok(PreparedView { transfer_function, settings, camera: view, drawing_surfaces })
 }
 
+/// Whether interactive frames blend arriving bricks in (Thiele et al.): `--blending on`, on the CPU backend.
+fn blending(args: &RenderArgs) -> bool {
+    args.blending == Switch::On && args.backend == Backend::Cpu
+}
+
 fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &MemoryBudget) -> Result<()> {
     let PreparedView { transfer_function, settings, camera: view, drawing_surfaces } = prepare_view(args, &source)?;
     let cameras = match &args.path {
@@ -394,7 +399,7 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
     let budget_bytes = budget.total_bytes();
     let limits = LoopLimits {
         requests_per_frame: args.requests_per_frame,
-        blending_fade_frames: (args.blending == Switch::On).then_some(args.fade_frames),
+        blending_fade_frames: blending(args).then_some(args.fade_frames),
         ..LoopLimits::default()
     };
     let plan = plan_budget(budget, &source.producer.shape(), source.producer_cache_bytes)?;
@@ -436,7 +441,12 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
             Err(warning) => progress.warn(&warning),
         }
     }
-    stats.blending = args.mode == Mode::Interactive && args.blending == Switch::On;
+    stats.blending = args.mode == Mode::Interactive && blending(args);
+    if args.mode == Mode::Interactive && args.blending == Switch::On && !blending(args) {
+        progress.warn(
+            "the GPU backend does not blend arriving bricks yet: interactive frames are drawn with --blending off",
+        );
+    }
     let mut empty_images = 0usize;
     let mut reported_failures = 0usize;
     let mut written = Vec::new();
