@@ -1,0 +1,30 @@
+#!/usr/bin/env bash
+# The GPU renderer's figures on whatever adapter this machine has, next to the CPU renderer's in the same run:
+# the adapter, converged and warm frame times, frames along an interactive path, and the bytes uploaded to the GPU
+# per frame (cold, warm, path). Not part of CI (CI's adapter is lavapipe, a CPU emulation: see BENCHMARKS.md).
+#
+#   bash bench/gpu.sh [SIZE] [SCENES]      e.g. bash bench/gpu.sh 1024 sponge,hypertexture
+set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+size="${1:-1024}"
+scenes="${2:-sponge,hypertexture,shell}"
+cargo build --release -q -p voxstream
+bin=./target/release/voxstream
+out=target/gpu-bench
+mkdir -p "$out"
+for backend in gpu cpu; do
+    echo "## --backend $backend, ${size}², scenes $scenes"
+    "$bin" bench --backend "$backend" --size "$size" --scenes "$scenes" --blending off --warm-frames 20 \
+        --path-frames 60 --json "$out/$backend.json"
+    echo
+done
+python3 - "$out/gpu.json" "$out/cpu.json" <<'PY'
+import json, sys
+gpu, cpu = (json.load(open(p)) for p in sys.argv[1:3])
+print("| scene | warm frame GPU / CPU | path median GPU / CPU | uploaded per path frame |")
+print("|---|---|---|---|")
+for g, c in zip(gpu, cpu):
+    print(f"| {g['scene']} | {g['warm_frame_ms']:.1f} / {c['warm_frame_ms']:.1f} ms ({c['warm_frame_ms'] / g['warm_frame_ms']:.2f}x) "
+          f"| {g['path_median_ms']:.1f} / {c['path_median_ms']:.1f} ms | {g['path_bytes_uploaded_per_frame'] / 1e3:.1f} kB |")
+print(f"\nadapter: {gpu[0]['backend']}")
+PY
