@@ -7,6 +7,10 @@
 // The records (Node, TreeHeader, RayFrame, TransferTableEntry, FeedbackCounters, RayCounters, RequestRecord) come
 // from crates/voxstream-layout/src/layout.wgsl, which is prepended to this file.
 //
+// Positions are f32 in the anchor frame of `RayFrame` (one unit per node of the anchor level, origin at the anchor
+// node that holds the eye), so that deep zooms keep the precision the CPU has in f64: a node is located by its
+// corner and edge in that frame, exact integers down to the anchor level, small fractions below it.
+//
 // Differences from the CPU, all below the image tolerance the tests check: positions are f32 (the CPU's are f64
 // between segments), the step ladder's rung and the level search are computed in f32, and no block or brick is
 // skipped as empty (skipping never moves a sample on the CPU either, so it changes only the work, not the image).
@@ -38,9 +42,11 @@ struct Feedback {
 @group(0) @binding(8) var<storage, read_write> usage: array<u32>;
 
 struct RayState {
+    // The ray in the anchor frame: origin, anchor units per world unit of t, and its inverse.
     origin: vec3<f32>,
     direction: vec3<f32>,
     inverse_direction: vec3<f32>,
+    // Unit-cube units per world unit of t (what sets the step).
     speed: f32,
     color: vec3<f32>,
     transmittance: f32,
@@ -258,14 +264,40 @@ fn intersect_box(origin: vec3<f32>, direction: vec3<f32>, lower: vec3<f32>, uppe
     return vec2<f32>(t0, t1);
 }
 
-// One node on the descent: its index, its record, its level and its integer coordinates at that level.
+// One node on the descent: its index, its record, its level, its integer coordinates at that level (down to the
+// anchor level), and its lower corner and edge in the anchor frame.
 struct PathNode {
     id: u32,
     node: Node,
     level: u32,
     ijk: vec3<u32>,
-    // N^level.
-    scale: f32,
+    corner: vec3<f32>,
+    size: f32,
+}
+
+// N^d as an integer (d ≤ the anchor level, so below 2³¹).
+fn integer_power(d: u32) -> u32 {
+    var s = 1u;
+    for (var i = 0u; i < d; i++) {
+        s *= tree.n;
+    }
+    return s;
+}
+
+// Child `offset` (0‥N−1 per axis) of `parent`: node coordinates in integers while they fit (down to the anchor
+// level), then corners by halving (N = 2) or thirding in the anchor frame.
+fn child_of(parent: PathNode, offset: vec3<u32>, id: u32, node: Node) -> PathNode {
+    let level = parent.level + 1u;
+    let n = tree.n;
+    let ijk = parent.ijk * n + offset;
+    if level <= frame.anchor_level {
+        let edge = integer_power(frame.anchor_level - level);
+        let anchor = vec3<i32>(vec3<u32>(frame.anchor_x, frame.anchor_y, frame.anchor_z));
+        let corner = vec3<f32>(vec3<i32>(ijk * edge) - anchor);
+        return PathNode(id, node, level, ijk, corner, f32(edge));
+    }
+    let size = parent.size / f32(n);
+    return PathNode(id, node, level, ijk, parent.corner + vec3<f32>(offset) * size, size);
 }
 
 fn has_brick(node: Node) -> bool {
@@ -275,13 +307,13 @@ fn has_brick(node: Node) -> bool {
 // Continuous voxel index in the brick of `entry` at the ray's point at distance t (`Traversal::brick_line`).
 fn brick_coordinates(state: ptr<function, RayState>, entry: PathNode, t: f32) -> vec3<f32> {
     let m = f32(tree.brick_size);
-    let origin = ((*state).origin * entry.scale - vec3<f32>(entry.ijk)) * m + 0.5;
+    let origin = ((*state).origin - entry.corner) / entry.size * m + 0.5;
     return origin + brick_rate(state, entry) * t;
 }
 
 // Voxels of the brick of `entry` per world unit along the ray.
 fn brick_rate(state: ptr<function, RayState>, entry: PathNode) -> vec3<f32> {
-    return (*state).direction * (entry.scale * f32(tree.brick_size));
+    return (*state).direction * (f32(tree.brick_size) / entry.size);
 }
 
 @compute @workgroup_size(8, 8, 1)
@@ -306,9 +338,10 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
 
     var state: RayState;
     state.origin = vec3<f32>(frame.eye_x, frame.eye_y, frame.eye_z);
-    state.direction = world_direction * inverse_scale;
+    let volume_direction = world_direction * inverse_scale;
+    state.direction = volume_direction * frame.anchor_scale;
     state.inverse_direction = 1.0 / state.direction;
-    state.speed = length(state.direction);
+    state.speed = length(volume_direction);
     state.color = vec3<f32>(0.0);
     state.transmittance = 1.0;
     state.requests_left = frame.max_requests_per_ray;
@@ -354,7 +387,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             }
 
             // Descend from the root (`Traversal::descend`), keeping the last three nodes of the path.
-            var current = PathNode(0u, root, 0u, vec3<u32>(0u), 1.0);
+            let root_corner = -vec3<f32>(vec3<i32>(vec3<u32>(frame.anchor_x, frame.anchor_y, frame.anchor_z)));
+            var current = PathNode(0u, root, 0u, vec3<u32>(0u), root_corner, frame.anchor_scale);
             var parent = current;
             var grandparent = current;
             var depth = 0u;
@@ -378,10 +412,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
                     break;
                 }
                 mark_tile(tile);
-                let s = current.scale * f32(n);
-                let lo = current.ijk * n;
-                let g = clamp(vec3<u32>(max(p * s, vec3<f32>(0.0))), lo, lo + vec3<u32>(n - 1u));
-                let offset = g - lo;
+                let local = max((p - current.corner) / current.size * f32(n), vec3<f32>(0.0));
+                let offset = min(vec3<u32>(local), vec3<u32>(n - 1u));
                 let child_index = (offset.z * n + offset.y) * n + offset.x;
                 let child_id = tile * tree.nodes_per_tile + child_index;
                 let child = Node(nodes[child_id].child_word, nodes[child_id].data_word);
@@ -390,13 +422,13 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
                 }
                 grandparent = parent;
                 parent = current;
-                current = PathNode(child_id, child, current.level + 1u, g, s);
+                current = child_of(current, offset, child_id, child);
                 depth += 1u;
             }
 
             // The node's box is one segment.
-            let node_size = 1.0 / current.scale;
-            let box_lower = vec3<f32>(current.ijk) * node_size;
+            let node_size = current.size;
+            let box_lower = current.corner;
             var t_exit = t_leave;
             for (var a = 0u; a < 3u; a++) {
                 let inv = state.inverse_direction[a];
@@ -406,8 +438,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
                 }
             }
             // Never stall on a boundary: move at least a sliver of the node (f32: coarser than the CPU's sliver).
-            t_exit = max(t_exit, t + (node_size * 1e-5 + 2e-7 * max(max(abs(p.x), abs(p.y)), abs(p.z))) / state.speed
-                + 2e-7 * t);
+            t_exit = max(t_exit, t + (node_size * 1e-5 + 2e-7 * max(max(abs(p.x), abs(p.y)), abs(p.z)))
+                / (state.speed * frame.anchor_scale) + 2e-7 * t);
             let t_start = t;
             t = t_exit;
 

@@ -219,7 +219,7 @@ impl GpuRenderer {
 
         let request_capacity =
             (pixel_count * settings.max_requests_per_ray.max(1) as u64).clamp(1, MAX_REQUEST_RECORDS) as u32;
-        let mut ray_frame = ray_frame(&frame, settings, view.shape.n, request_capacity);
+        let mut ray_frame = ray_frame(&frame, settings, view.shape.n, view.shape.max_level, request_capacity);
         [ray_frame.atlas_bricks_x, ray_frame.atlas_bricks_y] = [pools.atlas[0], pools.atlas[1]];
         let brick_atlas = pools.bricks.create_view(&wgpu::TextureViewDescriptor::default());
         let header = view.header();
@@ -376,8 +376,47 @@ fn usage_count(view: &TreeView<'_>) -> u64 {
     (view.nodes.len() as u64 / header.nodes_per_tile.max(1) as u64) + header.brick_count as u64
 }
 
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_anchor_is_the_deepest_node_holding_the_eye_that_an_i32_can_name() {
+        let clip = [[0.0; 3], [1.0; 3]];
+        // N = 3: 3^19 < 2^31 < 3^20.
+        let (level, scale, node) = anchor([0.5, 0.25, 1.0 + 1e-9], clip, 3, 25);
+        assert_eq!((level, scale), (19, 3f64.powi(19)));
+        assert_eq!(node[0] as f64, (0.5 * scale).floor());
+        assert_eq!(node[1] as f64, (0.25 * scale).floor());
+        assert_eq!(node[2] as f64, scale - 1.0, "an eye outside is clamped to the last node");
+        // N = 2: 2^30; a shallow tree stops at its deepest level.
+        assert_eq!(anchor([0.5; 3], clip, 2, 40).0, 30);
+        assert_eq!(anchor([0.5; 3], clip, 2, 7), (7, 128.0, [64; 3]));
+        // Far outside, below the clip box, or not finite: the nearest node inside.
+        assert_eq!(anchor([-5.0, f64::NAN, 0.3], [[0.25; 3], [0.75; 3]], 2, 2).2, [1, 1, 1]);
+    }
+}
+
 fn entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
     wgpu::BindGroupEntry { binding, resource: buffer.as_entire_binding() }
+}
+
+/// The anchor of the shader's positions (see `voxstream_layout::ray_frame`): the deepest level whose node
+/// coordinates fit in an `i32` (`N^level < 2³¹`, and no deeper than the tree), and the node there that holds `eye`
+/// (clamped into the clip box and the unit cube). Returns the level, its scale `N^level` and the node's coordinates.
+pub fn anchor(eye: [f64; 3], clip: [[f64; 3]; 2], n: u32, max_level: u32) -> (u32, f64, [u32; 3]) {
+    let (mut level, mut scale) = (0u32, 1u64);
+    while level < max_level && scale * n as u64 <= i32::MAX as u64 {
+        level += 1;
+        scale *= n as u64;
+    }
+    let coordinates = std::array::from_fn(|a| {
+        let lower = clip[0][a].max(0.0);
+        let upper = clip[1][a].min(1.0).max(lower);
+        let inside = if eye[a].is_finite() { eye[a].clamp(lower, upper) } else { lower };
+        ((inside * scale as f64).floor().max(0.0) as u64).min(scale - 1) as u32
+    });
+    (level, scale as f64, coordinates)
 }
 
 /// The frame's camera and settings as the shader reads them.
@@ -385,10 +424,17 @@ fn ray_frame(
     frame: &voxstream_render::CameraFrame,
     settings: &RenderSettings,
     n: u32,
+    max_level: u32,
     request_capacity: u32,
 ) -> RayFrame {
     let placement = &settings.placement;
     let eye: [f64; 3] = std::array::from_fn(|a| (frame.eye[a] - placement.origin[a]) / placement.scale[a]);
+    let (anchor_level, anchor_scale, anchor) = anchor(eye, [placement.clip_lower, placement.clip_upper], n, max_level);
+    // Unit cube → anchor frame, in f64, rounded once.
+    let to_anchor =
+        |p: [f64; 3]| -> [f32; 3] { std::array::from_fn(|a| (p[a] * anchor_scale - anchor[a] as f64) as f32) };
+    let (eye, clip_lower, clip_upper) =
+        (to_anchor(eye), to_anchor(placement.clip_lower), to_anchor(placement.clip_upper));
     let light = settings.light_direction.map_or([0.0; 3], |l| {
         let length = (l[0] * l[0] + l[1] * l[1] + l[2] * l[2]).sqrt();
         if length > 0.0 {
@@ -416,9 +462,9 @@ fn ray_frame(
         stand_in_levels: if n <= 2 { 2 } else { 1 },
         request_capacity,
         max_segments: MAX_SEGMENTS,
-        eye_x: eye[0] as f32,
-        eye_y: eye[1] as f32,
-        eye_z: eye[2] as f32,
+        eye_x: eye[0],
+        eye_y: eye[1],
+        eye_z: eye[2],
         pixel_spread: frame.pixel_spread as f32,
         forward_x: frame.forward.x as f32,
         forward_y: frame.forward.y as f32,
@@ -436,13 +482,13 @@ fn ray_frame(
         inverse_scale_y: (1.0 / placement.scale[1]) as f32,
         inverse_scale_z: (1.0 / placement.scale[2]) as f32,
         bias_scale: (-settings.lod_bias * (n as f64).ln()).exp() as f32,
-        clip_lower_x: placement.clip_lower[0] as f32,
-        clip_lower_y: placement.clip_lower[1] as f32,
-        clip_lower_z: placement.clip_lower[2] as f32,
+        clip_lower_x: clip_lower[0],
+        clip_lower_y: clip_lower[1],
+        clip_lower_z: clip_lower[2],
         stop_below: 1.0 - settings.opacity_cutoff,
-        clip_upper_x: placement.clip_upper[0] as f32,
-        clip_upper_y: placement.clip_upper[1] as f32,
-        clip_upper_z: placement.clip_upper[2] as f32,
+        clip_upper_x: clip_upper[0],
+        clip_upper_y: clip_upper[1],
+        clip_upper_z: clip_upper[2],
         ambient: settings.phong.ambient,
         background_r: settings.background[0],
         background_g: settings.background[1],
@@ -455,6 +501,10 @@ fn ray_frame(
         shininess: settings.phong.shininess,
         atlas_bricks_x: 1,
         atlas_bricks_y: 1,
-        padding: 0,
+        anchor_level,
+        anchor_x: anchor[0],
+        anchor_y: anchor[1],
+        anchor_z: anchor[2],
+        anchor_scale: anchor_scale as f32,
     }
 }

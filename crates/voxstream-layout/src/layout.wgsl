@@ -140,5 +140,9 @@ struct RayFrame {
     shininess: f32,
     atlas_bricks_x: u32,
     atlas_bricks_y: u32,
-    padding: u32,
+    anchor_level: u32,
+    anchor_x: u32,
+    anchor_y: u32,
+    anchor_z: u32,
+    anchor_scale: f32,
 }

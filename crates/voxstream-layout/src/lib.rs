@@ -14,7 +14,7 @@
 //! | [`FeedbackCounters`] | 16 | the request list's fill level, written with atomics ([P09] §5) |
 //! | [`UsageFlag`] | 4 | one tile or brick slot used by some ray this frame ([P09] §5) |
 //! | [`RayCounters`] | 16 | what a pass's rays counted: rays, samples, descents |
-//! | [`RayFrame`] | 192 | the frame's camera and ray settings, flattened: what a GPU ray caster reads beside the header |
+//! | [`RayFrame`] | 208 | the frame's camera and ray settings, flattened: what a GPU ray caster reads beside the header |
 //! | [`RequestRecord`] | 8 | one ray's request: a node to produce or to subdivide ([P09] §5) |
 //! | [`BrickBlend`] | 36 | per brick slot: the cap on its weight against its parent at its corners (Thiele et al.'s blending) |
 //!

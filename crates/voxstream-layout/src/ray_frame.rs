@@ -10,18 +10,19 @@
 //! |---|---|---|
 //! | 0 | `width`, `height`, `pixel_stride`, `max_requests_per_ray` | image size, the stride of the pixels traced this pass, the misses one ray may report |
 //! | 16 | `flags`, `stand_in_levels`, `request_capacity`, `max_segments` | [`RAY_FRAME_PHONG`] …, levels a stand-in is stepped below itself, the request list's length, a bound on segments per ray |
-//! | 32 | `eye_x`, `eye_y`, `eye_z`, `pixel_spread` | the eye in volume units; the cone's footprint per unit distance |
+//! | 32 | `eye_x`, `eye_y`, `eye_z`, `pixel_spread` | the eye, anchor frame; the cone's footprint per unit distance |
 //! | 48 | `forward_*`, `world_per_volume` | unit view direction (world); world units per volume unit (mean of the placement's scale) |
 //! | 64 | `right_*`, `lod_bias` | right vector scaled by the half-width of the image plane at distance 1; the level bias |
 //! | 80 | `up_*`, `step_factor` | up vector scaled by the half-height; samples per voxel of the footprint, inverted |
 //! | 96 | `inverse_scale_*`, `bias_scale` | `1 / placement.scale` per axis; `N^(−lod_bias)` |
-//! | 112 | `clip_lower_*`, `stop_below` | the clip box's lower corner (volume units); transmittance below which a ray stops |
+//! | 112 | `clip_lower_*`, `stop_below` | the clip box's lower corner, anchor frame; transmittance below which a ray stops |
 //! | 128 | `clip_upper_*`, `ambient` | the clip box's upper corner; Phong's ambient coefficient |
 //! | 144 | `background_*`, `diffuse` | linear background colour; Phong's diffuse coefficient |
 //! | 160 | `light_*`, `specular` | unit light direction (world; zero: a headlight); Phong's specular coefficient |
-//! | 176 | `shininess`, `atlas_bricks_x`, `atlas_bricks_y`, `padding` | Phong's exponent; brick slots per row and per column of the brick atlas (slot `s` sits at brick `(s mod x, (s div x) mod y, s div xy)`); zero |
+//! | 176 | `shininess`, `atlas_bricks_x`, `atlas_bricks_y`, `anchor_level` | Phong's exponent; brick slots per row and per column of the brick atlas (slot `s` sits at brick `(s mod x, (s div x) mod y, s div xy)`); the anchor's level |
+//! | 192 | `anchor_x`, `anchor_y`, `anchor_z`, `anchor_scale` | the anchor's integer coordinates at its level; `N^anchor_level` |
 //!
-//! Size 192 bytes (a multiple of 16, as uniforms need).
+//! Size 208 bytes (a multiple of 16, as uniforms need).
 
 use bytemuck::{Pod, Zeroable};
 
@@ -85,7 +86,11 @@ pub struct RayFrame {
     pub shininess: f32,
     pub atlas_bricks_x: u32,
     pub atlas_bricks_y: u32,
-    pub padding: u32,
+    pub anchor_level: u32,
+    pub anchor_x: u32,
+    pub anchor_y: u32,
+    pub anchor_z: u32,
+    pub anchor_scale: f32,
 }
 
 /// Bytes of a [`RayFrame`].
@@ -98,7 +103,7 @@ mod tests {
 
     #[test]
     fn offsets_are_as_documented() {
-        assert_eq!(RAY_FRAME_BYTES, 192);
+        assert_eq!(RAY_FRAME_BYTES, 208);
         assert_eq!(align_of::<RayFrame>(), 4);
         assert_eq!(offset_of!(RayFrame, flags), 16);
         assert_eq!(offset_of!(RayFrame, eye_x), 32);
@@ -111,5 +116,6 @@ mod tests {
         assert_eq!(offset_of!(RayFrame, background_r), 144);
         assert_eq!(offset_of!(RayFrame, light_x), 160);
         assert_eq!(offset_of!(RayFrame, shininess), 176);
+        assert_eq!(offset_of!(RayFrame, anchor_x), 192);
     }
 }

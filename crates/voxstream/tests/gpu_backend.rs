@@ -212,3 +212,27 @@ fn the_command_line_names_the_adapter_or_says_why_there_is_none() {
     assert!(!stderr.contains("panicked"), "{stderr}");
     assert!(!missing.exists(), "no image without a renderer");
 }
+
+#[test]
+fn the_deep_sponge_zoom_stays_exact() {
+    // Features of 3^-20 of the scene (crates/voxstream/tests/sponge_silhouette.rs checks the CPU's image against the
+    // analytic Menger set there): far below f32's 2^-24 in unit-cube coordinates. The shader's positions are
+    // relative to the anchor node at level 19 that holds the eye, so they stay exact; the CPU's are f64.
+    let cell = 3f64.powi(-20);
+    let target = [1.5 * cell, 1.5 * cell, 1.0];
+    let camera = Camera {
+        eye: [target[0] + 0.6 * cell, target[1] + 0.8 * cell, 1.0 + 4.0 * cell],
+        target,
+        up: [0.0, 1.0, 0.0],
+        fov: 50.0,
+    };
+    let mut cpu = cpu_session("sponge", SIZE, 128 << 20, LoopLimits::default());
+    let expected = common::converged(&mut cpu, &camera);
+    let covered = expected.pixels.iter().filter(|p| p[3] > 0.5).count();
+    let pixels = (SIZE * SIZE) as usize;
+    assert!(covered > pixels / 5 && covered < pixels * 95 / 100, "the view must show solid and holes: {covered}");
+    let mut gpu = gpu_session("sponge", SIZE, 128 << 20, LoopLimits::default());
+    let frame = gpu.render(&camera, Mode::Converged).expect("gpu render");
+    assert!(frame.is_converged());
+    assert_close("sponge-deep-zoom", &frame.image, &expected);
+}
