@@ -4,18 +4,21 @@
 # per frame (cold, warm, path). Not part of CI (CI's adapter is lavapipe, a CPU emulation: see BENCHMARKS.md).
 #
 #   bash bench/gpu.sh [SIZE] [SCENES]      e.g. bash bench/gpu.sh 1024 sponge,hypertexture
+#   WARM_FRAMES=5 PATH_FRAMES=20 bash bench/gpu.sh 256      (fewer frames, e.g. on lavapipe)
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 size="${1:-1024}"
 scenes="${2:-sponge,hypertexture,shell}"
+warm="${WARM_FRAMES:-20}"
+path_frames="${PATH_FRAMES:-60}"
 cargo build --release -q -p voxstream
 bin=./target/release/voxstream
 out=target/gpu-bench
 mkdir -p "$out"
 for backend in gpu cpu; do
     echo "## --backend $backend, ${size}², scenes $scenes"
-    "$bin" bench --backend "$backend" --size "$size" --scenes "$scenes" --blending off --warm-frames 20 \
-        --path-frames 60 --json "$out/$backend.json"
+    "$bin" bench --backend "$backend" --size "$size" --scenes "$scenes" --blending off --warm-frames "$warm" \
+        --path-frames "$path_frames" --json "$out/$backend.json"
     echo
 done
 python3 - "$out/gpu.json" "$out/cpu.json" <<'PY'
