@@ -40,6 +40,10 @@ struct Feedback {
 @group(0) @binding(7) var<storage, read_write> feedback: Feedback;
 // One flag per node tile, then one per brick slot (GigaVoxels [P09] §5's usage lists).
 @group(0) @binding(8) var<storage, read_write> usage: array<u32>;
+// For empty-space skipping: the transfer table's entries with non-zero extinction before each index (one more than
+// the table's length), then each brick slot's [min, max] voxel (min | max << 16), then each slot's occupancy
+// blocks' (blocks_per_axis³, x fastest).
+@group(0) @binding(9) var<storage, read> ranges: array<u32>;
 
 struct RayState {
     // The ray in the anchor frame: origin, anchor units per world unit of t, and its inverse.
@@ -151,6 +155,37 @@ fn step_lookup(value: f32, step: f32) -> vec4<f32> {
     let ea = vec4<f32>(vec3<f32>(a.r, a.g, a.b) * alpha_a, alpha_a);
     let eb = vec4<f32>(vec3<f32>(b.r, b.g, b.b) * alpha_b, alpha_b);
     return mix(ea, eb, p.y);
+}
+
+// Whether some value in [lower, upper] (normalised) has non-zero extinction: `TransferLut::is_visible_in`.
+fn visible_in(lower: f32, upper: f32) -> bool {
+    let last = f32(arrayLength(&table) - 1u);
+    let slack = select(1e-3, 0.0, lower == upper);
+    let first = u32(max(clamp(lower * last, 0.0, last) - slack, 0.0));
+    let end = min(u32(ceil(clamp(upper * last, 0.0, last) + slack)), u32(last));
+    return ranges[end + 1u] > ranges[first];
+}
+
+// The [min, max] of the brick in `slot`, normalised.
+fn brick_range(slot: u32) -> vec2<f32> {
+    let packed = ranges[arrayLength(&table) + 1u + slot];
+    return vec2<f32>(f32(packed & 0xffffu), f32(packed >> 16u)) * (1.0 / 65535.0);
+}
+
+// The [min, max] (normalised) of occupancy block `block` (x fastest) of the brick in `slot`.
+fn block_range(slot: u32, block: vec3<u32>) -> vec2<f32> {
+    let blocks = tree.blocks_per_axis;
+    let index = (block.z * blocks + block.y) * blocks + block.x;
+    let packed = ranges[arrayLength(&table) + 1u + tree.brick_count + slot * blocks * blocks * blocks + index];
+    return vec2<f32>(f32(packed & 0xffffu), f32(packed >> 16u)) * (1.0 / 65535.0);
+}
+
+// The occupancy block holding the cell that trilinear filtering reads at continuous voxel index x
+// (`Cell::locate` then `Cell::block_ijk`).
+fn block_of(x: vec3<f32>) -> vec3<u32> {
+    let b = tree.stored_brick_size;
+    let c = clamp(x, vec3<f32>(0.0), vec3<f32>(f32(b - 1u)));
+    return min(vec3<u32>(c), vec3<u32>(b - 2u)) / tree.block_cells;
 }
 
 fn power(base: f32, exponent: f32) -> f32 {
@@ -501,15 +536,58 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             let blend = has_coarse && weight < 1.0;
             let fine_slot = fine.node.data_word - 1u;
             let coarse_slot = coarse.node.data_word - 1u;
+            // Empty-space skipping: nothing in the bricks (fine, and coarse if blended) can contribute. The samples
+            // were placed above, so skipping moves none.
+            if (frame.flags & RAY_FRAME_SKIP_EMPTY_SPACE) != 0u {
+                var range = brick_range(fine_slot);
+                if blend {
+                    let coarse_range = brick_range(coarse_slot);
+                    range = vec2<f32>(min(range.x, coarse_range.x), max(range.y, coarse_range.y));
+                }
+                if !visible_in(range.x, range.y) {
+                    continue;
+                }
+            }
             let fine_start = brick_coordinates(&state, fine, first);
             let fine_delta = brick_rate(&state, fine) * dt;
             let coarse_start = brick_coordinates(&state, coarse, first);
             let coarse_delta = brick_rate(&state, coarse) * dt;
+            // Within the bricks, samples in occupancy blocks that hold nothing visible are skipped (the CPU skips
+            // them in runs; here each sample checks its blocks, once per block change).
+            let check_blocks = (frame.flags & RAY_FRAME_SKIP_EMPTY_SPACE) != 0u;
+            var last_blocks = vec4<u32>(0xffffffffu);
+            var blocks_visible = true;
             for (var k = 0u; k < count; k++) {
                 let kf = f32(k);
-                var s = sample_brick(fine_slot, fine_start + kf * fine_delta);
+                let fine_x = fine_start + kf * fine_delta;
+                let coarse_x = coarse_start + kf * coarse_delta;
+                if check_blocks {
+                    let fine_block = block_of(fine_x);
+                    var coarse_block = vec3<u32>(0u);
+                    if blend {
+                        coarse_block = block_of(coarse_x);
+                    }
+                    let blocks = vec4<u32>(
+                        (fine_block.z * tree.blocks_per_axis + fine_block.y) * tree.blocks_per_axis + fine_block.x,
+                        (coarse_block.z * tree.blocks_per_axis + coarse_block.y) * tree.blocks_per_axis + coarse_block.x,
+                        0u, 0u);
+                    if any(blocks != last_blocks) {
+                        last_blocks = blocks;
+                        // A blended value lies between the two bricks' values: their ranges' hull bounds it.
+                        var range = block_range(fine_slot, fine_block);
+                        if blend {
+                            let coarse_range = block_range(coarse_slot, coarse_block);
+                            range = vec2<f32>(min(range.x, coarse_range.x), max(range.y, coarse_range.y));
+                        }
+                        blocks_visible = visible_in(range.x, range.y);
+                    }
+                    if !blocks_visible {
+                        continue;
+                    }
+                }
+                var s = sample_brick(fine_slot, fine_x);
                 if blend {
-                    let c = sample_brick(coarse_slot, coarse_start + kf * coarse_delta);
+                    let c = sample_brick(coarse_slot, coarse_x);
                     s.x = c.x + (s.x - c.x) * weight;
                 }
                 state.samples += 1u;

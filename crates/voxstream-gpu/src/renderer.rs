@@ -12,7 +12,7 @@ use voxstream_core::{BrickSlot, FeedbackBuffer, Request, TileId, TreeView};
 use voxstream_engine::FrameRenderer;
 use voxstream_layout::{
     FeedbackCounters, RayCounters, RayFrame, RequestRecord, TransferTableEntry, RAY_FRAME_COLOUR_BY_LEVEL,
-    RAY_FRAME_PHONG, RAY_FRAME_STEPS_IGNORE_STAND_INS,
+    RAY_FRAME_PHONG, RAY_FRAME_SKIP_EMPTY_SPACE, RAY_FRAME_STEPS_IGNORE_STAND_INS,
 };
 use voxstream_render::{Camera, ProgressiveImage, RayStats, RenderError, RenderSettings, Shading, TransferLut};
 use wgpu::util::DeviceExt;
@@ -102,6 +102,7 @@ impl GpuRenderer {
                 storage(6, false),
                 storage(7, false),
                 storage(8, false),
+                storage(9, true),
             ],
         });
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -227,6 +228,9 @@ impl GpuRenderer {
             device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
         };
         let copy_src = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
+        // Brick and block ranges (4 bytes per brick and per block: a few % of the bricks' bytes) change with every
+        // brick produced: written whole each pass.
+        let ranges = init("ranges", bytemuck::cast_slice(&range_words(lut, &view)), wgpu::BufferUsages::STORAGE);
         let tree_uniform = init("tree header", bytemuck::bytes_of(&header), wgpu::BufferUsages::UNIFORM);
         let frame_uniform = init("ray frame", bytemuck::bytes_of(&ray_frame), wgpu::BufferUsages::UNIFORM);
         let pixels = device.create_buffer(&wgpu::BufferDescriptor {
@@ -267,6 +271,7 @@ impl GpuRenderer {
                 entry(6, &pixel_flags),
                 entry(7, &feedback_buffer),
                 entry(8, &usage),
+                entry(9, &ranges),
             ],
         });
 
@@ -370,6 +375,24 @@ impl FrameRenderer for GpuRenderer {
     }
 }
 
+/// What empty-space skipping reads: per transfer-table index, the entries with non-zero extinction before it (one
+/// more than the table's length), then per brick slot its `[min, max]` voxel as `min | max << 16`, then per slot
+/// its occupancy blocks' ranges, packed the same way.
+fn range_words(lut: &TransferLut, view: &TreeView<'_>) -> Vec<u32> {
+    let entries = lut.entries();
+    let mut words = Vec::with_capacity(entries.len() + 1 + view.brick_ranges.len());
+    let mut visible = 0u32;
+    words.push(0);
+    for entry in entries {
+        visible += (entry.sigma > 0.0) as u32;
+        words.push(visible);
+    }
+    let pack = |&[lo, hi]: &[u16; 2]| lo as u32 | (hi as u32) << 16;
+    words.extend(view.brick_ranges.iter().map(pack));
+    words.extend(view.block_ranges.iter().map(pack));
+    words
+}
+
 /// Usage flags of a pass: one per node tile, then one per brick slot.
 fn usage_count(view: &TreeView<'_>) -> u64 {
     let header = view.header();
@@ -452,6 +475,9 @@ fn ray_frame(
     }
     if settings.colour_by_level {
         flags |= RAY_FRAME_COLOUR_BY_LEVEL;
+    }
+    if settings.skip_empty_space {
+        flags |= RAY_FRAME_SKIP_EMPTY_SPACE;
     }
     RayFrame {
         width: settings.width,

@@ -91,6 +91,7 @@ struct BrickBlend {
 const RAY_FRAME_PHONG: u32 = 1u;
 const RAY_FRAME_STEPS_IGNORE_STAND_INS: u32 = 2u;
 const RAY_FRAME_COLOUR_BY_LEVEL: u32 = 4u;
+const RAY_FRAME_SKIP_EMPTY_SPACE: u32 = 8u;
 
 struct RayFrame {
     width: u32,

@@ -49,7 +49,8 @@ pub use feedback_records::{
 };
 pub use node::{BrickSlot, Node, NodeData, NodeId, TileId, CHILD_MASK, CONSTANT_BIT, MAX_TILE_INDEX, TERMINAL_BIT};
 pub use ray_frame::{
-    RayFrame, RAY_FRAME_BYTES, RAY_FRAME_COLOUR_BY_LEVEL, RAY_FRAME_PHONG, RAY_FRAME_STEPS_IGNORE_STAND_INS,
+    RayFrame, RAY_FRAME_BYTES, RAY_FRAME_COLOUR_BY_LEVEL, RAY_FRAME_PHONG, RAY_FRAME_SKIP_EMPTY_SPACE,
+    RAY_FRAME_STEPS_IGNORE_STAND_INS,
 };
 pub use transfer_table::{TransferTableEntry, TransferTableHeader, TABLE_HOLDS_EXTINCTION, TABLE_HOLDS_STEP_OPACITY};
 pub use tree_header::TreeHeader;

@@ -33,6 +33,9 @@ pub const RAY_FRAME_PHONG: u32 = 1;
 pub const RAY_FRAME_STEPS_IGNORE_STAND_INS: u32 = 2;
 /// [`RayFrame::flags`]: samples take their tree level's colour (`RenderSettings::colour_by_level`).
 pub const RAY_FRAME_COLOUR_BY_LEVEL: u32 = 4;
+/// [`RayFrame::flags`]: skip segments whose bricks hold no value the transfer function shows
+/// (`RenderSettings::skip_empty_space`).
+pub const RAY_FRAME_SKIP_EMPTY_SPACE: u32 = 8;
 
 /// The frame's ray parameters, as a GPU reads them (see the module docs for the offsets).
 #[repr(C)]

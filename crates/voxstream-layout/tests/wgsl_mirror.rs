@@ -196,6 +196,7 @@ fn every_constant_matches_its_rust_twin() {
         ("RAY_FRAME_PHONG", RAY_FRAME_PHONG),
         ("RAY_FRAME_STEPS_IGNORE_STAND_INS", RAY_FRAME_STEPS_IGNORE_STAND_INS),
         ("RAY_FRAME_COLOUR_BY_LEVEL", RAY_FRAME_COLOUR_BY_LEVEL),
+        ("RAY_FRAME_SKIP_EMPTY_SPACE", RAY_FRAME_SKIP_EMPTY_SPACE),
     ]
     .into_iter()
     .map(|(name, value)| (name.to_string(), value))

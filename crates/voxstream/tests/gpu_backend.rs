@@ -236,3 +236,33 @@ fn the_deep_sponge_zoom_stays_exact() {
     assert!(frame.is_converged());
     assert_close("sponge-deep-zoom", &frame.image, &expected);
 }
+
+#[test]
+fn empty_space_skipping_takes_fewer_samples_and_changes_no_pixel() {
+    // A transfer function that shows only values in (0.55, 0.65): the bricks of the shell's inside and outside
+    // hold none, and are skipped.
+    let tf = voxstream_render::TransferFunction::new(
+        vec![
+            [0.0, 0.0, 0.0, 0.0, 0.0],
+            [0.55, 0.2, 0.6, 1.0, 0.0],
+            [0.6, 1.0, 0.9, 0.2, 0.8],
+            [0.65, 0.1, 0.1, 0.9, 0.0],
+        ],
+        None,
+    )
+    .expect("transfer function");
+    let (settings, producer, _, camera) = settings("shell", SIZE);
+    let render = |skip_empty_space: bool| {
+        let settings = RenderSettings { skip_empty_space, ..settings.clone() };
+        let mut gpu =
+            Session::with_renderer(open_gpu(), producer, &tf, settings, 64 << 20, LoopLimits::default(), [0.0, 1.0])
+                .expect("gpu session");
+        gpu.render(&camera, Mode::Converged).expect("gpu render");
+        // A warm frame: the same tree in both runs.
+        gpu.render(&camera, Mode::Converged).expect("warm frame")
+    };
+    let (skipping, sampling_all) = (render(true), render(false));
+    println!("samples: {} skipping, {} without", skipping.samples, sampling_all.samples);
+    assert!(skipping.samples * 10 < sampling_all.samples * 9, "{} vs {}", skipping.samples, sampling_all.samples);
+    assert_eq!(skipping.image.pixels, sampling_all.image.pixels, "skipping changed the image");
+}
