@@ -399,27 +399,6 @@ fn usage_count(view: &TreeView<'_>) -> u64 {
     (view.nodes.len() as u64 / header.nodes_per_tile.max(1) as u64) + header.brick_count as u64
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_anchor_is_the_deepest_node_holding_the_eye_that_an_i32_can_name() {
-        let clip = [[0.0; 3], [1.0; 3]];
-        // N = 3: 3^19 < 2^31 < 3^20.
-        let (level, scale, node) = anchor([0.5, 0.25, 1.0 + 1e-9], clip, 3, 25);
-        assert_eq!((level, scale), (19, 3f64.powi(19)));
-        assert_eq!(node[0] as f64, (0.5 * scale).floor());
-        assert_eq!(node[1] as f64, (0.25 * scale).floor());
-        assert_eq!(node[2] as f64, scale - 1.0, "an eye outside is clamped to the last node");
-        // N = 2: 2^30; a shallow tree stops at its deepest level.
-        assert_eq!(anchor([0.5; 3], clip, 2, 40).0, 30);
-        assert_eq!(anchor([0.5; 3], clip, 2, 7), (7, 128.0, [64; 3]));
-        // Far outside, below the clip box, or not finite: the nearest node inside.
-        assert_eq!(anchor([-5.0, f64::NAN, 0.3], [[0.25; 3], [0.75; 3]], 2, 2).2, [1, 1, 1]);
-    }
-}
-
 fn entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
     wgpu::BindGroupEntry { binding, resource: buffer.as_entire_binding() }
 }
@@ -532,5 +511,26 @@ fn ray_frame(
         anchor_y: anchor[1],
         anchor_z: anchor[2],
         anchor_scale: anchor_scale as f32,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_anchor_is_the_deepest_node_holding_the_eye_that_an_i32_can_name() {
+        let clip = [[0.0; 3], [1.0; 3]];
+        // N = 3: 3^19 < 2^31 < 3^20.
+        let (level, scale, node) = anchor([0.5, 0.25, 1.0 + 1e-9], clip, 3, 25);
+        assert_eq!((level, scale), (19, 3f64.powi(19)));
+        assert_eq!(node[0] as f64, (0.5 * scale).floor());
+        assert_eq!(node[1] as f64, (0.25 * scale).floor());
+        assert_eq!(node[2] as f64, scale - 1.0, "an eye outside is clamped to the last node");
+        // N = 2: 2^30; a shallow tree stops at its deepest level.
+        assert_eq!(anchor([0.5; 3], clip, 2, 40).0, 30);
+        assert_eq!(anchor([0.5; 3], clip, 2, 7), (7, 128.0, [64; 3]));
+        // Far outside, below the clip box, or not finite: the nearest node inside.
+        assert_eq!(anchor([-5.0, f64::NAN, 0.3], [[0.25; 3], [0.75; 3]], 2, 2).2, [1, 1, 1]);
     }
 }
