@@ -7,8 +7,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use serde::Serialize;
 use voxstream_core::Producer;
-use voxstream_engine::{CpuRenderer, FrameRenderer, LoopLimits, Mode, Session};
-use voxstream_gpu::GpuRenderer;
+use voxstream_engine::{FrameRenderer, LoopLimits, Mode, Session};
 use voxstream_render::RenderSettings;
 
 use crate::camera_path::orbit;
@@ -142,10 +141,7 @@ fn new_session(
         blending_fade_frames: blending.then_some(voxstream_core::DEFAULT_FADE_FRAMES),
         ..LoopLimits::default()
     };
-    let renderer: Box<dyn FrameRenderer> = match args.backend {
-        Backend::Cpu => Box::new(CpuRenderer),
-        Backend::Gpu => Box::new(GpuRenderer::new().context("--backend gpu")?),
-    };
+    let renderer = crate::backend::open_renderer(args.backend)?;
     let session = Session::with_renderer(
         renderer,
         scene.producer,

@@ -7,6 +7,7 @@
 //! ([`voxstream_engine::Session`]), which also plans the memory budget; this crate parses flags and files, drives
 //! the engine, and writes images and statistics.
 
+pub mod backend;
 pub mod bench;
 pub mod camera_path;
 pub mod cli;

@@ -6,14 +6,14 @@ use std::sync::Arc;
 
 use anyhow::{bail, Context, Result};
 use voxstream_core::Producer;
-use voxstream_engine::{CpuRenderer, FrameRenderer, LoopLimits, MemoryBudget, Mode, Session, MAX_BUDGET_MB};
+use voxstream_engine::{FrameRenderer, LoopLimits, MemoryBudget, Mode, Session, MAX_BUDGET_MB};
 use voxstream_geometry::formats::is_geometry_file_name;
-use voxstream_gpu::GpuRenderer;
 use voxstream_render::{
     Camera, IsoSurface, RenderSettings, Shading, SurfaceNormals, TransferFunction, VolumePlacement,
 };
 use voxstream_store::{InMemoryVolume, StoreProducer, StoreReader};
 
+use crate::backend::open_renderer;
 use crate::camera_path::{generated_path, parse_generated_path, read_camera_file, read_camera_path};
 use crate::cli::{Backend, NormalsArg, RenderArgs, ShadingArg, Switch};
 use crate::exit_status::IncompleteImage;
@@ -403,10 +403,7 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
         ..LoopLimits::default()
     };
     let plan = plan_budget(budget, &source.producer.shape(), source.producer_cache_bytes)?;
-    let renderer: Box<dyn FrameRenderer> = match args.backend {
-        Backend::Cpu => Box::new(CpuRenderer),
-        Backend::Gpu => Box::new(GpuRenderer::new().context("--backend gpu")?),
-    };
+    let renderer = open_renderer(args.backend)?;
     let mut session = Session::with_renderer(
         renderer,
         source.producer,

@@ -5,6 +5,7 @@
 //!
 //! A failing comparison writes the actual (GPU), expected (CPU) and difference images to
 //! `target/gpu-test-failures/`.
+#![cfg(feature = "gpu")]
 
 mod common;
 

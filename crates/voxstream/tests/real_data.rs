@@ -458,6 +458,7 @@ fn foreign_ome_zarr_v2_and_v3_render_like_the_native_store() {
     }
 }
 
+#[cfg(feature = "gpu")]
 #[test]
 fn the_gpu_renders_real_stores_and_a_foreign_ome_zarr_like_the_cpu() {
     // The GPU renderer (crates/voxstream-gpu) against its reference, the CPU ray caster, on real scans: voxstream's
