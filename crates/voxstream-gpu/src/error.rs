@@ -22,8 +22,8 @@ pub enum GpuError {
     },
     /// A pool or frame buffer is larger than the adapter can bind.
     #[error(
-        "the {what} needs {bytes} bytes on the GPU, more than this adapter's largest storage buffer ({limit} bytes): \
-         lower --budget-mb (or the image size) or use --backend cpu"
+        "the {what} needs {bytes} bytes on the GPU, more than this adapter holds in one ({limit} bytes): lower \
+         --budget-mb (or the image size) or use --backend cpu"
     )]
     TooLarge {
         /// Which buffer.
@@ -36,6 +36,9 @@ pub enum GpuError {
     /// The shader or a GPU command failed validation (a bug of voxstream's, not of the input).
     #[error("the GPU rejected voxstream's ray caster ({0}); please report this, and use --backend cpu meanwhile")]
     Validation(String),
+    /// The GPU ran out of memory.
+    #[error("the GPU ran out of memory ({0}): lower --budget-mb (or the image size) or use --backend cpu")]
+    OutOfMemory(String),
     /// Reading a result back from the GPU failed.
     #[error("reading the frame back from the GPU failed ({0}); use --backend cpu")]
     Readback(String),

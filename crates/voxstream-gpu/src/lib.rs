@@ -7,7 +7,8 @@
 //! as the CPU ray caster, whose image is its reference (every GPU stage has a CPU twin).
 //!
 //! - [`context`]: the headless Vulkan device (Mesa's lavapipe in CI) and its description;
-//! - [`pools`]: the node and brick pools as storage buffers, updated by changed tiles and bricks only;
+//! - [`pools`]: the node pool as a storage buffer and the brick pool as a 3D texture atlas, updated by changed tiles
+//!   and bricks only;
 //! - [`renderer`]: one pass: uniforms, the `ray_caster.wgsl` compute shader, readback, feedback to the CPU.
 //!
 //! The shader reads the `#[repr(C)]` records of `voxstream-layout` (nodes, tree header, transfer-table entries,
@@ -15,8 +16,9 @@
 //! `layout.wgsl`, which is prepended to it.
 //!
 //! Not yet on the GPU (each refused with a clear error or listed in `docs/ARCHITECTURE.md`): isosurfaces, Thiele
-//! et al.'s blended transitions, the brick pool as a 3D texture with hardware filtering, empty-space skipping,
-//! and f64-exact deep zooms (positions are f32: exact to about 2⁻²⁰ of the volume).
+//! et al.'s blended transitions, hardware-filtered bricks, request compaction and focus weighting on the GPU.
+//! Positions are f32 in an anchor frame near the eye, so deep zooms keep the CPU's precision (see
+//! `voxstream_layout::ray_frame`).
 
 pub mod context;
 pub mod error;

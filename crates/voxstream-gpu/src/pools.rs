@@ -74,7 +74,7 @@ impl GpuPools {
         }
         let b = view.shape.stored_brick_size();
         let atlas = atlas_shape(brick_count as u64, b, limits.max_texture_dimension_3d).ok_or(GpuError::TooLarge {
-            what: "brick pool",
+            what: "brick pool (a 3D texture)",
             bytes: (brick_count * voxels_per_brick * 2) as u64,
             limit: (limits.max_texture_dimension_3d as u64 / b as u64).pow(3) * voxels_per_brick as u64 * 2,
         })?;

@@ -12,8 +12,9 @@
 // corner and edge in that frame, exact integers down to the anchor level, small fractions below it.
 //
 // Differences from the CPU, all below the image tolerance the tests check: positions are f32 (the CPU's are f64
-// between segments), the step ladder's rung and the level search are computed in f32, and no block or brick is
-// skipped as empty (skipping never moves a sample on the CPU either, so it changes only the work, not the image).
+// between segments), the step ladder's rung and the level search are computed in f32, opacities are computed per
+// sample (the CPU reads tables pre-corrected per step), and empty blocks are skipped sample by sample rather than in
+// runs (skipping never moves a sample on either side, so it changes only the work, not the image).
 
 const MAX_LEVELS: u32 = 32u;
 const RUNG_RATIO: f32 = 1.189207115;
@@ -136,6 +137,12 @@ fn sample_brick(slot: u32, x: vec3<f32>) -> vec4<f32> {
     return vec4<f32>(value, gx, gy, gz) * (1.0 / 65535.0);
 }
 
+// 1 − exp(−x) for x ≥ 0 without the cancellation of f32 near 0 (the CPU uses f64 `exp_m1`): a faint medium's
+// opacity per step stays exact to f32 precision instead of rounding to 0.
+fn opacity(x: f32) -> f32 {
+    return select(1.0 - exp(-x), x * (1.0 - x * (0.5 - x / 6.0)), x < 1e-3);
+}
+
 // Table position of a normalised value: entries i and i + 1 with weight f on the latter.
 fn table_position(value: f32) -> vec2<f32> {
     let last = f32(arrayLength(&table) - 1u);
@@ -150,8 +157,8 @@ fn step_lookup(value: f32, step: f32) -> vec4<f32> {
     let p = table_position(value);
     let a = table[u32(p.x)];
     let b = table[u32(p.x) + 1u];
-    let alpha_a = select(0.0, 1.0 - exp(-a.a * step), a.a > 0.0);
-    let alpha_b = select(0.0, 1.0 - exp(-b.a * step), b.a > 0.0);
+    let alpha_a = select(0.0, opacity(a.a * step), a.a > 0.0);
+    let alpha_b = select(0.0, opacity(b.a * step), b.a > 0.0);
     let ea = vec4<f32>(vec3<f32>(a.r, a.g, a.b) * alpha_a, alpha_a);
     let eb = vec4<f32>(vec3<f32>(b.r, b.g, b.b) * alpha_b, alpha_b);
     return mix(ea, eb, p.y);
@@ -235,7 +242,7 @@ fn composite_constant(state: ptr<function, RayState>, start: f32, end: f32, valu
     if entry.w <= 0.0 {
         return true;
     }
-    let alpha = 1.0 - exp(-entry.w * (end - start));
+    let alpha = opacity(entry.w * (end - start));
     var color = entry.xyz;
     if (frame.flags & RAY_FRAME_COLOUR_BY_LEVEL) != 0u {
         color = level_colour(level);
@@ -467,7 +474,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             var t_exit = t_leave;
             for (var a = 0u; a < 3u; a++) {
                 let inv = state.inverse_direction[a];
-                if abs(inv) < 3.0e38 {
+                if state.direction[a] != 0.0 {
                     let bound = select(box_lower[a], box_lower[a] + node_size, inv > 0.0);
                     t_exit = min(t_exit, (bound - state.origin[a]) * inv);
                 }
@@ -522,7 +529,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             let first = covered + 0.5 * dt;
             var count = 0u;
             if first < t_exit {
-                count = u32(max(ceil((t_exit - first) / dt), 1.0));
+                // Bounded, so that no placement, however extreme, can keep a ray busy for ever.
+                count = u32(clamp(ceil((t_exit - first) / dt), 1.0, 16777216.0));
             }
             covered += f32(count) * dt;
             if count == 0u {

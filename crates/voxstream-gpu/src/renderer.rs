@@ -14,6 +14,7 @@ use voxstream_layout::{
     FeedbackCounters, RayCounters, RayFrame, RequestRecord, TransferTableEntry, RAY_FRAME_COLOUR_BY_LEVEL,
     RAY_FRAME_PHONG, RAY_FRAME_SKIP_EMPTY_SPACE, RAY_FRAME_STEPS_IGNORE_STAND_INS,
 };
+use voxstream_render::transfer_function::LUT_SIZE;
 use voxstream_render::{Camera, ProgressiveImage, RayStats, RenderError, RenderSettings, Shading, TransferLut};
 use wgpu::util::DeviceExt;
 
@@ -185,13 +186,23 @@ impl GpuRenderer {
         let frame = camera.frame(width, height)?;
         let pixel_count = width as u64 * height as u64;
         let max_storage = self.context.max_storage_bytes();
-        for (what, bytes) in [("image", pixel_count * 16), ("tile and brick usage list", usage_count(&view) * 4)] {
+        let range_bytes = (LUT_SIZE as u64 + 1 + view.brick_ranges.len() as u64 + view.block_ranges.len() as u64) * 4;
+        let readback_bytes =
+            pixel_count * 20 + FEEDBACK_HEADER_BYTES + MAX_REQUEST_RECORDS * 8 + usage_count(&view) * 4;
+        for (what, bytes) in [
+            ("image", pixel_count * 16),
+            ("tile and brick usage list", usage_count(&view) * 4),
+            ("brick and block range list", range_bytes),
+            ("readback of the image and the feedback", readback_bytes),
+        ] {
             if bytes > max_storage {
                 return Err(GpuError::TooLarge { what, bytes, limit: max_storage }.into());
             }
         }
         let device = &self.context.device;
         let queue = &self.context.queue;
+        // Out of memory is an answer, not a crash: captured like validation errors (popped in reverse order).
+        let memory_scope = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
 
         // The pools: allocated once at their size, then only what changed is written.
@@ -304,6 +315,9 @@ impl GpuRenderer {
         device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
         if let Some(error) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Validation(error.to_string()).into());
+        }
+        if let Some(error) = pollster::block_on(memory_scope.pop()) {
+            return Err(GpuError::OutOfMemory(error.to_string()).into());
         }
         receiver
             .recv()
