@@ -45,6 +45,8 @@ struct Feedback {
 // the table's length), then each brick slot's [min, max] voxel (min | max << 16), then each slot's occupancy
 // blocks' (blocks_per_axis³, x fastest).
 @group(0) @binding(9) var<storage, read> ranges: array<u32>;
+// The frame's isosurfaces (`RayFrame::surface_count` of them; one unused record where there are none).
+@group(0) @binding(10) var<storage, read> surfaces: array<SurfaceRecord>;
 
 struct RayState {
     // The ray in the anchor frame: origin, anchor units per world unit of t, and its inverse.
@@ -64,6 +66,17 @@ struct RayState {
     // Phong: the light and half vectors (volume shading is two-sided, as on the CPU).
     light: vec3<f32>,
     half_vector: vec3<f32>,
+    // Where the ray starts (0 for a primary ray; a shadow ray starts past its surface point), and its descents.
+    start: f32,
+    descents: u32,
+    // Isosurfaces: per surface (bit i) whether the ray is inside, and whether that is known yet; the first
+    // crossing, what its light added beyond the ambient term, and whether any crossing ends the ray (shadow rays).
+    inside: u32,
+    known: bool,
+    has_hit: bool,
+    first_hit: f32,
+    first_lit: vec3<f32>,
+    any_hit: bool,
 }
 
 fn level_colour(level: u32) -> vec3<f32> {
@@ -358,6 +371,672 @@ fn brick_rate(state: ptr<function, RayState>, entry: PathNode) -> vec3<f32> {
     return (*state).direction * (f32(tree.brick_size) / entry.size);
 }
 
+// A shadow ray's cone at the surface is this many times the primary ray's (`SurfaceCaster`).
+const SHADOW_CONE: f32 = 2.0;
+// A shadow ray starts this many of its footprints off the surface (no self-shadowing by the crossing itself).
+const SHADOW_OFFSET: f32 = 1.5;
+
+// ---- Isosurfaces: the `Isosurfaces` integrand of voxstream-render (Knoll et al., seed 002) ----
+// The ray carries, per surface (bit i), whether it is inside (f ≥ iso); a crossing is any change of that state:
+// inside a trilinear cell (a root of the cell's cubic along the ray) or between pieces of the ray whose fields
+// differ (a level seam, a constant node).
+
+// The surfaces a stored value (0‥65535) is inside of.
+fn iso_inside_of(stored: f32) -> u32 {
+    var bits = 0u;
+    for (var i = 0u; i < frame.surface_count; i++) {
+        bits |= select(0u, 1u << i, stored >= surfaces[i].iso);
+    }
+    return bits;
+}
+
+// Whether some value in [lower, upper] (normalised) can change the ray's state (`Isosurfaces::can_contribute`).
+fn iso_can_contribute(state: ptr<function, RayState>, lower: f32, upper: f32) -> bool {
+    if !(*state).known {
+        return true;
+    }
+    for (var i = 0u; i < frame.surface_count; i++) {
+        let s = surfaces[i];
+        let may_straddle = lower <= s.upper && upper >= s.lower;
+        let all_inside = lower > s.upper;
+        let inside = ((*state).inside & (1u << i)) != 0u;
+        if may_straddle || all_inside != inside {
+            return true;
+        }
+    }
+    return false;
+}
+
+// A crossing of surface i at t with the field's gradient there (world axes; zero where unknown); returns false
+// once the ray is done (`Isosurfaces::hit`).
+fn iso_hit(state: ptr<function, RayState>, i: u32, t: f32, gradient: vec3<f32>) -> bool {
+    if (*state).any_hit {
+        (*state).has_hit = true;
+        (*state).first_hit = t;
+        (*state).transmittance = 0.0;
+        return false;
+    }
+    let s = surfaces[i];
+    let color = vec3<f32>(s.r, s.g, s.b);
+    let phong = (frame.flags & RAY_FRAME_PHONG) != 0u;
+    var shaded = color;
+    if phong {
+        shaded = shade(state, color, s.opacity, gradient);
+    }
+    if !(*state).has_hit {
+        (*state).has_hit = true;
+        (*state).first_hit = t;
+        if phong {
+            (*state).first_lit = (*state).transmittance * (shaded - color * frame.ambient);
+        }
+    }
+    (*state).color += (*state).transmittance * shaded;
+    (*state).transmittance *= 1.0 - s.opacity;
+    return (*state).transmittance > frame.stop_below;
+}
+
+// The surfaces whose state changes where the ray's state becomes `entry` (none for the first data met): the
+// state is updated, the changed bits returned (`Isosurfaces::enter` without the hits).
+fn iso_changes(state: ptr<function, RayState>, entry: u32) -> u32 {
+    if !(*state).known {
+        (*state).known = true;
+        (*state).inside = entry;
+        return 0u;
+    }
+    let changed = entry ^ (*state).inside;
+    (*state).inside = entry;
+    return changed;
+}
+
+// The state is `entry` from t on: a crossing at t for every surface that changed.
+fn iso_enter(state: ptr<function, RayState>, entry: u32, t: f32, gradient: vec3<f32>) -> bool {
+    return iso_enter_changed(state, iso_changes(state, entry), t, gradient);
+}
+
+// The cubic f(u) = c.x + u·(c.y + u·(c.z + u·c.w)) of the trilinear interpolant of `v` along start + u·rate
+// (cell-local coordinates): `CellCubic::new`.
+fn cell_cubic(v: array<f32, 8>, start: vec3<f32>, rate: vec3<f32>) -> vec4<f32> {
+    var e: array<vec2<f32>, 4>;
+    for (var i = 0u; i < 4u; i++) {
+        let a = v[i];
+        let b = v[i + 4u];
+        e[i] = vec2<f32>(a + (b - a) * start.z, (b - a) * rate.z);
+    }
+    let w0 = 1.0 - start.y;
+    let w0u = -rate.y;
+    let w1 = start.y;
+    let w1u = rate.y;
+    // Along y: e00·(1 − y) + e01·y with x = 0 (edges 0, 2), the same with x = 1 (edges 1, 3).
+    let q0 = vec3<f32>(e[0].x * w0 + e[2].x * w1, e[0].x * w0u + e[0].y * w0 + e[2].x * w1u + e[2].y * w1,
+        e[0].y * w0u + e[2].y * w1u);
+    let q1 = vec3<f32>(e[1].x * w0 + e[3].x * w1, e[1].x * w0u + e[1].y * w0 + e[3].x * w1u + e[3].y * w1,
+        e[1].y * w0u + e[3].y * w1u);
+    let x0 = 1.0 - start.x;
+    let x0u = -rate.x;
+    let x1 = start.x;
+    let x1u = rate.x;
+    return vec4<f32>(q0.x * x0 + q1.x * x1, q0.x * x0u + q0.y * x0 + q1.x * x1u + q1.y * x1,
+        q0.y * x0u + q0.z * x0 + q1.y * x1u + q1.z * x1, q0.z * x0u + q1.z * x1u);
+}
+
+fn cubic_at(c: vec4<f32>, u: f32) -> f32 {
+    return c.x + u * (c.y + u * (c.z + u * c.w));
+}
+
+// The crossing in [a, b] where fa = f(a) − iso and fb = f(b) − iso lie on different sides: Illinois-modified
+// regula falsi (`CellCubic::refine`).
+fn cubic_refine(c: vec4<f32>, iso: f32, a_in: f32, fa_in: f32, b_in: f32, fb_in: f32) -> f32 {
+    var a = a_in;
+    var fa = fa_in;
+    var b = b_in;
+    var fb = fb_in;
+    let inside_a = fa >= 0.0;
+    var side = 0;
+    for (var k = 0u; k < 16u; k++) {
+        let denominator = fb - fa;
+        var m = 0.5 * (a + b);
+        if denominator != 0.0 {
+            m = a - fa * (b - a) / denominator;
+        }
+        if !(m > a && m < b) {
+            m = 0.5 * (a + b);
+            if !(m > a && m < b) {
+                break;
+            }
+        }
+        let fm = cubic_at(c, m) - iso;
+        if (fm >= 0.0) == inside_a {
+            a = m;
+            fa = fm;
+            if side == -1 {
+                fb *= 0.5;
+            }
+            side = -1;
+        } else {
+            b = m;
+            fb = fm;
+            if side == 1 {
+                fa *= 0.5;
+            }
+            side = 1;
+        }
+        if fm == 0.0 {
+            break;
+        }
+    }
+    return select(b, a, fa == 0.0);
+}
+
+// The analytic gradient of the trilinear cell at cell-local p (`cell_gradient`).
+fn cell_gradient(v: array<f32, 8>, p_in: vec3<f32>) -> vec3<f32> {
+    let p = clamp(p_in, vec3<f32>(0.0), vec3<f32>(1.0));
+    let gx = mix(mix(v[1] - v[0], v[3] - v[2], p.y), mix(v[5] - v[4], v[7] - v[6], p.y), p.z);
+    let gy = mix(mix(v[2] - v[0], v[3] - v[1], p.x), mix(v[6] - v[4], v[7] - v[5], p.x), p.z);
+    let gz = mix(mix(v[4] - v[0], v[5] - v[1], p.x), mix(v[6] - v[2], v[7] - v[3], p.x), p.y);
+    return vec3<f32>(gx, gy, gz);
+}
+
+// Central differences at the cell's corners, interpolated trilinearly at cell-local p; one-sided at the brick's
+// outer voxels (`CellVisit::central_gradient`).
+fn central_gradient(origin: vec3<u32>, cell: vec3<i32>, p_in: vec3<f32>) -> vec3<f32> {
+    let p = clamp(p_in, vec3<f32>(0.0), vec3<f32>(1.0));
+    let last = i32(tree.stored_brick_size) - 1;
+    var g = vec3<f32>(0.0);
+    for (var corner = 0u; corner < 8u; corner++) {
+        let side = vec3<u32>(corner & 1u, (corner >> 1u) & 1u, corner >> 2u);
+        let ijk = cell + vec3<i32>(side);
+        let f = select(vec3<f32>(1.0) - p, p, side == vec3<u32>(1u));
+        let w = f.x * f.y * f.z;
+        for (var a = 0u; a < 3u; a++) {
+            var lo = ijk;
+            var hi = ijk;
+            lo[a] = max(ijk[a] - 1, 0);
+            hi[a] = min(ijk[a] + 1, last);
+            let span = f32(hi[a] - lo[a]);
+            g[a] += w * (voxel(origin + vec3<u32>(hi)) - voxel(origin + vec3<u32>(lo))) / span;
+        }
+    }
+    return g;
+}
+
+// The normal at cell-local p, world axes (`Isosurfaces::cell`'s `gradient_at`).
+fn surface_gradient(v: array<f32, 8>, origin: vec3<u32>, cell: vec3<i32>, p: vec3<f32>) -> vec3<f32> {
+    var g = cell_gradient(v, p);
+    if (frame.flags & RAY_FRAME_CENTRAL_NORMALS) != 0u {
+        g = central_gradient(origin, cell, p);
+    }
+    return g * vec3<f32>(frame.inverse_scale_x, frame.inverse_scale_y, frame.inverse_scale_z);
+}
+
+// One trilinear cell entered at t_in and crossed over `span_length` (world t): the seams at its entry, then its exact
+// crossings in ray order (`Isosurfaces::cell`, `CellCubic::crossings`). `start` is the ray's cell-local position
+// at t_in, `rate` its cell-local units per world unit.
+fn iso_cell(state: ptr<function, RayState>, v: array<f32, 8>, t_in: f32, span_length: f32, start: vec3<f32>,
+    rate: vec3<f32>, origin: vec3<u32>, cell: vec3<i32>) -> bool {
+    var lo = v[0];
+    var hi = v[0];
+    for (var k = 1u; k < 8u; k++) {
+        lo = min(lo, v[k]);
+        hi = max(hi, v[k]);
+    }
+    var above = 0u;
+    var straddle = 0u;
+    for (var i = 0u; i < frame.surface_count; i++) {
+        let iso = surfaces[i].iso;
+        if lo >= iso {
+            above |= 1u << i;
+        } else if hi >= iso {
+            straddle |= 1u << i;
+        }
+    }
+    if straddle == 0u && (*state).known && above == (*state).inside {
+        return true;
+    }
+    if straddle == 0u {
+        let changed = iso_changes(state, above);
+        if changed == 0u {
+            return true;
+        }
+        return iso_enter_changed(state, changed, t_in, surface_gradient(v, origin, cell, start));
+    }
+    let c = cell_cubic(v, start, rate);
+    let f0 = cubic_at(c, 0.0);
+    var entry = above;
+    for (var i = 0u; i < frame.surface_count; i++) {
+        if (straddle & (1u << i)) != 0u && f0 >= surfaces[i].iso {
+            entry |= 1u << i;
+        }
+    }
+    let changed = iso_changes(state, entry);
+    if changed != 0u && !iso_enter_changed(state, changed, t_in, surface_gradient(v, origin, cell, start)) {
+        return false;
+    }
+    // The cubic's extrema inside (0, span_length) split it into monotone pieces (`CellCubic::extrema`).
+    let qa = 3.0 * c.w;
+    let qb = 2.0 * c.z;
+    let qc = c.y;
+    var ends = array<f32, 3>(span_length, span_length, span_length);
+    var pieces = 0u;
+    let scale = max(max(abs(qa), abs(qb)), abs(qc));
+    if scale != 0.0 {
+        var r = vec2<f32>(-1.0, -1.0);
+        if abs(qa) <= 1e-6 * scale {
+            if qb != 0.0 {
+                r.x = -qc / qb;
+            }
+        } else {
+            let discriminant = qb * qb - 4.0 * qa * qc;
+            if discriminant > 0.0 {
+                let q = -0.5 * (qb + select(-sqrt(discriminant), sqrt(discriminant), qb >= 0.0));
+                let r0 = q / qa;
+                let r1 = select(0.0, qc / q, q != 0.0);
+                r = vec2<f32>(min(r0, r1), max(r0, r1));
+                if r.y == r.x {
+                    r.y = -1.0;
+                }
+            }
+        }
+        if r.x > 0.0 && r.x < span_length {
+            ends[pieces] = r.x;
+            pieces += 1u;
+        }
+        if r.y > 0.0 && r.y < span_length {
+            ends[pieces] = r.y;
+            pieces += 1u;
+        }
+    }
+    ends[pieces] = span_length;
+    // Every straddled surface's crossings, merged in ray order by insertion.
+    var cross_u: array<f32, 24>;
+    var cross_i: array<u32, 24>;
+    var count = 0u;
+    for (var i = 0u; i < frame.surface_count; i++) {
+        if (straddle & (1u << i)) == 0u {
+            continue;
+        }
+        let iso = surfaces[i].iso;
+        var a = 0.0;
+        var fa = f0 - iso;
+        for (var k = 0u; k <= pieces; k++) {
+            let b = ends[k];
+            let fb = cubic_at(c, b) - iso;
+            if (fa >= 0.0) != (fb >= 0.0) {
+                let u = cubic_refine(c, iso, a, fa, b, fb);
+                var j = count;
+                while j > 0u && cross_u[j - 1u] > u {
+                    cross_u[j] = cross_u[j - 1u];
+                    cross_i[j] = cross_i[j - 1u];
+                    j -= 1u;
+                }
+                cross_u[j] = u;
+                cross_i[j] = i;
+                count += 1u;
+            }
+            a = b;
+            fa = fb;
+        }
+    }
+    for (var k = 0u; k < count; k++) {
+        let i = cross_i[k];
+        (*state).inside ^= 1u << i;
+        let u = cross_u[k];
+        if !iso_hit(state, i, t_in + u, surface_gradient(v, origin, cell, start + u * rate)) {
+            return false;
+        }
+    }
+    return true;
+}
+
+// Hits at t for the surfaces in `changed`, in order.
+fn iso_enter_changed(state: ptr<function, RayState>, changed: u32, t: f32, gradient: vec3<f32>) -> bool {
+    for (var i = 0u; i < frame.surface_count; i++) {
+        if (changed & (1u << i)) != 0u && !iso_hit(state, i, t, gradient) {
+            return false;
+        }
+    }
+    return true;
+}
+
+// The DDA's next lattice plane per axis, as distances from the span's start (`Lattice::at`); 3e38 where the ray
+// does not move along an axis.
+fn lattice_next(cell: vec3<i32>, x0: vec3<f32>, rate: vec3<f32>) -> vec3<f32> {
+    var next = vec3<f32>(3.0e38);
+    for (var a = 0u; a < 3u; a++) {
+        if rate[a] != 0.0 {
+            let plane = f32(cell[a]) + select(0.0, 1.0, rate[a] > 0.0);
+            next[a] = (plane - x0[a]) / rate[a];
+        }
+    }
+    return next;
+}
+
+// The trilinear cells the ray crosses in the brick of `entry` over [from, to), in order, each handed to
+// `iso_cell`; occupancy blocks that cannot change the ray's state are crossed without visiting their cells
+// (`walk_cells`: Amanatides & Woo). Returns false once the ray is done.
+fn walk_cells(state: ptr<function, RayState>, entry: PathNode, t_from: f32, t_to: f32) -> bool {
+    let b = tree.stored_brick_size;
+    let last_cell = i32(b) - 2;
+    let slot = entry.node.data_word - 1u;
+    let origin = brick_origin(slot);
+    let x0 = brick_coordinates(state, entry, t_from);
+    let rate = brick_rate(state, entry);
+    let span_length = t_to - t_from;
+    let direction_sign = vec3<i32>(select(vec3<i32>(0), vec3<i32>(1), rate > vec3<f32>(0.0)))
+        - vec3<i32>(select(vec3<i32>(0), vec3<i32>(1), rate < vec3<f32>(0.0)));
+    let delta = select(vec3<f32>(0.0), abs(vec3<f32>(1.0) / rate), rate != vec3<f32>(0.0));
+    var cell = clamp(vec3<i32>(x0), vec3<i32>(0), vec3<i32>(last_cell));
+    var next = lattice_next(cell, x0, rate);
+    var u = 0.0;
+    let cull = (frame.flags & RAY_FRAME_SKIP_EMPTY_SPACE) != 0u;
+    let block_cells = i32(tree.block_cells);
+    var checked = vec3<i32>(-1);
+    for (var visits = 0u; visits < 3u * b + 3u; visits++) {
+        if cull {
+            let block = cell / block_cells;
+            if any(block != checked) {
+                checked = block;
+                let range = block_range(slot, vec3<u32>(block));
+                if !iso_can_contribute(state, range.x, range.y) {
+                    // Leave the block: the nearest of its exit planes.
+                    var exit_u = 3.0e38;
+                    var exit_axis = 0u;
+                    var exit_across = 0;
+                    for (var a = 0u; a < 3u; a++) {
+                        if direction_sign[a] == 0 {
+                            continue;
+                        }
+                        var across = block[a] * block_cells - 1;
+                        var plane = across + 1;
+                        if direction_sign[a] > 0 {
+                            across = min((block[a] + 1) * block_cells, last_cell + 1);
+                            plane = across;
+                        }
+                        let u_plane = (f32(plane) - x0[a]) / rate[a];
+                        if u_plane < exit_u {
+                            exit_u = u_plane;
+                            exit_axis = a;
+                            exit_across = across;
+                        }
+                    }
+                    if exit_u >= span_length || exit_across < 0 || exit_across > last_cell {
+                        break;
+                    }
+                    u = max(exit_u, u);
+                    cell = clamp(vec3<i32>(x0 + u * rate), vec3<i32>(0), vec3<i32>(last_cell));
+                    cell[exit_axis] = exit_across;
+                    next = lattice_next(cell, x0, rate);
+                    continue;
+                }
+            }
+        }
+        var axis = 2u;
+        if next.x <= next.y && next.x <= next.z {
+            axis = 0u;
+        } else if next.y <= next.z {
+            axis = 1u;
+        }
+        let u_out = max(min(next[axis], span_length), u);
+        let base = origin + vec3<u32>(cell);
+        var v: array<f32, 8>;
+        for (var k = 0u; k < 8u; k++) {
+            v[k] = voxel(base + vec3<u32>(k & 1u, (k >> 1u) & 1u, k >> 2u));
+        }
+        (*state).samples += 1u;
+        let start = x0 + u * rate - vec3<f32>(cell);
+        if !iso_cell(state, v, t_from + u, u_out - u, start, rate, origin, cell) {
+            return false;
+        }
+        if next[axis] >= span_length {
+            break;
+        }
+        cell[axis] += direction_sign[axis];
+        if cell[axis] < 0 || cell[axis] > last_cell {
+            break;
+        }
+        u = u_out;
+        next[axis] += delta[axis];
+    }
+    return true;
+}
+
+// Walks one ray through the tree from distance `(*state).start` (`Traversal::trace`), handing its segments to the
+// frame's integrand: emission–absorption, or the isosurfaces when the frame has any.
+fn march(state: ptr<function, RayState>) {
+    let lower = vec3<f32>(frame.clip_lower_x, frame.clip_lower_y, frame.clip_lower_z);
+    let upper = vec3<f32>(frame.clip_upper_x, frame.clip_upper_y, frame.clip_upper_z);
+    let surfaces_on = frame.surface_count > 0u;
+    let skip_empty = (frame.flags & RAY_FRAME_SKIP_EMPTY_SPACE) != 0u;
+    let hit = intersect_box((*state).origin, (*state).direction, lower, upper);
+    if hit.x <= hit.y {
+        var t = max(hit.x, (*state).start);
+        let t_leave = hit.y;
+        var covered = t;
+        let root = Node(nodes[0].child_word, nodes[0].data_word);
+        if has_brick(root) {
+            mark_brick(root.data_word - 1u);
+        }
+        var segments = 0u;
+        var running = true;
+        let n = tree.n;
+        while running && t < t_leave && segments < frame.max_segments {
+            segments += 1u;
+            (*state).descents += 1u;
+            let p = (*state).origin + (*state).direction * t;
+            // The cone's footprint voxel and the level to descend to (`Traversal::footprint_at`).
+            let footprint_voxel = clamp(footprint(t) * frame.bias_scale, level_voxel(tree.max_level), level_voxel(0u));
+            var target_level = 0u;
+            var target_voxel = 1.0 / f32(tree.brick_size);
+            while target_level < tree.max_level && target_voxel > footprint_voxel {
+                target_level += 1u;
+                target_voxel /= f32(tree.n);
+            }
+
+            // Descend from the root (`Traversal::descend`), keeping the last three nodes of the path.
+            let root_corner = -vec3<f32>(vec3<i32>(vec3<u32>(frame.anchor_x, frame.anchor_y, frame.anchor_z)));
+            var current = PathNode(0u, root, 0u, vec3<u32>(0u), root_corner, frame.anchor_scale);
+            var parent = current;
+            var grandparent = current;
+            var depth = 0u;
+            var constant = false;
+            loop {
+                let node = current.node;
+                if (node.child_word & NODE_CONSTANT_BIT) != 0u {
+                    constant = true;
+                    break;
+                }
+                if node.data_word == 0u {
+                    request(state, current.id, REQUEST_PRODUCE);
+                    break;
+                }
+                if current.level >= target_level || (node.child_word & NODE_TERMINAL_BIT) != 0u {
+                    break;
+                }
+                // Isosurfaces: a subtree whose values cannot change the ray's state is one segment, skipped whole
+                // and never loaded deeper (Knoll et al.'s min/max culling; the CPU's span integrands).
+                if surfaces_on && skip_empty && has_brick(node) {
+                    let range = brick_range(node.data_word - 1u);
+                    if !iso_can_contribute(state, range.x, range.y) {
+                        break;
+                    }
+                }
+                let tile = node.child_word & NODE_CHILD_MASK;
+                if tile == 0u {
+                    request(state, current.id, REQUEST_SUBDIVIDE);
+                    break;
+                }
+                mark_tile(tile);
+                let local = max((p - current.corner) / current.size * f32(n), vec3<f32>(0.0));
+                let offset = min(vec3<u32>(local), vec3<u32>(n - 1u));
+                let child_index = (offset.z * n + offset.y) * n + offset.x;
+                let child_id = tile * tree.nodes_per_tile + child_index;
+                let child = Node(nodes[child_id].child_word, nodes[child_id].data_word);
+                if has_brick(child) {
+                    mark_brick(child.data_word - 1u);
+                }
+                grandparent = parent;
+                parent = current;
+                current = child_of(current, offset, child_id, child);
+                depth += 1u;
+            }
+
+            // The node's box is one segment.
+            let node_size = current.size;
+            let box_lower = current.corner;
+            var t_exit = t_leave;
+            for (var a = 0u; a < 3u; a++) {
+                let inv = (*state).inverse_direction[a];
+                if (*state).direction[a] != 0.0 {
+                    let bound = select(box_lower[a], box_lower[a] + node_size, inv > 0.0);
+                    t_exit = min(t_exit, (bound - (*state).origin[a]) * inv);
+                }
+            }
+            // Never stall on a boundary: move at least a sliver of the node (f32: coarser than the CPU's sliver).
+            t_exit = max(t_exit, t + (node_size * 1e-5 + 2e-7 * max(max(abs(p.x), abs(p.y)), abs(p.z)))
+                / ((*state).speed * frame.anchor_scale) + 2e-7 * t);
+            let t_start = t;
+            t = t_exit;
+
+            if constant {
+                let segment_start = covered;
+                covered = max(covered, t_exit);
+                if segment_start < t_exit {
+                    (*state).samples += 1u;
+                    let value = bitcast<f32>(current.node.data_word);
+                    if surfaces_on {
+                        running = iso_enter(state, iso_inside_of(value * 65535.0), segment_start, vec3<f32>(0.0));
+                    } else {
+                        running = composite_constant(state, segment_start, t_exit, value, current.level);
+                    }
+                }
+                continue;
+            }
+            // The finest brick on the path and its parent: every node above the last holds a brick.
+            var fine = current;
+            var coarse = parent;
+            var has_coarse = depth >= 1u;
+            if !has_brick(current.node) {
+                if depth == 0u {
+                    // Nothing resident at all: the segment is skipped.
+                    covered = max(covered, t_exit);
+                    continue;
+                }
+                fine = parent;
+                coarse = grandparent;
+                has_coarse = depth >= 2u;
+            }
+            if surfaces_on {
+                // The whole segment at the fine brick's level, cell by cell: no level blending (the crossings of
+                // the state close the seams where the level changes).
+                covered = max(covered, t_exit);
+                if skip_empty {
+                    let range = brick_range(fine.node.data_word - 1u);
+                    if !iso_can_contribute(state, range.x, range.y) {
+                        continue;
+                    }
+                }
+                running = walk_cells(state, fine, t_start, t_exit);
+                continue;
+            }
+            let is_final = fine.level == current.level
+                && (current.level >= target_level || (current.node.child_word & NODE_TERMINAL_BIT) != 0u);
+            let stand_in = !is_final;
+
+            // The step: the footprint voxel, or the sampled level's voxel where only coarser data exists, rounded
+            // down to the ladder of `StepLength` (kept while it still is the rung for the desired step).
+            var sampled_level = fine.level;
+            if stand_in && (frame.flags & RAY_FRAME_STEPS_IGNORE_STAND_INS) != 0u {
+                sampled_level = min(fine.level + frame.stand_in_levels, tree.max_level);
+            }
+            let desired = max(level_voxel(sampled_level), footprint_voxel) * frame.step_factor / (*state).speed;
+            if !((*state).has_step && (*state).step <= desired && desired < (*state).step * RUNG_RATIO) {
+                let index = clamp(ceil(-4.0 * log2(desired)), -512.0, 511.0);
+                (*state).step = exp2(-index / 4.0);
+                (*state).has_step = true;
+            }
+            let dt = (*state).step;
+            let first = covered + 0.5 * dt;
+            var count = 0u;
+            if first < t_exit {
+                // Bounded, so that no placement, however extreme, can keep a ray busy for ever.
+                count = u32(clamp(ceil((t_exit - first) / dt), 1.0, 16777216.0));
+            }
+            covered += f32(count) * dt;
+            if count == 0u {
+                continue;
+            }
+            // Quadrilinear: blend with the parent by the cone's level where the finest data is the wanted level.
+            var weight = 1.0;
+            if has_coarse && fine.level == target_level {
+                weight = clamp(level_at(0.5 * (t_start + t_exit)) - f32(coarse.level), 0.0, 1.0);
+            }
+            let blend = has_coarse && weight < 1.0;
+            let fine_slot = fine.node.data_word - 1u;
+            let coarse_slot = coarse.node.data_word - 1u;
+            // Empty-space skipping: nothing in the bricks (fine, and coarse if blended) can contribute. The samples
+            // were placed above, so skipping moves none.
+            if (frame.flags & RAY_FRAME_SKIP_EMPTY_SPACE) != 0u {
+                var range = brick_range(fine_slot);
+                if blend {
+                    let coarse_range = brick_range(coarse_slot);
+                    range = vec2<f32>(min(range.x, coarse_range.x), max(range.y, coarse_range.y));
+                }
+                if !visible_in(range.x, range.y) {
+                    continue;
+                }
+            }
+            let fine_start = brick_coordinates(state, fine, first);
+            let fine_delta = brick_rate(state, fine) * dt;
+            let coarse_start = brick_coordinates(state, coarse, first);
+            let coarse_delta = brick_rate(state, coarse) * dt;
+            // Within the bricks, samples in occupancy blocks that hold nothing visible are skipped (the CPU skips
+            // them in runs; here each sample checks its blocks, once per block change).
+            let check_blocks = (frame.flags & RAY_FRAME_SKIP_EMPTY_SPACE) != 0u;
+            var last_blocks = vec4<u32>(0xffffffffu);
+            var blocks_visible = true;
+            for (var k = 0u; k < count; k++) {
+                let kf = f32(k);
+                let fine_x = fine_start + kf * fine_delta;
+                let coarse_x = coarse_start + kf * coarse_delta;
+                if check_blocks {
+                    let fine_block = block_of(fine_x);
+                    var coarse_block = vec3<u32>(0u);
+                    if blend {
+                        coarse_block = block_of(coarse_x);
+                    }
+                    let blocks = vec4<u32>(
+                        (fine_block.z * tree.blocks_per_axis + fine_block.y) * tree.blocks_per_axis + fine_block.x,
+                        (coarse_block.z * tree.blocks_per_axis + coarse_block.y) * tree.blocks_per_axis + coarse_block.x,
+                        0u, 0u);
+                    if any(blocks != last_blocks) {
+                        last_blocks = blocks;
+                        // A blended value lies between the two bricks' values: their ranges' hull bounds it.
+                        var range = block_range(fine_slot, fine_block);
+                        if blend {
+                            let coarse_range = block_range(coarse_slot, coarse_block);
+                            range = vec2<f32>(min(range.x, coarse_range.x), max(range.y, coarse_range.y));
+                        }
+                        blocks_visible = visible_in(range.x, range.y);
+                    }
+                    if !blocks_visible {
+                        continue;
+                    }
+                }
+                var s = sample_brick(fine_slot, fine_x);
+                if blend {
+                    let c = sample_brick(coarse_slot, coarse_x);
+                    s.x = c.x + (s.x - c.x) * weight;
+                }
+                (*state).samples += 1u;
+                if !composite(state, s.x, s.yzw, fine.level) {
+                    running = false;
+                    break;
+                }
+            }
+        }
+    }
+
+}
+
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if id.x >= frame.width || id.y >= frame.height {
@@ -400,210 +1079,46 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let half_sum = light + view;
     state.half_vector = select(vec3<f32>(0.0), normalize(half_sum), dot(half_sum, half_sum) > 0.0);
 
-    var descents = 0u;
-    let lower = vec3<f32>(frame.clip_lower_x, frame.clip_lower_y, frame.clip_lower_z);
-    let upper = vec3<f32>(frame.clip_upper_x, frame.clip_upper_y, frame.clip_upper_z);
-    let hit = intersect_box(state.origin, state.direction, lower, upper);
-    if hit.x <= hit.y {
-        var t = max(hit.x, 0.0);
-        let t_leave = hit.y;
-        var covered = t;
-        let root = Node(nodes[0].child_word, nodes[0].data_word);
-        if has_brick(root) {
-            mark_brick(root.data_word - 1u);
-        }
-        var segments = 0u;
-        var running = true;
-        let n = tree.n;
-        while running && t < t_leave && segments < frame.max_segments {
-            segments += 1u;
-            descents += 1u;
-            let p = state.origin + state.direction * t;
-            // The cone's footprint voxel and the level to descend to (`Traversal::footprint_at`).
-            let footprint_voxel = clamp(footprint(t) * frame.bias_scale, level_voxel(tree.max_level), level_voxel(0u));
-            var target_level = 0u;
-            var target_voxel = 1.0 / f32(tree.brick_size);
-            while target_level < tree.max_level && target_voxel > footprint_voxel {
-                target_level += 1u;
-                target_voxel /= f32(tree.n);
-            }
+    state.start = 0.0;
+    state.descents = 0u;
+    state.inside = 0u;
+    state.known = false;
+    state.has_hit = false;
+    state.first_hit = 0.0;
+    state.first_lit = vec3<f32>(0.0);
+    state.any_hit = false;
+    march(&state);
 
-            // Descend from the root (`Traversal::descend`), keeping the last three nodes of the path.
-            let root_corner = -vec3<f32>(vec3<i32>(vec3<u32>(frame.anchor_x, frame.anchor_y, frame.anchor_z)));
-            var current = PathNode(0u, root, 0u, vec3<u32>(0u), root_corner, frame.anchor_scale);
-            var parent = current;
-            var grandparent = current;
-            var depth = 0u;
-            var constant = false;
-            loop {
-                let node = current.node;
-                if (node.child_word & NODE_CONSTANT_BIT) != 0u {
-                    constant = true;
-                    break;
-                }
-                if node.data_word == 0u {
-                    request(&state, current.id, REQUEST_PRODUCE);
-                    break;
-                }
-                if current.level >= target_level || (node.child_word & NODE_TERMINAL_BIT) != 0u {
-                    break;
-                }
-                let tile = node.child_word & NODE_CHILD_MASK;
-                if tile == 0u {
-                    request(&state, current.id, REQUEST_SUBDIVIDE);
-                    break;
-                }
-                mark_tile(tile);
-                let local = max((p - current.corner) / current.size * f32(n), vec3<f32>(0.0));
-                let offset = min(vec3<u32>(local), vec3<u32>(n - 1u));
-                let child_index = (offset.z * n + offset.y) * n + offset.x;
-                let child_id = tile * tree.nodes_per_tile + child_index;
-                let child = Node(nodes[child_id].child_word, nodes[child_id].data_word);
-                if has_brick(child) {
-                    mark_brick(child.data_word - 1u);
-                }
-                grandparent = parent;
-                parent = current;
-                current = child_of(current, offset, child_id, child);
-                depth += 1u;
-            }
-
-            // The node's box is one segment.
-            let node_size = current.size;
-            let box_lower = current.corner;
-            var t_exit = t_leave;
-            for (var a = 0u; a < 3u; a++) {
-                let inv = state.inverse_direction[a];
-                if state.direction[a] != 0.0 {
-                    let bound = select(box_lower[a], box_lower[a] + node_size, inv > 0.0);
-                    t_exit = min(t_exit, (bound - state.origin[a]) * inv);
-                }
-            }
-            // Never stall on a boundary: move at least a sliver of the node (f32: coarser than the CPU's sliver).
-            t_exit = max(t_exit, t + (node_size * 1e-5 + 2e-7 * max(max(abs(p.x), abs(p.y)), abs(p.z)))
-                / (state.speed * frame.anchor_scale) + 2e-7 * t);
-            let t_start = t;
-            t = t_exit;
-
-            if constant {
-                let segment_start = covered;
-                covered = max(covered, t_exit);
-                if segment_start < t_exit {
-                    state.samples += 1u;
-                    running = composite_constant(&state, segment_start, t_exit, bitcast<f32>(current.node.data_word),
-                        current.level);
-                }
-                continue;
-            }
-            // The finest brick on the path and its parent: every node above the last holds a brick.
-            var fine = current;
-            var coarse = parent;
-            var has_coarse = depth >= 1u;
-            if !has_brick(current.node) {
-                if depth == 0u {
-                    // Nothing resident at all: the segment is skipped.
-                    covered = max(covered, t_exit);
-                    continue;
-                }
-                fine = parent;
-                coarse = grandparent;
-                has_coarse = depth >= 2u;
-            }
-            let is_final = fine.level == current.level
-                && (current.level >= target_level || (current.node.child_word & NODE_TERMINAL_BIT) != 0u);
-            let stand_in = !is_final;
-
-            // The step: the footprint voxel, or the sampled level's voxel where only coarser data exists, rounded
-            // down to the ladder of `StepLength` (kept while it still is the rung for the desired step).
-            var sampled_level = fine.level;
-            if stand_in && (frame.flags & RAY_FRAME_STEPS_IGNORE_STAND_INS) != 0u {
-                sampled_level = min(fine.level + frame.stand_in_levels, tree.max_level);
-            }
-            let desired = max(level_voxel(sampled_level), footprint_voxel) * frame.step_factor / state.speed;
-            if !(state.has_step && state.step <= desired && desired < state.step * RUNG_RATIO) {
-                let index = clamp(ceil(-4.0 * log2(desired)), -512.0, 511.0);
-                state.step = exp2(-index / 4.0);
-                state.has_step = true;
-            }
-            let dt = state.step;
-            let first = covered + 0.5 * dt;
-            var count = 0u;
-            if first < t_exit {
-                // Bounded, so that no placement, however extreme, can keep a ray busy for ever.
-                count = u32(clamp(ceil((t_exit - first) / dt), 1.0, 16777216.0));
-            }
-            covered += f32(count) * dt;
-            if count == 0u {
-                continue;
-            }
-            // Quadrilinear: blend with the parent by the cone's level where the finest data is the wanted level.
-            var weight = 1.0;
-            if has_coarse && fine.level == target_level {
-                weight = clamp(level_at(0.5 * (t_start + t_exit)) - f32(coarse.level), 0.0, 1.0);
-            }
-            let blend = has_coarse && weight < 1.0;
-            let fine_slot = fine.node.data_word - 1u;
-            let coarse_slot = coarse.node.data_word - 1u;
-            // Empty-space skipping: nothing in the bricks (fine, and coarse if blended) can contribute. The samples
-            // were placed above, so skipping moves none.
-            if (frame.flags & RAY_FRAME_SKIP_EMPTY_SPACE) != 0u {
-                var range = brick_range(fine_slot);
-                if blend {
-                    let coarse_range = brick_range(coarse_slot);
-                    range = vec2<f32>(min(range.x, coarse_range.x), max(range.y, coarse_range.y));
-                }
-                if !visible_in(range.x, range.y) {
-                    continue;
-                }
-            }
-            let fine_start = brick_coordinates(&state, fine, first);
-            let fine_delta = brick_rate(&state, fine) * dt;
-            let coarse_start = brick_coordinates(&state, coarse, first);
-            let coarse_delta = brick_rate(&state, coarse) * dt;
-            // Within the bricks, samples in occupancy blocks that hold nothing visible are skipped (the CPU skips
-            // them in runs; here each sample checks its blocks, once per block change).
-            let check_blocks = (frame.flags & RAY_FRAME_SKIP_EMPTY_SPACE) != 0u;
-            var last_blocks = vec4<u32>(0xffffffffu);
-            var blocks_visible = true;
-            for (var k = 0u; k < count; k++) {
-                let kf = f32(k);
-                let fine_x = fine_start + kf * fine_delta;
-                let coarse_x = coarse_start + kf * coarse_delta;
-                if check_blocks {
-                    let fine_block = block_of(fine_x);
-                    var coarse_block = vec3<u32>(0u);
-                    if blend {
-                        coarse_block = block_of(coarse_x);
-                    }
-                    let blocks = vec4<u32>(
-                        (fine_block.z * tree.blocks_per_axis + fine_block.y) * tree.blocks_per_axis + fine_block.x,
-                        (coarse_block.z * tree.blocks_per_axis + coarse_block.y) * tree.blocks_per_axis + coarse_block.x,
-                        0u, 0u);
-                    if any(blocks != last_blocks) {
-                        last_blocks = blocks;
-                        // A blended value lies between the two bricks' values: their ranges' hull bounds it.
-                        var range = block_range(fine_slot, fine_block);
-                        if blend {
-                            let coarse_range = block_range(coarse_slot, coarse_block);
-                            range = vec2<f32>(min(range.x, coarse_range.x), max(range.y, coarse_range.y));
-                        }
-                        blocks_visible = visible_in(range.x, range.y);
-                    }
-                    if !blocks_visible {
-                        continue;
-                    }
-                }
-                var s = sample_brick(fine_slot, fine_x);
-                if blend {
-                    let c = sample_brick(coarse_slot, coarse_x);
-                    s.x = c.x + (s.x - c.x) * weight;
-                }
-                state.samples += 1u;
-                if !composite(&state, s.x, s.yzw, fine.level) {
-                    running = false;
-                    break;
-                }
-            }
+    // Hard shadows (`SurfaceCaster`, Knoll et al. §5): from the first crossing, a ray towards the light through the
+    // same tree, its cone twice as wide as the primary ray's at the surface; a blocked light leaves the crossing
+    // its ambient term. Its misses are reported like the primary ray's.
+    if frame.surface_count > 0u && (frame.flags & RAY_FRAME_SHADOWS) != 0u && state.has_hit {
+        let t_hit = state.first_hit;
+        let point = state.origin + state.direction * t_hit;
+        let toward_light = light * inverse_scale;
+        let back = t_hit * SHADOW_CONE;
+        let shadow_footprint = max(t_hit * frame.pixel_spread * SHADOW_CONE, frame.finest_voxel);
+        let color = state.color;
+        let transmittance = state.transmittance;
+        let first_lit = state.first_lit;
+        state.direction = toward_light * frame.anchor_scale;
+        state.origin = point - state.direction * back;
+        state.inverse_direction = 1.0 / state.direction;
+        state.speed = length(toward_light);
+        state.start = back + SHADOW_OFFSET * shadow_footprint;
+        state.requests_left = frame.max_requests_per_ray;
+        state.color = vec3<f32>(0.0);
+        state.transmittance = 1.0;
+        state.inside = 0u;
+        state.known = false;
+        state.has_hit = false;
+        state.any_hit = true;
+        march(&state);
+        let blocked = state.has_hit;
+        state.color = color;
+        state.transmittance = transmittance;
+        if blocked {
+            state.color -= first_lit;
         }
     }
 
@@ -612,5 +1127,5 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     pixel_flags[pixel] = select(PIXEL_DONE, PIXEL_MISSED, state.requested);
     atomicAdd(&feedback.rays.rays, 1u);
     atomicAdd(&feedback.rays.samples, state.samples);
-    atomicAdd(&feedback.rays.descents, descents);
+    atomicAdd(&feedback.rays.descents, state.descents);
 }

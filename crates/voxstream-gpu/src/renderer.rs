@@ -11,11 +11,15 @@ use std::sync::mpsc;
 use voxstream_core::{BrickSlot, FeedbackBuffer, Request, TileId, TreeView};
 use voxstream_engine::FrameRenderer;
 use voxstream_layout::{
-    FeedbackCounters, RayCounters, RayFrame, RequestRecord, TransferTableEntry, RAY_FRAME_COLOUR_BY_LEVEL,
-    RAY_FRAME_PHONG, RAY_FRAME_SKIP_EMPTY_SPACE, RAY_FRAME_STEPS_IGNORE_STAND_INS,
+    FeedbackCounters, RayCounters, RayFrame, RequestRecord, SurfaceRecord, TransferTableEntry,
+    RAY_FRAME_CENTRAL_NORMALS, RAY_FRAME_COLOUR_BY_LEVEL, RAY_FRAME_PHONG, RAY_FRAME_SHADOWS,
+    RAY_FRAME_SKIP_EMPTY_SPACE, RAY_FRAME_STEPS_IGNORE_STAND_INS,
 };
 use voxstream_render::transfer_function::LUT_SIZE;
-use voxstream_render::{Camera, ProgressiveImage, RayStats, RenderError, RenderSettings, Shading, TransferLut};
+use voxstream_render::{
+    Camera, ProgressiveImage, RayStats, RenderError, RenderSettings, Shading, SurfaceNormals, SurfaceSettings,
+    TransferLut,
+};
 use wgpu::util::DeviceExt;
 
 use crate::context::GpuContext;
@@ -104,6 +108,7 @@ impl GpuRenderer {
                 storage(7, false),
                 storage(8, false),
                 storage(9, true),
+                storage(10, true),
             ],
         });
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -169,9 +174,6 @@ impl GpuRenderer {
         progressive: &mut ProgressiveImage,
     ) -> Result<(RayStats, usize), RenderError> {
         settings.validate()?;
-        if !settings.surfaces.is_empty() {
-            return Err(GpuError::Unsupported { what: "an isosurface (--iso)", instead: "--backend cpu" }.into());
-        }
         if !view.brick_blends.is_empty() {
             return Err(GpuError::Unsupported {
                 what: "blending arriving bricks in (interactive frames with --blending on)",
@@ -233,6 +235,11 @@ impl GpuRenderer {
             (pixel_count * settings.max_requests_per_ray.max(1) as u64).clamp(1, MAX_REQUEST_RECORDS) as u32;
         let mut ray_frame = ray_frame(&frame, settings, view.shape.n, view.shape.max_level, request_capacity);
         [ray_frame.atlas_bricks_x, ray_frame.atlas_bricks_y] = [pools.atlas[0], pools.atlas[1]];
+        // Isosurfaces (Knoll et al.): the same settings the CPU's surface caster derives.
+        let surfaces = SurfaceSettings::new(settings, |value| lut.normalise(value));
+        let surface_records = surface_records(&surfaces);
+        ray_frame.surface_count = surfaces.count() as u32;
+        ray_frame.finest_voxel = (settings.placement.mean_scale() * view.shape.voxel_size(view.shape.max_level)) as f32;
         let brick_atlas = pools.bricks.create_view(&wgpu::TextureViewDescriptor::default());
         let header = view.header();
         let init = |label, contents: &[u8], usage| {
@@ -242,6 +249,7 @@ impl GpuRenderer {
         // Brick and block ranges (4 bytes per brick and per block: a few % of the bricks' bytes) change with every
         // brick produced: written whole each pass.
         let ranges = init("ranges", bytemuck::cast_slice(&range_words(lut, &view)), wgpu::BufferUsages::STORAGE);
+        let surface_buffer = init("surfaces", bytemuck::cast_slice(&surface_records), wgpu::BufferUsages::STORAGE);
         let tree_uniform = init("tree header", bytemuck::bytes_of(&header), wgpu::BufferUsages::UNIFORM);
         let frame_uniform = init("ray frame", bytemuck::bytes_of(&ray_frame), wgpu::BufferUsages::UNIFORM);
         let pixels = device.create_buffer(&wgpu::BufferDescriptor {
@@ -283,6 +291,7 @@ impl GpuRenderer {
                 entry(7, &feedback_buffer),
                 entry(8, &usage),
                 entry(9, &ranges),
+                entry(10, &surface_buffer),
             ],
         });
 
@@ -472,6 +481,13 @@ fn ray_frame(
     if settings.skip_empty_space {
         flags |= RAY_FRAME_SKIP_EMPTY_SPACE;
     }
+    if settings.surface_normals == SurfaceNormals::CentralDifferences {
+        flags |= RAY_FRAME_CENTRAL_NORMALS;
+    }
+    // As `SurfaceCaster`: shadows from a fixed light, with Phong shading.
+    if settings.shadows && settings.shading == Shading::Phong && light != [0.0; 3] {
+        flags |= RAY_FRAME_SHADOWS;
+    }
     RayFrame {
         width: settings.width,
         height: settings.height,
@@ -525,7 +541,35 @@ fn ray_frame(
         anchor_y: anchor[1],
         anchor_z: anchor[2],
         anchor_scale: anchor_scale as f32,
+        surface_count: 0,
+        finest_voxel: 0.0,
+        reserved0: 0,
+        reserved1: 0,
     }
+}
+
+/// The frame's isosurfaces as the shader reads them; one unused record where there are none (a binding may not be
+/// empty).
+fn surface_records(surfaces: &SurfaceSettings) -> Vec<SurfaceRecord> {
+    let mut records: Vec<SurfaceRecord> = (0..surfaces.count())
+        .map(|i| {
+            let s = surfaces.surface(i);
+            SurfaceRecord {
+                iso: s.iso,
+                lower: s.lower,
+                upper: s.upper,
+                opacity: s.opacity,
+                r: s.color[0],
+                g: s.color[1],
+                b: s.color[2],
+                reserved: 0,
+            }
+        })
+        .collect();
+    if records.is_empty() {
+        records.push(SurfaceRecord::default());
+    }
+    records
 }
 
 #[cfg(test)]

@@ -92,6 +92,8 @@ const RAY_FRAME_PHONG: u32 = 1u;
 const RAY_FRAME_STEPS_IGNORE_STAND_INS: u32 = 2u;
 const RAY_FRAME_COLOUR_BY_LEVEL: u32 = 4u;
 const RAY_FRAME_SKIP_EMPTY_SPACE: u32 = 8u;
+const RAY_FRAME_CENTRAL_NORMALS: u32 = 16u;
+const RAY_FRAME_SHADOWS: u32 = 32u;
 
 struct RayFrame {
     width: u32,
@@ -146,4 +148,20 @@ struct RayFrame {
     anchor_y: u32,
     anchor_z: u32,
     anchor_scale: f32,
+    surface_count: u32,
+    finest_voxel: f32,
+    reserved0: u32,
+    reserved1: u32,
+}
+
+// One isosurface (ray_frame.rs, `SurfaceRecord`).
+struct SurfaceRecord {
+    iso: f32,
+    lower: f32,
+    upper: f32,
+    opacity: f32,
+    r: f32,
+    g: f32,
+    b: f32,
+    reserved: u32,
 }

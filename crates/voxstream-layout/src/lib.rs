@@ -14,7 +14,8 @@
 //! | [`FeedbackCounters`] | 16 | the request list's fill level, written with atomics ([P09] §5) |
 //! | [`UsageFlag`] | 4 | one tile or brick slot used by some ray this frame ([P09] §5) |
 //! | [`RayCounters`] | 16 | what a pass's rays counted: rays, samples, descents |
-//! | [`RayFrame`] | 208 | the frame's camera and ray settings, flattened: what a GPU ray caster reads beside the header |
+//! | [`RayFrame`] | 224 | the frame's camera and ray settings, flattened: what a GPU ray caster reads beside the header |
+//! | [`SurfaceRecord`] | 32 | one isosurface: isovalue, culling bounds, colour and opacity (Knoll et al.) |
 //! | [`RequestRecord`] | 8 | one ray's request: a node to produce or to subdivide ([P09] §5) |
 //! | [`BrickBlend`] | 36 | per brick slot: the cap on its weight against its parent at its corners (Thiele et al.'s blending) |
 //!
@@ -49,8 +50,8 @@ pub use feedback_records::{
 };
 pub use node::{BrickSlot, Node, NodeData, NodeId, TileId, CHILD_MASK, CONSTANT_BIT, MAX_TILE_INDEX, TERMINAL_BIT};
 pub use ray_frame::{
-    RayFrame, RAY_FRAME_BYTES, RAY_FRAME_COLOUR_BY_LEVEL, RAY_FRAME_PHONG, RAY_FRAME_SKIP_EMPTY_SPACE,
-    RAY_FRAME_STEPS_IGNORE_STAND_INS,
+    RayFrame, SurfaceRecord, RAY_FRAME_BYTES, RAY_FRAME_CENTRAL_NORMALS, RAY_FRAME_COLOUR_BY_LEVEL, RAY_FRAME_PHONG,
+    RAY_FRAME_SHADOWS, RAY_FRAME_SKIP_EMPTY_SPACE, RAY_FRAME_STEPS_IGNORE_STAND_INS,
 };
 pub use transfer_table::{TransferTableEntry, TransferTableHeader, TABLE_HOLDS_EXTINCTION, TABLE_HOLDS_STEP_OPACITY};
 pub use tree_header::TreeHeader;

@@ -21,8 +21,17 @@
 //! | 160 | `light_*`, `specular` | unit light direction (world; zero: a headlight); Phong's specular coefficient |
 //! | 176 | `shininess`, `atlas_bricks_x`, `atlas_bricks_y`, `anchor_level` | Phong's exponent; brick slots per row and per column of the brick atlas (slot `s` sits at brick `(s mod x, (s div x) mod y, s div xy)`); the anchor's level |
 //! | 192 | `anchor_x`, `anchor_y`, `anchor_z`, `anchor_scale` | the anchor's integer coordinates at its level; `N^anchor_level` |
+//! | 208 | `surface_count`, `finest_voxel`, `reserved0`, `reserved1` | isosurfaces drawn (0: emission–absorption), each a [`SurfaceRecord`]; world length of the finest voxel (the least shadow offset); zero |
 //!
-//! Size 208 bytes (a multiple of 16, as uniforms need).
+//! Size 224 bytes (a multiple of 16, as uniforms need).
+//!
+//! [`SurfaceRecord`], 32 bytes: one isosurface (Knoll et al., seed 002), as `voxstream-render`'s `SurfaceSettings`
+//! holds it.
+//!
+//! | offset | fields | meaning |
+//! |---|---|---|
+//! | 0 | `iso`, `lower`, `upper`, `opacity` | the isovalue in stored units (`[0, 65535]`); the normalised isovalue less and plus the culling margin; opacity |
+//! | 16 | `r`, `g`, `b`, `reserved` | linear colour premultiplied by the opacity; zero |
 
 use bytemuck::{Pod, Zeroable};
 
@@ -36,6 +45,11 @@ pub const RAY_FRAME_COLOUR_BY_LEVEL: u32 = 4;
 /// [`RayFrame::flags`]: skip segments whose bricks hold no value the transfer function shows
 /// (`RenderSettings::skip_empty_space`).
 pub const RAY_FRAME_SKIP_EMPTY_SPACE: u32 = 8;
+/// [`RayFrame::flags`]: isosurface normals from central differences at the cell's corners, interpolated
+/// (`SurfaceNormals::CentralDifferences`), instead of the cell's analytic gradient.
+pub const RAY_FRAME_CENTRAL_NORMALS: u32 = 16;
+/// [`RayFrame::flags`]: isosurfaces cast hard shadows from the fixed light (`RenderSettings::shadows`).
+pub const RAY_FRAME_SHADOWS: u32 = 32;
 
 /// The frame's ray parameters, as a GPU reads them (see the module docs for the offsets).
 #[repr(C)]
@@ -94,6 +108,25 @@ pub struct RayFrame {
     pub anchor_y: u32,
     pub anchor_z: u32,
     pub anchor_scale: f32,
+    pub surface_count: u32,
+    pub finest_voxel: f32,
+    pub reserved0: u32,
+    pub reserved1: u32,
+}
+
+/// One isosurface, as a GPU reads it (see the module docs for the offsets).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+#[allow(missing_docs)]
+pub struct SurfaceRecord {
+    pub iso: f32,
+    pub lower: f32,
+    pub upper: f32,
+    pub opacity: f32,
+    pub r: f32,
+    pub g: f32,
+    pub b: f32,
+    pub reserved: u32,
 }
 
 /// Bytes of a [`RayFrame`].
@@ -102,11 +135,11 @@ pub const RAY_FRAME_BYTES: usize = core::mem::size_of::<RayFrame>();
 #[cfg(test)]
 mod tests {
     use super::*;
-    use core::mem::{align_of, offset_of};
+    use core::mem::{align_of, offset_of, size_of};
 
     #[test]
     fn offsets_are_as_documented() {
-        assert_eq!(RAY_FRAME_BYTES, 208);
+        assert_eq!(RAY_FRAME_BYTES, 224);
         assert_eq!(align_of::<RayFrame>(), 4);
         assert_eq!(offset_of!(RayFrame, flags), 16);
         assert_eq!(offset_of!(RayFrame, eye_x), 32);
@@ -120,5 +153,8 @@ mod tests {
         assert_eq!(offset_of!(RayFrame, light_x), 160);
         assert_eq!(offset_of!(RayFrame, shininess), 176);
         assert_eq!(offset_of!(RayFrame, anchor_x), 192);
+        assert_eq!(offset_of!(RayFrame, surface_count), 208);
+        assert_eq!(size_of::<SurfaceRecord>(), 32);
+        assert_eq!(offset_of!(SurfaceRecord, r), 16);
     }
 }

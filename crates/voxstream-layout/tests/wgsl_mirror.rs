@@ -170,7 +170,12 @@ fn every_struct_matches_its_rust_twin() {
             anchor_y,
             anchor_z,
             anchor_scale,
+            surface_count,
+            finest_voxel,
+            reserved0,
+            reserved1,
         }),
+        rust_layout!(SurfaceRecord { iso, lower, upper, opacity, r, g, b, reserved }),
         rust_layout!(RequestRecord { node, kind }),
         rust_layout!(BrickBlend { corner0, corner1, corner2, corner3, corner4, corner5, corner6, corner7, fade }),
     ]
@@ -197,6 +202,8 @@ fn every_constant_matches_its_rust_twin() {
         ("RAY_FRAME_STEPS_IGNORE_STAND_INS", RAY_FRAME_STEPS_IGNORE_STAND_INS),
         ("RAY_FRAME_COLOUR_BY_LEVEL", RAY_FRAME_COLOUR_BY_LEVEL),
         ("RAY_FRAME_SKIP_EMPTY_SPACE", RAY_FRAME_SKIP_EMPTY_SPACE),
+        ("RAY_FRAME_CENTRAL_NORMALS", RAY_FRAME_CENTRAL_NORMALS),
+        ("RAY_FRAME_SHADOWS", RAY_FRAME_SHADOWS),
     ]
     .into_iter()
     .map(|(name, value)| (name.to_string(), value))

@@ -107,6 +107,33 @@ impl SurfaceSettings {
     pub fn count(&self) -> usize {
         self.count
     }
+
+    /// Surface `i` as the GPU's `SurfaceRecord` holds it: the isovalue in stored units, the normalised culling
+    /// bounds (isovalue less and plus the margin), the premultiplied colour and the opacity.
+    pub fn surface(&self, i: usize) -> SurfaceParameters {
+        SurfaceParameters {
+            iso: self.iso[i],
+            lower: self.lower[i],
+            upper: self.upper[i],
+            color: self.color[i].to_array(),
+            opacity: self.opacity[i],
+        }
+    }
+}
+
+/// One surface of [`SurfaceSettings`] in the units the cells and the culling use ([`SurfaceSettings::surface`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfaceParameters {
+    /// Isovalue in stored units (`[0, 65535]`).
+    pub iso: f32,
+    /// Normalised isovalue less the culling margin.
+    pub lower: f32,
+    /// Normalised isovalue plus the culling margin.
+    pub upper: f32,
+    /// Linear colour premultiplied by the opacity.
+    pub color: [f32; 3],
+    /// Opacity in `(0, 1]`.
+    pub opacity: f32,
 }
 
 /// The surfaces met along one ray, composited front to back.

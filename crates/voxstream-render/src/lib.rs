@@ -53,7 +53,7 @@ pub use frame::{
 pub use image::{psnr, Image};
 pub use instruction_set::InstructionSet;
 pub use integrand::{BrickSpan, Integrand, Sample};
-pub use isosurface::{IsoSurface, SurfaceNormals, MAX_SURFACES};
+pub use isosurface::{IsoSurface, SurfaceNormals, SurfaceParameters, SurfaceSettings, MAX_SURFACES};
 pub use ray_caster::RayCaster;
 pub use settings::{level_colour, PhongCoefficients, RenderSettings, Shading, VolumePlacement};
 pub use transfer_function::{TransferFunction, TransferLut};

@@ -2,9 +2,12 @@
 //! renders the default scene to `frame.png`. (It once stopped with "could not determine which binary to run" when a
 //! second binary joined the workspace, and nothing noticed; `.ci/run` also runs it from CI's clean clone.)
 //!
-//! The checkout is a copy of the files git tracks, in `target/quick-start/checkout`; it builds into
-//! `target/quick-start`, seeded from this build's dependencies the first time so that only voxstream's own crates
-//! are compiled.
+//! The checkout is a copy of the files git tracks, in the system's temporary folder: outside this repository, so
+//! that cargo reads the checkout's `.cargo/config.toml` alone (inside it, cargo would also merge this repository's
+//! copy and append the same `rustflags` twice, which changes every crate's hash and rebuilds all ~300 of them). It
+//! builds into this repository's own `target/`, so the compiled dependencies are shared, nothing is copied, and
+//! only voxstream's own crates are compiled again for the checkout's path. That build replaces
+//! `target/release/voxstream` with one from the same sources.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -43,40 +46,39 @@ fn clean_checkout(root: &Path, checkout: &Path) {
     assert!(copied > 20, "only {copied} tracked files");
 }
 
+/// The last `lines` lines of `text` (a failed build's error is at its end).
+fn tail(text: &str, lines: usize) -> String {
+    let all: Vec<&str> = text.lines().collect();
+    all[all.len().saturating_sub(lines)..].join("\n")
+}
+
 #[test]
 fn readme_main_command_renders_the_default_scene_in_a_clean_checkout() {
     let root = repository();
     let command = main_command(&std::fs::read_to_string(root.join("README.md")).unwrap());
     assert!(command.starts_with("cargo run"), "{command}");
 
-    // A fixed place (with the sources' times kept) lets a later run reuse this one's build.
-    let target = root.join("target/quick-start");
-    let checkout = target.join("checkout");
+    // Earlier versions of this test built into target/quick-start, a second copy of every dependency.
+    let _ = std::fs::remove_dir_all(root.join("target/quick-start"));
+    // One place per repository (the hash of its path), so that a later run reuses this one's build.
+    let mut hasher = std::collections::hash_map::DefaultHasher::new();
+    std::hash::Hash::hash(&root, &mut hasher);
+    let checkout =
+        std::env::temp_dir().join(format!("voxstream-quick-start-{:016x}", std::hash::Hasher::finish(&hasher)));
     let _ = std::fs::remove_dir_all(&checkout);
     clean_checkout(&root, &checkout);
-    if !target.join("release").exists() {
-        // Seed with this build's compiled dependencies (a copy: cargo rewrites its files in place).
-        std::fs::create_dir_all(target.join("release")).unwrap();
-        for part in ["deps", "build", ".fingerprint"] {
-            let status = Command::new("cp")
-                .arg("-a")
-                .arg(root.join("target/release").join(part))
-                .arg(target.join("release"))
-                .status();
-            assert!(status.is_ok_and(|s| s.success()), "cannot seed {}", target.display());
-        }
-    }
     let output = Command::new("bash")
         .args(["-c", &command])
         .current_dir(&checkout)
-        .env("CARGO_TARGET_DIR", &target)
+        .env("CARGO_TARGET_DIR", root.join("target"))
         .env_remove("RUSTFLAGS")
         .output()
         .expect("bash");
     let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(output.status.success(), "`{command}` failed in a clean checkout:\n{stderr}");
-    assert!(stderr.contains("wrote frame.png (512x512, complete"), "no summary line:\n{stderr}");
+    assert!(output.status.success(), "`{command}` failed in a clean checkout; its last lines:\n{}", tail(&stderr, 40));
+    assert!(stderr.contains("wrote frame.png (512x512, complete"), "no summary line:\n{}", tail(&stderr, 40));
     let bytes = std::fs::read(checkout.join("frame.png")).expect("frame.png written");
     let reader = png::Decoder::new(std::io::Cursor::new(bytes)).read_info().unwrap();
     assert_eq!((reader.info().width, reader.info().height), (512, 512));
+    let _ = std::fs::remove_dir_all(&checkout);
 }

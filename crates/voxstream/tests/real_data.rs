@@ -483,10 +483,14 @@ fn the_gpu_renders_real_stores_and_a_foreign_ome_zarr_like_the_cpu() {
     let size = 96;
     // The frog's tissue labels with the peers' transfer function (bench/peers), shaded.
     let frog_tf = TransferFunction::from_json(include_str!("../../../docs/examples/frog-tf.json")).unwrap();
-    for (name, reader, shading, tf) in [
-        ("mni152_t1", native, voxstream_render::Shading::None, None),
-        ("frog_tissues (Phong)", frog, voxstream_render::Shading::Phong, Some(frog_tf)),
-        ("mni152_t1 as zarr-python's OME-Zarr v3", foreign, voxstream_render::Shading::None, None),
+    // The brain's isosurface at 70 (README's example), Phong-shaded with hard shadows: Knoll et al.'s exact crossings.
+    let iso = vec![voxstream_render::IsoSurface { value: 70.0, color: [0.9, 0.75, 0.65], opacity: 1.0 }];
+    let phong = voxstream_render::Shading::Phong;
+    for (name, reader, shading, tf, surfaces) in [
+        ("mni152_t1", native.clone(), voxstream_render::Shading::None, None, vec![]),
+        ("frog_tissues (Phong)", frog, phong, Some(frog_tf), vec![]),
+        ("mni152_t1 as zarr-python's OME-Zarr v3", foreign, voxstream_render::Shading::None, None, vec![]),
+        ("mni152_t1's isosurface at 70 with shadows", native, phong, None, iso),
     ] {
         let range = reader.attributes().value_range;
         let tf = tf.unwrap_or_else(|| default_store_transfer_function(reader.attributes().typical_range()).unwrap());
@@ -495,6 +499,9 @@ fn the_gpu_renders_real_stores_and_a_foreign_ome_zarr_like_the_cpu() {
             height: size,
             shading,
             placement: store_placement(&reader),
+            shadows: !surfaces.is_empty(),
+            light_direction: Some([0.3, 0.8, 0.5]).filter(|_| !surfaces.is_empty()),
+            surfaces,
             ..RenderSettings::default()
         };
         let camera = store_camera(reader.info(), size, size);
