@@ -15,8 +15,9 @@
 //! feedback records, the frame's [`RayFrame`](voxstream_layout::RayFrame)) through their WGSL mirror
 //! `layout.wgsl`, which is prepended to it.
 //!
-//! Not yet on the GPU (each refused with a clear error or listed in `docs/ARCHITECTURE.md`): isosurfaces, Thiele
-//! et al.'s blended transitions, hardware-filtered bricks, request compaction and focus weighting on the GPU.
+//! Both integrands of the CPU renderer run on the GPU: emission–absorption and Knoll et al.'s exact isosurfaces
+//! (with culling, translucent nested surfaces and shadows). Not yet on the GPU (each refused with a clear error or
+//! listed in `docs/ARCHITECTURE.md`): Thiele et al.'s blended transitions, hardware-filtered bricks, request compaction and focus weighting on the GPU.
 //! Positions are f32 in an anchor frame near the eye, so deep zooms keep the CPU's precision (see
 //! `voxstream_layout::ray_frame`).
 

@@ -1,11 +1,16 @@
 // The GPU twin of voxstream-render's ray caster: one invocation per pixel walks its ray through the N³-tree exactly
-// as `Traversal::trace` does with the `EmissionAbsorption` integrand (GigaVoxels [P09] §6: cone-traced level of
-// detail, kd-restart descent from the root at every segment, quadrilinear blending with the parent brick, opacity
-// correction per step, front-to-back compositing, early termination), and writes the feedback of [P09] §5 (tiles and
-// bricks used, nodes missed).
+// as `Traversal::trace` does (GigaVoxels [P09] §6: cone-traced level of detail, kd-restart descent from the root at
+// every segment, early termination), and writes the feedback of [P09] §5 (tiles and bricks used, nodes missed).
+// `march` is the traversal; what its segments feed is the frame's integrand, as on the CPU:
+// - emission–absorption (`EmissionAbsorption`): quadrilinear blending with the parent brick, opacity correction per
+//   step, Phong, front-to-back compositing;
+// - exact isosurfaces when `RayFrame::surface_count` > 0 (`Isosurfaces`, Knoll et al., seed 002): whole brick
+//   segments walked cell by cell (`walk_cells`), each cell's cubic solved for its crossings (`iso_cell`), subtrees,
+//   bricks, blocks and cells culled by their value ranges, several translucent surfaces, hard shadows from a second
+//   `march` towards the light (`SurfaceCaster`).
 //
-// The records (Node, TreeHeader, RayFrame, TransferTableEntry, FeedbackCounters, RayCounters, RequestRecord) come
-// from crates/voxstream-layout/src/layout.wgsl, which is prepended to this file.
+// The records (Node, TreeHeader, RayFrame, SurfaceRecord, TransferTableEntry, FeedbackCounters, RayCounters,
+// RequestRecord) come from crates/voxstream-layout/src/layout.wgsl, which is prepended to this file.
 //
 // Positions are f32 in the anchor frame of `RayFrame` (one unit per node of the anchor level, origin at the anchor
 // node that holds the eye), so that deep zooms keep the precision the CPU has in f64: a node is located by its

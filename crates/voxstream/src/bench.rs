@@ -4,7 +4,7 @@
 
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use serde::Serialize;
 use voxstream_core::Producer;
 use voxstream_engine::{FrameRenderer, LoopLimits, Mode, Session};
@@ -72,6 +72,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let names: Vec<String> =
         if args.scenes.is_empty() { SCENE_NAMES.iter().map(|s| s.to_string()).collect() } else { args.scenes.clone() };
     check_budget(args.budget_mb, args.size, args.size, "--size")?;
+    bench_surfaces(args)?;
     if args.backend == Backend::Gpu && args.blending == Switch::On {
         eprintln!(
             "bench: the GPU backend does not blend arriving bricks yet: interactive frames run with --blending off"
@@ -122,16 +123,58 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     Ok(())
 }
 
+/// The light of `bench --iso` (towards the light, world axes).
+const BENCH_LIGHT: [f64; 3] = [0.3, 0.8, 0.5];
+
+/// The surfaces `--iso` asks for (empty: volume rendering), checked against the built-in scenes' data range.
+fn bench_surfaces(args: &BenchArgs) -> Result<Vec<voxstream_render::IsoSurface>> {
+    if args.iso.is_empty() {
+        if args.shadows {
+            bail!("--shadows applies to isosurfaces: add --iso VALUE");
+        }
+        return Ok(Vec::new());
+    }
+    if args.iso.len() > voxstream_render::MAX_SURFACES {
+        bail!(
+            "--iso names {} values; at most {} surfaces are drawn at once",
+            args.iso.len(),
+            voxstream_render::MAX_SURFACES
+        );
+    }
+    if let Some(bad) = args.iso.iter().find(|v| !(**v > 0.0 && **v <= 1.0)) {
+        bail!("--iso {bad} lies outside the built-in scenes' values (0 to 1): pick a value between them");
+    }
+    Ok(args
+        .iso
+        .iter()
+        .zip(crate::iso_flags::PALETTE)
+        .map(|(&value, color)| voxstream_render::IsoSurface { value, color, opacity: 1.0 })
+        .collect())
+}
+
 fn new_session(
     scene: &Scene,
     args: &BenchArgs,
 ) -> Result<Session<crate::scenes::SceneProducer, Box<dyn FrameRenderer>>> {
-    let settings = RenderSettings {
-        width: args.size,
-        height: args.size,
-        shading: scene.shading,
-        light_direction: scene.light,
-        ..RenderSettings::default()
+    let surfaces = bench_surfaces(args)?;
+    let settings = if surfaces.is_empty() {
+        RenderSettings {
+            width: args.size,
+            height: args.size,
+            shading: scene.shading,
+            light_direction: scene.light,
+            ..RenderSettings::default()
+        }
+    } else {
+        RenderSettings {
+            width: args.size,
+            height: args.size,
+            shading: voxstream_render::Shading::Phong,
+            light_direction: Some(BENCH_LIGHT),
+            shadows: args.shadows,
+            surfaces,
+            ..RenderSettings::default()
+        }
     };
     // The same split as `render`: the frame's buffers count, and a budget beyond the machine is refused.
     let budget = check_budget(args.budget_mb, args.size, args.size, "--size")?;

@@ -386,6 +386,13 @@ pub struct BenchArgs {
     /// --popping: write a strip of consecutive frames without (top) and with (bottom) blending here (PNG).
     #[arg(long, value_name = "PNG")]
     pub strip: Option<PathBuf>,
+    /// Measure isosurfaces of these values (in (0, 1], the built-in scenes' data range) instead of each scene's
+    /// volume: Phong-shaded from a fixed light, in the colours of `render --iso`.
+    #[arg(long, value_delimiter = ',', value_name = "V1,V2,…")]
+    pub iso: Vec<f64>,
+    /// With --iso: hard shadows from that light.
+    #[arg(long)]
+    pub shadows: bool,
 }
 
 /// Parses `x,y,z` positive integers.
