@@ -16,8 +16,9 @@
 //! `layout.wgsl`, which is prepended to it.
 //!
 //! Both integrands of the CPU renderer run on the GPU: emission–absorption and Knoll et al.'s exact isosurfaces
-//! (with culling, translucent nested surfaces and shadows). Not yet on the GPU (each refused with a clear error or
-//! listed in `docs/ARCHITECTURE.md`): Thiele et al.'s blended transitions, hardware-filtered bricks, request compaction and focus weighting on the GPU.
+//! (with culling, translucent nested surfaces and shadows), and Thiele et al.'s level blending of interactive frames.
+//! Not yet on the GPU (listed in `docs/ARCHITECTURE.md`): hardware-filtered bricks, request compaction and focus
+//! weighting on the GPU.
 //! Positions are f32 in an anchor frame near the eye, so deep zooms keep the CPU's precision (see
 //! `voxstream_layout::ray_frame`).
 

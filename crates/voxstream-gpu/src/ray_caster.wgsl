@@ -2,8 +2,9 @@
 // as `Traversal::trace` does (GigaVoxels [P09] §6: cone-traced level of detail, kd-restart descent from the root at
 // every segment, early termination), and writes the feedback of [P09] §5 (tiles and bricks used, nodes missed).
 // `march` is the traversal; what its segments feed is the frame's integrand, as on the CPU:
-// - emission–absorption (`EmissionAbsorption`): quadrilinear blending with the parent brick, opacity correction per
-//   step, Phong, front-to-back compositing;
+// - emission–absorption (`EmissionAbsorption`): quadrilinear blending with the parent brick (capped by Thiele et
+//   al.'s level blending in interactive frames: `BrickBlend` caps and fade-in), opacity correction per step, Phong,
+//   front-to-back compositing;
 // - exact isosurfaces when `RayFrame::surface_count` > 0 (`Isosurfaces`, Knoll et al., seed 002): whole brick
 //   segments walked cell by cell (`walk_cells`), each cell's cubic solved for its crossings (`iso_cell`), subtrees,
 //   bricks, blocks and cells culled by their value ranges, several translucent surfaces, hard shadows from a second
@@ -52,6 +53,9 @@ struct Feedback {
 @group(0) @binding(9) var<storage, read> ranges: array<u32>;
 // The frame's isosurfaces (`RayFrame::surface_count` of them; one unused record where there are none).
 @group(0) @binding(10) var<storage, read> surfaces: array<SurfaceRecord>;
+// Thiele et al.'s level blending (`RAY_FRAME_BLENDING`): per brick slot, the caps on its weight against its parent at
+// its corners and its own fade-in (`BrickBlend`; one unused record when off).
+@group(0) @binding(11) var<storage, read> blends: array<BrickBlend>;
 
 struct RayState {
     // The ray in the anchor frame: origin, anchor units per world unit of t, and its inverse.
@@ -804,6 +808,32 @@ fn walk_cells(state: ptr<function, RayState>, entry: PathNode, t_from: f32, t_to
     return true;
 }
 
+// Whether the brick in `slot` has faded in completely (its descendants may be drawn): `BrickBlend::is_in`.
+fn blend_is_in(slot: u32) -> bool {
+    return (frame.flags & RAY_FRAME_BLENDING) == 0u || blends[slot].fade >= 1.0;
+}
+
+// Whether the brick in `slot` stands in fully for its parent everywhere: `BrickBlend::is_full`.
+fn blend_is_full(slot: u32) -> bool {
+    if (frame.flags & RAY_FRAME_BLENDING) == 0u {
+        return true;
+    }
+    let b = blends[slot];
+    return min(min(min(b.corner0, b.corner1), min(b.corner2, b.corner3)),
+        min(min(b.corner4, b.corner5), min(b.corner6, b.corner7))) >= 1.0;
+}
+
+// The cap of the brick of `entry` where the ray is at t, trilinear between its corners (`Traversal::cap_at`,
+// `BrickBlend::at`).
+fn cap_at(state: ptr<function, RayState>, entry: PathNode, t: f32) -> f32 {
+    let b = blends[entry.node.data_word - 1u];
+    let p = clamp(((*state).origin + (*state).direction * t - entry.corner) / entry.size, vec3<f32>(0.0),
+        vec3<f32>(1.0));
+    let y0 = mix(mix(b.corner0, b.corner1, p.x), mix(b.corner2, b.corner3, p.x), p.y);
+    let y1 = mix(mix(b.corner4, b.corner5, p.x), mix(b.corner6, b.corner7, p.x), p.y);
+    return mix(y0, y1, p.z);
+}
+
 // Walks one ray through the tree from distance `(*state).start` (`Traversal::trace`), handing its segments to the
 // frame's integrand: emission–absorption, or the isosurfaces when the frame has any.
 fn march(state: ptr<function, RayState>) {
@@ -843,8 +873,18 @@ fn march(state: ptr<function, RayState>) {
             var grandparent = current;
             var depth = 0u;
             var constant = false;
+            // Level blending: the shallowest node on the path whose brick has not faded in, and its parent
+            // (`first_fading`): it is drawn, blended with its parent, instead of anything below it.
+            var fading = current;
+            var fading_parent = current;
+            var has_fading = false;
             loop {
                 let node = current.node;
+                if !has_fading && has_brick(node) && !blend_is_in(node.data_word - 1u) {
+                    fading = current;
+                    fading_parent = parent;
+                    has_fading = true;
+                }
                 if (node.child_word & NODE_CONSTANT_BIT) != 0u {
                     constant = true;
                     break;
@@ -901,7 +941,8 @@ fn march(state: ptr<function, RayState>) {
             let t_start = t;
             t = t_exit;
 
-            if constant {
+            // Under a brick still fading in, that brick stands in for a constant node too.
+            if constant && !(has_fading && fading.level < current.level) {
                 let segment_start = covered;
                 covered = max(covered, t_exit);
                 if segment_start < t_exit {
@@ -928,6 +969,11 @@ fn march(state: ptr<function, RayState>) {
                 fine = parent;
                 coarse = grandparent;
                 has_coarse = depth >= 2u;
+            }
+            if has_fading && fading.level < fine.level {
+                fine = fading;
+                coarse = fading_parent;
+                has_coarse = fading.level >= 1u;
             }
             if surfaces_on {
                 // The whole segment at the fine brick's level, cell by cell: no level blending (the crossings of
@@ -974,9 +1020,26 @@ fn march(state: ptr<function, RayState>) {
             if has_coarse && fine.level == target_level {
                 weight = clamp(level_at(0.5 * (t_start + t_exit)) - f32(coarse.level), 0.0, 1.0);
             }
-            let blend = has_coarse && weight < 1.0;
             let fine_slot = fine.node.data_word - 1u;
             let coarse_slot = coarse.node.data_word - 1u;
+            // Thiele et al.: the cone's weight capped by the fine brick's caps (fade-in, coarser neighbours) at the
+            // first and the last sample, ramped linearly between them; normals blend by the caps alone.
+            let capped = has_coarse && !blend_is_full(fine_slot);
+            var weight_first = weight;
+            var weight_step = 0.0;
+            var normal_first = 1.0;
+            var normal_step = 0.0;
+            if capped {
+                let cap_first = cap_at(state, fine, first);
+                let cap_last = cap_at(state, fine, first + f32(count - 1u) * dt);
+                weight_first = min(weight, cap_first);
+                normal_first = cap_first;
+                if count > 1u {
+                    weight_step = (min(weight, cap_last) - weight_first) / f32(count - 1u);
+                    normal_step = (cap_last - cap_first) / f32(count - 1u);
+                }
+            }
+            let blend = has_coarse && (!(weight_first >= 1.0 && weight_first + weight_step >= 1.0) || capped);
             // Empty-space skipping: nothing in the bricks (fine, and coarse if blended) can contribute. The samples
             // were placed above, so skipping moves none.
             if (frame.flags & RAY_FRAME_SKIP_EMPTY_SPACE) != 0u {
@@ -1029,7 +1092,12 @@ fn march(state: ptr<function, RayState>) {
                 var s = sample_brick(fine_slot, fine_x);
                 if blend {
                     let c = sample_brick(coarse_slot, coarse_x);
-                    s.x = c.x + (s.x - c.x) * weight;
+                    s.x = c.x + (s.x - c.x) * (weight_first + kf * weight_step);
+                    if capped {
+                        // A coarse gradient per coarse voxel, in fine voxels.
+                        let coarse_gradient = c.yzw / f32(tree.n);
+                        s = vec4<f32>(s.x, coarse_gradient + (s.yzw - coarse_gradient) * (normal_first + kf * normal_step));
+                    }
                 }
                 (*state).samples += 1u;
                 if !composite(state, s.x, s.yzw, fine.level) {

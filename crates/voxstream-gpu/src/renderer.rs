@@ -11,8 +11,8 @@ use std::sync::mpsc;
 use voxstream_core::{BrickSlot, FeedbackBuffer, Request, TileId, TreeView};
 use voxstream_engine::FrameRenderer;
 use voxstream_layout::{
-    FeedbackCounters, RayCounters, RayFrame, RequestRecord, SurfaceRecord, TransferTableEntry,
-    RAY_FRAME_CENTRAL_NORMALS, RAY_FRAME_COLOUR_BY_LEVEL, RAY_FRAME_PHONG, RAY_FRAME_SHADOWS,
+    BrickBlend, FeedbackCounters, RayCounters, RayFrame, RequestRecord, SurfaceRecord, TransferTableEntry,
+    RAY_FRAME_BLENDING, RAY_FRAME_CENTRAL_NORMALS, RAY_FRAME_COLOUR_BY_LEVEL, RAY_FRAME_PHONG, RAY_FRAME_SHADOWS,
     RAY_FRAME_SKIP_EMPTY_SPACE, RAY_FRAME_STEPS_IGNORE_STAND_INS,
 };
 use voxstream_render::transfer_function::LUT_SIZE;
@@ -109,6 +109,7 @@ impl GpuRenderer {
                 storage(8, false),
                 storage(9, true),
                 storage(10, true),
+                storage(11, true),
             ],
         });
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -174,13 +175,6 @@ impl GpuRenderer {
         progressive: &mut ProgressiveImage,
     ) -> Result<(RayStats, usize), RenderError> {
         settings.validate()?;
-        if !view.brick_blends.is_empty() {
-            return Err(GpuError::Unsupported {
-                what: "blending arriving bricks in (interactive frames with --blending on)",
-                instead: "--blending off or --backend cpu",
-            }
-            .into());
-        }
         let (width, height) = (settings.width, settings.height);
         if progressive.image.width != width || progressive.image.height != height {
             return Err(RenderError::InvalidSetting("progressive image size differs from the settings".into()));
@@ -195,6 +189,7 @@ impl GpuRenderer {
             ("image", pixel_count * 16),
             ("tile and brick usage list", usage_count(&view) * 4),
             ("brick and block range list", range_bytes),
+            ("brick blend list", view.brick_blends.len() as u64 * size_of::<BrickBlend>() as u64),
             ("readback of the image and the feedback", readback_bytes),
         ] {
             if bytes > max_storage {
@@ -240,6 +235,10 @@ impl GpuRenderer {
         let surface_records = surface_records(&surfaces);
         ray_frame.surface_count = surfaces.count() as u32;
         ray_frame.finest_voxel = (settings.placement.mean_scale() * view.shape.voxel_size(view.shape.max_level)) as f32;
+        // Thiele et al.'s level blending, when the frame loop blends (interactive frames): one record per brick slot.
+        if !view.brick_blends.is_empty() {
+            ray_frame.flags |= RAY_FRAME_BLENDING;
+        }
         let brick_atlas = pools.bricks.create_view(&wgpu::TextureViewDescriptor::default());
         let header = view.header();
         let init = |label, contents: &[u8], usage| {
@@ -250,6 +249,10 @@ impl GpuRenderer {
         // brick produced: written whole each pass.
         let ranges = init("ranges", bytemuck::cast_slice(&range_words(lut, &view)), wgpu::BufferUsages::STORAGE);
         let surface_buffer = init("surfaces", bytemuck::cast_slice(&surface_records), wgpu::BufferUsages::STORAGE);
+        // Written whole each pass while blending (the caps change every frame of a transition).
+        let unused = [BrickBlend::FULL];
+        let blend_records = if view.brick_blends.is_empty() { &unused[..] } else { view.brick_blends };
+        let blend_buffer = init("brick blends", bytemuck::cast_slice(blend_records), wgpu::BufferUsages::STORAGE);
         let tree_uniform = init("tree header", bytemuck::bytes_of(&header), wgpu::BufferUsages::UNIFORM);
         let frame_uniform = init("ray frame", bytemuck::bytes_of(&ray_frame), wgpu::BufferUsages::UNIFORM);
         let pixels = device.create_buffer(&wgpu::BufferDescriptor {
@@ -292,6 +295,7 @@ impl GpuRenderer {
                 entry(8, &usage),
                 entry(9, &ranges),
                 entry(10, &surface_buffer),
+                entry(11, &blend_buffer),
             ],
         });
 

@@ -94,6 +94,7 @@ const RAY_FRAME_COLOUR_BY_LEVEL: u32 = 4u;
 const RAY_FRAME_SKIP_EMPTY_SPACE: u32 = 8u;
 const RAY_FRAME_CENTRAL_NORMALS: u32 = 16u;
 const RAY_FRAME_SHADOWS: u32 = 32u;
+const RAY_FRAME_BLENDING: u32 = 64u;
 
 struct RayFrame {
     width: u32,

@@ -50,6 +50,9 @@ pub const RAY_FRAME_SKIP_EMPTY_SPACE: u32 = 8;
 pub const RAY_FRAME_CENTRAL_NORMALS: u32 = 16;
 /// [`RayFrame::flags`]: isosurfaces cast hard shadows from the fixed light (`RenderSettings::shadows`).
 pub const RAY_FRAME_SHADOWS: u32 = 32;
+/// [`RayFrame::flags`]: Thiele et al.'s level blending: each brick's [`BrickBlend`](crate::BrickBlend) caps its
+/// weight against its parent, and a brick still fading in is drawn instead of its descendants.
+pub const RAY_FRAME_BLENDING: u32 = 64;
 
 /// The frame's ray parameters, as a GPU reads them (see the module docs for the offsets).
 #[repr(C)]

@@ -204,6 +204,7 @@ fn every_constant_matches_its_rust_twin() {
         ("RAY_FRAME_SKIP_EMPTY_SPACE", RAY_FRAME_SKIP_EMPTY_SPACE),
         ("RAY_FRAME_CENTRAL_NORMALS", RAY_FRAME_CENTRAL_NORMALS),
         ("RAY_FRAME_SHADOWS", RAY_FRAME_SHADOWS),
+        ("RAY_FRAME_BLENDING", RAY_FRAME_BLENDING),
     ]
     .into_iter()
     .map(|(name, value)| (name.to_string(), value))

@@ -11,7 +11,7 @@ use voxstream_engine::{FrameRenderer, LoopLimits, Mode, Session};
 use voxstream_render::RenderSettings;
 
 use crate::camera_path::orbit;
-use crate::cli::{Backend, BenchArgs, Switch};
+use crate::cli::{BenchArgs, Switch};
 use crate::memory::peak_rss_bytes;
 use crate::render_budget::{check_budget, plan_budget};
 use crate::scenes::{builtin, Scene, SCENE_NAMES};
@@ -73,11 +73,6 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         if args.scenes.is_empty() { SCENE_NAMES.iter().map(|s| s.to_string()).collect() } else { args.scenes.clone() };
     check_budget(args.budget_mb, args.size, args.size, "--size")?;
     bench_surfaces(args)?;
-    if args.backend == Backend::Gpu && args.blending == Switch::On {
-        eprintln!(
-            "bench: the GPU backend does not blend arriving bricks yet: interactive frames run with --blending off"
-        );
-    }
     eprintln!("bench: the scalar trilinear bound …");
     let bound_ns = scalar_trilinear_ns_per_sample(BOUND_DURATION);
     let mut figures = Vec::new();
@@ -179,7 +174,7 @@ fn new_session(
     // The same split as `render`: the frame's buffers count, and a budget beyond the machine is refused.
     let budget = check_budget(args.budget_mb, args.size, args.size, "--size")?;
     let plan = plan_budget(&budget, &scene.producer.shape(), 0)?;
-    let blending = args.blending == Switch::On && args.backend == Backend::Cpu;
+    let blending = args.blending == Switch::On;
     let limits = LoopLimits {
         blending_fade_frames: blending.then_some(voxstream_core::DEFAULT_FADE_FRAMES),
         ..LoopLimits::default()

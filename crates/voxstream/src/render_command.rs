@@ -15,7 +15,7 @@ use voxstream_store::{InMemoryVolume, StoreProducer, StoreReader};
 
 use crate::backend::open_renderer;
 use crate::camera_path::{generated_path, parse_generated_path, read_camera_file, read_camera_path};
-use crate::cli::{Backend, NormalsArg, RenderArgs, ShadingArg, Switch};
+use crate::cli::{NormalsArg, RenderArgs, ShadingArg, Switch};
 use crate::exit_status::IncompleteImage;
 use crate::geometry_source;
 use crate::iso_flags;
@@ -373,9 +373,9 @@ pub fn prepare_view<P>(args: &RenderArgs, source: &Source<P>) -> Result<Prepared
     Ok(PreparedView { transfer_function, settings, camera: view, drawing_surfaces })
 }
 
-/// Whether interactive frames blend arriving bricks in (Thiele et al.): `--blending on`, on the CPU backend.
+/// Whether interactive frames blend arriving bricks in (Thiele et al.): `--blending on`, on either backend.
 fn blending(args: &RenderArgs) -> bool {
-    args.blending == Switch::On && args.backend == Backend::Cpu
+    args.blending == Switch::On
 }
 
 fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &MemoryBudget) -> Result<()> {
@@ -439,11 +439,6 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
         }
     }
     stats.blending = args.mode == Mode::Interactive && blending(args);
-    if args.mode == Mode::Interactive && args.blending == Switch::On && !blending(args) {
-        progress.warn(
-            "the GPU backend does not blend arriving bricks yet: interactive frames are drawn with --blending off",
-        );
-    }
     let mut empty_images = 0usize;
     let mut reported_failures = 0usize;
     let mut written = Vec::new();

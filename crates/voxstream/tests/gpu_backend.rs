@@ -346,3 +346,45 @@ fn isosurface_shadows_match_the_cpu_image() {
     assert!(cpu_darker > (SIZE * SIZE / 200) as usize, "the reference has almost no shadow: {cpu_darker} pixels");
     assert!(gpu_darker.abs_diff(cpu_darker) * 20 <= cpu_darker, "GPU {gpu_darker} vs CPU {cpu_darker} shadowed pixels");
 }
+
+#[test]
+fn interactive_frames_blend_arriving_bricks_as_on_the_cpu() {
+    // Thiele et al.'s level blending on the GPU (caps at brick corners, fade-in, a fading brick drawn instead of its
+    // descendants). Every request is served each frame, so both backends load nearly the same bricks in the same
+    // frames (a ray on a node boundary may ask for one more node in f32 than in f64). Every frame drawn from the same
+    // resident bricks on both must match the CPU's, including frames with bricks fading in, and blending must change
+    // the GPU's frames.
+    let blending =
+        |fade| LoopLimits { requests_per_frame: 1 << 20, blending_fade_frames: fade, ..LoopLimits::default() };
+    let on = blending(Some(voxstream_core::DEFAULT_FADE_FRAMES));
+    let (_, _, _, camera) = settings("hypertexture", SIZE);
+    let mut cpu = cpu_session("hypertexture", SIZE, 64 << 20, on);
+    let mut gpu = gpu_session("hypertexture", SIZE, 64 << 20, on);
+    let mut unblended = gpu_session("hypertexture", SIZE, 64 << 20, blending(None));
+    let (mut frames, mut compared_while_fading, mut differing_frames) = (0, 0, 0);
+    loop {
+        let fading = cpu.cache().view().brick_blends.iter().any(|b| !b.is_full() || !b.is_in());
+        let same_bricks = cpu.residency().bricks == gpu.residency().bricks;
+        let expected = cpu.render(&camera, Mode::Interactive).expect("cpu frame");
+        let actual = gpu.render(&camera, Mode::Interactive).expect("gpu frame");
+        let without = unblended.render(&camera, Mode::Interactive).expect("gpu frame without blending");
+        if same_bricks {
+            assert_close(&format!("blending-frame-{frames}"), &actual.image, &expected.image);
+            compared_while_fading += fading as usize;
+        } else {
+            let quality = psnr(&actual.image.to_rgb8(), &expected.image.to_rgb8());
+            println!("blending-frame-{frames}: PSNR {quality:.1} dB, not compared (resident bricks differ)");
+        }
+        differing_frames += (actual.image.pixels != without.image.pixels) as usize;
+        frames += 1;
+        if (expected.is_final() && actual.is_final()) || frames >= 100 {
+            assert!(actual.is_final() && expected.is_final(), "not final after {frames} frames");
+            break;
+        }
+    }
+    println!(
+        "{frames} frames; {compared_while_fading} compared with bricks fading in; {differing_frames} differ without"
+    );
+    assert!(compared_while_fading > 3, "only {compared_while_fading} compared frames had bricks fading in");
+    assert!(differing_frames > 3, "blending changed only {differing_frames} GPU frames");
+}
