@@ -5,7 +5,7 @@
 // - emission–absorption (`EmissionAbsorption`): quadrilinear blending with the parent brick (capped by Thiele et
 //   al.'s level blending in interactive frames: `BrickBlend` caps and fade-in), opacity correction per step, Phong,
 //   front-to-back compositing;
-// - exact isosurfaces when `RayFrame::surface_count` > 0 (`Isosurfaces`, Knoll et al., seed 002): whole brick
+// - exact isosurfaces in the pipeline compiled with ISOSURFACES (`Isosurfaces`, Knoll et al., seed 002): whole brick
 //   segments walked cell by cell (`walk_cells`), each cell's cubic solved for its crossings (`iso_cell`), subtrees,
 //   bricks, blocks and cells culled by their value ranges, several translucent surfaces, hard shadows from a second
 //   `march` towards the light (`SurfaceCaster`).
@@ -21,6 +21,10 @@
 // between segments), the step ladder's rung and the level search are computed in f32, opacities are computed per
 // sample (the CPU reads tables pre-corrected per step), and empty blocks are skipped sample by sample rather than in
 // runs (skipping never moves a sample on either side, so it changes only the work, not the image).
+
+// Which integrand this pipeline draws: emission–absorption (false) or isosurfaces (true). A pipeline constant, so
+// that each variant is compiled without the other's code (its registers would slow the volume kernel by a third).
+override ISOSURFACES: bool = false;
 
 const MAX_LEVELS: u32 = 32u;
 const RUNG_RATIO: f32 = 1.189207115;
@@ -839,7 +843,7 @@ fn cap_at(state: ptr<function, RayState>, entry: PathNode, t: f32) -> f32 {
 fn march(state: ptr<function, RayState>) {
     let lower = vec3<f32>(frame.clip_lower_x, frame.clip_lower_y, frame.clip_lower_z);
     let upper = vec3<f32>(frame.clip_upper_x, frame.clip_upper_y, frame.clip_upper_z);
-    let surfaces_on = frame.surface_count > 0u;
+    let surfaces_on = ISOSURFACES;
     let skip_empty = (frame.flags & RAY_FRAME_SKIP_EMPTY_SPACE) != 0u;
     let hit = intersect_box((*state).origin, (*state).direction, lower, upper);
     if hit.x <= hit.y {
@@ -1165,7 +1169,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     // Hard shadows (`SurfaceCaster`, Knoll et al. §5): from the first crossing, a ray towards the light through the
     // same tree, its cone twice as wide as the primary ray's at the surface; a blocked light leaves the crossing
     // its ambient term. Its misses are reported like the primary ray's.
-    if frame.surface_count > 0u && (frame.flags & RAY_FRAME_SHADOWS) != 0u && state.has_hit {
+    if ISOSURFACES && (frame.flags & RAY_FRAME_SHADOWS) != 0u && state.has_hit {
         let t_hit = state.first_hit;
         let point = state.origin + state.direction * t_hit;
         let toward_light = light * inverse_scale;

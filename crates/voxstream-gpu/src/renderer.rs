@@ -42,7 +42,12 @@ const FEEDBACK_HEADER_BYTES: u64 = (size_of::<FeedbackCounters>() + size_of::<Ra
 /// The GPU renderer: a device, the compiled ray caster, and the pools on the GPU.
 pub struct GpuRenderer {
     context: GpuContext,
+    module: wgpu::ShaderModule,
+    layout: wgpu::PipelineLayout,
+    /// The ray caster compiled for volumes (emission–absorption).
     pipeline: wgpu::ComputePipeline,
+    /// The ray caster compiled for isosurfaces (`ISOSURFACES`), made at the first frame that draws them.
+    surface_pipeline: Option<wgpu::ComputePipeline>,
     bind_group_layout: wgpu::BindGroupLayout,
     pools: Option<GpuPools>,
     table: Option<(Vec<TransferTableEntry>, wgpu::Buffer)>,
@@ -117,20 +122,16 @@ impl GpuRenderer {
             bind_group_layouts: &[Some(&bind_group_layout)],
             immediate_size: 0,
         });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("ray caster"),
-            layout: Some(&layout),
-            module: &module,
-            entry_point: Some("main"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
+        let pipeline = compile(device, &module, &layout, false);
         if let Some(error) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Validation(error.to_string()));
         }
         Ok(GpuRenderer {
             context,
+            module,
+            layout,
             pipeline,
+            surface_pipeline: None,
             bind_group_layout,
             pools: None,
             table: None,
@@ -201,6 +202,13 @@ impl GpuRenderer {
         // Out of memory is an answer, not a crash: captured like validation errors (popped in reverse order).
         let memory_scope = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        if !settings.surfaces.is_empty() && self.surface_pipeline.is_none() {
+            self.surface_pipeline = Some(compile(device, &self.module, &self.layout, true));
+        }
+        let pipeline = match (&self.surface_pipeline, settings.surfaces.is_empty()) {
+            (Some(surfaces), false) => surfaces,
+            _ => &self.pipeline,
+        };
 
         // The pools: allocated once at their size, then only what changed is written.
         if !self.pools.as_ref().is_some_and(|pools| pools.fits(&view)) {
@@ -311,7 +319,7 @@ impl GpuRenderer {
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("pass") });
         {
             let mut compute = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
-            compute.set_pipeline(&self.pipeline);
+            compute.set_pipeline(pipeline);
             compute.set_bind_group(0, &bind_group, &[]);
             compute.dispatch_workgroups(width.div_ceil(WORKGROUP_EDGE), height.div_ceil(WORKGROUP_EDGE), 1);
         }
@@ -400,6 +408,24 @@ impl FrameRenderer for GpuRenderer {
     fn bytes_uploaded(&self) -> u64 {
         self.total_upload.bytes()
     }
+}
+
+/// The ray caster's pipeline, for isosurfaces or for volumes (the shader's `ISOSURFACES` constant).
+fn compile(
+    device: &wgpu::Device,
+    module: &wgpu::ShaderModule,
+    layout: &wgpu::PipelineLayout,
+    isosurfaces: bool,
+) -> wgpu::ComputePipeline {
+    let constants = [("ISOSURFACES", if isosurfaces { 1.0 } else { 0.0 })];
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(if isosurfaces { "ray caster (isosurfaces)" } else { "ray caster (volumes)" }),
+        layout: Some(layout),
+        module,
+        entry_point: Some("main"),
+        compilation_options: wgpu::PipelineCompilationOptions { constants: &constants, ..Default::default() },
+        cache: None,
+    })
 }
 
 /// What empty-space skipping reads: per transfer-table index, the entries with non-zero extinction before it (one
