@@ -178,6 +178,9 @@ fn bad_input_is_one_clear_line() {
     assert_fails(&["render", "--path", "broken.json", "--out", "x.png"], "camera path");
     assert_fails(&["render", "--out", "no/such/folder/x.png"], "does not exist");
     assert_fails(&["render", "--background", "2,0,0", "--out", "x.png"], "background");
+    // bench --iso: checked before anything is measured.
+    assert_fails(&["bench", "--iso", "2"], "outside the built-in scenes' values");
+    assert_fails(&["bench", "--shadows"], "add --iso");
 }
 
 /// Runs a command line clap rejects: exit 2, clap's whole message (the problem, then valid values, a suggestion or

@@ -5,9 +5,11 @@
 //! The checkout is a copy of the files git tracks, in the system's temporary folder: outside this repository, so
 //! that cargo reads the checkout's `.cargo/config.toml` alone (inside it, cargo would also merge this repository's
 //! copy and append the same `rustflags` twice, which changes every crate's hash and rebuilds all ~300 of them). It
-//! builds into this repository's own `target/`, so the compiled dependencies are shared, nothing is copied, and
-//! only voxstream's own crates are compiled again for the checkout's path. That build replaces
-//! `target/release/voxstream` with one from the same sources.
+//! builds into this repository's own `target/`: cargo names a workspace's crates by their paths relative to the
+//! workspace, and the copies keep their files' modification times, so it finds the working tree's build fresh for
+//! the checkout and compiles nothing, unless the checkout differs (a file the build needs that git does not track is
+//! missing there, and the build fails, as it would in a fresh clone). In CI this takes seconds; it once rebuilt every
+//! dependency into a second target folder, and failed there.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
