@@ -814,12 +814,18 @@ fn walk_cells(state: ptr<function, RayState>, entry: PathNode, t_from: f32, t_to
 
 // Whether the brick in `slot` has faded in completely (its descendants may be drawn): `BrickBlend::is_in`.
 fn blend_is_in(slot: u32) -> bool {
-    return (frame.flags & RAY_FRAME_BLENDING) == 0u || blends[slot].fade >= 1.0;
+    return !has_blend(slot) || blends[slot].fade >= 1.0;
+}
+
+// Whether the brick in `slot` has a blend record this pass (as the CPU's `brick_blends.get(slot)`): none without
+// blending, or past the records uploaded (which cover every slot today).
+fn has_blend(slot: u32) -> bool {
+    return (frame.flags & RAY_FRAME_BLENDING) != 0u && slot < arrayLength(&blends);
 }
 
 // Whether the brick in `slot` stands in fully for its parent everywhere: `BrickBlend::is_full`.
 fn blend_is_full(slot: u32) -> bool {
-    if (frame.flags & RAY_FRAME_BLENDING) == 0u {
+    if !has_blend(slot) {
         return true;
     }
     let b = blends[slot];
@@ -828,7 +834,7 @@ fn blend_is_full(slot: u32) -> bool {
 }
 
 // The cap of the brick of `entry` where the ray is at t, trilinear between its corners (`Traversal::cap_at`,
-// `BrickBlend::at`).
+// `BrickBlend::at`); only called where `has_blend` holds (through `blend_is_full`).
 fn cap_at(state: ptr<function, RayState>, entry: PathNode, t: f32) -> f32 {
     let b = blends[entry.node.data_word - 1u];
     let p = clamp(((*state).origin + (*state).direction * t - entry.corner) / entry.size, vec3<f32>(0.0),
@@ -1191,6 +1197,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         state.has_hit = false;
         state.any_hit = true;
         march(&state);
+        // A shadow ray counts as a ray, as on the CPU.
+        atomicAdd(&feedback.rays.rays, 1u);
         let blocked = state.has_hit;
         state.color = color;
         state.transmittance = transmittance;

@@ -30,6 +30,8 @@ use crate::pools::{GpuPools, UploadStats};
 pub const RAY_CASTER_WGSL: [&str; 2] =
     [include_str!("../../voxstream-layout/src/layout.wgsl"), include_str!("ray_caster.wgsl")];
 
+/// Storage buffers the ray caster binds (nodes, table, pixels, flags, feedback, usage, ranges, surfaces, blends).
+const STORAGE_BUFFERS: u32 = 9;
 /// Edge of a workgroup's square of pixels (`@workgroup_size(8, 8, 1)` in the shader).
 const WORKGROUP_EDGE: u32 = 8;
 /// Most request records one pass keeps (more are counted as dropped; their rays stay pending and ask again).
@@ -42,12 +44,10 @@ const FEEDBACK_HEADER_BYTES: u64 = (size_of::<FeedbackCounters>() + size_of::<Ra
 /// The GPU renderer: a device, the compiled ray caster, and the pools on the GPU.
 pub struct GpuRenderer {
     context: GpuContext,
-    module: wgpu::ShaderModule,
-    layout: wgpu::PipelineLayout,
     /// The ray caster compiled for volumes (emission–absorption).
     pipeline: wgpu::ComputePipeline,
-    /// The ray caster compiled for isosurfaces (`ISOSURFACES`), made at the first frame that draws them.
-    surface_pipeline: Option<wgpu::ComputePipeline>,
+    /// The ray caster compiled for isosurfaces (`ISOSURFACES`).
+    surface_pipeline: wgpu::ComputePipeline,
     bind_group_layout: wgpu::BindGroupLayout,
     pools: Option<GpuPools>,
     table: Option<(Vec<TransferTableEntry>, wgpu::Buffer)>,
@@ -65,6 +65,14 @@ impl GpuRenderer {
     /// The ray caster on an already open device.
     pub fn with_context(context: GpuContext) -> Result<GpuRenderer, GpuError> {
         let device = &context.device;
+        // Bindings 2 and 4–11: one more than WebGPU's default limit of 8, which most Vulkan adapters exceed.
+        let allowed = context.limits.max_storage_buffers_per_shader_stage;
+        if allowed < STORAGE_BUFFERS {
+            return Err(GpuError::Device {
+                adapter: context.info.name.clone(),
+                reason: format!("the ray caster binds {STORAGE_BUFFERS} storage buffers, the adapter allows {allowed}"),
+            });
+        }
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let source = RAY_CASTER_WGSL.concat();
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -122,16 +130,17 @@ impl GpuRenderer {
             bind_group_layouts: &[Some(&bind_group_layout)],
             immediate_size: 0,
         });
+        // Both variants at start: an isosurface frame then never compiles inside a pass, and a driver that cannot
+        // compile either fails here, once, with the reason.
         let pipeline = compile(device, &module, &layout, false);
+        let surface_pipeline = compile(device, &module, &layout, true);
         if let Some(error) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Validation(error.to_string()));
         }
         Ok(GpuRenderer {
             context,
-            module,
-            layout,
             pipeline,
-            surface_pipeline: None,
+            surface_pipeline,
             bind_group_layout,
             pools: None,
             table: None,
@@ -202,13 +211,7 @@ impl GpuRenderer {
         // Out of memory is an answer, not a crash: captured like validation errors (popped in reverse order).
         let memory_scope = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        if !settings.surfaces.is_empty() && self.surface_pipeline.is_none() {
-            self.surface_pipeline = Some(compile(device, &self.module, &self.layout, true));
-        }
-        let pipeline = match (&self.surface_pipeline, settings.surfaces.is_empty()) {
-            (Some(surfaces), false) => surfaces,
-            _ => &self.pipeline,
-        };
+        let pipeline = if settings.surfaces.is_empty() { &self.pipeline } else { &self.surface_pipeline };
 
         // The pools: allocated once at their size, then only what changed is written.
         if !self.pools.as_ref().is_some_and(|pools| pools.fits(&view)) {

@@ -5,7 +5,7 @@
 //! The checkout is a copy of the files git tracks, in the system's temporary folder: outside this repository, so
 //! that cargo reads the checkout's `.cargo/config.toml` alone (inside it, cargo would also merge this repository's
 //! copy and append the same `rustflags` twice, which changes every crate's hash and rebuilds all ~300 of them). It
-//! builds into this repository's own `target/`: cargo names a workspace's crates by their paths relative to the
+//! builds into the `target/` folder of the build running this test, in the same environment: cargo names a workspace's crates by their paths relative to the
 //! workspace, and the copies keep their files' modification times, so it finds the working tree's build fresh for
 //! the checkout and compiles nothing, unless the checkout differs (a file the build needs that git does not track is
 //! missing there, and the build fails, as it would in a fresh clone). In CI this takes seconds; it once rebuilt every
@@ -60,27 +60,35 @@ fn readme_main_command_renders_the_default_scene_in_a_clean_checkout() {
     let command = main_command(&std::fs::read_to_string(root.join("README.md")).unwrap());
     assert!(command.starts_with("cargo run"), "{command}");
 
+    // This test binary is target/<profile>/deps/quick_start-…: its build's target folder is three levels up.
+    let exe = std::env::current_exe().expect("test binary path");
+    let target = exe.ancestors().nth(3).expect("target folder").to_path_buf();
     // Earlier versions of this test built into target/quick-start, a second copy of every dependency.
-    let _ = std::fs::remove_dir_all(root.join("target/quick-start"));
-    // One place per repository (the hash of its path), so that a later run reuses this one's build.
-    let mut hasher = std::collections::hash_map::DefaultHasher::new();
-    std::hash::Hash::hash(&root, &mut hasher);
-    let checkout =
-        std::env::temp_dir().join(format!("voxstream-quick-start-{:016x}", std::hash::Hasher::finish(&hasher)));
-    let _ = std::fs::remove_dir_all(&checkout);
-    clean_checkout(&root, &checkout);
+    let _ = std::fs::remove_dir_all(target.join("quick-start"));
+    // A folder of this process's own, removed however the test ends.
+    let checkout = TempFolder(std::env::temp_dir().join(format!("voxstream-quick-start-{}", std::process::id())));
+    let _ = std::fs::remove_dir_all(&checkout.0);
+    clean_checkout(&root, &checkout.0);
+    // The environment of this build (RUSTFLAGS included), so that cargo finds its artifacts fresh.
     let output = Command::new("bash")
         .args(["-c", &command])
-        .current_dir(&checkout)
-        .env("CARGO_TARGET_DIR", root.join("target"))
-        .env_remove("RUSTFLAGS")
+        .current_dir(&checkout.0)
+        .env("CARGO_TARGET_DIR", &target)
         .output()
         .expect("bash");
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(output.status.success(), "`{command}` failed in a clean checkout; its last lines:\n{}", tail(&stderr, 40));
     assert!(stderr.contains("wrote frame.png (512x512, complete"), "no summary line:\n{}", tail(&stderr, 40));
-    let bytes = std::fs::read(checkout.join("frame.png")).expect("frame.png written");
+    let bytes = std::fs::read(checkout.0.join("frame.png")).expect("frame.png written");
     let reader = png::Decoder::new(std::io::Cursor::new(bytes)).read_info().unwrap();
     assert_eq!((reader.info().width, reader.info().height), (512, 512));
-    let _ = std::fs::remove_dir_all(&checkout);
+}
+
+/// A folder removed when dropped (also when the test panics).
+struct TempFolder(PathBuf);
+
+impl Drop for TempFolder {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
 }
