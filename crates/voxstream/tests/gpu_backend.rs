@@ -388,3 +388,39 @@ fn interactive_frames_blend_arriving_bricks_as_on_the_cpu() {
     assert!(compared_while_fading > 3, "only {compared_while_fading} compared frames had bricks fading in");
     assert!(differing_frames > 3, "blending changed only {differing_frames} GPU frames");
 }
+
+#[test]
+fn interactive_isosurface_frames_blend_as_on_the_cpu() {
+    // Level blending on the isosurface path: a brick still fading in stands in for its descendants (and for a
+    // constant node below it) on both backends. As for volumes, frames drawn from the same resident bricks must match.
+    let limits = LoopLimits {
+        requests_per_frame: 1 << 20,
+        blending_fade_frames: Some(voxstream_core::DEFAULT_FADE_FRAMES),
+        ..LoopLimits::default()
+    };
+    let (mut settings, producer, tf, camera) = settings("hypertexture", SIZE);
+    settings.surfaces = vec![voxstream_render::IsoSurface { value: 0.5, color: [0.9, 0.75, 0.65], opacity: 1.0 }];
+    settings.shading = voxstream_render::Shading::Phong;
+    settings.light_direction = Some([0.3, 0.8, 0.5]);
+    let mut cpu = Session::new(producer, &tf, settings.clone(), 64 << 20, limits).expect("cpu");
+    let mut gpu =
+        Session::with_renderer(open_gpu(), producer, &tf, settings, 64 << 20, limits, [0.0, 1.0]).expect("gpu");
+    let (mut frames, mut compared_while_fading) = (0, 0);
+    loop {
+        let fading = cpu.cache().view().brick_blends.iter().any(|b| !b.is_in());
+        let same_bricks = cpu.residency().bricks == gpu.residency().bricks;
+        let expected = cpu.render(&camera, Mode::Interactive).expect("cpu frame");
+        let actual = gpu.render(&camera, Mode::Interactive).expect("gpu frame");
+        if same_bricks {
+            assert_close(&format!("iso-blending-frame-{frames}"), &actual.image, &expected.image);
+            compared_while_fading += fading as usize;
+        }
+        frames += 1;
+        if (expected.is_final() && actual.is_final()) || frames >= 100 {
+            assert!(actual.is_final() && expected.is_final(), "not final after {frames} frames");
+            break;
+        }
+    }
+    println!("{frames} frames; {compared_while_fading} compared with a brick still fading in");
+    assert!(compared_while_fading > 2, "only {compared_while_fading} compared frames had a brick fading in");
+}
