@@ -56,6 +56,29 @@ impl FrameRenderer for Box<dyn FrameRenderer + '_> {
     }
 }
 
+/// A renderer chosen at run time that can move to another thread (the viewer's render thread).
+impl FrameRenderer for Box<dyn FrameRenderer + Send + '_> {
+    fn render_pass(
+        &mut self,
+        view: TreeView<'_>,
+        feedback: &FeedbackBuffer,
+        camera: &Camera,
+        lut: &TransferLut,
+        settings: &RenderSettings,
+        progressive: &mut ProgressiveImage,
+    ) -> Result<(RayStats, usize), RenderError> {
+        (**self).render_pass(view, feedback, camera, lut, settings, progressive)
+    }
+
+    fn describe(&self) -> String {
+        (**self).describe()
+    }
+
+    fn bytes_uploaded(&self) -> u64 {
+        (**self).bytes_uploaded()
+    }
+}
+
 /// The CPU cone-tracing ray caster of `voxstream-render` (rayon over image tiles): the reference renderer.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct CpuRenderer;

@@ -61,6 +61,9 @@ pub struct ViewerConfig {
     pub stats_path: Option<PathBuf>,
     /// How a view at rest is refined.
     pub refinement: crate::render_worker::Refinement,
+    /// The renderer drawing the frames, in one line (`FrameRenderer::describe`): in the help overlay and the frame
+    /// log.
+    pub renderer: String,
 }
 
 /// One frame as the window received it (`view --stats`).
@@ -527,9 +530,13 @@ impl ViewerApp {
             self.reset_view();
         }
         if self.show_help {
-            let text = "left drag: orbit · right/middle drag or shift+drag: pan · wheel: zoom\n\
-                        W/S: fly forward/back · A/D: left/right · Q/E: down/up · arrows: orbit\n\
-                        R or double-click: reset · M: mark missing data · L: colour by level · H/F1: this help";
+            let text = format!(
+                "left drag: orbit · right/middle drag or shift+drag: pan · wheel: zoom\n\
+                 W/S: fly forward/back · A/D: left/right · Q/E: down/up · arrows: orbit\n\
+                 R or double-click: reset · M: mark missing data · L: colour by level · H/F1: this help\n\
+                 renderer: {}",
+                self.config.renderer
+            );
             ui.painter().text(
                 rect.left_top() + egui::vec2(8.0, 8.0),
                 egui::Align2::LEFT_TOP,
@@ -681,6 +688,7 @@ impl ViewerApp {
             .filter_map(|w| w[1].since_input_ms)
             .collect();
         serde_json::json!({
+            "renderer": self.config.renderer,
             "render_size": full,
             "first_image_ms": self.frame_log.first().map(|f| f.at_ms),
             "first_final_ms": self.frame_log.iter().find(|f| f.is_final).map(|f| f.at_ms),

@@ -12,7 +12,8 @@
 //! - [`files`]: screenshots, cameras and transfer functions saved for `voxstream render --camera/--tf`;
 //! - [`script`]: scripted sessions for demonstrations and end-to-end tests.
 //!
-//! The window is eframe (egui on winit) with its OpenGL backend; the CPU renders the image and OpenGL only shows it.
+//! The window is eframe (egui on winit) with its OpenGL backend; the session's renderer (the CPU ray caster, or the
+//! GPU one with `--backend gpu`) draws the image off-screen and OpenGL only shows it.
 
 pub mod app;
 pub mod error;
@@ -29,7 +30,7 @@ pub use app::{ViewerApp, ViewerConfig};
 pub use error::ViewerError;
 pub use render_worker::Refinement;
 use voxstream_core::Producer;
-use voxstream_engine::Session;
+use voxstream_engine::{FrameRenderer, Session};
 
 /// Room around the image for the controls and the status line (points).
 const CONTROLS_WIDTH: f32 = 360.0;
@@ -41,7 +42,11 @@ pub fn has_display() -> bool {
 
 /// Opens the viewer's window on `session` and returns when it is closed: `Err` when no window could be opened or a
 /// script failed.
-pub fn run_viewer<P: Producer + 'static>(session: Session<P>, config: ViewerConfig) -> Result<(), ViewerError> {
+pub fn run_viewer<P, R>(session: Session<P, R>, config: ViewerConfig) -> Result<(), ViewerError>
+where
+    P: Producer + 'static,
+    R: FrameRenderer + Send + 'static,
+{
     if !has_display() {
         return Err(ViewerError::NoDisplay);
     }

@@ -6,8 +6,8 @@ use voxstream_engine::{CpuRenderer, FrameRenderer};
 
 use crate::cli::Backend;
 
-/// Opens the renderer `backend` names.
-pub fn open_renderer(backend: Backend) -> Result<Box<dyn FrameRenderer>> {
+/// Opens the renderer `backend` names (`Send`: the viewer draws on its own thread).
+pub fn open_renderer(backend: Backend) -> Result<Box<dyn FrameRenderer + Send>> {
     match backend {
         Backend::Cpu => Ok(Box::new(CpuRenderer)),
         Backend::Gpu => open_gpu(),
@@ -15,13 +15,13 @@ pub fn open_renderer(backend: Backend) -> Result<Box<dyn FrameRenderer>> {
 }
 
 #[cfg(feature = "gpu")]
-fn open_gpu() -> Result<Box<dyn FrameRenderer>> {
+fn open_gpu() -> Result<Box<dyn FrameRenderer + Send>> {
     use anyhow::Context;
     Ok(Box::new(voxstream_gpu::GpuRenderer::new().context("--backend gpu")?))
 }
 
 #[cfg(not(feature = "gpu"))]
-fn open_gpu() -> Result<Box<dyn FrameRenderer>> {
+fn open_gpu() -> Result<Box<dyn FrameRenderer + Send>> {
     anyhow::bail!(
         "--backend gpu: this voxstream was built without the GPU renderer (the `gpu` feature); build it with the \
          default features (cargo build --release) or use --backend cpu"

@@ -150,7 +150,7 @@ fn bench_surfaces(args: &BenchArgs) -> Result<Vec<voxstream_render::IsoSurface>>
 fn new_session(
     scene: &Scene,
     args: &BenchArgs,
-) -> Result<Session<crate::scenes::SceneProducer, Box<dyn FrameRenderer>>> {
+) -> Result<Session<crate::scenes::SceneProducer, Box<dyn FrameRenderer + Send>>> {
     let surfaces = bench_surfaces(args)?;
     let settings = if surfaces.is_empty() {
         RenderSettings {

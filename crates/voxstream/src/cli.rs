@@ -102,6 +102,10 @@ pub struct ViewArgs {
     /// Stores only: decode every level into RAM first (as `render --in-memory`).
     #[arg(long)]
     pub in_memory: bool,
+    /// cpu: the CPU ray caster draws the frames; gpu: the GPU ray caster (wgpu on Vulkan, headless: the window
+    /// only shows its image). The same flag and errors as `render --backend`.
+    #[arg(long, value_enum, default_value_t = Backend::Cpu)]
+    pub backend: Backend,
 }
 
 /// Shading choice on the command line.
@@ -201,7 +205,7 @@ pub struct RenderArgs {
     #[arg(long, default_value_t = 256)]
     pub budget_mb: u64,
     /// cpu: the cone-tracing ray caster on every core; gpu: the same traversal in a compute shader (wgpu on
-    /// Vulkan; volumes only, interactive frames with --blending off).
+    /// Vulkan): volumes, isosurfaces, shadows and level blending, with the CPU's image as its reference.
     #[arg(long, value_enum, default_value_t = Backend::Cpu)]
     pub backend: Backend,
     /// converged: iterate until exact; interactive: bounded production per frame.
@@ -364,7 +368,7 @@ pub struct BenchArgs {
     /// Memory budget, MiB.
     #[arg(long, default_value_t = 512)]
     pub budget_mb: u64,
-    /// cpu: the CPU ray caster; gpu: the GPU ray caster (wgpu, Vulkan; interactive frames without blending).
+    /// cpu: the CPU ray caster; gpu: the GPU ray caster (wgpu on Vulkan).
     #[arg(long, value_enum, default_value_t = Backend::Cpu)]
     pub backend: Backend,
     /// Also write the figures as JSON here.

@@ -9,6 +9,7 @@ use voxstream_render::TransferFunction;
 use voxstream_viewer::script::Script;
 use voxstream_viewer::{run_viewer, Refinement, ViewerConfig};
 
+use crate::backend::open_renderer;
 use crate::cli::{Cli, Command, RefineArg, RenderArgs, Switch, ViewArgs};
 use crate::render_budget::{check_budget, plan_budget};
 use crate::render_command::{check_flags, open_source, prepare_view, Source, SourceUser};
@@ -59,6 +60,7 @@ fn render_args(args: &ViewArgs) -> Result<RenderArgs> {
     render.resolution = args.resolution;
     render.attribute = args.attribute;
     render.in_memory = args.in_memory;
+    render.backend = args.backend;
     Ok(render)
 }
 
@@ -86,27 +88,30 @@ impl SourceUser for ShowInWindow {
             blending_fade_frames: (args.blending == Switch::On).then_some(args.fade_frames),
             ..LoopLimits::default()
         };
-        let presets = presets(source.typical_range);
-        let config = ViewerConfig {
-            title: format!("voxstream view {}", source.name),
-            camera: prepared.camera,
-            transfer_function: prepared.transfer_function.clone(),
-            settings: prepared.settings.clone(),
-            value_range: source.value_range,
-            presets,
-            script: self.script,
-            pool_budget_bytes: plan.pool_bytes,
-            stats_path: self.stats,
-            refinement: self.refinement,
-        };
-        let session = Session::with_value_range(
+        // After the display check (no GPU is opened for a window that cannot open), before the pools.
+        let renderer = open_renderer(args.backend)?;
+        let session = Session::with_renderer(
+            renderer,
             source.producer,
             &prepared.transfer_function,
-            prepared.settings,
+            prepared.settings.clone(),
             plan.pool_bytes,
             limits,
             source.value_range,
         )?;
+        let config = ViewerConfig {
+            title: format!("voxstream view {}", source.name),
+            camera: prepared.camera,
+            transfer_function: prepared.transfer_function,
+            settings: prepared.settings,
+            value_range: source.value_range,
+            presets: presets(source.typical_range),
+            script: self.script,
+            pool_budget_bytes: plan.pool_bytes,
+            stats_path: self.stats,
+            refinement: self.refinement,
+            renderer: session.renderer().describe(),
+        };
         run_viewer(session, config).context("voxstream view")
     }
 }

@@ -311,3 +311,83 @@ fn view_errors_are_one_line_before_any_window() {
     assert_eq!(first_line(&view), first_line(&render));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// PSNR (dB) of `actual` against `expected`, 8-bit channels.
+fn psnr(actual: &[u8], expected: &[u8]) -> f64 {
+    assert_eq!(actual.len(), expected.len());
+    let mse =
+        actual.iter().zip(expected).map(|(&a, &b)| (a as f64 - b as f64).powi(2)).sum::<f64>() / actual.len() as f64;
+    if mse == 0.0 {
+        f64::INFINITY
+    } else {
+        10.0 * (255.0f64 * 255.0 / mse).log10()
+    }
+}
+
+#[test]
+fn with_the_gpu_backend_the_viewer_shows_what_render_on_the_gpu_draws() {
+    require("xvfb-run");
+    let dir = scratch("gpu");
+    store(&dir);
+    std::fs::write(
+        dir.join("session.txt"),
+        "orbit 40 10\nwait-final 600\nscreenshot b.png\nsave-camera b.json\nsave-tf tf-b.json\n\
+         iso 1500\nwait-final 600\nscreenshot d.png\nquit\n",
+    )
+    .unwrap();
+    let viewer = env!("CARGO_BIN_EXE_voxstream");
+    let out = under_xvfb(
+        &dir,
+        &format!(
+            "XDG_RUNTIME_DIR=/tmp {viewer} view balls.zarr --width 160 --height 120 --budget-mb 64 --backend gpu \
+             --script session.txt --stats stats.json"
+        ),
+    );
+    assert!(
+        out.status.success(),
+        "viewer --backend gpu: {}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stats = camera(&dir.join("stats.json"));
+    let renderer = stats["renderer"].as_str().unwrap_or("");
+    assert!(renderer.starts_with("gpu:"), "the frame log names the GPU renderer: {renderer}");
+    // `render` on either backend with the saved camera and transfer function.
+    let render = |backend: &str, iso: bool, out: &str| {
+        let mut args = vec![
+            "render",
+            "balls.zarr",
+            "--width",
+            "160",
+            "--height",
+            "120",
+            "--camera",
+            "b.json",
+            "--backend",
+            backend,
+            "--out",
+            out,
+            "--quiet",
+        ];
+        if iso {
+            args.extend(["--iso", "1500", "--iso-color", "0.9,0.8,0.7"]);
+        } else {
+            args.extend(["--tf", "tf-b.json"]);
+        }
+        let result = voxstream(&args, &dir);
+        assert!(result.status.success(), "render --backend {backend}: {}", String::from_utf8_lossy(&result.stderr));
+        pixels(&dir.join(out))
+    };
+    let (volume, surface) = (pixels(&dir.join("b.png")), pixels(&dir.join("d.png")));
+    assert!(volume.iter().any(|&v| v > 20), "the volume is visible");
+    assert!(mean_difference(&volume, &surface) > 1.0, "the isosurface replaced the volume");
+    // The same renderer over the same loop: the same bytes as `render --backend gpu`.
+    assert_eq!(render("gpu", false, "gpu-b.png"), volume, "the viewer's GPU volume and render's differ");
+    assert_eq!(render("gpu", true, "gpu-d.png"), surface, "the viewer's GPU isosurface and render's differ");
+    // And the CPU image is its reference, as in the GPU backend's tests (40 dB).
+    for (image, iso, name) in [(&volume, false, "cpu-b.png"), (&surface, true, "cpu-d.png")] {
+        let db = psnr(image, &render("cpu", iso, name));
+        assert!(db >= 40.0, "{name}: the viewer's GPU image is {db:.1} dB from the CPU's");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
