@@ -13,6 +13,9 @@ pub struct GpuContext {
     pub info: wgpu::AdapterInfo,
     /// The limits the device was opened with (the adapter's own).
     pub limits: wgpu::Limits,
+    /// Whether the device can hold bricks as `R16Unorm` and filter them in hardware (wgpu's
+    /// `TEXTURE_FORMAT_16BIT_NORM`, requested where the adapter has it, and the format filterable there).
+    pub filters_16bit_norm: bool,
 }
 
 impl GpuContext {
@@ -29,14 +32,20 @@ impl GpuContext {
         .map_err(|_| GpuError::NoAdapter)?;
         let info = adapter.get_info();
         let limits = adapter.limits();
+        let norm16 = wgpu::Features::TEXTURE_FORMAT_16BIT_NORM;
+        let filters_16bit_norm = adapter.features().contains(norm16)
+            && adapter
+                .get_texture_format_features(wgpu::TextureFormat::R16Unorm)
+                .flags
+                .contains(wgpu::TextureFormatFeatureFlags::FILTERABLE);
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("voxstream"),
-            required_features: wgpu::Features::empty(),
+            required_features: if filters_16bit_norm { norm16 } else { wgpu::Features::empty() },
             required_limits: limits.clone(),
             ..Default::default()
         }))
         .map_err(|e| GpuError::Device { adapter: info.name.clone(), reason: e.to_string() })?;
-        Ok(GpuContext { device, queue, info, limits })
+        Ok(GpuContext { device, queue, info, limits, filters_16bit_norm })
     }
 
     /// One line naming the adapter, its kind, backend and driver (what `--stats` prints).

@@ -20,6 +20,15 @@ pub enum GpuError {
         /// What wgpu said.
         reason: String,
     },
+    /// Hardware-filtered bricks were asked for on an adapter that cannot filter their format.
+    #[error(
+        "the GPU adapter {adapter} cannot filter 16-bit normalised textures (R16Unorm), which --gpu-filter hardware \
+         needs: use --gpu-filter exact (or auto, which picks what the adapter can do)"
+    )]
+    NoHardwareFiltering {
+        /// The adapter's name.
+        adapter: String,
+    },
     /// A pool or frame buffer is larger than the adapter can bind.
     #[error(
         "the {what} needs {bytes} bytes on the GPU, more than this adapter holds in one ({limit} bytes): lower \

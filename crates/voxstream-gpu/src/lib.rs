@@ -7,6 +7,7 @@
 //! as the CPU ray caster, whose image is its reference (every GPU stage has a CPU twin).
 //!
 //! - [`context`]: the headless Vulkan device (Mesa's lavapipe in CI) and its description;
+//! - [`brick_filtering`]: bricks filtered exactly in the shader or by the texture units;
 //! - [`pools`]: the node pool as a storage buffer and the brick pool as a 3D texture atlas, updated by changed tiles
 //!   and bricks only;
 //! - [`renderer`]: one pass: uniforms, the `ray_caster.wgsl` compute shader, readback, feedback to the CPU.
@@ -17,16 +18,17 @@
 //!
 //! Both integrands of the CPU renderer run on the GPU: emission–absorption and Knoll et al.'s exact isosurfaces
 //! (with culling, translucent nested surfaces and shadows), and Thiele et al.'s level blending of interactive frames.
-//! Not yet on the GPU (listed in `docs/ARCHITECTURE.md`): hardware-filtered bricks, request compaction and focus
-//! weighting on the GPU.
+//! Not yet on the GPU (listed in `docs/ARCHITECTURE.md`): request compaction and focus weighting.
 //! Positions are f32 in an anchor frame near the eye, so deep zooms keep the CPU's precision (see
 //! `voxstream_layout::ray_frame`).
 
+pub mod brick_filtering;
 pub mod context;
 pub mod error;
 pub mod pools;
 pub mod renderer;
 
+pub use brick_filtering::BrickFiltering;
 pub use context::GpuContext;
 pub use error::GpuError;
 pub use pools::UploadStats;

@@ -1,9 +1,9 @@
 //! The node and brick pools in GPU memory, kept equal to the CPU pools by uploading, each pass, only the node tiles
 //! and brick slots whose contents changed (GigaVoxels [P09] §5: the CPU serves requests and the GPU copy follows;
 //! Reichl's pools, seed 004). The node pool is a storage buffer of `voxstream_layout::Node`s; the brick pool is a
-//! 3D texture atlas (GigaVoxels [P09] §4), bricks side by side in the voxels' native 16-bit format (`R16Uint`, read
-//! with `textureLoad` and filtered in the shader exactly as the CPU filters; hardware filtering would round the
-//! weights to 8 bits on many GPUs), so it is bounded by the adapter's 3D texture size, not its storage-buffer size.
+//! 3D texture atlas (GigaVoxels [P09] §4), bricks side by side in the voxels' native 16-bit format (`R16Uint`,
+//! filtered in the shader exactly as the CPU filters, or `R16Unorm`, filtered by the texture units:
+//! [`BrickFiltering`]), so it is bounded by the adapter's 3D texture size, not its storage-buffer size.
 //!
 //! The cache manager does not report which slots it rewrote, so each pass compares the pools with the shadow copy
 //! of what was uploaded last, tile by tile and brick by brick, and writes the runs that differ. That comparison reads
@@ -13,6 +13,7 @@
 
 use voxstream_core::{Node, TreeView};
 
+use crate::brick_filtering::BrickFiltering;
 use crate::error::GpuError;
 
 /// Bytes a pass uploaded, and what it was.
@@ -47,7 +48,8 @@ impl UploadStats {
 pub struct GpuPools {
     /// The node pool (`Node` records).
     pub nodes: wgpu::Buffer,
-    /// The brick pool: an atlas of bricks of `(M+2)³` voxels, `R16Uint`.
+    /// The brick pool: an atlas of bricks of `(M+2)³` voxels, `R16Uint` or `R16Unorm` ([`BrickFiltering`]): the same
+    /// 16 bits either way.
     pub bricks: wgpu::Texture,
     /// Brick slots along x, y and z of the atlas.
     pub atlas: [u32; 3],
@@ -61,7 +63,12 @@ pub struct GpuPools {
 
 impl GpuPools {
     /// Buffers for pools of `view`'s capacity (everything resident is uploaded by the first [`GpuPools::update`]).
-    pub fn new(device: &wgpu::Device, view: &TreeView<'_>, limits: &wgpu::Limits) -> Result<GpuPools, GpuError> {
+    pub fn new(
+        device: &wgpu::Device,
+        view: &TreeView<'_>,
+        limits: &wgpu::Limits,
+        filtering: BrickFiltering,
+    ) -> Result<GpuPools, GpuError> {
         let nodes_per_tile = view.shape.nodes_per_tile() as usize;
         let voxels_per_brick = view.shape.voxels_per_brick();
         // The pools grow up to their capacity with use; a view may already hold more if built by hand.
@@ -90,7 +97,7 @@ impl GpuPools {
             mip_level_count: 1,
             sample_count: 1,
             dimension: wgpu::TextureDimension::D3,
-            format: wgpu::TextureFormat::R16Uint,
+            format: filtering.texture_format(),
             usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
             view_formats: &[],
         });

@@ -42,8 +42,9 @@ struct Feedback {
 @group(0) @binding(0) var<uniform> tree: TreeHeader;
 @group(0) @binding(1) var<uniform> frame: RayFrame;
 @group(0) @binding(2) var<storage, read> nodes: array<Node>;
-// The brick pool: bricks of (M+2)³ voxels side by side in a 3D atlas, 16-bit, filtered here as on the CPU.
-@group(0) @binding(3) var bricks: texture_3d<u32>;
+// The brick pool (binding 3: bricks of (M+2)³ voxels side by side in a 3D atlas, 16-bit), `voxel` and
+// `filtered_value` are declared before this file by the renderer's `BrickFiltering` (brick_filtering.rs): an R16Uint
+// atlas filtered here as on the CPU, or an R16Unorm atlas filtered by the texture units (with its sampler, binding 12).
 // The transfer function: LUT entries of linear colour and extinction per world unit (TABLE_HOLDS_EXTINCTION).
 @group(0) @binding(4) var<storage, read> table: array<TransferTableEntry>;
 @group(0) @binding(5) var<storage, read_write> pixels: array<vec4<f32>>;
@@ -129,11 +130,6 @@ fn brick_origin(slot: u32) -> vec3<u32> {
     return vec3<u32>(slot % x, (slot / x) % y, slot / (x * y)) * tree.stored_brick_size;
 }
 
-// One stored voxel (0‥65535).
-fn voxel(at: vec3<u32>) -> f32 {
-    return f32(textureLoad(bricks, at, 0).r);
-}
-
 // Trilinear value (normalised) and analytic gradient (value per voxel) at continuous voxel index x of the brick in
 // `slot`: the arithmetic of voxstream-render's `Cell::locate` and `Cell::value_and_gradient`.
 fn sample_brick(slot: u32, x: vec3<f32>) -> vec4<f32> {
@@ -161,6 +157,15 @@ fn sample_brick(slot: u32, x: vec3<f32>) -> vec4<f32> {
     let gy = mix(c10 - c00, c11 - c01, f.z);
     let gx = mix(mix(v100 - v000, v110 - v010, f.y), mix(v101 - v001, v111 - v011, f.y), f.z);
     return vec4<f32>(value, gx, gy, gz) * (1.0 / 65535.0);
+}
+
+// The sample at continuous voxel index x of the brick in `slot`: with its analytic gradient when `gradient`
+// (`sample_brick`), else the value alone (`filtered_value`: the texture unit's filtering where the atlas has it).
+fn sample_at(slot: u32, x: vec3<f32>, gradient: bool) -> vec4<f32> {
+    if gradient {
+        return sample_brick(slot, x);
+    }
+    return vec4<f32>(filtered_value(slot, x), 0.0, 0.0, 0.0);
 }
 
 // 1 − exp(−x) for x ≥ 0 without the cancellation of f32 near 0 (the CPU uses f64 `exp_m1`): a faint medium's
@@ -1069,6 +1074,8 @@ fn march(state: ptr<function, RayState>) {
             // Within the bricks, samples in occupancy blocks that hold nothing visible are skipped (the CPU skips
             // them in runs; here each sample checks its blocks, once per block change).
             let check_blocks = (frame.flags & RAY_FRAME_SKIP_EMPTY_SPACE) != 0u;
+            // Gradients only where Phong shades with them (unshaded samples are one filtered fetch).
+            let gradients = (frame.flags & RAY_FRAME_PHONG) != 0u;
             var last_blocks = vec4<u32>(0xffffffffu);
             var blocks_visible = true;
             for (var k = 0u; k < count; k++) {
@@ -1099,9 +1106,9 @@ fn march(state: ptr<function, RayState>) {
                         continue;
                     }
                 }
-                var s = sample_brick(fine_slot, fine_x);
+                var s = sample_at(fine_slot, fine_x, gradients);
                 if blend {
-                    let c = sample_brick(coarse_slot, coarse_x);
+                    let c = sample_at(coarse_slot, coarse_x, gradients);
                     s.x = c.x + (s.x - c.x) * (weight_first + kf * weight_step);
                     if capped {
                         // A coarse gradient per coarse voxel, in fine voxels.

@@ -22,13 +22,20 @@ use voxstream_render::{
 };
 use wgpu::util::DeviceExt;
 
+use crate::brick_filtering::BrickFiltering;
 use crate::context::GpuContext;
 use crate::error::GpuError;
 use crate::pools::{GpuPools, UploadStats};
 
-/// The ray caster's WGSL: the shared records of `voxstream-layout`, then the shader.
+/// The ray caster's WGSL: the shared records of `voxstream-layout`, then the shader. The brick atlas's declaration
+/// and reads ([`BrickFiltering::wgsl`]) go between them.
 pub const RAY_CASTER_WGSL: [&str; 2] =
     [include_str!("../../voxstream-layout/src/layout.wgsl"), include_str!("ray_caster.wgsl")];
+
+/// The whole shader for bricks filtered as `filtering` says.
+pub fn ray_caster_source(filtering: BrickFiltering) -> String {
+    [RAY_CASTER_WGSL[0], filtering.wgsl(), RAY_CASTER_WGSL[1]].concat()
+}
 
 /// Storage buffers the ray caster binds (nodes, table, pixels, flags, feedback, usage, ranges, surfaces, blends).
 const STORAGE_BUFFERS: u32 = 9;
@@ -49,6 +56,9 @@ pub struct GpuRenderer {
     /// The ray caster compiled for isosurfaces (`ISOSURFACES`).
     surface_pipeline: wgpu::ComputePipeline,
     bind_group_layout: wgpu::BindGroupLayout,
+    filtering: BrickFiltering,
+    /// The atlas's sampler (trilinear, clamped), bound with hardware filtering.
+    sampler: wgpu::Sampler,
     pools: Option<GpuPools>,
     table: Option<(Vec<TransferTableEntry>, wgpu::Buffer)>,
     last_upload: UploadStats,
@@ -57,13 +67,26 @@ pub struct GpuRenderer {
 }
 
 impl GpuRenderer {
-    /// Opens the GPU ([`GpuContext::new`]) and compiles the ray caster.
+    /// Opens the GPU ([`GpuContext::new`]) and compiles the ray caster, with hardware-filtered bricks where the
+    /// adapter can filter them ([`BrickFiltering::best_for`]).
     pub fn new() -> Result<GpuRenderer, GpuError> {
-        GpuRenderer::with_context(GpuContext::new()?)
+        GpuRenderer::with_filtering(None)
     }
 
-    /// The ray caster on an already open device.
-    pub fn with_context(context: GpuContext) -> Result<GpuRenderer, GpuError> {
+    /// Opens the GPU with bricks filtered as `filtering` says (`None`: the best the adapter can do); an error where
+    /// the adapter cannot do what was asked.
+    pub fn with_filtering(filtering: Option<BrickFiltering>) -> Result<GpuRenderer, GpuError> {
+        let context = GpuContext::new()?;
+        let filtering = match filtering {
+            Some(asked) => asked.check(context.filters_16bit_norm, &context.info.name)?,
+            None => BrickFiltering::best_for(context.filters_16bit_norm),
+        };
+        GpuRenderer::with_context(context, filtering)
+    }
+
+    /// The ray caster on an already open device that can filter as `filtering` says ([`BrickFiltering::check`]).
+    pub fn with_context(context: GpuContext, filtering: BrickFiltering) -> Result<GpuRenderer, GpuError> {
+        let filtering = filtering.check(context.filters_16bit_norm, &context.info.name)?;
         let device = &context.device;
         // Bindings 2 and 4–11: one more than WebGPU's default limit of 8, which most Vulkan adapters exceed.
         let allowed = context.limits.max_storage_buffers_per_shader_stage;
@@ -74,7 +97,7 @@ impl GpuRenderer {
             });
         }
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let source = RAY_CASTER_WGSL.concat();
+        let source = ray_caster_source(filtering);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("ray_caster.wgsl"),
             source: wgpu::ShaderSource::Wgsl(source.into()),
@@ -99,31 +122,46 @@ impl GpuRenderer {
             },
             count: None,
         };
+        let mut entries = vec![
+            uniform(0),
+            uniform(1),
+            storage(2, true),
+            wgpu::BindGroupLayoutEntry {
+                binding: 3,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Texture {
+                    sample_type: filtering.sample_type(),
+                    view_dimension: wgpu::TextureViewDimension::D3,
+                    multisampled: false,
+                },
+                count: None,
+            },
+            storage(4, true),
+            storage(5, false),
+            storage(6, false),
+            storage(7, false),
+            storage(8, false),
+            storage(9, true),
+            storage(10, true),
+            storage(11, true),
+        ];
+        if filtering == BrickFiltering::Hardware {
+            entries.push(wgpu::BindGroupLayoutEntry {
+                binding: 12,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                count: None,
+            });
+        }
         let bind_group_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("ray caster"),
-            entries: &[
-                uniform(0),
-                uniform(1),
-                storage(2, true),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 3,
-                    visibility: wgpu::ShaderStages::COMPUTE,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Uint,
-                        view_dimension: wgpu::TextureViewDimension::D3,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
-                storage(4, true),
-                storage(5, false),
-                storage(6, false),
-                storage(7, false),
-                storage(8, false),
-                storage(9, true),
-                storage(10, true),
-                storage(11, true),
-            ],
+            entries: &entries,
+        });
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("brick atlas"),
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            ..Default::default()
         });
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("ray caster"),
@@ -142,6 +180,8 @@ impl GpuRenderer {
             pipeline,
             surface_pipeline,
             bind_group_layout,
+            filtering,
+            sampler,
             pools: None,
             table: None,
             last_upload: UploadStats::default(),
@@ -153,6 +193,11 @@ impl GpuRenderer {
     /// The adapter, in one line ([`GpuContext::describe`]).
     pub fn adapter(&self) -> String {
         self.context.describe()
+    }
+
+    /// How the bricks are filtered.
+    pub fn filtering(&self) -> BrickFiltering {
+        self.filtering
     }
 
     /// What the last pass uploaded.
@@ -215,7 +260,7 @@ impl GpuRenderer {
 
         // The pools: allocated once at their size, then only what changed is written.
         if !self.pools.as_ref().is_some_and(|pools| pools.fits(&view)) {
-            self.pools = Some(GpuPools::new(device, &view, &self.context.limits)?);
+            self.pools = Some(GpuPools::new(device, &view, &self.context.limits, self.filtering)?);
         }
         let Some(pools) = self.pools.as_mut() else { unreachable!("pools were just made") };
         self.last_upload = pools.update(queue, &view);
@@ -291,23 +336,27 @@ impl GpuRenderer {
             usage: copy_src,
             mapped_at_creation: false,
         });
+        let mut entries = vec![
+            entry(0, &tree_uniform),
+            entry(1, &frame_uniform),
+            entry(2, &pools.nodes),
+            wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(&brick_atlas) },
+            entry(4, table),
+            entry(5, &pixels),
+            entry(6, &pixel_flags),
+            entry(7, &feedback_buffer),
+            entry(8, &usage),
+            entry(9, &ranges),
+            entry(10, &surface_buffer),
+            entry(11, &blend_buffer),
+        ];
+        if self.filtering == BrickFiltering::Hardware {
+            entries.push(wgpu::BindGroupEntry { binding: 12, resource: wgpu::BindingResource::Sampler(&self.sampler) });
+        }
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("ray caster"),
             layout: &self.bind_group_layout,
-            entries: &[
-                entry(0, &tree_uniform),
-                entry(1, &frame_uniform),
-                entry(2, &pools.nodes),
-                wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(&brick_atlas) },
-                entry(4, table),
-                entry(5, &pixels),
-                entry(6, &pixel_flags),
-                entry(7, &feedback_buffer),
-                entry(8, &usage),
-                entry(9, &ranges),
-                entry(10, &surface_buffer),
-                entry(11, &blend_buffer),
-            ],
+            entries: &entries,
         });
 
         // One readback buffer: pixels, flags, feedback, usage, one after another.
@@ -405,7 +454,7 @@ impl FrameRenderer for GpuRenderer {
     }
 
     fn describe(&self) -> String {
-        format!("gpu: {}", self.adapter())
+        format!("gpu: {}, {}", self.adapter(), self.filtering.describe())
     }
 
     fn bytes_uploaded(&self) -> u64 {

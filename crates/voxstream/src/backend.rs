@@ -4,24 +4,42 @@
 use anyhow::Result;
 use voxstream_engine::{CpuRenderer, FrameRenderer};
 
-use crate::cli::Backend;
+use crate::cli::{Backend, GpuFilter};
 
 /// Opens the renderer `backend` names (`Send`: the viewer draws on its own thread).
-pub fn open_renderer(backend: Backend) -> Result<Box<dyn FrameRenderer + Send>> {
+/// `filter` is `--gpu-filter`, which only the GPU renderer takes ([`check_backend_flags`]).
+pub fn open_renderer(backend: Backend, filter: GpuFilter) -> Result<Box<dyn FrameRenderer + Send>> {
+    check_backend_flags(backend, filter)?;
     match backend {
         Backend::Cpu => Ok(Box::new(CpuRenderer)),
-        Backend::Gpu => open_gpu(),
+        Backend::Gpu => open_gpu(filter),
     }
 }
 
+/// Refuses `--gpu-filter` without `--backend gpu` (checked with the other flags, before any work).
+pub fn check_backend_flags(backend: Backend, filter: GpuFilter) -> Result<()> {
+    if backend == Backend::Cpu && filter != GpuFilter::Auto {
+        anyhow::bail!(
+            "--gpu-filter is for --backend gpu (the CPU filters bricks exactly): add --backend gpu or drop it"
+        );
+    }
+    Ok(())
+}
+
 #[cfg(feature = "gpu")]
-fn open_gpu() -> Result<Box<dyn FrameRenderer + Send>> {
+fn open_gpu(filter: GpuFilter) -> Result<Box<dyn FrameRenderer + Send>> {
     use anyhow::Context;
-    Ok(Box::new(voxstream_gpu::GpuRenderer::new().context("--backend gpu")?))
+    use voxstream_gpu::BrickFiltering;
+    let filtering = match filter {
+        GpuFilter::Auto => None,
+        GpuFilter::Hardware => Some(BrickFiltering::Hardware),
+        GpuFilter::Exact => Some(BrickFiltering::Exact),
+    };
+    Ok(Box::new(voxstream_gpu::GpuRenderer::with_filtering(filtering).context("--backend gpu")?))
 }
 
 #[cfg(not(feature = "gpu"))]
-fn open_gpu() -> Result<Box<dyn FrameRenderer + Send>> {
+fn open_gpu(_filter: GpuFilter) -> Result<Box<dyn FrameRenderer + Send>> {
     anyhow::bail!(
         "--backend gpu: this voxstream was built without the GPU renderer (the `gpu` feature); build it with the \
          default features (cargo build --release) or use --backend cpu"

@@ -73,6 +73,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         if args.scenes.is_empty() { SCENE_NAMES.iter().map(|s| s.to_string()).collect() } else { args.scenes.clone() };
     check_budget(args.budget_mb, args.size, args.size, "--size")?;
     bench_surfaces(args)?;
+    crate::backend::check_backend_flags(args.backend, args.gpu_filter)?;
     eprintln!("bench: the scalar trilinear bound …");
     let bound_ns = scalar_trilinear_ns_per_sample(BOUND_DURATION);
     let mut figures = Vec::new();
@@ -179,7 +180,7 @@ fn new_session(
         blending_fade_frames: blending.then_some(voxstream_core::DEFAULT_FADE_FRAMES),
         ..LoopLimits::default()
     };
-    let renderer = crate::backend::open_renderer(args.backend)?;
+    let renderer = crate::backend::open_renderer(args.backend, args.gpu_filter)?;
     let session = Session::with_renderer(
         renderer,
         scene.producer,

@@ -106,6 +106,10 @@ pub struct ViewArgs {
     /// only shows its image). The same flag and errors as `render --backend`.
     #[arg(long, value_enum, default_value_t = Backend::Cpu)]
     pub backend: Backend,
+    /// With --backend gpu: how bricks are filtered: auto (the texture units where the adapter can), hardware, or
+    /// exact (in the shader, as the CPU).
+    #[arg(long, value_enum, default_value_t = GpuFilter::Auto)]
+    pub gpu_filter: GpuFilter,
 }
 
 /// Shading choice on the command line.
@@ -208,6 +212,10 @@ pub struct RenderArgs {
     /// Vulkan): volumes, isosurfaces, shadows and level blending, with the CPU's image as its reference.
     #[arg(long, value_enum, default_value_t = Backend::Cpu)]
     pub backend: Backend,
+    /// With --backend gpu: how bricks are filtered: auto (the texture units where the adapter can), hardware, or
+    /// exact (in the shader, as the CPU).
+    #[arg(long, value_enum, default_value_t = GpuFilter::Auto)]
+    pub gpu_filter: GpuFilter,
     /// converged: iterate until exact; interactive: bounded production per frame.
     #[arg(long, value_enum, default_value_t = Mode::Converged)]
     pub mode: Mode,
@@ -272,6 +280,17 @@ pub enum Backend {
     Cpu,
     /// The GPU ray caster (wgpu, Vulkan).
     Gpu,
+}
+
+/// How the GPU renderer filters brick samples (`voxstream_gpu::BrickFiltering`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum GpuFilter {
+    /// The texture units where the adapter can filter 16-bit bricks, else exact.
+    Auto,
+    /// The texture units' trilinear filtering (one fetch per sample; weights at the GPU's precision).
+    Hardware,
+    /// Trilinear filtering in the shader from eight texel loads: the CPU's arithmetic.
+    Exact,
 }
 
 /// On or off.
@@ -371,6 +390,10 @@ pub struct BenchArgs {
     /// cpu: the CPU ray caster; gpu: the GPU ray caster (wgpu on Vulkan).
     #[arg(long, value_enum, default_value_t = Backend::Cpu)]
     pub backend: Backend,
+    /// With --backend gpu: how bricks are filtered: auto (the texture units where the adapter can), hardware, or
+    /// exact (in the shader, as the CPU).
+    #[arg(long, value_enum, default_value_t = GpuFilter::Auto)]
+    pub gpu_filter: GpuFilter,
     /// Also write the figures as JSON here.
     #[arg(long)]
     pub json: Option<PathBuf>,

@@ -86,6 +86,7 @@ fn unreachable_default() -> RenderArgs {
         background: [0.0; 3],
         budget_mb: 256,
         backend: voxstream::cli::Backend::Cpu,
+        gpu_filter: voxstream::cli::GpuFilter::Auto,
         mode: voxstream_engine::Mode::Converged,
         frames: 1,
         requests_per_frame: 1024,

@@ -212,6 +212,7 @@ fn check_geometry_flags(args: &RenderArgs, source: &str) -> Result<()> {
 
 /// `render`'s checks of the flags (also `view`'s, on the arguments it builds).
 pub fn check_flags(args: &RenderArgs) -> Result<()> {
+    crate::backend::check_backend_flags(args.backend, args.gpu_filter)?;
     if args.width == 0 || args.height == 0 {
         bail!("image size must be positive, got {}x{}", args.width, args.height);
     }
@@ -403,7 +404,7 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
         ..LoopLimits::default()
     };
     let plan = plan_budget(budget, &source.producer.shape(), source.producer_cache_bytes)?;
-    let renderer = open_renderer(args.backend)?;
+    let renderer = open_renderer(args.backend, args.gpu_filter)?;
     let mut session = Session::with_renderer(
         renderer,
         source.producer,

@@ -61,6 +61,7 @@ fn render_args(args: &ViewArgs) -> Result<RenderArgs> {
     render.attribute = args.attribute;
     render.in_memory = args.in_memory;
     render.backend = args.backend;
+    render.gpu_filter = args.gpu_filter;
     Ok(render)
 }
 
@@ -89,7 +90,7 @@ impl SourceUser for ShowInWindow {
             ..LoopLimits::default()
         };
         // After the display check (no GPU is opened for a window that cannot open), before the pools.
-        let renderer = open_renderer(args.backend)?;
+        let renderer = open_renderer(args.backend, args.gpu_filter)?;
         let session = Session::with_renderer(
             renderer,
             source.producer,

@@ -181,6 +181,9 @@ fn bad_input_is_one_clear_line() {
     // bench --iso: checked before anything is measured.
     assert_fails(&["bench", "--iso", "2"], "outside the built-in scenes' values");
     assert_fails(&["bench", "--shadows"], "add --iso");
+    // --gpu-filter without the GPU renderer.
+    assert_fails(&["render", "--gpu-filter", "hardware", "--out", "x.png"], "add --backend gpu");
+    assert_fails(&["bench", "--gpu-filter", "exact"], "add --backend gpu");
 }
 
 /// Runs a command line clap rejects: exit 2, clap's whole message (the problem, then valid values, a suggestion or

@@ -13,8 +13,8 @@ use std::path::PathBuf;
 
 use voxstream::png_output::write_rgb8_png;
 use voxstream::scenes::{builtin, SceneProducer, SCENE_NAMES};
-use voxstream_engine::{LoopLimits, Mode, Session};
-use voxstream_gpu::GpuRenderer;
+use voxstream_engine::{FrameRenderer, LoopLimits, Mode, Session};
+use voxstream_gpu::{BrickFiltering, GpuRenderer};
 use voxstream_render::{psnr, Camera, Image, RenderSettings};
 
 /// The PSNR a GPU image must reach against the CPU image of the same frame (8-bit RGB). The two differ only by
@@ -116,6 +116,42 @@ fn a_close_view_and_a_cut_transfer_function_match_too() {
             .expect("gpu");
     let frame = gpu.render(&camera, Mode::Converged).expect("gpu render");
     assert_close("shell-cut", &frame.image, &expected);
+}
+
+#[test]
+fn bricks_filtered_by_the_texture_units_or_in_the_shader_both_match_the_cpu_image() {
+    // Unshaded volumes, where samples are one filtered fetch with hardware filtering (shaded samples and isosurface
+    // cells read the eight corners in both modes): the shell and the hypertexture, whole and close up.
+    let close = Camera { eye: [0.62, 0.58, 0.95], target: [0.5, 0.5, 0.5], up: [0.0, 1.0, 0.0], fov: 30.0 };
+    for (name, close_up) in [("shell", false), ("hypertexture", false), ("hypertexture", true)] {
+        let (mut settings, producer, tf, camera) = settings(name, SIZE);
+        settings.shading = voxstream_render::Shading::None;
+        let camera = if close_up { close } else { camera };
+        let mut cpu = Session::new(producer, &tf, settings.clone(), 64 << 20, LoopLimits::default()).expect("cpu");
+        let expected = common::converged(&mut cpu, &camera);
+        assert!(expected.pixels.iter().any(|p| p[3] > 0.1), "{name}: the reference shows nothing");
+        for filtering in [BrickFiltering::Hardware, BrickFiltering::Exact] {
+            let renderer = GpuRenderer::with_filtering(Some(filtering)).unwrap_or_else(|e| {
+                panic!("{e}\n(lavapipe, which CI installs, filters R16Unorm; a GPU test needs it)")
+            });
+            assert_eq!(renderer.filtering(), filtering);
+            assert!(renderer.describe().contains(filtering.describe()), "{}", renderer.describe());
+            let mut gpu = Session::with_renderer(
+                renderer,
+                producer,
+                &tf,
+                settings.clone(),
+                64 << 20,
+                LoopLimits::default(),
+                [0.0, 1.0],
+            )
+            .expect("gpu session");
+            let frame = gpu.render(&camera, Mode::Converged).expect("gpu render");
+            assert!(frame.is_converged(), "{name} {filtering:?}: did not converge");
+            let label = format!("{name}{}-{filtering:?}", if close_up { "-close" } else { "" });
+            assert_close(&label, &frame.image, &expected);
+        }
+    }
 }
 
 #[test]
