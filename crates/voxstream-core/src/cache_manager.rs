@@ -146,6 +146,21 @@ impl<P: Producer> CacheManager<P> {
         })
     }
 
+    /// Moves the cache to a new budget: the pools are planned for `budget_bytes` and start empty (what was resident
+    /// is produced again as rays ask for it), level blending keeps its setting, failed nodes are forgotten. A budget
+    /// too small for the tree leaves the cache as it was and says so.
+    pub fn set_budget(&mut self, budget_bytes: u64) -> Result<(), CoreError> {
+        let capacities = PoolCapacities::plan(&self.shape, budget_bytes)?;
+        self.node_pool = NodePool::new(self.shape, capacities.tiles);
+        self.brick_pool = BrickPool::new(&self.shape, capacities.bricks);
+        self.feedback = FeedbackBuffer::new(self.node_pool.tiles_allocated(), 0);
+        self.capacities = capacities;
+        self.frame = 1;
+        self.failed.clear();
+        self.blending = self.blending.as_ref().map(|b| LevelBlending::new(b.fade_frames()));
+        Ok(())
+    }
+
     /// The producer.
     pub fn producer(&self) -> &P {
         &self.producer

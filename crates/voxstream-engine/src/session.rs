@@ -270,6 +270,15 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
         self.value_range
     }
 
+    /// Moves the pools to `budget_bytes` ([`CacheManager::set_budget`]: they start empty and fill again as rays
+    /// ask); a budget too small for the tree is refused and changes nothing. The peak resident bytes start again.
+    pub fn set_pool_budget(&mut self, budget_bytes: u64) -> Result<()> {
+        self.cache.set_budget(budget_bytes)?;
+        self.peak_resident_bytes = 0;
+        self.gather_sparsely_next = true;
+        Ok(())
+    }
+
     /// Highest resident pool bytes seen.
     pub fn peak_resident_bytes(&self) -> u64 {
         self.peak_resident_bytes
@@ -528,6 +537,28 @@ mod tests {
         let resumed = session.render(&camera, Mode::Converged).unwrap();
         let mut fresh = Session::new(Ball, &tf, settings, 16 << 20, LoopLimits::default()).unwrap();
         assert_eq!(resumed.image.pixels, fresh.render(&camera, Mode::Converged).unwrap().image.pixels);
+    }
+
+    #[test]
+    fn a_new_pool_budget_refills_the_pools_within_it_and_gives_the_same_image() {
+        let (tf, settings, camera) = parts();
+        let mut session = Session::new(Ball, &tf, settings.clone(), 16 << 20, LoopLimits::default()).unwrap();
+        let before = session.render(&camera, Mode::Converged).unwrap();
+        assert!(session.residency().bricks > 0);
+        let smaller = 4 << 20;
+        session.set_pool_budget(smaller).unwrap();
+        let residency = session.residency();
+        assert_eq!(residency.budget_bytes, smaller);
+        assert_eq!((residency.bricks, residency.tiles), (0, 1), "the pools start again from the root's tile");
+        let after = session.render(&camera, Mode::Converged).unwrap();
+        assert!(after.is_converged());
+        assert_eq!(after.image.pixels, before.image.pixels, "the budget changes what is resident, not the image");
+        let residency = session.residency();
+        assert!(residency.bricks > 0 && residency.bytes <= smaller, "{residency:?}");
+        assert!(session.peak_resident_bytes() <= smaller);
+        // Too small for the tree: refused, and the cache keeps its budget and contents.
+        assert!(session.set_pool_budget(1).is_err());
+        assert_eq!(session.residency(), residency);
     }
 
     #[test]

@@ -71,9 +71,7 @@ impl GpuPools {
     ) -> Result<GpuPools, GpuError> {
         let nodes_per_tile = view.shape.nodes_per_tile() as usize;
         let voxels_per_brick = view.shape.voxels_per_brick();
-        // The pools grow up to their capacity with use; a view may already hold more if built by hand.
-        let node_count = (view.capacity.tiles as usize * nodes_per_tile).max(view.nodes.len());
-        let brick_count = (view.capacity.bricks as usize).max(view.voxels.len() / voxels_per_brick).max(1);
+        let (node_count, brick_count) = capacity_of(view);
         let node_bytes = (node_count * size_of::<Node>()) as u64;
         let max_storage = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         if node_bytes > max_storage {
@@ -121,10 +119,12 @@ impl GpuPools {
         self.nodes.size() + size.width as u64 * size.height as u64 * size.depth_or_array_layers as u64 * 2
     }
 
-    /// Whether these buffers can hold `view`'s pools (same shape, within their capacity).
+    /// Whether these buffers are `view`'s pools: the same shape and the same capacity (a budget changed since, up
+    /// or down, allocates them again, so the GPU copy never holds more than the budget gives).
     pub fn fits(&self, view: &TreeView<'_>) -> bool {
-        view.nodes.len() <= self.node_capacity
-            && view.voxels.len() <= self.voxel_capacity
+        let (node_count, brick_count) = capacity_of(view);
+        node_count == self.node_capacity
+            && brick_count * view.shape.voxels_per_brick() == self.voxel_capacity
             && self.nodes_per_tile == view.shape.nodes_per_tile() as usize
             && self.voxels_per_brick == view.shape.voxels_per_brick()
     }
@@ -173,17 +173,28 @@ impl GpuPools {
     }
 }
 
-/// Brick slots per axis of an atlas holding `bricks` bricks of `b³` voxels within `max_dimension` voxels per axis:
-/// rows along x as long as the texture allows, then as few rows and slices as hold them all (`None` if they do not
-/// fit).
+/// Nodes and bricks the GPU pools hold for `view`: the CPU pools' capacity (they grow up to it with use; a view
+/// built by hand may already hold more).
+fn capacity_of(view: &TreeView<'_>) -> (usize, usize) {
+    let nodes = (view.capacity.tiles as usize * view.shape.nodes_per_tile() as usize).max(view.nodes.len());
+    let bricks = (view.capacity.bricks as usize).max(view.voxels.len() / view.shape.voxels_per_brick()).max(1);
+    (nodes, bricks)
+}
+
+/// Brick slots per axis of an atlas holding `bricks` bricks of `b³` voxels within `max_dimension` voxels per axis
+/// (`None` if they do not fit): as few rows as hold them, rows of at most the texture's width, spread over as few
+/// slices as the texture's height allows, then the rows evened out, so that fewer than one slot per row is left
+/// over. The atlas then stays within the bricks' share of the budget, as the CPU pool does.
 fn atlas_shape(bricks: u64, b: u32, max_dimension: u32) -> Option<[u32; 3]> {
     let per_axis = (max_dimension / b.max(1)) as u64;
     if per_axis == 0 {
         return None;
     }
-    let x = per_axis.min(bricks);
-    let y = per_axis.min(bricks.div_ceil(x));
-    let z = bricks.div_ceil(x * y);
+    let bricks = bricks.max(1);
+    let rows = bricks.div_ceil(per_axis);
+    let z = rows.div_ceil(per_axis);
+    let y = rows.div_ceil(z);
+    let x = bricks.div_ceil(y * z);
     (z <= per_axis).then_some([x as u32, y as u32, z as u32])
 }
 
@@ -236,14 +247,17 @@ mod tests {
     #[test]
     fn the_atlas_holds_every_brick_within_the_texture_size() {
         assert_eq!(atlas_shape(1, 10, 2048), Some([1, 1, 1]));
-        assert_eq!(atlas_shape(300, 10, 2048), Some([204, 2, 1]));
-        assert_eq!(atlas_shape(204 * 204 + 1, 10, 2048), Some([204, 204, 2]));
+        assert_eq!(atlas_shape(300, 10, 2048), Some([150, 2, 1]));
+        assert_eq!(atlas_shape(1323, 10, 2048), Some([189, 7, 1]), "no padding where the rows divide evenly");
         assert_eq!(atlas_shape(204 * 204 * 204, 10, 2048), Some([204, 204, 204]));
         assert_eq!(atlas_shape(204 * 204 * 204 + 1, 10, 2048), None);
         assert_eq!(atlas_shape(5, 4096, 2048), None);
-        for bricks in [1u64, 7, 1000, 99_999] {
-            let [x, y, z] = atlas_shape(bricks, 18, 2048).expect("fits");
-            assert!((x * y * z) as u64 >= bricks && ((x * y * (z - 1)) as u64) < bricks, "{bricks}: {x}x{y}x{z}");
+        for bricks in [1u64, 7, 1000, 99_999, 204 * 204 + 1, 3_000_000] {
+            let [x, y, z] = atlas_shape(bricks, 10, 2048).expect("fits");
+            assert!([x, y, z].iter().all(|&a| a <= 204), "{bricks}: {x}x{y}x{z} exceeds the texture");
+            let slots = x as u64 * y as u64 * z as u64;
+            assert!(slots >= bricks, "{bricks}: {x}x{y}x{z} holds fewer");
+            assert!(slots - bricks < (y * z) as u64, "{bricks}: {x}x{y}x{z} leaves a slot or more per row unused");
         }
     }
 

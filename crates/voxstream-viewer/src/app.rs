@@ -55,7 +55,7 @@ pub struct ViewerConfig {
     pub presets: Vec<(String, TransferFunction)>,
     /// A scripted session to run.
     pub script: Option<Script>,
-    /// The pools' budget (bytes), for the status line.
+    /// The pools' budget at start (bytes); the window's budget field changes it.
     pub pool_budget_bytes: u64,
     /// Where to write the frame log when the window closes (`view --stats`).
     pub stats_path: Option<PathBuf>,
@@ -77,6 +77,8 @@ struct FrameLog {
     is_final: bool,
     pending: usize,
     bricks_produced: u64,
+    /// Pool bytes resident after the frame, and the pools' budget.
+    resident_bytes: [u64; 2],
     /// Milliseconds since the last input (pointer, keys or a scripted move), if any.
     since_input_ms: Option<f64>,
 }
@@ -96,6 +98,10 @@ pub struct ViewerApp {
     shown: Option<ShownFrame>,
     texture: Option<TextureHandle>,
     overlay_missing: bool,
+    /// The pools' budget the renderer is asked for, bytes (`--budget-mb`'s share at start).
+    pool_budget_bytes: u64,
+    /// The budget field, MiB (applied by its button).
+    budget_field_mib: u64,
     /// Where loading is prioritised: the cursor over the image, else the centre (`RenderSettings::focus`).
     focus: [f32; 2],
     show_help: bool,
@@ -133,6 +139,8 @@ impl ViewerApp {
             shown: None,
             texture: None,
             overlay_missing: false,
+            pool_budget_bytes: config.pool_budget_bytes,
+            budget_field_mib: (config.pool_budget_bytes >> 20).max(1),
             focus: [0.5, 0.5],
             show_help: false,
             messages: Vec::new(),
@@ -177,6 +185,7 @@ impl ViewerApp {
             transfer_function: self.editor.transfer_function(),
             settings,
             at_rest: !moving,
+            pool_budget_bytes: self.pool_budget_bytes,
         }
     }
 
@@ -189,6 +198,7 @@ impl ViewerApp {
             last.camera != request.camera
                 || last.at_rest != request.at_rest
                 || last.transfer_function != request.transfer_function
+                || last.pool_budget_bytes != request.pool_budget_bytes
                 || unfocused != request.settings
                 // A new focus matters only while data is still loading frame by frame (converged passes at rest
                 // serve every request anyway, and a new request would interrupt them).
@@ -235,6 +245,7 @@ impl ViewerApp {
                         is_final: frame.is_final,
                         pending: frame.pending,
                         bricks_produced: frame.bricks_produced,
+                        resident_bytes: frame.resident_bytes,
                         since_input_ms: self.last_input.map(|t| t.elapsed().as_secs_f64() * 1e3),
                     });
                     self.upload(ctx, &frame);
@@ -371,12 +382,17 @@ impl ViewerApp {
                 }
             });
         }
-        ui.label(format!(
-            "render size {}×{}, budget {:.0} MiB",
-            self.settings.width,
-            self.settings.height,
-            self.config.pool_budget_bytes as f64 / (1 << 20) as f64
-        ));
+        ui.horizontal(|ui| {
+            ui.add(
+                egui::DragValue::new(&mut self.budget_field_mib)
+                    .range(1..=crate::script::MAX_BUDGET_MIB)
+                    .suffix(" MiB"),
+            );
+            if ui.button("set budget").on_hover_text("the pools' budget: they fill again from the root").clicked() {
+                self.pool_budget_bytes = self.budget_field_mib << 20;
+            }
+        });
+        ui.label(format!("render size {}×{}", self.settings.width, self.settings.height));
         ui.separator();
         ui.heading("Save");
         ui.horizontal(|ui| {
@@ -637,6 +653,10 @@ impl ViewerApp {
             ScriptCommand::Iso(value) => {
                 self.set_isosurface(value.map(|value| IsoSurface { value, color: [0.9, 0.8, 0.7], opacity: 1.0 }))
             }
+            ScriptCommand::Budget(mib) => {
+                self.budget_field_mib = mib;
+                self.pool_budget_bytes = mib << 20;
+            }
             ScriptCommand::Quit => ctx.send_viewport_cmd(egui::ViewportCommand::Close),
         }
         if let Some(message) = failure {
@@ -670,6 +690,7 @@ impl ViewerApp {
                 serde_json::json!({
                     "at_ms": f.at_ms, "frame_ms": f.frame_ms, "width": f.size[0], "height": f.size[1],
                     "final": f.is_final, "pending": f.pending, "bricks_produced": f.bricks_produced,
+                    "resident_bytes": f.resident_bytes[0], "budget_bytes": f.resident_bytes[1],
                     "since_input_ms": f.since_input_ms,
                 })
             })

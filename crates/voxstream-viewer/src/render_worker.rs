@@ -50,6 +50,9 @@ pub struct ViewRequest {
     /// Whether the view rests (no input for a moment): frames may then serve more requests, up to
     /// [`REST_PRODUCTION_MS`] of production each.
     pub at_rest: bool,
+    /// The pools' budget, bytes: a change moves the session's pools to it (`Session::set_pool_budget`: they fill
+    /// again from the root); a budget the tree cannot fit is refused with a message and the old one kept.
+    pub pool_budget_bytes: u64,
 }
 
 /// While the view rests, the requests served per frame double while a frame's production takes less than half of
@@ -182,6 +185,8 @@ fn render_loop<P: Producer, R: FrameRenderer>(
     let mut histogram_sent = false;
     // Whether the current request has had its first (interactive) frame.
     let mut shown_once = false;
+    // A budget refused once is not tried again until the window asks for another.
+    let mut refused_budget = None;
     loop {
         let next = {
             let mut inbox = shared.inbox.lock().unwrap_or_else(PoisonError::into_inner);
@@ -194,6 +199,15 @@ fn render_loop<P: Producer, R: FrameRenderer>(
             inbox.latest.take()
         };
         if let Some(request) = next {
+            let budget = request.pool_budget_bytes;
+            if budget != session.residency().budget_bytes && refused_budget != Some(budget) {
+                if let Err(error) = session.set_pool_budget(budget) {
+                    refused_budget = Some(budget);
+                    let mib = budget as f64 / (1 << 20) as f64;
+                    let _ = events.send(WorkerEvent::Error(format!("a budget of {mib:.1} MiB: {error}")));
+                    notify();
+                }
+            }
             if let Err(message) = apply(&mut session, current.as_ref(), &request) {
                 // The session may hold part of the refused request (its transfer function): compare with nothing.
                 current = None;

@@ -31,13 +31,17 @@ use std::time::Duration;
 
 use crate::error::ViewerError;
 
+/// The largest pool budget the window and scripts accept, MiB (1 TiB, `render --budget-mb`'s bound).
+pub const MAX_BUDGET_MIB: u64 = 1 << 20;
+
 /// Default timeout of `wait-final`.
 pub const DEFAULT_WAIT_FINAL: Duration = Duration::from_secs(120);
 
 /// The commands, with what each takes.
 const COMMANDS: &str = "wait-final [SECONDS], wait SECONDS, screenshot PNG, orbit YAW PITCH, pan RIGHT UP, zoom FACTOR, \
                         fly FORWARD RIGHT UP, reset, tf-point VALUE R G B OPACITY, tf-delete INDEX, load-tf FILE, \
-                        save-tf FILE, save-camera FILE, shading phong|none, lod-bias BIAS, overlay on|off, levels on|off, iso VALUE|off, quit";
+                        save-tf FILE, save-camera FILE, shading phong|none, lod-bias BIAS, overlay on|off, levels on|off, iso VALUE|off, \
+                        budget MIB, quit";
 
 /// One scripted action.
 #[derive(Clone, Debug, PartialEq)]
@@ -78,6 +82,8 @@ pub enum ScriptCommand {
     Levels(bool),
     /// An isosurface at this value instead of the volume, or the volume again.
     Iso(Option<f64>),
+    /// The pools' budget, MiB (as the window's budget field).
+    Budget(u64),
     /// Close the window.
     Quit,
 }
@@ -199,6 +205,13 @@ fn parse_line(line: &str) -> Result<ScriptCommand, String> {
             ["off"] => ScriptCommand::Iso(None),
             _ => ScriptCommand::Iso(Some(numbers(1).map_err(|_| "`iso` takes a data value or `off`".to_string())?[0])),
         },
+        "budget" => match rest.as_slice() {
+            [w] => match w.parse::<u64>() {
+                Ok(mib) if (1..=MAX_BUDGET_MIB).contains(&mib) => ScriptCommand::Budget(mib),
+                _ => return Err(format!("`budget` takes MiB from 1 to {MAX_BUDGET_MIB}, got `{w}`")),
+            },
+            _ => return Err("`budget` takes one number of MiB".into()),
+        },
         "quit" if rest.is_empty() => ScriptCommand::Quit,
         "reset" | "quit" => return Err(format!("`{verb}` takes nothing")),
         other => return Err(format!("unknown command `{other}` (expected one of: {COMMANDS})")),
@@ -238,6 +251,9 @@ mod tests {
         assert!(message("tf-point 0 2 0 0 0").contains("in [0, 1]"));
         assert!(message("wait 1e300").contains("not a number of seconds"));
         assert!(message("shading flat").contains("`shading` takes `phong` or `none`"));
+        assert!(message("budget 0").contains("`budget` takes MiB from 1 to 1048576, got `0`"));
+        assert!(message("budget 2e6").contains("got `2e6`"));
+        assert_eq!(Script::parse("budget 48", "s").unwrap().commands, vec![(1, ScriptCommand::Budget(48))]);
         assert!(message("quit now").contains("`quit` takes nothing"));
         assert!(message("iso x").contains("`iso` takes a data value or `off`"));
         assert_eq!(Script::parse("iso off\niso 2.5", "s").unwrap().commands[1].1, ScriptCommand::Iso(Some(2.5)));

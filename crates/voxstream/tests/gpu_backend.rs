@@ -199,6 +199,14 @@ fn the_gpu_pools_stay_within_the_budget_and_upload_only_changes() {
     assert!(loaded > 0, "the new view should need new bricks");
     let written = after.bricks - before.bricks;
     assert!(written > 0 && written <= loaded, "{written} brick slots uploaded for {loaded} bricks loaded");
+    // A smaller budget (the viewer's budget field): the GPU pools are allocated again at the new size, never kept
+    // at the old one, and the image is the same.
+    let smaller = 3 << 20;
+    gpu.set_pool_budget(smaller).expect("a budget the tree fits");
+    let shrunk = gpu.render(&other, Mode::Converged).expect("frame at the smaller budget");
+    let pool_bytes = gpu.renderer().pool_bytes().expect("pools");
+    assert!(pool_bytes <= smaller, "GPU pools of {pool_bytes} bytes after the budget fell to {smaller}");
+    assert_eq!(shrunk.image.pixels, moved.image.pixels, "the budget changed the image");
 }
 
 #[test]

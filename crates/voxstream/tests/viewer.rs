@@ -391,3 +391,39 @@ fn with_the_gpu_backend_the_viewer_shows_what_render_on_the_gpu_draws() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn a_budget_set_from_the_window_holds_and_leaves_the_image_as_render_draws_it() {
+    require("xvfb-run");
+    let dir = scratch("budget");
+    store(&dir);
+    std::fs::write(
+        dir.join("session.txt"),
+        "wait-final 600\nbudget 3\nwait-final 600\nscreenshot small.png\nsave-camera small.json\nquit\n",
+    )
+    .unwrap();
+    let viewer = env!("CARGO_BIN_EXE_voxstream");
+    let out = under_xvfb(
+        &dir,
+        &format!(
+            "{viewer} view balls.zarr --width 160 --height 120 --budget-mb 64 --script session.txt --stats stats.json"
+        ),
+    );
+    assert!(out.status.success(), "viewer: {}", String::from_utf8_lossy(&out.stderr));
+    let stats = camera(&dir.join("stats.json"));
+    let frames = stats["frames"].as_array().expect("frame log");
+    let (first, last) = (&frames[0], &frames[frames.len() - 1]);
+    assert!(first["budget_bytes"].as_u64().unwrap() > 3 << 20, "the session started at --budget-mb's share");
+    assert_eq!(last["budget_bytes"].as_u64(), Some(3 << 20), "the last frame ran within the new budget");
+    let resident = last["resident_bytes"].as_u64().unwrap();
+    assert!(resident > 0 && resident <= 3 << 20, "resident {resident} bytes");
+    assert_eq!(last["final"], serde_json::json!(true));
+    // The pools refilled within the new budget; the image is still the one `render` draws.
+    let out = voxstream(
+        &["render", "balls.zarr", "--width", "160", "--height", "120", "--camera", "small.json", "--out", "r.png"],
+        &dir,
+    );
+    assert!(out.status.success(), "render: {}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(pixels(&dir.join("r.png")), pixels(&dir.join("small.png")), "the image changed with the budget");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
