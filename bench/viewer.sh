@@ -3,11 +3,14 @@
 # image, the first final image, frames while the view moves (a scripted drag: 60 turns of 1.5°, 50 ms apart), and the
 # time from the last input to the final image. Usage:
 #   bench/viewer.sh SOURCE [SIZE] [OUT.json] [VIEW FLAGS…]   e.g. bench/viewer.sh hypertexture 512 out.json --refine blended
+# SIZE is an edge (512) or WIDTHxHEIGHT (1024x768).
 # Needs xvfb-run (Debian: xvfb xauth libgl1-mesa-dri) and a release build (cargo build --release).
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 source="${1:?usage: bench/viewer.sh SOURCE [SIZE] [OUT.json]}"
 size="${2:-512}"
+width="${size%%x*}"
+height="${size##*x}"
 out="${3:-target/viewer-bench.json}"
 shift $(( $# < 3 ? $# : 3 ))
 command -v xvfb-run >/dev/null || { echo "xvfb-run is needed (Debian: apt-get install xvfb xauth libgl1-mesa-dri)" >&2; exit 1; }
@@ -19,7 +22,7 @@ trap 'rm -f "$script"' EXIT
     echo "wait-final 900"
     echo "quit"
 } > "$script"
-xvfb-run -a -s "-screen 0 1600x1200x24" ./target/release/voxstream view "$source" --width "$size" --height "$size" \
+xvfb-run -a -s "-screen 0 1600x1200x24" ./target/release/voxstream view "$source" --width "$width" --height "$height" \
     --script "$script" --stats "$out" "$@"
 python3 - "$out" <<'PY'
 import json, sys

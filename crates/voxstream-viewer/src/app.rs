@@ -32,6 +32,8 @@ const RATE_WINDOW: Duration = Duration::from_secs(3);
 
 /// How often a waiting script looks again (frames arriving wake it too).
 const SCRIPT_POLL: Duration = Duration::from_millis(100);
+/// How long `window-screenshot` waits for the window to be read back.
+const WINDOW_SHOT_TIMEOUT: Duration = Duration::from_secs(30);
 
 /// Largest divisor of the render size while moving.
 const MAX_MOVING_DIVISOR: u32 = 8;
@@ -120,12 +122,19 @@ struct ScriptRun {
     script: Script,
     next: usize,
     started: Instant,
+    /// A `window-screenshot` under way: egui's callback leaves the result of writing the file here.
+    window_shot: Option<Arc<Mutex<Option<Result<(), String>>>>>,
 }
 
 impl ViewerApp {
     /// A window over `worker`; a failing script's message is left in `script_failure`.
     pub fn new(worker: RenderWorker, config: ViewerConfig, script_failure: Arc<Mutex<Option<String>>>) -> ViewerApp {
-        let script = config.script.clone().map(|script| ScriptRun { script, next: 0, started: Instant::now() });
+        let script = config.script.clone().map(|script| ScriptRun {
+            script,
+            next: 0,
+            started: Instant::now(),
+            window_shot: None,
+        });
         ViewerApp {
             worker,
             orbit: OrbitCamera::from_camera(&config.camera),
@@ -608,6 +617,33 @@ impl ViewerApp {
             }
             ScriptCommand::Wait(duration) => advance = since.elapsed() >= duration,
             ScriptCommand::Screenshot(path) => failure = self.screenshot(&path).err(),
+            ScriptCommand::WindowScreenshot(path) => {
+                // Asked once; the next frame drawn is read back and written by egui's callback, then the script
+                // goes on.
+                let slot = run.window_shot.get_or_insert_with(|| {
+                    let slot = Arc::new(Mutex::new(None));
+                    let result = slot.clone();
+                    let repaint = ctx.clone();
+                    ctx.request_screenshot(move |image| {
+                        let rgb: Vec<u8> = image.pixels.iter().flat_map(|p| [p.r(), p.g(), p.b()]).collect();
+                        let size = [image.size[0] as u32, image.size[1] as u32];
+                        *result.lock().unwrap_or_else(PoisonError::into_inner) = Some(save_png(&path, size, &rgb));
+                        repaint.request_repaint();
+                    });
+                    slot
+                });
+                let written = slot.lock().unwrap_or_else(PoisonError::into_inner).take();
+                match written {
+                    Some(result) => {
+                        run.window_shot = None;
+                        failure = result.err();
+                    }
+                    None if since.elapsed() > WINDOW_SHOT_TIMEOUT => {
+                        failure = Some("the window was not read back (no frame drawn?)".into())
+                    }
+                    None => advance = false,
+                }
+            }
             ScriptCommand::Orbit(yaw, pitch) => {
                 self.orbit.orbit(yaw, pitch);
                 self.note_input();

@@ -38,7 +38,7 @@ pub const MAX_BUDGET_MIB: u64 = 1 << 20;
 pub const DEFAULT_WAIT_FINAL: Duration = Duration::from_secs(120);
 
 /// The commands, with what each takes.
-const COMMANDS: &str = "wait-final [SECONDS], wait SECONDS, screenshot PNG, orbit YAW PITCH, pan RIGHT UP, zoom FACTOR, \
+const COMMANDS: &str = "wait-final [SECONDS], wait SECONDS, screenshot PNG, window-screenshot PNG, orbit YAW PITCH, pan RIGHT UP, zoom FACTOR, \
                         fly FORWARD RIGHT UP, reset, tf-point VALUE R G B OPACITY, tf-delete INDEX, load-tf FILE, \
                         save-tf FILE, save-camera FILE, shading phong|none, lod-bias BIAS, overlay on|off, levels on|off, iso VALUE|off, \
                         budget MIB, quit";
@@ -84,6 +84,8 @@ pub enum ScriptCommand {
     Iso(Option<f64>),
     /// The pools' budget, MiB (as the window's budget field).
     Budget(u64),
+    /// Save the whole window (image, panels, status line) as it is drawn.
+    WindowScreenshot(PathBuf),
     /// Close the window.
     Quit,
 }
@@ -163,6 +165,7 @@ fn parse_line(line: &str) -> Result<ScriptCommand, String> {
         },
         "wait" => ScriptCommand::Wait(seconds(numbers(1)?[0])?),
         "screenshot" => ScriptCommand::Screenshot(path()?),
+        "window-screenshot" => ScriptCommand::WindowScreenshot(path()?),
         "orbit" => {
             let v = numbers(2)?;
             ScriptCommand::Orbit(v[0], v[1])

@@ -399,7 +399,8 @@ fn a_budget_set_from_the_window_holds_and_leaves_the_image_as_render_draws_it() 
     store(&dir);
     std::fs::write(
         dir.join("session.txt"),
-        "wait-final 600\nbudget 3\nwait-final 600\nscreenshot small.png\nsave-camera small.json\nquit\n",
+        "wait-final 600\nbudget 3\nwait-final 600\nscreenshot small.png\nsave-camera small.json\n\
+         window-screenshot window.png\nquit\n",
     )
     .unwrap();
     let viewer = env!("CARGO_BIN_EXE_voxstream");
@@ -425,5 +426,11 @@ fn a_budget_set_from_the_window_holds_and_leaves_the_image_as_render_draws_it() 
     );
     assert!(out.status.success(), "render: {}", String::from_utf8_lossy(&out.stderr));
     assert_eq!(pixels(&dir.join("r.png")), pixels(&dir.join("small.png")), "the image changed with the budget");
+    // The whole window as drawn: larger than the image (the panels and the status line), and not blank.
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(dir.join("window.png")).unwrap()));
+    let info = decoder.read_info().unwrap().info().clone();
+    assert!(info.width > 160 + 200 && info.height > 120, "window {}x{}", info.width, info.height);
+    let window = pixels(&dir.join("window.png"));
+    assert!(window.iter().any(|&v| v > 200) && window.iter().any(|&v| v < 50), "the window capture is blank");
     std::fs::remove_dir_all(&dir).unwrap();
 }
