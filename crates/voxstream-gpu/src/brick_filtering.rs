@@ -111,4 +111,22 @@ mod tests {
         let message = BrickFiltering::Hardware.check(false, "a").unwrap_err().to_string();
         assert!(message.contains("R16Unorm") && message.contains("--gpu-filter exact"), "{message}");
     }
+
+    /// Both variants of the whole shader parse and validate with wgpu's compiler (naga), without a device: a WGSL
+    /// error fails here on any machine, not only where a GPU test runs.
+    #[test]
+    fn both_shader_variants_are_valid_wgsl() {
+        for filtering in [BrickFiltering::Exact, BrickFiltering::Hardware] {
+            let source = crate::renderer::ray_caster_source(filtering);
+            let module = naga::front::wgsl::parse_str(&source)
+                .unwrap_or_else(|e| panic!("{filtering:?}: {}", e.emit_to_string(&source)));
+            let mut validator =
+                naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all());
+            if let Err(error) = validator.validate(&module) {
+                panic!("{filtering:?}: {}", error.emit_to_string(&source));
+            }
+            let sampled = source.contains("textureSampleLevel(bricks");
+            assert_eq!(sampled, filtering == BrickFiltering::Hardware, "{filtering:?}: the sampler is used");
+        }
+    }
 }

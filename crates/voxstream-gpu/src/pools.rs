@@ -8,8 +8,8 @@
 //! The cache manager does not report which slots it rewrote, so each pass compares the pools with the shadow copy
 //! of what was uploaded last, tile by tile and brick by brick, and writes the runs that differ. That comparison reads
 //! the whole pool once per pass on the CPU (memory bandwidth: about 10 ms per 100 MB); dirty lists from the cache
-//! manager would remove it. The buffer and the atlas are allocated once at the pools' capacity, which the memory
-//! budget fixed, and never grow past it.
+//! manager would remove it. The buffer and the atlas are allocated at the pools' capacity, which the memory budget
+//! fixed, and never grow past it; a new budget (`Session::set_pool_budget`) allocates them again at the new one.
 
 use voxstream_core::{Node, TreeView};
 

@@ -258,8 +258,11 @@ impl GpuRenderer {
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let pipeline = if settings.surfaces.is_empty() { &self.pipeline } else { &self.surface_pipeline };
 
-        // The pools: allocated once at their size, then only what changed is written.
+        // The pools: allocated at the capacity the budget gives (again when the budget changes), then only what
+        // changed is written.
         if !self.pools.as_ref().is_some_and(|pools| pools.fits(&view)) {
+            // The old pools go first: never both on the GPU at once.
+            self.pools = None;
             self.pools = Some(GpuPools::new(device, &view, &self.context.limits, self.filtering)?);
         }
         let Some(pools) = self.pools.as_mut() else { unreachable!("pools were just made") };

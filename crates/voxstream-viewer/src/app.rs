@@ -24,7 +24,7 @@ use crate::tf_editor::TransferFunctionEditor;
 /// Time without input after which the view is at rest and drawn at full size.
 pub const REST_AFTER: Duration = Duration::from_millis(250);
 
-/// Frame time above which moving frames are drawn smaller (and below a third of which, larger again): 40 ms, so that
+/// Frame time above which moving frames are drawn smaller (and below a quarter of which, larger again): 40 ms, so that
 /// moving frames stay within a 50 ms budget (20 frames/s) with room for a frame that loads more than most.
 pub const MOVING_FRAME_MS: f64 = 40.0;
 
@@ -33,6 +33,13 @@ const RATE_WINDOW: Duration = Duration::from_secs(3);
 
 /// How often a waiting script looks again (frames arriving wake it too).
 const SCRIPT_POLL: Duration = Duration::from_millis(100);
+/// The largest pool budget the window offers, MiB: the machine's memory (or the cgroup's limit) where known, never
+/// more than `--budget-mb`'s bound.
+fn max_budget_mib() -> u64 {
+    let machine = voxstream_engine::machine_memory_bytes().map_or(crate::script::MAX_BUDGET_MIB, |b| b >> 20);
+    machine.clamp(1, crate::script::MAX_BUDGET_MIB)
+}
+
 /// How long `window-screenshot` waits for the window to be read back.
 const WINDOW_SHOT_TIMEOUT: Duration = Duration::from_secs(30);
 
@@ -237,7 +244,8 @@ impl ViewerApp {
                         // A moving frame: adapt the divisor to keep moving frames short.
                         if frame.frame_ms > MOVING_FRAME_MS {
                             self.moving_divisor = (self.moving_divisor * 2).min(MAX_MOVING_DIVISOR);
-                        } else if frame.frame_ms < MOVING_FRAME_MS / 3.0 {
+                        } else if frame.frame_ms < MOVING_FRAME_MS / 4.0 {
+                            // Twice the edge is four times the pixels: grow only if that still fits the target.
                             self.moving_divisor = (self.moving_divisor / 2).max(2);
                         }
                     }
@@ -263,6 +271,16 @@ impl ViewerApp {
                 }
                 WorkerEvent::Histogram(histogram) => self.histogram = Some(histogram),
                 WorkerEvent::Error(message) => self.message(message),
+                WorkerEvent::BudgetRefused { message, kept } => {
+                    self.pool_budget_bytes = kept;
+                    self.budget_field_mib = (kept >> 20).max(1);
+                    if self.script.is_some() {
+                        // A scripted session fails as a failing command does.
+                        self.fail_script(ctx, format!("budget: {message}"));
+                    } else {
+                        self.message(message);
+                    }
+                }
             }
         }
         if self.worker.has_ended() && self.messages.iter().all(|m| !m.starts_with("the render thread")) {
@@ -393,12 +411,12 @@ impl ViewerApp {
             });
         }
         ui.horizontal(|ui| {
-            ui.add(
-                egui::DragValue::new(&mut self.budget_field_mib)
-                    .range(1..=crate::script::MAX_BUDGET_MIB)
-                    .suffix(" MiB"),
-            );
-            if ui.button("set budget").on_hover_text("the pools' budget: they fill again from the root").clicked() {
+            ui.add(egui::DragValue::new(&mut self.budget_field_mib).range(1..=max_budget_mib()).suffix(" MiB"));
+            // The field shows whole MiB; unchanged, it keeps the exact budget in use (no refill).
+            let changed = self.budget_field_mib != (self.pool_budget_bytes >> 20).max(1);
+            if ui.button("set budget").on_hover_text("the pools' budget: they fill again from the root").clicked()
+                && changed
+            {
                 self.pool_budget_bytes = self.budget_field_mib << 20;
             }
         });
@@ -593,6 +611,14 @@ impl ViewerApp {
         save_png(path, shown.size, &shown.rgb)
     }
 
+    /// Ends the scripted session with `message`: shown, left for `run_viewer` to return, and the window closed.
+    fn fail_script(&mut self, ctx: &egui::Context, message: String) {
+        *self.script_failure.lock().unwrap_or_else(PoisonError::into_inner) = Some(message.clone());
+        self.message(message);
+        self.script = None;
+        ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+    }
+
     /// Runs the script's next commands; returns whether it waits (and wants a repaint soon).
     fn run_script(&mut self, ctx: &egui::Context) {
         let Some(run) = &mut self.script else { return };
@@ -690,6 +716,10 @@ impl ViewerApp {
             ScriptCommand::Iso(value) => {
                 self.set_isosurface(value.map(|value| IsoSurface { value, color: [0.9, 0.8, 0.7], opacity: 1.0 }))
             }
+            ScriptCommand::Budget(mib) if mib > max_budget_mib() => {
+                failure =
+                    Some(format!("a budget of {mib} MiB is more than this machine's memory ({} MiB)", max_budget_mib()))
+            }
             ScriptCommand::Budget(mib) => {
                 self.budget_field_mib = mib;
                 self.pool_budget_bytes = mib << 20;
@@ -697,11 +727,7 @@ impl ViewerApp {
             ScriptCommand::Quit => ctx.send_viewport_cmd(egui::ViewportCommand::Close),
         }
         if let Some(message) = failure {
-            let message = format!("{name} line {line}: {message}");
-            *self.script_failure.lock().unwrap_or_else(PoisonError::into_inner) = Some(message.clone());
-            self.message(message);
-            self.script = None;
-            ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+            self.fail_script(ctx, format!("{name} line {line}: {message}"));
             return;
         }
         if let Some(run) = &mut self.script {

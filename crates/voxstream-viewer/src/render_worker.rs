@@ -63,6 +63,15 @@ pub const REST_PRODUCTION_MS: f64 = 400.0;
 /// The most requests a frame at rest serves.
 const MAX_REST_REQUESTS: usize = 1 << 16;
 
+/// While the view moves, a frame's production (serving requests) should take at most about this: the requests
+/// served per moving frame halve after a frame whose production took longer, down to [`MIN_MOVING_REQUESTS`], and
+/// double back (up to the session's own number) after frames that served all they could in under a quarter of it.
+/// Production is counted in requests, so this bounds the next frames, not the one that overran.
+pub const MOVING_PRODUCTION_MS: f64 = 20.0;
+
+/// The fewest requests a moving frame serves (detail still arrives while the view moves).
+const MIN_MOVING_REQUESTS: usize = 8;
+
 /// A frame ready to show.
 #[derive(Clone, Debug)]
 pub struct ShownFrame {
@@ -99,6 +108,14 @@ pub enum WorkerEvent {
     Histogram(SampledHistogram),
     /// A request could not be rendered (the message is for the window; the thread goes on with the next request).
     Error(String),
+    /// A pool budget the window asked for was refused (too small for the source) or failed on the renderer (e.g.
+    /// GPU pools the adapter cannot hold); the session keeps (or went back to) `kept` bytes.
+    BudgetRefused {
+        /// Why, for the window.
+        message: String,
+        /// The budget in use, bytes.
+        kept: u64,
+    },
 }
 
 #[derive(Default)]
@@ -179,14 +196,17 @@ fn render_loop<P: Producer, R: FrameRenderer>(
     notify: &dyn Fn(),
 ) {
     let base_requests = session.limits().requests_per_frame;
+    // Requests per moving frame, adapted to MOVING_PRODUCTION_MS and kept from one moving request to the next.
+    let mut moving_requests = base_requests;
     let mut current: Option<ViewRequest> = None;
     let mut refining = false;
     let mut stalled_frames = 0;
     let mut histogram_sent = false;
     // Whether the current request has had its first (interactive) frame.
     let mut shown_once = false;
-    // A budget refused once is not tried again until the window asks for another.
-    let mut refused_budget = None;
+    // The budget before the last change, until a frame has rendered at the new one (a renderer that cannot use it,
+    // e.g. GPU pools larger than the adapter holds, fails that frame and the old budget comes back).
+    let mut budget_before: Option<u64> = None;
     loop {
         let next = {
             let mut inbox = shared.inbox.lock().unwrap_or_else(PoisonError::into_inner);
@@ -200,12 +220,15 @@ fn render_loop<P: Producer, R: FrameRenderer>(
         };
         if let Some(request) = next {
             let budget = request.pool_budget_bytes;
-            if budget != session.residency().budget_bytes && refused_budget != Some(budget) {
-                if let Err(error) = session.set_pool_budget(budget) {
-                    refused_budget = Some(budget);
-                    let mib = budget as f64 / (1 << 20) as f64;
-                    let _ = events.send(WorkerEvent::Error(format!("a budget of {mib:.1} MiB: {error}")));
-                    notify();
+            let in_use = session.residency().budget_bytes;
+            if budget != in_use {
+                match session.set_pool_budget(budget) {
+                    Ok(()) => budget_before = Some(in_use),
+                    Err(error) => {
+                        let message = format!("a budget of {}: {error}", mib(budget));
+                        let _ = events.send(WorkerEvent::BudgetRefused { message, kept: in_use });
+                        notify();
+                    }
                 }
             }
             if let Err(message) = apply(&mut session, current.as_ref(), &request) {
@@ -217,6 +240,9 @@ fn render_loop<P: Producer, R: FrameRenderer>(
                 continue;
             }
             if !request.at_rest {
+                session.set_requests_per_frame(moving_requests);
+            } else if current.as_ref().is_some_and(|c| !c.at_rest) {
+                // From moving to rest: the rest frames' own adaptation starts from the session's number.
                 session.set_requests_per_frame(base_requests);
             }
             current = Some(request);
@@ -240,14 +266,13 @@ fn render_loop<P: Producer, R: FrameRenderer>(
             refining = false;
             match result {
                 Ok(frame) if !interrupted => {
+                    budget_before = None;
                     let residency = session.residency();
                     let shown = shown_frame(request, frame, [residency.bytes, residency.budget_bytes]);
                     let _ = events.send(WorkerEvent::Frame(Box::new(shown)));
                 }
                 Ok(_) => {}
-                Err(error) => {
-                    let _ = events.send(WorkerEvent::Error(format!("cannot render this view: {error}")));
-                }
+                Err(error) => report_failure(&mut session, &mut budget_before, error, events),
             }
             notify();
             continue;
@@ -255,12 +280,21 @@ fn render_loop<P: Producer, R: FrameRenderer>(
         shown_once = true;
         match session.render(&request.camera, Mode::Interactive) {
             Ok(frame) => {
+                budget_before = None;
                 // Nothing served with requests pending: nothing more will arrive (fades may still finish within
                 // the allowance).
                 let stalled = frame.pending > 0 && frame.served == 0;
+                let production_ms = frame.elapsed_ms - frame.render_ms;
+                if !request.at_rest {
+                    if production_ms > MOVING_PRODUCTION_MS {
+                        moving_requests = (moving_requests / 2).max(MIN_MOVING_REQUESTS.min(base_requests));
+                    } else if frame.served as usize >= moving_requests && production_ms < MOVING_PRODUCTION_MS / 4.0 {
+                        moving_requests = (moving_requests * 2).min(base_requests);
+                    }
+                    session.set_requests_per_frame(moving_requests);
+                }
                 if request.at_rest {
                     let limit = session.limits().requests_per_frame;
-                    let production_ms = frame.elapsed_ms - frame.render_ms;
                     if frame.served as usize >= limit && production_ms < REST_PRODUCTION_MS / 2.0 {
                         session.set_requests_per_frame((limit * 2).min(MAX_REST_REQUESTS));
                     } else if production_ms > REST_PRODUCTION_MS {
@@ -275,7 +309,7 @@ fn render_loop<P: Producer, R: FrameRenderer>(
             }
             Err(error) => {
                 refining = false;
-                let _ = events.send(WorkerEvent::Error(format!("cannot render this view: {error}")));
+                report_failure(&mut session, &mut budget_before, error, events);
             }
         }
         notify();
@@ -286,6 +320,32 @@ fn render_loop<P: Producer, R: FrameRenderer>(
             notify();
         }
     }
+}
+
+/// Reports a frame that could not be rendered; if it was the first since a budget change, the renderer could not
+/// use that budget (GPU pools the adapter cannot hold, out of memory): the budget before it comes back, and the
+/// window is told which budget is in use.
+fn report_failure<P: Producer, R: FrameRenderer>(
+    session: &mut Session<P, R>,
+    budget_before: &mut Option<u64>,
+    error: voxstream_engine::EngineError,
+    events: &Sender<WorkerEvent>,
+) {
+    let tried = session.residency().budget_bytes;
+    match budget_before.take() {
+        Some(kept) if session.set_pool_budget(kept).is_ok() => {
+            let message = format!("a budget of {}: {error}; back to {}", mib(tried), mib(kept));
+            let _ = events.send(WorkerEvent::BudgetRefused { message, kept });
+        }
+        _ => {
+            let _ = events.send(WorkerEvent::Error(format!("cannot render this view: {error}")));
+        }
+    }
+}
+
+/// Bytes as MiB, for messages.
+fn mib(bytes: u64) -> String {
+    format!("{:.1} MiB", bytes as f64 / (1 << 20) as f64)
 }
 
 /// Brings the session to `request`'s transfer function and settings.
@@ -320,5 +380,86 @@ fn shown_frame(request: &ViewRequest, frame: FrameResult, resident_bytes: [u64; 
         resident_bytes,
         failures: frame.failures.iter().map(|f| f.to_string()).collect(),
         missing: frame.missing,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::time::{Duration, Instant};
+
+    use voxstream_engine::LoopLimits;
+    use voxstream_procedural::Shell;
+
+    use super::*;
+
+    const BUDGET: u64 = 16 << 20;
+
+    fn request(revision: u64, pool_budget_bytes: u64) -> ViewRequest {
+        ViewRequest {
+            revision,
+            camera: Camera { eye: [0.5, 0.5, 3.0], target: [0.5, 0.5, 0.5], up: [0.0, 1.0, 0.0], fov: 30.0 },
+            transfer_function: TransferFunction::new(vec![[0.0, 1.0, 1.0, 1.0, 0.0], [1.0, 1.0, 0.5, 0.2, 0.9]], None)
+                .unwrap(),
+            settings: RenderSettings { width: 24, height: 24, ..RenderSettings::default() },
+            at_rest: true,
+            pool_budget_bytes,
+        }
+    }
+
+    /// Events until `done` says so (or a minute passes).
+    fn events_until(worker: &RenderWorker, done: impl Fn(&[WorkerEvent]) -> bool) -> Vec<WorkerEvent> {
+        let start = Instant::now();
+        let mut events = Vec::new();
+        while !done(&events) {
+            assert!(start.elapsed() < Duration::from_secs(60), "no such event: {events:?}");
+            events.extend(worker.events());
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        events
+    }
+
+    fn final_frame_of(revision: u64) -> impl Fn(&[WorkerEvent]) -> bool {
+        move |events| events.iter().any(|e| matches!(e, WorkerEvent::Frame(f) if f.revision == revision && f.is_final))
+    }
+
+    #[test]
+    fn a_new_budget_is_used_and_one_too_small_is_refused_keeping_the_old() {
+        let request_one = request(1, BUDGET);
+        let (tf, settings) = (request_one.transfer_function.clone(), request_one.settings.clone());
+        let session = Session::new(Shell::default(), &tf, settings, BUDGET, LoopLimits::default()).unwrap();
+        let worker = RenderWorker::start(session, Refinement::Converged, || {}).unwrap();
+        worker.request(request_one);
+        events_until(&worker, final_frame_of(1));
+
+        // A smaller budget that fits: the frames say so.
+        worker.request(request(2, BUDGET / 4));
+        let events = events_until(&worker, final_frame_of(2));
+        let budgets: Vec<u64> = events
+            .iter()
+            .filter_map(|e| match e {
+                WorkerEvent::Frame(f) => Some(f.resident_bytes[1]),
+                _ => None,
+            })
+            .collect();
+        assert!(budgets.iter().all(|&b| b == BUDGET / 4), "{budgets:?}");
+
+        // One byte: refused, the window told which budget is kept, and frames go on within it.
+        worker.request(request(3, 1));
+        let events = events_until(&worker, final_frame_of(3));
+        let refusals: Vec<(&String, u64)> = events
+            .iter()
+            .filter_map(|e| match e {
+                WorkerEvent::BudgetRefused { message, kept } => Some((message, *kept)),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(refusals.len(), 1, "{events:?}");
+        assert_eq!(refusals[0].1, BUDGET / 4);
+        assert!(refusals[0].0.contains("a budget of 0.0 MiB"), "{}", refusals[0].0);
+        let last = events.iter().rev().find_map(|e| match e {
+            WorkerEvent::Frame(f) => Some(f.resident_bytes[1]),
+            _ => None,
+        });
+        assert_eq!(last, Some(BUDGET / 4));
     }
 }

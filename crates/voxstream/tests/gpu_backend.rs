@@ -130,6 +130,7 @@ fn bricks_filtered_by_the_texture_units_or_in_the_shader_both_match_the_cpu_imag
         let mut cpu = Session::new(producer, &tf, settings.clone(), 64 << 20, LoopLimits::default()).expect("cpu");
         let expected = common::converged(&mut cpu, &camera);
         assert!(expected.pixels.iter().any(|p| p[3] > 0.1), "{name}: the reference shows nothing");
+        let mut images = Vec::new();
         for filtering in [BrickFiltering::Hardware, BrickFiltering::Exact] {
             let renderer = GpuRenderer::with_filtering(Some(filtering)).unwrap_or_else(|e| {
                 panic!("{e}\n(lavapipe, which CI installs, filters R16Unorm; a GPU test needs it)")
@@ -150,7 +151,16 @@ fn bricks_filtered_by_the_texture_units_or_in_the_shader_both_match_the_cpu_imag
             assert!(frame.is_converged(), "{name} {filtering:?}: did not converge");
             let label = format!("{name}{}-{filtering:?}", if close_up { "-close" } else { "" });
             assert_close(&label, &frame.image, &expected);
+            images.push(frame.image);
         }
+        // The two modes against each other: the sampler ran (the images are not the same floats: its weights are
+        // rounded differently from the shader's), and it filtered the same voxels at the same places (a half-texel
+        // shift of the field would cost far more than 70 dB).
+        let (hardware, exact) = (&images[0], &images[1]);
+        assert_ne!(hardware.pixels, exact.pixels, "{name}: hardware filtering gave the exact image: no sampler ran?");
+        let quality = psnr(&hardware.to_rgb8(), &exact.to_rgb8());
+        println!("{name} close={close_up}: hardware against exact {quality:.1} dB");
+        assert!(quality >= 70.0, "{name}: hardware against exact filtering {quality:.1} dB < 70 dB");
     }
 }
 
@@ -207,6 +217,14 @@ fn the_gpu_pools_stay_within_the_budget_and_upload_only_changes() {
     let pool_bytes = gpu.renderer().pool_bytes().expect("pools");
     assert!(pool_bytes <= smaller, "GPU pools of {pool_bytes} bytes after the budget fell to {smaller}");
     assert_eq!(shrunk.image.pixels, moved.image.pixels, "the budget changed the image");
+    // And a larger one: allocated again (uploads start over), the same image.
+    let uploaded = gpu.renderer().total_upload().bricks;
+    gpu.set_pool_budget(budget * 2).expect("a larger budget");
+    let grown = gpu.render(&other, Mode::Converged).expect("frame at the larger budget");
+    let pool_bytes = gpu.renderer().pool_bytes().expect("pools");
+    assert!(pool_bytes > budget && pool_bytes <= budget * 2, "GPU pools of {pool_bytes} bytes at {}", budget * 2);
+    assert!(gpu.renderer().total_upload().bricks > uploaded, "the new pools were filled");
+    assert_eq!(grown.image.pixels, moved.image.pixels, "the budget changed the image");
 }
 
 #[test]
