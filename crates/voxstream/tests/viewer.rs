@@ -120,6 +120,7 @@ fn a_scripted_session_rotates_edits_and_saves_what_render_reproduces() {
         "wait-final 600\nscreenshot a.png\nsave-camera a.json\nsave-tf tf-a.json\n\
          orbit 40 10\nwait-final 600\nscreenshot b.png\nsave-camera b.json\n\
          tf-point 1500 1 0.1 0.1 0.4\nwait-final 600\nscreenshot c.png\nsave-tf tf-c.json\n\
+         levels on\nwait-final 600\nscreenshot levels.png\nlevels off\n\
          iso 1500\nwait-final 600\nscreenshot d.png\nquit\n",
     )
     .unwrap();
@@ -171,6 +172,30 @@ fn a_scripted_session_rotates_edits_and_saves_what_render_reproduces() {
             "the viewer's final image {image} and render's differ"
         );
     }
+    // The level overlay is `render --colour-by-level`'s image, and not the plain one.
+    let out = voxstream(
+        &[
+            "render",
+            "balls.zarr",
+            "--width",
+            "160",
+            "--height",
+            "120",
+            "--camera",
+            "b.json",
+            "--tf",
+            "tf-c.json",
+            "--colour-by-level",
+            "--out",
+            "render-levels.png",
+            "--quiet",
+        ],
+        &dir,
+    );
+    assert!(out.status.success(), "render --colour-by-level: {}", String::from_utf8_lossy(&out.stderr));
+    let levels = pixels(&dir.join("levels.png"));
+    assert_eq!(pixels(&dir.join("render-levels.png")), levels, "the viewer's level colours and render's differ");
+    assert!(mean_difference(&c, &levels) > 1.0, "the level overlay did not change the image");
     // The isosurface is the same integrand of the same loop as `render --iso`.
     let out = voxstream(
         &[
