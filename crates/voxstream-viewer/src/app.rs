@@ -1,8 +1,9 @@
 //! The window: the image, the controls, the status line, and the scripted session, on the window's thread. It only
 //! posts requests to the [`RenderWorker`] and shows what comes back, so it never waits for a frame or a brick.
 //!
-//! While the view moves, frames are drawn at a fraction of the render size (halved again while they take longer
-//! than [`MOVING_FRAME_MS`]); once the pointer and keys rest for [`REST_AFTER`], the full size is asked for and
+//! While the view moves, frames are drawn at a fraction of the render size (an eighth of the edge at first, halved
+//! again while they take longer than [`MOVING_FRAME_MS`], doubled below an eighth of it); once the pointer and keys
+//! rest for [`REST_AFTER`], the full size is asked for and
 //! refined until final (GigaVoxels' interactive frames with Thiele et al.'s level blending, as `voxstream render
 //! --mode interactive` draws them).
 
@@ -24,7 +25,7 @@ use crate::tf_editor::TransferFunctionEditor;
 /// Time without input after which the view is at rest and drawn at full size.
 pub const REST_AFTER: Duration = Duration::from_millis(250);
 
-/// Frame time above which moving frames are drawn smaller (and below a quarter of which, larger again): 40 ms, so that
+/// Frame time above which moving frames are drawn smaller (and below an eighth of which, larger again): 40 ms, so that
 /// moving frames stay within a 50 ms budget (20 frames/s) with room for a frame that loads more than most.
 pub const MOVING_FRAME_MS: f64 = 40.0;
 
@@ -152,7 +153,8 @@ impl ViewerApp {
             revision: 0,
             last_request: None,
             last_input: None,
-            moving_divisor: 2,
+            // Start small: the first moving frames come before any has been measured.
+            moving_divisor: MAX_MOVING_DIVISOR,
             shown: None,
             texture: None,
             overlay_missing: false,
@@ -244,8 +246,9 @@ impl ViewerApp {
                         // A moving frame: adapt the divisor to keep moving frames short.
                         if frame.frame_ms > MOVING_FRAME_MS {
                             self.moving_divisor = (self.moving_divisor * 2).min(MAX_MOVING_DIVISOR);
-                        } else if frame.frame_ms < MOVING_FRAME_MS / 4.0 {
-                            // Twice the edge is four times the pixels: grow only if that still fits the target.
+                        } else if frame.frame_ms < MOVING_FRAME_MS / 8.0 {
+                            // Twice the edge is four times the pixels (and measured frames grow by more: a larger
+                            // image also asks for finer data): grow only with room for twice that.
                             self.moving_divisor = (self.moving_divisor / 2).max(2);
                         }
                     }
