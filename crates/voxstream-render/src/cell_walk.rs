@@ -291,7 +291,7 @@ mod tests {
             };
             let mut gradients = Vec::new();
             let record = |c: &CellVisit<'_>| gradients.push(c.central_gradient(c.start()));
-            walk_cells(&span, &mut Recorder { skip: u16::MAX..=u16::MAX, record });
+            let _ = walk_cells(&span, &mut Recorder { skip: u16::MAX..=u16::MAX, record });
             assert_eq!(gradients.len(), 1);
             for (g, slope) in gradients[0].iter().zip([3.0, 5.0, 7.0]) {
                 assert!((g - slope).abs() < 1e-5, "{:?} at {origin:?}", gradients[0]);
