@@ -6,7 +6,9 @@
 #
 # Inputs: the Stanford dragon (871,414 triangles, scripts/fetch-real-data.sh), a million-particle clustered cloud
 # (made here with numpy, fixed seed: 256 Gaussian clumps), and adenylate kinase in water (47,681 atoms, GRO).
-# Peers: OpenVDB's vdb_tool (-mesh2ls, -points2ls: voxelise first) + vdb_render (Debian libopenvdb-tools).
+# Peers: OpenVDB's vdb_tool (-mesh2ls, -points2ls: voxelise first) + vdb_render (Debian libopenvdb-tools); for
+# particles also VTK's Gaussian splatter + fixed-point ray caster (bench/peers/splat.py, VTK 9.7.2 from PyPI in
+# target/peers/venv, which bench/peers/run.sh makes).
 # For each: time to the first 512x512 image (from the file, cold), a second frame of the same view (warm, voxstream
 # only: the peers have no cache to reuse), and peak memory (GNU time).
 set -euo pipefail
@@ -63,7 +65,15 @@ import json; d = json.load(open('$out/vs.json')); print('%.0f %.0f %d' % (d['fra
             read -r t2 m2 < <(timed vdb_render "$out/dragon$d.vdb" "$out/dragon-vdb$d.png" -res 512x512 -shader diffuse)
             echo "| $input | vdb_tool -mesh2ls d=$d + vdb_render | $(echo "$t1 + $t2" | bc) | $((m1 > m2 ? m1 : m2)) | | voxelise ${t1} s, render ${t2} s |"
         done
-    elif [ "$input" = cloud1m.ply ]; then
+    fi
+    if [ "$input" != dragon.ply ] && [ -x target/peers/venv/bin/python ]; then
+        # A particle splatter: VTK's Gaussian splatter (ParaView's "Gaussian Resampling") + its CPU ray caster.
+        for d in 256 512; do
+            read -r t1 m1 < <(timed target/peers/venv/bin/python bench/peers/splat.py "$path" $d "$out/${input%%.*}-splat$d.png")
+            echo "| $input | VTK vtkGaussianSplatter ${d}³ + fixed-point ray caster | $t1 | $m1 | | splat, then one 512² frame (python + VTK: ~300 MiB before any data) |"
+        done
+    fi
+    if [ "$input" = cloud1m.ply ]; then
         for d in 512 1024; do
             read -r t1 m1 < <(timed vdb_tool -read "$path" -points2ls d=$d r=2.0 -write "$out/cloud$d.vdb")
             read -r t2 m2 < <(timed vdb_render "$out/cloud$d.vdb" "$out/cloud-vdb$d.png" -res 512x512 -shader diffuse)
