@@ -125,14 +125,20 @@ pub struct CacheManager<P: Producer> {
     blending: Option<LevelBlending>,
 }
 
+/// Pools of `capacities` holding only the root, and the feedback buffer sized for them.
+fn empty_pools(shape: &TreeShape, capacities: &PoolCapacities) -> (NodePool, BrickPool, FeedbackBuffer) {
+    let node_pool = NodePool::new(*shape, capacities.tiles);
+    let brick_pool = BrickPool::new(shape, capacities.bricks);
+    let feedback = FeedbackBuffer::new(node_pool.tiles_allocated(), 0);
+    (node_pool, brick_pool, feedback)
+}
+
 impl<P: Producer> CacheManager<P> {
     /// A cache for `producer` within `budget_bytes`. Only the root exists; its data is requested by the first rays.
     pub fn new(producer: P, budget_bytes: u64) -> Result<CacheManager<P>, CoreError> {
         let shape = producer.shape();
         let capacities = PoolCapacities::plan(&shape, budget_bytes)?;
-        let node_pool = NodePool::new(shape, capacities.tiles);
-        let brick_pool = BrickPool::new(&shape, capacities.bricks);
-        let feedback = FeedbackBuffer::new(node_pool.tiles_allocated(), 0);
+        let (node_pool, brick_pool, feedback) = empty_pools(&shape, &capacities);
         Ok(CacheManager {
             producer,
             shape,
@@ -151,9 +157,7 @@ impl<P: Producer> CacheManager<P> {
     /// too small for the tree leaves the cache as it was and says so.
     pub fn set_budget(&mut self, budget_bytes: u64) -> Result<(), CoreError> {
         let capacities = PoolCapacities::plan(&self.shape, budget_bytes)?;
-        self.node_pool = NodePool::new(self.shape, capacities.tiles);
-        self.brick_pool = BrickPool::new(&self.shape, capacities.bricks);
-        self.feedback = FeedbackBuffer::new(self.node_pool.tiles_allocated(), 0);
+        (self.node_pool, self.brick_pool, self.feedback) = empty_pools(&self.shape, &capacities);
         self.capacities = capacities;
         self.frame = 1;
         self.failed.clear();

@@ -33,30 +33,7 @@ pub trait FrameRenderer {
     }
 }
 
-/// A renderer chosen at run time (`--backend`).
-impl FrameRenderer for Box<dyn FrameRenderer + '_> {
-    fn render_pass(
-        &mut self,
-        view: TreeView<'_>,
-        feedback: &FeedbackBuffer,
-        camera: &Camera,
-        lut: &TransferLut,
-        settings: &RenderSettings,
-        progressive: &mut ProgressiveImage,
-    ) -> Result<(RayStats, usize), RenderError> {
-        (**self).render_pass(view, feedback, camera, lut, settings, progressive)
-    }
-
-    fn describe(&self) -> String {
-        (**self).describe()
-    }
-
-    fn bytes_uploaded(&self) -> u64 {
-        (**self).bytes_uploaded()
-    }
-}
-
-/// A renderer chosen at run time that can move to another thread (the viewer's render thread).
+/// A renderer chosen at run time (`--backend`), `Send` so that it can move to the viewer's render thread.
 impl FrameRenderer for Box<dyn FrameRenderer + Send + '_> {
     fn render_pass(
         &mut self,

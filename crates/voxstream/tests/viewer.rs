@@ -77,6 +77,15 @@ fn mean_difference(a: &[u8], b: &[u8]) -> f64 {
     a.iter().zip(b).map(|(&x, &y)| (x as f64 - y as f64).abs()).sum::<f64>() / a.len() as f64
 }
 
+/// `voxstream render balls.zarr` at the viewer tests' 160×120 with `args`, into `out` (in `dir`): its pixels.
+fn render_balls(dir: &Path, args: &[&str], out: &str) -> Vec<u8> {
+    let mut all = vec!["render", "balls.zarr", "--width", "160", "--height", "120", "--out", out, "--quiet"];
+    all.extend_from_slice(args);
+    let result = voxstream(&all, dir);
+    assert!(result.status.success(), "render {args:?}: {}", String::from_utf8_lossy(&result.stderr));
+    pixels(&dir.join(out))
+}
+
 fn camera(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
@@ -147,82 +156,23 @@ fn a_scripted_session_rotates_edits_and_saves_what_render_reproduces() {
     for (image, camera, tf) in
         [("a", "a.json", "tf-a.json"), ("b", "b.json", "tf-a.json"), ("c", "b.json", "tf-c.json")]
     {
-        let out = voxstream(
-            &[
-                "render",
-                "balls.zarr",
-                "--width",
-                "160",
-                "--height",
-                "120",
-                "--camera",
-                camera,
-                "--tf",
-                tf,
-                "--out",
-                &format!("render-{image}.png"),
-                "--quiet",
-            ],
-            &dir,
-        );
-        assert!(out.status.success(), "render: {}", String::from_utf8_lossy(&out.stderr));
+        let rendered = render_balls(&dir, &["--camera", camera, "--tf", tf], &format!("render-{image}.png"));
         assert_eq!(
-            pixels(&dir.join(format!("render-{image}.png"))),
+            rendered,
             pixels(&dir.join(format!("{image}.png"))),
             "the viewer's final image {image} and render's differ"
         );
     }
     // The level overlay is `render --colour-by-level`'s image, and not the plain one.
-    let out = voxstream(
-        &[
-            "render",
-            "balls.zarr",
-            "--width",
-            "160",
-            "--height",
-            "120",
-            "--camera",
-            "b.json",
-            "--tf",
-            "tf-c.json",
-            "--colour-by-level",
-            "--out",
-            "render-levels.png",
-            "--quiet",
-        ],
-        &dir,
-    );
-    assert!(out.status.success(), "render --colour-by-level: {}", String::from_utf8_lossy(&out.stderr));
+    let rendered_levels =
+        render_balls(&dir, &["--camera", "b.json", "--tf", "tf-c.json", "--colour-by-level"], "render-levels.png");
     let levels = pixels(&dir.join("levels.png"));
-    assert_eq!(pixels(&dir.join("render-levels.png")), levels, "the viewer's level colours and render's differ");
+    assert_eq!(rendered_levels, levels, "the viewer's level colours and render's differ");
     assert!(mean_difference(&c, &levels) > 1.0, "the level overlay did not change the image");
     // The isosurface is the same integrand of the same loop as `render --iso`.
-    let out = voxstream(
-        &[
-            "render",
-            "balls.zarr",
-            "--width",
-            "160",
-            "--height",
-            "120",
-            "--camera",
-            "b.json",
-            "--iso",
-            "1500",
-            "--iso-color",
-            "0.9,0.8,0.7",
-            "--out",
-            "render-d.png",
-            "--quiet",
-        ],
-        &dir,
-    );
-    assert!(out.status.success(), "render --iso: {}", String::from_utf8_lossy(&out.stderr));
-    assert_eq!(
-        pixels(&dir.join("render-d.png")),
-        pixels(&dir.join("d.png")),
-        "the viewer's isosurface and render's differ"
-    );
+    let rendered_iso =
+        render_balls(&dir, &["--camera", "b.json", "--iso", "1500", "--iso-color", "0.9,0.8,0.7"], "render-d.png");
+    assert_eq!(rendered_iso, pixels(&dir.join("d.png")), "the viewer's isosurface and render's differ");
     assert!(mean_difference(&c, &pixels(&dir.join("d.png"))) > 1.0, "the isosurface replaced the volume");
     // Refined by blended interactive frames instead of converged passes: the same final image.
     std::fs::write(dir.join("blended.txt"), "orbit 40 10\nwait-final 600\nscreenshot e.png\nquit\n").unwrap();
@@ -379,29 +329,8 @@ fn with_the_gpu_backend_the_viewer_shows_what_render_on_the_gpu_draws() {
     assert!(renderer.starts_with("gpu:"), "the frame log names the GPU renderer: {renderer}");
     // `render` on either backend with the saved camera and transfer function.
     let render = |backend: &str, iso: bool, out: &str| {
-        let mut args = vec![
-            "render",
-            "balls.zarr",
-            "--width",
-            "160",
-            "--height",
-            "120",
-            "--camera",
-            "b.json",
-            "--backend",
-            backend,
-            "--out",
-            out,
-            "--quiet",
-        ];
-        if iso {
-            args.extend(["--iso", "1500", "--iso-color", "0.9,0.8,0.7"]);
-        } else {
-            args.extend(["--tf", "tf-b.json"]);
-        }
-        let result = voxstream(&args, &dir);
-        assert!(result.status.success(), "render --backend {backend}: {}", String::from_utf8_lossy(&result.stderr));
-        pixels(&dir.join(out))
+        let what: &[&str] = if iso { &["--iso", "1500", "--iso-color", "0.9,0.8,0.7"] } else { &["--tf", "tf-b.json"] };
+        render_balls(&dir, &[&["--camera", "b.json", "--backend", backend], what].concat(), out)
     };
     let (volume, surface) = (pixels(&dir.join("b.png")), pixels(&dir.join("d.png")));
     assert!(volume.iter().any(|&v| v > 20), "the volume is visible");
@@ -445,12 +374,8 @@ fn a_budget_set_from_the_window_holds_and_leaves_the_image_as_render_draws_it() 
     assert!(resident > 0 && resident <= 3 << 20, "resident {resident} bytes");
     assert_eq!(last["final"], serde_json::json!(true));
     // The pools refilled within the new budget; the image is still the one `render` draws.
-    let out = voxstream(
-        &["render", "balls.zarr", "--width", "160", "--height", "120", "--camera", "small.json", "--out", "r.png"],
-        &dir,
-    );
-    assert!(out.status.success(), "render: {}", String::from_utf8_lossy(&out.stderr));
-    assert_eq!(pixels(&dir.join("r.png")), pixels(&dir.join("small.png")), "the image changed with the budget");
+    let rendered = render_balls(&dir, &["--camera", "small.json"], "r.png");
+    assert_eq!(rendered, pixels(&dir.join("small.png")), "the image changed with the budget");
     // The whole window as drawn: larger than the image (the panels and the status line), and not blank.
     let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(dir.join("window.png")).unwrap()));
     let info = decoder.read_info().unwrap().info().clone();
