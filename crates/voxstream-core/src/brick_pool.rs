@@ -129,8 +129,21 @@ impl BrickPool {
     /// Stores `voxels` for `owner`. Returns the slot and, if a slot was recycled, the node that owned it (the caller
     /// must clear that node's brick pointer). `None` when every brick was used during `frame`.
     pub fn insert(&mut self, owner: NodeId, voxels: &[u16], frame: u32) -> Option<(BrickSlot, Option<NodeId>)> {
+        self.insert_avoiding(owner, voxels, frame, |_| false).map(|(slot, evicted, _)| (slot, evicted))
+    }
+
+    /// As [`BrickPool::insert`], but a brick to evict is one whose owner `keep` lets go, if one of the oldest
+    /// [`crate::lru::RECYCLE_SCAN`] is; else the oldest all the same, and the third value is `true`.
+    pub fn insert_avoiding(
+        &mut self,
+        owner: NodeId,
+        voxels: &[u16],
+        frame: u32,
+        mut keep: impl FnMut(NodeId) -> bool,
+    ) -> Option<(BrickSlot, Option<NodeId>, bool)> {
         debug_assert_eq!(voxels.len(), self.voxels_per_brick);
-        let allocation = self.lru.allocate(frame)?;
+        let owners = &self.owners;
+        let (allocation, yielded) = self.lru.allocate_avoiding(frame, |slot| keep(NodeId(owners[slot as usize])))?;
         let slot = allocation.slot() as usize;
         let start = slot * self.voxels_per_brick;
         let range = voxels.iter().fold([u16::MAX, 0], |[lo, hi], &v| [lo.min(v), hi.max(v)]);
@@ -141,7 +154,7 @@ impl BrickPool {
             self.ranges.push(range);
             self.block_ranges.resize(self.block_ranges.len() + blocks, [0, 0]);
             block_ranges(&self.shape, voxels, &mut self.block_ranges[slot * blocks..]);
-            return Some((BrickSlot(slot as u32), None));
+            return Some((BrickSlot(slot as u32), None, yielded));
         }
         self.voxels[start..start + self.voxels_per_brick].copy_from_slice(voxels);
         self.ranges[slot] = range;
@@ -151,7 +164,7 @@ impl BrickPool {
             Allocation::Recycled(_) => Some(NodeId(previous)),
             Allocation::Fresh(_) => None,
         };
-        Some((BrickSlot(slot as u32), evicted))
+        Some((BrickSlot(slot as u32), evicted, yielded))
     }
 
     /// Widens the value range of the brick in `slot` to include `[lower, upper]` (stored units): for a brick with

@@ -45,6 +45,7 @@ use crate::node::{BrickSlot, Node, NodeData, NodeId, TileId};
 use crate::node_pool::{NodePool, ROOT_TILE};
 use crate::producer::{NodeContent, Produced, Producer};
 use crate::request_queue::RequestQueue;
+use crate::restriction::{self, reach, Reach};
 use crate::tree_view::TreeView;
 
 /// Deferred requests passed to [`Producer::prefetch`] per frame.
@@ -92,6 +93,12 @@ pub struct ServeReport {
     pub bricks_evicted: usize,
     /// Tiles evicted (with their subtrees) to make room.
     pub tiles_evicted: usize,
+    /// Of `served`, the forced ones: steps no ray asked for, served first so that what a ray asked for keeps the
+    /// working set restricted ([`crate::restriction`]).
+    pub forced: usize,
+    /// Evictions that broke the restriction because every candidate the LRU looked at was needed to keep it: the
+    /// memory budget won.
+    pub restriction_yielded: usize,
     /// Producer failures recorded this frame.
     pub failures: Vec<ProduceError>,
 }
@@ -123,6 +130,8 @@ pub struct CacheManager<P: Producer> {
     failed: HashSet<NodeKey>,
     /// Thiele et al.'s temporal and spatial blending, when on ([`CacheManager::set_blending`]).
     blending: Option<LevelBlending>,
+    /// Whether the working set is kept restricted ([`CacheManager::set_restricted`]).
+    restricted: bool,
 }
 
 /// Pools of `capacities` holding only the root, and the feedback buffer sized for them.
@@ -149,6 +158,7 @@ impl<P: Producer> CacheManager<P> {
             frame: 1,
             failed: HashSet::new(),
             blending: None,
+            restricted: false,
         })
     }
 
@@ -212,6 +222,24 @@ impl<P: Producer> CacheManager<P> {
         self.blending = fade_frames.map(LevelBlending::new);
     }
 
+    /// Keeps the working set restricted (Thiele et al.: neighbouring data at most one level apart, see
+    /// [`crate::restriction`]) from the next frame on, or lets it free. Restricting a working set built free does
+    /// not repair it at once: each ray request is served once its neighbourhood allows it, and the forced steps fill
+    /// the gaps near what the rays ask for.
+    pub fn set_restricted(&mut self, restricted: bool) {
+        self.restricted = restricted;
+    }
+
+    /// Whether the working set is kept restricted.
+    pub fn is_restricted(&self) -> bool {
+        self.restricted
+    }
+
+    /// Checks that the working set is restricted; returns the first violation. Used by tests.
+    pub fn check_restricted(&self) -> Result<(), String> {
+        restriction::check(&self.node_pool)
+    }
+
     /// Ends any blending in progress: the next frame shows what is resident as it is (after an exact frame).
     pub fn settle_blending(&mut self) {
         if let Some(blending) = &mut self.blending {
@@ -273,34 +301,18 @@ impl<P: Producer> CacheManager<P> {
         let mut report = ServeReport { requests: queue.len(), ..ServeReport::default() };
 
         // Keep what is still valid and not known to fail, up to the bound.
-        let mut work: Vec<(Request, NodeKey)> = Vec::new();
-        for queued in &queue.requests {
-            let request = queued.request;
-            let node = self.node_pool.node(request.node);
-            let key = self.node_pool.key(request.node);
-            let is_valid = match request.kind {
-                RequestKind::Produce => node.data() == NodeData::Missing && !self.failed.contains(&key),
-                RequestKind::Subdivide => {
-                    !node.is_constant()
-                        && !node.is_terminal()
-                        && node.child_tile().is_none()
-                        && key.level < self.shape.max_level
-                }
-            };
-            if is_valid {
-                work.push((request, key));
-            }
-        }
+        let work: Vec<(Request, NodeKey)> = queue
+            .requests
+            .iter()
+            .map(|queued| (queued.request, self.node_pool.key(queued.request.node)))
+            .filter(|&(request, key)| self.still_wanted(request, key))
+            .collect();
         report.pending = work.len();
-        // What this frame leaves unserved: past the bound, or deferred for want of room.
-        let mut unserved: Vec<(Request, NodeKey)> = Vec::new();
-        if let Some(limit) = limit {
-            unserved.extend(work.iter().skip(limit).copied());
-            report.deferred += work.len().saturating_sub(limit);
+        let take = limit.unwrap_or(work.len()).min(work.len());
+        if take < work.len() {
             // Let the producer fetch the deferred bricks in the background while the next frame renders.
-            let deferred: Vec<NodeKey> = work
+            let deferred: Vec<NodeKey> = work[take..]
                 .iter()
-                .skip(limit)
                 .filter(|(request, _)| request.kind == RequestKind::Produce)
                 .take(PREFETCH_LIMIT)
                 .map(|&(_, key)| key)
@@ -308,49 +320,18 @@ impl<P: Producer> CacheManager<P> {
             if !deferred.is_empty() {
                 self.producer.prefetch(&deferred);
             }
-            work.truncate(limit);
         }
-
-        // Produce on worker threads, with no lock held, a batch at a time so that produced-but-unapplied bricks
-        // stay a bounded transient; then apply each batch in queue order.
+        // What this frame leaves unserved: past the bound, or deferred for want of room.
+        let mut unserved: Vec<(Request, NodeKey)> = Vec::new();
         let mut new_tiles: Vec<(TileId, NodeKey)> = Vec::new();
-        for batch in work.chunks(self.capacities.production_batch.max(1) as usize) {
-            let producer = &self.producer;
-            let shape = self.shape;
-            let results: Vec<WorkResult> = batch
-                .par_iter()
-                .map(|&(request, key)| match request.kind {
-                    RequestKind::Produce => WorkResult::Produced(produce_analysed(producer, key, &shape)),
-                    RequestKind::Subdivide => WorkResult::Children(
-                        (0..shape.nodes_per_tile()).map(|c| producer.oracle(key.child(c, shape.n))).collect(),
-                    ),
-                })
-                .collect();
-            for (&(request, key), result) in batch.iter().zip(results) {
-                let applied = match result {
-                    WorkResult::Produced(Ok(brick)) => {
-                        self.apply_produced(request.node, brick, Eviction::Allowed, &mut report)
-                    }
-                    WorkResult::Produced(Err(error)) => {
-                        self.failed.insert(key);
-                        report.failures.push(error);
-                        true
-                    }
-                    WorkResult::Children(hints) => match self.apply_subdivide(request.node, &hints, &mut report) {
-                        Some(tile) => {
-                            new_tiles.push((tile, key));
-                            true
-                        }
-                        None => false,
-                    },
-                };
-                if applied {
-                    report.served += 1;
-                } else {
-                    report.deferred += 1;
-                    unserved.push((request, key));
-                }
-            }
+        if self.restricted {
+            self.serve_restricted(work, limit.unwrap_or(usize::MAX), &mut report, &mut new_tiles, &mut unserved);
+        } else {
+            unserved.extend_from_slice(&work[take..]);
+            report.deferred += work.len() - take;
+            let batch: Vec<Work> =
+                work[..take].iter().map(|&(request, key)| Work { request, key, forced: false }).collect();
+            self.serve(&batch, &mut report, &mut new_tiles, &mut unserved);
         }
         if options.prefetch_new_children {
             self.prefetch_children(&new_tiles, &mut report);
@@ -367,6 +348,219 @@ impl<P: Producer> CacheManager<P> {
         report
     }
 
+    /// Whether `request` (for the node of `key`) still needs work: its node still holds `key` (no tile recycling
+    /// reused it), and it is missing and not known to fail, or childless and subdividable.
+    fn still_wanted(&self, request: Request, key: NodeKey) -> bool {
+        if !self.node_pool.is_in_use(request.node.tile(self.shape.nodes_per_tile()))
+            || self.node_pool.key(request.node) != key
+        {
+            return false;
+        }
+        let node = self.node_pool.node(request.node);
+        match request.kind {
+            RequestKind::Produce => node.data() == NodeData::Missing && !self.failed.contains(&key),
+            RequestKind::Subdivide => {
+                !node.is_constant()
+                    && !node.is_terminal()
+                    && node.child_tile().is_none()
+                    && key.level < self.shape.max_level
+            }
+        }
+    }
+
+    /// Produces and subdivides `work` on worker threads, with no lock held, a batch at a time so that
+    /// produced-but-unapplied bricks stay a bounded transient; applies each batch in order. What cannot be applied
+    /// (no room, or the restriction no longer allows it) is counted deferred, and the rays' own requests among it
+    /// go to `unserved`.
+    fn serve(
+        &mut self,
+        work: &[Work],
+        report: &mut ServeReport,
+        new_tiles: &mut Vec<(TileId, NodeKey)>,
+        unserved: &mut Vec<(Request, NodeKey)>,
+    ) {
+        for batch in work.chunks(self.capacities.production_batch.max(1) as usize) {
+            let producer = &self.producer;
+            let shape = self.shape;
+            let results: Vec<WorkResult> = batch
+                .par_iter()
+                .map(|item| match item.request.kind {
+                    RequestKind::Produce => WorkResult::Produced(produce_analysed(producer, item.key, &shape)),
+                    RequestKind::Subdivide => WorkResult::Children(
+                        (0..shape.nodes_per_tile()).map(|c| producer.oracle(item.key.child(c, shape.n))).collect(),
+                    ),
+                })
+                .collect();
+            for (item, result) in batch.iter().zip(results) {
+                let (request, key) = (item.request, item.key);
+                // A forced step served earlier in the batch, or a recycled tile, may have made it moot; under the
+                // restriction, an eviction earlier in the batch may have made it premature.
+                if !self.still_wanted(request, key) {
+                    continue;
+                }
+                let is_premature = self.restricted
+                    && request.kind == RequestKind::Produce
+                    && !restriction::prerequisites(&self.node_pool, key).is_empty();
+                let applied = !is_premature
+                    && match result {
+                        WorkResult::Produced(Ok(brick)) => {
+                            self.apply_produced(request.node, brick, Eviction::Allowed, report)
+                        }
+                        WorkResult::Produced(Err(error)) => {
+                            self.failed.insert(key);
+                            report.failures.push(error);
+                            true
+                        }
+                        WorkResult::Children(hints) => match self.apply_subdivide(request.node, &hints, report) {
+                            Some(tile) => {
+                                new_tiles.push((tile, key));
+                                true
+                            }
+                            None => false,
+                        },
+                    };
+                if applied {
+                    report.served += 1;
+                    report.forced += usize::from(item.forced);
+                } else if !item.forced {
+                    report.deferred += 1;
+                    unserved.push((request, key));
+                }
+            }
+        }
+    }
+
+    /// Serves the rays' `work` in rounds, keeping the working set restricted: a request to produce a node whose
+    /// coarser neighbourhood is incomplete waits while the steps completing it are served (forced), coarsest first;
+    /// everything served, forced or not, counts against `limit`. What is left waits for a later frame.
+    fn serve_restricted(
+        &mut self,
+        work: Vec<(Request, NodeKey)>,
+        mut limit: usize,
+        report: &mut ServeReport,
+        new_tiles: &mut Vec<(TileId, NodeKey)>,
+        unserved: &mut Vec<(Request, NodeKey)>,
+    ) {
+        let mut waiting = work;
+        while !waiting.is_empty() && limit > 0 {
+            let mut round: Vec<Work> = Vec::new();
+            let mut planned: HashSet<Request> = HashSet::new();
+            let mut next: Vec<(Request, NodeKey)> = Vec::new();
+            for (request, key) in waiting {
+                if !self.still_wanted(request, key) {
+                    continue;
+                }
+                if round.len() >= limit {
+                    next.push((request, key));
+                    continue;
+                }
+                let steps = if request.kind == RequestKind::Produce { self.forced_steps(key) } else { Vec::new() };
+                if steps.is_empty() {
+                    if planned.insert(request) {
+                        if request.kind == RequestKind::Produce {
+                            self.pin_neighbourhood(key);
+                        }
+                        round.push(Work { request, key, forced: false });
+                    }
+                    continue;
+                }
+                for (step, step_key) in steps {
+                    if round.len() < limit && planned.insert(step) {
+                        match step.kind {
+                            RequestKind::Produce => self.pin_neighbourhood(step_key),
+                            RequestKind::Subdivide => self.pin_path(step_key),
+                        }
+                        round.push(Work { request: step, key: step_key, forced: true });
+                    }
+                }
+                next.push((request, key));
+            }
+            waiting = next;
+            if round.is_empty() {
+                break;
+            }
+            limit -= round.len();
+            let served_before = report.served;
+            self.serve(&round, report, new_tiles, unserved);
+            if report.served == served_before {
+                // Nothing could be applied (no room): later rounds would fare no better this frame.
+                break;
+            }
+        }
+        report.deferred += waiting.len();
+        unserved.extend(waiting);
+    }
+
+    /// The steps that must be served before the node of `key` may be produced, each ready now (its own steps done):
+    /// for every incomplete position one level up touching it, the first missing node on the way (or, if that one
+    /// is not ready either, its own steps, recursively) or the first childless one. Failed nodes are passed over:
+    /// their ancestors stand in, and nothing can be done for them.
+    fn forced_steps(&self, key: NodeKey) -> Vec<(Request, NodeKey)> {
+        fn visit<P: Producer>(
+            cache: &CacheManager<P>,
+            key: NodeKey,
+            seen: &mut HashSet<NodeKey>,
+            out: &mut Vec<(Request, NodeKey)>,
+        ) {
+            for step in restriction::prerequisites(&cache.node_pool, key) {
+                match step {
+                    Reach::Childless(node, step_key) => {
+                        if seen.insert(step_key) {
+                            out.push((Request { node, kind: RequestKind::Subdivide }, step_key));
+                        }
+                    }
+                    Reach::Missing(node, step_key) => {
+                        if cache.failed.contains(&step_key) || !seen.insert(step_key) {
+                            continue;
+                        }
+                        let before = out.len();
+                        visit(cache, step_key, seen, out);
+                        if out.len() == before {
+                            out.push((Request { node, kind: RequestKind::Produce }, step_key));
+                        }
+                    }
+                    Reach::Complete(_) | Reach::Final => {}
+                }
+            }
+        }
+        let mut out = Vec::new();
+        visit(self, key, &mut HashSet::new(), &mut out);
+        out
+    }
+
+    /// Marks the tiles and bricks on the way to `key` used in this frame, so that no eviction in this frame takes
+    /// them.
+    fn pin_path(&mut self, key: NodeKey) {
+        let per_tile = self.shape.nodes_per_tile();
+        let n = self.shape.n as u64;
+        let mut id = NodeId::ROOT;
+        let mut here = NodeKey::ROOT;
+        loop {
+            let node = self.node_pool.node(id);
+            if let Some(slot) = node.brick() {
+                self.brick_pool.touch(slot, self.frame);
+            }
+            let (Some(tile), true) = (node.child_tile(), here.level < key.level) else { return };
+            self.node_pool.touch(tile, self.frame);
+            let div = n.pow(key.level - here.level - 1);
+            let c = [0, 1, 2].map(|a| (key.ijk[a] / div) % n);
+            let child = (c[0] + n * (c[1] + n * c[2])) as u32;
+            id = NodeId::new(tile, child, per_tile);
+            here = here.child(child, self.shape.n);
+        }
+    }
+
+    /// Pins ([`CacheManager::pin_path`]) the node of `key` and every position one level up touching it: what keeps
+    /// the working set restricted once the node is complete stays for this frame.
+    fn pin_neighbourhood(&mut self, key: NodeKey) {
+        self.pin_path(key);
+        if key.level >= 2 {
+            for position in restriction::touching(&self.shape, key, key.level - 1) {
+                self.pin_path(position);
+            }
+        }
+    }
+
     /// Produces the still-missing children of `new_tiles` (each with its parent's key) into free brick slots, in
     /// tile then child order, a batch at a time; stops when no slot is free. Nothing is evicted, and a failure
     /// leaves the child missing (a ray that needs it will request it, and the failure is reported then).
@@ -381,7 +575,10 @@ impl<P: Producer> CacheManager<P> {
             for child in 0..per_tile {
                 let node_id = NodeId::new(tile, child, per_tile);
                 let key = parent_key.child(child, n);
-                if self.node_pool.node(node_id).data() == NodeData::Missing && !self.failed.contains(&key) {
+                if self.node_pool.node(node_id).data() == NodeData::Missing
+                    && !self.failed.contains(&key)
+                    && !(self.restricted && !restriction::prerequisites(&self.node_pool, key).is_empty())
+                {
                     candidates.push((node_id, key));
                 }
             }
@@ -430,7 +627,16 @@ impl<P: Producer> CacheManager<P> {
             }
             NodeContent::Brick => {
                 let inserted = match eviction {
-                    Eviction::Allowed => self.brick_pool.insert(node_id, &brick.voxels, self.frame),
+                    Eviction::Allowed => {
+                        let (pool, restricted) = (&self.node_pool, self.restricted);
+                        let keep = |owner: NodeId| restricted && evicting_breaks_restriction(pool, owner);
+                        self.brick_pool.insert_avoiding(node_id, &brick.voxels, self.frame, keep).map(
+                            |(slot, evicted, yielded)| {
+                                report.restriction_yielded += usize::from(yielded);
+                                (slot, evicted)
+                            },
+                        )
+                    }
                     Eviction::Forbidden => {
                         self.brick_pool.insert_if_free(node_id, &brick.voxels, self.frame).map(|slot| (slot, None))
                     }
@@ -463,7 +669,10 @@ impl<P: Producer> CacheManager<P> {
     /// Gives `node_id` a tile of children (constant where `hints` say so); returns the tile, `None` if every tile
     /// was used during this frame.
     fn apply_subdivide(&mut self, node_id: NodeId, hints: &[Option<f32>], report: &mut ServeReport) -> Option<TileId> {
-        if let Some(victim) = self.node_pool.oldest_recyclable(self.frame) {
+        let (pool, restricted) = (&self.node_pool, self.restricted);
+        let keep = |tile: TileId| restricted && freeing_breaks_restriction(pool, tile);
+        if let Some((victim, yielded)) = self.node_pool.oldest_recyclable_avoiding(self.frame, keep) {
+            report.restriction_yielded += usize::from(yielded);
             self.detach_and_free(victim);
             report.tiles_evicted += 1;
         }
@@ -561,6 +770,32 @@ impl<P: Producer> CacheManager<P> {
         }
         Ok(())
     }
+}
+
+/// One step to serve: a ray's request, or a forced step of the restriction.
+#[derive(Clone, Copy)]
+struct Work {
+    request: Request,
+    key: NodeKey,
+    forced: bool,
+}
+
+/// Whether evicting the brick of `owner` would leave finer complete data beside it, two levels finer than what is
+/// drawn there then ([`crate::restriction`]).
+fn evicting_breaks_restriction(pool: &NodePool, owner: NodeId) -> bool {
+    let key = pool.key(owner);
+    reach(pool, key) == Reach::Complete(owner) && restriction::finer_data_touches(pool, key, key.level)
+}
+
+/// Whether freeing `tile` (its parent's children and their subtrees) would leave finer complete data beside the
+/// parent, two levels finer than the parent drawn there then.
+fn freeing_breaks_restriction(pool: &NodePool, tile: TileId) -> bool {
+    let record = pool.record(tile);
+    if record.parent == u32::MAX {
+        return false;
+    }
+    let parent = NodeKey { level: record.level - 1, ijk: record.parent_ijk };
+    restriction::finer_data_touches(pool, parent, record.level)
 }
 
 /// Whether storing a produced brick may recycle the least recently used slot.

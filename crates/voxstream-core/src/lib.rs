@@ -14,6 +14,7 @@
 //! - [`CacheManager`]: serves requests by calling a [`Producer`] on worker threads; LRU recycling.
 //! - [`TreeView`]: the immutable flat view renderers read during a frame.
 //! - [`LevelBlending`]: Thiele et al.'s fade-in of arriving bricks and caps towards coarser neighbours.
+//! - [`restriction`]: Thiele et al.'s restricted working set (neighbouring data at most one level apart).
 //!
 //! ```
 //! use voxstream_core::{CacheManager, NodeContent, NodeKey, Produced, Producer, ProduceError, ServeOptions, TreeShape};
@@ -50,6 +51,7 @@ pub mod node;
 pub mod node_pool;
 pub mod producer;
 pub mod request_queue;
+pub mod restriction;
 pub mod tree_view;
 
 pub use brick_pool::{dequantize, quantize, BrickPool, VOXEL_MAX};

@@ -42,6 +42,10 @@ pub struct LruSlots {
     linked_count: u32,
 }
 
+/// Most slots [`LruSlots::allocate_avoiding`] looks at, oldest first, for one it may recycle: bounds the work of one
+/// allocation when the caller wants to keep many old slots.
+pub const RECYCLE_SCAN: usize = 64;
+
 /// Bytes of bookkeeping per slot (`prev`, `next`, `stamp`, `is_linked`), counted in the memory budget.
 pub const LRU_BYTES_PER_SLOT: usize = 4 + 4 + 4 + 1;
 
@@ -95,6 +99,14 @@ impl LruSlots {
     /// Takes a slot: a free one if any, else the least recently used one if it was not used at `frame`.
     /// Returns `None` when every slot was used during `frame`. The slot is marked used at `frame`.
     pub fn allocate(&mut self, frame: u32) -> Option<Allocation> {
+        self.allocate_avoiding(frame, |_| false).map(|(allocation, _)| allocation)
+    }
+
+    /// As [`LruSlots::allocate`], but a slot to recycle is the least recently used one among the oldest
+    /// [`RECYCLE_SCAN`] not used at `frame` for which `keep` is false. When `keep` holds for all of them, the oldest
+    /// is recycled all the same, and the second value is `true` (the caller's wish yielded to the capacity).
+    pub fn allocate_avoiding(&mut self, frame: u32, mut keep: impl FnMut(u32) -> bool) -> Option<(Allocation, bool)> {
+        let mut yielded = false;
         let allocation = if let Some(slot) = self.free.pop() {
             Allocation::Fresh(slot)
         } else if self.grown < self.capacity {
@@ -106,7 +118,10 @@ impl LruSlots {
             self.is_linked.push(false);
             Allocation::Fresh(slot)
         } else if self.tail != NONE && self.stamp[self.tail as usize] < frame {
-            let slot = self.tail;
+            let slot = self.oldest_not_kept(frame, &mut keep).unwrap_or_else(|| {
+                yielded = true;
+                self.tail
+            });
             self.unlink(slot);
             Allocation::Recycled(slot)
         } else {
@@ -115,7 +130,15 @@ impl LruSlots {
         let slot = allocation.slot();
         self.link_front(slot);
         self.stamp[slot as usize] = frame;
-        Some(allocation)
+        Some((allocation, yielded))
+    }
+
+    /// The oldest of the [`RECYCLE_SCAN`] least recently used slots not used at `frame` that `keep` lets go.
+    pub fn oldest_not_kept(&self, frame: u32, mut keep: impl FnMut(u32) -> bool) -> Option<u32> {
+        self.iter_oldest_first()
+            .take(RECYCLE_SCAN)
+            .take_while(|&slot| self.stamp[slot as usize] < frame)
+            .find(|&slot| !keep(slot))
     }
 
     /// Marks `slot` used at `frame` (moves it to the most-recent end).

@@ -158,6 +158,20 @@ impl NodePool {
         (self.lru.stamp(oldest) < frame).then_some(TileId(oldest + 1))
     }
 
+    /// As [`NodePool::oldest_recyclable`], but the oldest of the [`crate::lru::RECYCLE_SCAN`] least recently used
+    /// tiles that `keep` lets go; the oldest all the same when `keep` holds for all, with `true` (the wish yielded).
+    pub fn oldest_recyclable_avoiding(
+        &self,
+        frame: u32,
+        mut keep: impl FnMut(TileId) -> bool,
+    ) -> Option<(TileId, bool)> {
+        let oldest = self.oldest_recyclable(frame)?;
+        match self.lru.oldest_not_kept(frame, |slot| keep(TileId(slot + 1))) {
+            Some(slot) => Some((TileId(slot + 1), false)),
+            None => Some((oldest, true)),
+        }
+    }
+
     /// Returns `tile` to the free list (its nodes are cleared).
     pub fn release(&mut self, tile: TileId) {
         if tile == ROOT_TILE {

@@ -59,6 +59,9 @@ pub struct LoopLimits {
     /// Interactive mode only: Thiele et al.'s level blending ([`voxstream_core::level_blending`]) with a fade-in of
     /// this many frames; `None` turns it off. Converged frames never blend (their image is exact either way).
     pub blending_fade_frames: Option<u32>,
+    /// With level blending: keep the working set restricted (Thiele et al.: neighbouring data at most one level
+    /// apart, forced splits first; [`voxstream_core::restriction`]), in every frame. Without blending it is free.
+    pub restrict_working_set: bool,
 }
 
 /// The pixel stride of the request-gathering passes of a converged frame ([`LoopLimits::gather_sparsely`]).
@@ -72,6 +75,7 @@ impl Default for LoopLimits {
             prefetch_new_children: true,
             gather_sparsely: true,
             blending_fade_frames: Some(DEFAULT_FADE_FRAMES),
+            restrict_working_set: true,
         }
     }
 }
@@ -97,6 +101,12 @@ pub struct FrameResult {
     pub bricks_produced: u64,
     /// Of `bricks_produced`, those produced for new children before any ray asked for them.
     pub bricks_prefetched: u64,
+    /// Of the requests served, the forced steps that kept the working set restricted
+    /// ([`LoopLimits::restrict_working_set`]).
+    pub forced_steps: u64,
+    /// Evictions that broke the restriction because the memory budget needed them
+    /// ([`voxstream_core::ServeReport::restriction_yielded`]).
+    pub restriction_yielded: u64,
     /// Requests still pending after the last pass: 0 = the image is exact.
     pub pending: usize,
     /// Requests served over all passes (0 with some pending: the budget cannot hold what the view needs, or the
@@ -201,6 +211,7 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
         let lut = TransferLut::new(transfer_function, value_range[0] as f32, value_range[1] as f32, finest_voxel);
         let mut cache = CacheManager::new(producer, budget_bytes)?;
         cache.set_blending(limits.blending_fade_frames);
+        cache.set_restricted(limits.blending_fade_frames.is_some() && limits.restrict_working_set);
         Ok(Session {
             cache,
             renderer,
@@ -327,6 +338,8 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
             requests: 0,
             bricks_produced: 0,
             bricks_prefetched: 0,
+            forced_steps: 0,
+            restriction_yielded: 0,
             pending: 0,
             served: 0,
             blended: false,
@@ -383,6 +396,8 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
             result.requests += report.requests as u64;
             result.bricks_produced += report.bricks_produced as u64;
             result.bricks_prefetched += report.bricks_prefetched as u64;
+            result.forced_steps += report.forced as u64;
+            result.restriction_yielded += report.restriction_yielded as u64;
             result.pending = report.pending;
             result.served += report.served as u64;
             result.failures.extend(report.failures);
