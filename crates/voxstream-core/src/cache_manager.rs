@@ -506,7 +506,7 @@ impl<P: Producer> CacheManager<P> {
                 match step {
                     Reach::Childless(node, step_key) => {
                         if seen.insert(step_key) {
-                            out.push((Request { node, kind: RequestKind::Subdivide }, step_key));
+                            out.push((Request { node, kind: RequestKind::Subdivide, deficit: 0 }, step_key));
                         }
                     }
                     Reach::Missing(node, step_key) => {
@@ -516,7 +516,7 @@ impl<P: Producer> CacheManager<P> {
                         let before = out.len();
                         visit(cache, step_key, seen, out);
                         if out.len() == before {
-                            out.push((Request { node, kind: RequestKind::Produce }, step_key));
+                            out.push((Request { node, kind: RequestKind::Produce, deficit: 0 }, step_key));
                         }
                     }
                     Reach::Complete(_) | Reach::Final => {}
@@ -876,7 +876,7 @@ mod tests {
 
     fn request(cache: &mut CacheManager<Ramp>, node: NodeId, kind: RequestKind, prefetch: bool) -> ServeReport {
         cache.begin_frame();
-        cache.feedback().push_requests(&[Request { node, kind }]);
+        cache.feedback().push_requests(&[Request { node, kind, deficit: 1 }]);
         let report = cache.end_frame(ServeOptions { limit: None, prefetch_new_children: prefetch });
         assert_eq!(cache.check_invariants(), Ok(()));
         report
@@ -968,8 +968,8 @@ mod tests {
         // frame that serves one request: the other waits, and the served one's corners on that face stay at 0.
         cache.begin_frame();
         cache.feedback().push_requests(&[
-            Request { node: children[1], kind: RequestKind::Produce },
-            Request { node: children[3], kind: RequestKind::Produce },
+            Request { node: children[1], kind: RequestKind::Produce, deficit: 1 },
+            Request { node: children[3], kind: RequestKind::Produce, deficit: 1 },
         ]);
         cache.end_frame(ServeOptions { limit: Some(1), prefetch_new_children: false });
         let first_served = cache.node_pool().node(children[1]).brick().is_some();
@@ -983,7 +983,7 @@ mod tests {
                 assert_eq!(corners[c], 0.0, "corner {c}");
             }
             // The other child is still wanted: asked for again, served never.
-            cache.feedback().push_requests(&[Request { node: waiting, kind: RequestKind::Produce }]);
+            cache.feedback().push_requests(&[Request { node: waiting, kind: RequestKind::Produce, deficit: 1 }]);
             cache.end_frame(ServeOptions { limit: Some(0), prefetch_new_children: false });
         }
         let corners = caps_of(&cache, served).corners();

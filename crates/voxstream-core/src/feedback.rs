@@ -11,7 +11,7 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 
-use voxstream_layout::{RequestRecord, REQUEST_PRODUCE, REQUEST_SUBDIVIDE};
+use voxstream_layout::{RequestRecord, REQUEST_DEFICIT_SHIFT, REQUEST_KIND_MASK, REQUEST_PRODUCE, REQUEST_SUBDIVIDE};
 
 use crate::node::{BrickSlot, NodeId, TileId};
 
@@ -31,6 +31,9 @@ pub struct Request {
     pub node: NodeId,
     /// What to do.
     pub kind: RequestKind,
+    /// How many levels coarser than it wanted the ray drew for lack of this node (Thiele et al.'s ideal − actual
+    /// level, at least 1): the request's priority ([`crate::RequestQueue`]).
+    pub deficit: u8,
 }
 
 impl Request {
@@ -40,17 +43,22 @@ impl Request {
             RequestKind::Produce => REQUEST_PRODUCE,
             RequestKind::Subdivide => REQUEST_SUBDIVIDE,
         };
-        RequestRecord { node: self.node.0, kind }
+        RequestRecord { node: self.node.0, kind: kind | (self.deficit as u32) << REQUEST_DEFICIT_SHIFT }
     }
 
     /// A request read back from a GPU's request buffer; `None` for a kind no ray writes (a corrupt buffer).
     pub fn from_record(record: RequestRecord) -> Option<Request> {
-        let kind = match record.kind {
+        let kind = match record.kind & REQUEST_KIND_MASK {
             REQUEST_PRODUCE => RequestKind::Produce,
             REQUEST_SUBDIVIDE => RequestKind::Subdivide,
             _ => return None,
         };
-        Some(Request { node: NodeId(record.node), kind })
+        let deficit = (record.kind >> REQUEST_DEFICIT_SHIFT) as u8;
+        (record.kind >> REQUEST_DEFICIT_SHIFT <= u8::MAX as u32).then_some(Request {
+            node: NodeId(record.node),
+            kind,
+            deficit,
+        })
     }
 }
 
@@ -140,7 +148,7 @@ mod tests {
         feedback.mark_brick(BrickSlot(99)); // beyond the pool: ignored, never a panic
         assert_eq!(feedback.used_tiles().collect::<Vec<_>>(), vec![TileId(2)]);
         assert_eq!(feedback.used_bricks().collect::<Vec<_>>(), vec![BrickSlot(3)]);
-        feedback.push_requests(&[Request { node: NodeId(1), kind: RequestKind::Produce }]);
+        feedback.push_requests(&[Request { node: NodeId(1), kind: RequestKind::Produce, deficit: 1 }]);
         assert_eq!(feedback.take_requests().len(), 1);
         feedback.reset(8, 8);
         assert_eq!(feedback.used_tiles().count(), 0);
@@ -150,13 +158,16 @@ mod tests {
     #[test]
     fn requests_round_trip_through_the_gpu_record() {
         for kind in [RequestKind::Produce, RequestKind::Subdivide] {
-            let request = Request { node: NodeId(41), kind };
-            assert_eq!(Request::from_record(request.to_record()), Some(request));
+            for deficit in [1, 7, 255] {
+                let request = Request { node: NodeId(41), kind, deficit };
+                assert_eq!(Request::from_record(request.to_record()), Some(request));
+            }
         }
         assert_ne!(
-            Request { node: NodeId(1), kind: RequestKind::Produce }.to_record(),
-            Request { node: NodeId(1), kind: RequestKind::Subdivide }.to_record()
+            Request { node: NodeId(1), kind: RequestKind::Produce, deficit: 1 }.to_record(),
+            Request { node: NodeId(1), kind: RequestKind::Subdivide, deficit: 1 }.to_record()
         );
         assert_eq!(Request::from_record(RequestRecord { node: 1, kind: 7 }), None);
+        assert_eq!(Request::from_record(RequestRecord { node: 1, kind: 1 << 16 }), None);
     }
 }

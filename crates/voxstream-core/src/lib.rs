@@ -33,6 +33,7 @@
 //! cache.feedback().push_requests(&[voxstream_core::Request {
 //!     node: voxstream_core::NodeId::ROOT,
 //!     kind: voxstream_core::RequestKind::Produce,
+//!     deficit: 1,
 //! }]);
 //! let report = cache.end_frame(ServeOptions::ALL);
 //! assert_eq!(report.constant_nodes, 1);

@@ -2,9 +2,15 @@
 //!
 //! GigaVoxels [P09] §5 compacts the per-ray request lists on the GPU (neighbour comparison + stream reduction) and
 //! lets overflow wait for the next frame. voxstream does the same on the CPU: requests are deduplicated (counting how
-//! many rays asked: the screen area waiting on the node), ordered parent before child (coarse levels first, so every
-//! ray gets a usable ancestor quickly), then by that count, and cut to the per-frame bound. The order is total, so
-//! the result never depends on thread scheduling.
+//! many rays asked: the screen area waiting on the node, and keeping the largest level deficit any of them reported:
+//! Thiele et al.'s feedback, the maximum over rays of ideal − actual level), ordered by that deficit (the region
+//! drawn most levels too coarse first, Thiele et al.'s split priority), then parent before child (coarse levels
+//! first, so every ray gets a usable ancestor quickly), then by the ray count, and cut to the per-frame bound. The
+//! order is total, so the result never depends on thread scheduling.
+//!
+//! Thiele et al. distribute the priority over their working-set tree (top-down `P_child = max(F, P_parent − 1)`,
+//! bottom-up `P = max(P_child + 1)`) because their feedback names the bricks drawn, not the ones missing. Here a ray
+//! names the one node it lacks, at most one per path, so the deficit it reports already is that node's priority.
 
 use crate::feedback::{Request, RequestKind};
 use crate::node::NodeId;
@@ -14,7 +20,7 @@ use crate::node::NodeId;
 pub struct QueuedRequest {
     /// The request.
     pub request: Request,
-    /// Level of the node (parents first).
+    /// Level of the node (parents first among equal deficits).
     pub level: u32,
     /// Number of rays that asked for it.
     pub ray_count: u32,
@@ -36,15 +42,21 @@ impl RequestQueue {
         let mut requests: Vec<QueuedRequest> = Vec::new();
         for request in raw {
             match requests.last_mut() {
-                Some(last) if last.request == request => last.ray_count += 1,
+                Some(last) if (last.request.node, last.request.kind) == (request.node, request.kind) => {
+                    // Thiele et al.: the maximum over rays, not the average (sorted, so the last is the largest).
+                    last.request.deficit = request.deficit;
+                    last.ray_count += 1;
+                }
                 _ => requests.push(QueuedRequest { request, level: level_of(request.node), ray_count: 1 }),
             }
         }
         // A node that needs producing cannot be subdivided in the same frame: its data comes first.
         let distinct = requests.len();
         requests.sort_unstable_by(|a, b| {
-            a.level
-                .cmp(&b.level)
+            b.request
+                .deficit
+                .cmp(&a.request.deficit)
+                .then(a.level.cmp(&b.level))
                 .then(kind_rank(a.request.kind).cmp(&kind_rank(b.request.kind)))
                 .then(b.ray_count.cmp(&a.ray_count))
                 .then(a.request.cmp(&b.request))
@@ -79,7 +91,19 @@ mod tests {
     use proptest::prelude::*;
 
     fn req(node: u32, kind: RequestKind) -> Request {
-        Request { node: NodeId(node), kind }
+        Request { node: NodeId(node), kind, deficit: 1 }
+    }
+
+    #[test]
+    fn the_largest_deficit_of_any_ray_comes_first() {
+        let with = |node: u32, deficit: u8| Request { node: NodeId(node), kind: RequestKind::Produce, deficit };
+        // Node 30 (level 3) is wanted 3 levels finer by one ray of three; node 10 (level 1) one level finer.
+        let raw = vec![with(10, 1), with(30, 1), with(30, 3), with(10, 1), with(30, 2)];
+        let queue = RequestQueue::build(raw, None, |node| node.0 / 10);
+        assert_eq!(queue.len(), 2);
+        assert_eq!(queue.requests[0].request, with(30, 3));
+        assert_eq!(queue.requests[0].ray_count, 3);
+        assert_eq!(queue.requests[1].request, with(10, 1));
     }
 
     #[test]

@@ -905,7 +905,8 @@ fn march(state: ptr<function, RayState>) {
                     break;
                 }
                 if node.data_word == 0u {
-                    request(state, current.id, REQUEST_PRODUCE);
+                    // The parent stands in: drawn one level above this node (the deficit, as the CPU's).
+                    request(state, current.id, REQUEST_PRODUCE | (min(target_level + 1u - current.level, 255u) << REQUEST_DEFICIT_SHIFT));
                     break;
                 }
                 if current.level >= target_level || (node.child_word & NODE_TERMINAL_BIT) != 0u {
@@ -921,7 +922,7 @@ fn march(state: ptr<function, RayState>) {
                 }
                 let tile = node.child_word & NODE_CHILD_MASK;
                 if tile == 0u {
-                    request(state, current.id, REQUEST_SUBDIVIDE);
+                    request(state, current.id, REQUEST_SUBDIVIDE | (min(target_level - current.level, 255u) << REQUEST_DEFICIT_SHIFT));
                     break;
                 }
                 mark_tile(tile);

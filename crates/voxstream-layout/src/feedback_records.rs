@@ -24,7 +24,7 @@
 //! | | 12 | 4 | `padding` | zero |
 //! | [`UsageFlag`] | 0 | 4 | `used` | 0 = unused this frame, 1 = used |
 //! | [`RequestRecord`] | 0 | 4 | `node` | the node's index in the node buffer |
-//! | | 4 | 4 | `kind` | [`REQUEST_PRODUCE`] or [`REQUEST_SUBDIVIDE`] |
+//! | | 4 | 4 | `kind` | bits 0–7: [`REQUEST_PRODUCE`] or [`REQUEST_SUBDIVIDE`]; bits 8–15: the ray's level deficit |
 
 use bytemuck::{Pod, Zeroable};
 
@@ -32,6 +32,11 @@ use bytemuck::{Pod, Zeroable};
 pub const REQUEST_PRODUCE: u32 = 0;
 /// [`RequestRecord::kind`]: the node is too coarse for the ray and has no children; create its child tile.
 pub const REQUEST_SUBDIVIDE: u32 = 1;
+/// [`RequestRecord::kind`]'s bits holding the kind.
+pub const REQUEST_KIND_MASK: u32 = 0xff;
+/// [`RequestRecord::kind`]'s shift to the level deficit (8 bits): how many levels coarser than it wanted the ray drew
+/// for lack of this node (Thiele et al.'s ideal − actual level, the request's priority).
+pub const REQUEST_DEFICIT_SHIFT: u32 = 8;
 
 /// The fill level of the request buffer.
 #[repr(C)]
@@ -76,7 +81,7 @@ pub struct UsageFlag {
 pub struct RequestRecord {
     /// The node's index in the node buffer.
     pub node: u32,
-    /// [`REQUEST_PRODUCE`] or [`REQUEST_SUBDIVIDE`].
+    /// [`REQUEST_PRODUCE`] or [`REQUEST_SUBDIVIDE`], with the level deficit at [`REQUEST_DEFICIT_SHIFT`].
     pub kind: u32,
 }
 

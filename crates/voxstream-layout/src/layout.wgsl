@@ -49,6 +49,8 @@ struct TransferTableEntry {
 // feedback_records.rs: what the rays write for the cache manager (GigaVoxels [P09] §5).
 const REQUEST_PRODUCE: u32 = 0u;
 const REQUEST_SUBDIVIDE: u32 = 1u;
+const REQUEST_KIND_MASK: u32 = 0xffu;
+const REQUEST_DEFICIT_SHIFT: u32 = 8u;
 
 struct FeedbackCounters {
     request_count: atomic<u32>,

@@ -924,7 +924,9 @@ impl<'a> Traversal<'a> {
                 }
                 NodeData::Brick(_) => {}
                 NodeData::Missing => {
-                    request.push(Request { node: id, kind: RequestKind::Produce });
+                    // The parent stands in: drawn one level above this node.
+                    let deficit = (target_level + 1).saturating_sub(level).min(u8::MAX as u32) as u8;
+                    request.push(Request { node: id, kind: RequestKind::Produce, deficit });
                     break;
                 }
             }
@@ -943,7 +945,8 @@ impl<'a> Traversal<'a> {
                 }
             }
             let Some(tile) = node.child_tile() else {
-                request.push(Request { node: id, kind: RequestKind::Subdivide });
+                let deficit = target_level.saturating_sub(level).min(u8::MAX as u32) as u8;
+                request.push(Request { node: id, kind: RequestKind::Subdivide, deficit });
                 break;
             };
             self.feedback.mark_tile(tile);

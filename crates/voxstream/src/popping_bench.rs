@@ -1,7 +1,8 @@
 //! `voxstream bench --popping`: popping and seams (Thiele et al.'s evaluation, [`voxstream_engine::popping`]) along
 //! four camera paths (at rest, orbit, zoom, fly-through; [`crate::camera_path::PathKind`]), each from a cold cache with a
-//! bounded number of requests per frame, level blending off and on, against the converged images at the same
-//! cameras; with the frame times, so the cost of blending shows next to what it buys.
+//! bounded number of requests per frame, level blending off and on (and on with Thiele et al.'s restriction of the
+//! working set lifted, to show what it adds), against the converged images at the same cameras; with the frame
+//! times, so the cost of blending shows next to what it buys.
 
 use std::sync::Arc;
 
@@ -47,6 +48,17 @@ pub struct PathFigures {
     pub off_frames_to_final: usize,
     /// The same, blending on.
     pub on_frames_to_final: usize,
+    /// Blending on with a free working set (Thiele et al.'s restriction off): what the restriction adds.
+    pub free: PoppingSummary,
+    /// Median frame time, blending on, working set free, ms.
+    pub free_frame_ms: f64,
+    /// Frames to final, blending on, working set free.
+    pub free_frames_to_final: usize,
+    /// Forced steps served over the path with blending on (the restricted working set), and evictions that yielded
+    /// to the budget.
+    pub forced_steps: u64,
+    /// Evictions that broke the restriction for the budget's sake, over the path.
+    pub restriction_yielded: u64,
 }
 
 /// Runs the popping benchmark and prints a Markdown table.
@@ -135,7 +147,8 @@ fn strip_start(figure: &PathFigures) -> usize {
     (figure.off.empty_frames_skipped + peak).saturating_sub(STRIP_FRAMES / 2 - 1)
 }
 
-/// One path from `view` over a source, blending off then on, each from a cold session made by `make`.
+/// One path from `view` over a source, blending off, on with a free working set, and on (restricted), each from a
+/// cold session made by `make`; returns the figures and the recordings without and with blending (restricted).
 fn study<P: Producer>(
     source: &str,
     view: &Camera,
@@ -147,10 +160,15 @@ fn study<P: Producer>(
     let cameras = generated_path(kind, frames, view);
     let mut runs = Vec::new();
     let mut exact = Vec::new();
-    for fade_frames in [None, Some(DEFAULT_FADE_FRAMES)] {
+    let (mut forced_steps, mut restriction_yielded) = (0, 0);
+    // Off, on with a free working set, on (restricted).
+    for (fade_frames, restrict) in
+        [(None, false), (Some(DEFAULT_FADE_FRAMES), false), (Some(DEFAULT_FADE_FRAMES), true)]
+    {
         let limits = LoopLimits {
             requests_per_frame: args.requests_per_frame,
             blending_fade_frames: fade_frames,
+            restrict_working_set: restrict,
             ..LoopLimits::default()
         };
         let mut session = make(limits)?;
@@ -160,6 +178,10 @@ fn study<P: Producer>(
         for camera in &cameras {
             let result = session.render(camera, Mode::Interactive)?;
             frame_ms.push(result.elapsed_ms);
+            if restrict {
+                forced_steps += result.forced_steps;
+                restriction_yielded += result.restriction_yielded;
+            }
             recorder.record(camera, &result.image);
             last_final = result.is_final();
         }
@@ -175,8 +197,9 @@ fn study<P: Producer>(
         frame_ms.sort_by(f64::total_cmp);
         runs.push((recorder, frame_ms[frame_ms.len() / 2], frames_to_final));
     }
-    let (on, on_ms, on_final) = runs.pop().expect("two runs");
-    let (off, off_ms, off_final) = runs.pop().expect("two runs");
+    let (on, on_ms, on_final) = runs.pop().expect("three runs");
+    let (free, free_ms, free_final) = runs.pop().expect("three runs");
+    let (off, off_ms, off_final) = runs.pop().expect("three runs");
     let figure = PathFigures {
         source: source.to_string(),
         path: kind.name().to_string(),
@@ -187,6 +210,11 @@ fn study<P: Producer>(
         on_frame_ms: on_ms,
         off_frames_to_final: off_final,
         on_frames_to_final: on_final,
+        free: free.summary(&exact),
+        free_frame_ms: free_ms,
+        free_frames_to_final: free_final,
+        forced_steps,
+        restriction_yielded,
     };
     Ok((figure, off, on))
 }
@@ -221,6 +249,31 @@ fn print_table(figures: &[PathFigures], args: &BenchArgs, frames: usize) {
             (f.on_frame_ms / f.off_frame_ms.max(1e-9) - 1.0) * 100.0,
             f.off_frames_to_final,
             f.on_frames_to_final,
+        );
+    }
+    println!(
+        "\nWhat the restricted working set adds to blending (blending on, working set free → restricted; forced: steps \
+         served so that neighbours stay within one level, yielded: evictions that broke it for the budget)\n"
+    );
+    println!("| source | path | popping mean | popping p99 | seams mean | frame ms (median) | frames to final | forced | yielded |");
+    println!("|---|---|---|---|---|---|---|---|---|");
+    for f in figures {
+        println!(
+            "| {} | {} | {:.3} → {:.3} | {:.2} → {:.2} | {:.3} → {:.3} | {:.0} → {:.0} | {} → {} | {} | {} |",
+            f.source,
+            f.path,
+            f.free.popping_mean,
+            f.on.popping_mean,
+            f.free.popping_p99,
+            f.on.popping_p99,
+            f.free.seam_mean,
+            f.on.seam_mean,
+            f.free_frame_ms,
+            f.on_frame_ms,
+            f.free_frames_to_final,
+            f.on_frames_to_final,
+            f.forced_steps,
+            f.restriction_yielded,
         );
     }
 }

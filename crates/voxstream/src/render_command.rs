@@ -459,6 +459,8 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
             stats.samples += result.samples;
             stats.requests += result.requests;
             stats.bricks_produced += result.bricks_produced;
+            stats.forced_steps += result.forced_steps;
+            stats.restriction_yielded += result.restriction_yielded;
             stats.converged = result.is_converged();
             if let Some(recorder) = &mut recorder {
                 recorder.record(camera, &result.image);

@@ -25,6 +25,11 @@ pub struct RunStats {
     pub requests: u64,
     /// Bricks produced.
     pub bricks_produced: u64,
+    /// Of the requests served, steps no ray asked for that kept the working set restricted (level blending on:
+    /// Thiele et al.'s forced splits).
+    pub forced_steps: u64,
+    /// Evictions that broke the restriction because the memory budget needed them.
+    pub restriction_yielded: u64,
     /// Bricks resident at the end.
     pub bricks_resident: u64,
     /// Nodes resident at the end.
