@@ -11,8 +11,11 @@
 //! - **No dangling pointers.** Recycling a brick clears its owner's brick pointer. Recycling a tile clears its
 //!   parent's child pointer and frees its whole subtree (tiles and bricks), because descendants are never more
 //!   recently used than their ancestors.
-//! - **Dedup and priority.** [`RequestQueue`]: duplicates merged, parents before children, then by how many rays
-//!   asked, bounded per frame in interactive mode.
+//! - **Dedup and priority.** [`RequestQueue`]: duplicates merged, the largest level deficit first, then parents
+//!   before children, then by how many rays asked, bounded per frame in interactive mode.
+//! - **Restricted working set** (optional, [`CacheManager::set_restricted`]; Thiele et al., [`crate::restriction`]):
+//!   a request waits while forced steps complete its coarser neighbourhood, within the same bound; evictions that
+//!   would leave neighbours two levels apart are passed over for the next oldest.
 //! - **Threads.** Production runs on the rayon worker threads, outside any lock; results are applied by the
 //!   calling thread in queue order, so the final pools do not depend on scheduling. Requests deferred past the
 //!   per-frame bound are handed to [`Producer::prefetch`], which may read ahead in the background while the next
