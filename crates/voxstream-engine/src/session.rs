@@ -59,8 +59,9 @@ pub struct LoopLimits {
     /// Interactive mode only: Thiele et al.'s level blending ([`voxstream_core::level_blending`]) with a fade-in of
     /// this many frames; `None` turns it off. Converged frames never blend (their image is exact either way).
     pub blending_fade_frames: Option<u32>,
-    /// With level blending: keep the working set restricted (Thiele et al.: neighbouring data at most one level
-    /// apart, forced splits first; [`voxstream_core::restriction`]), in every frame. Without blending it is free.
+    /// Interactive frames with level blending: keep the working set restricted (Thiele et al.: neighbouring data at
+    /// most one level apart, forced splits first; [`voxstream_core::restriction`]). Converged frames, and frames
+    /// without blending, leave it free.
     pub restrict_working_set: bool,
 }
 
@@ -211,7 +212,6 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
         let lut = TransferLut::new(transfer_function, value_range[0] as f32, value_range[1] as f32, finest_voxel);
         let mut cache = CacheManager::new(producer, budget_bytes)?;
         cache.set_blending(limits.blending_fade_frames);
-        cache.set_restricted(limits.blending_fade_frames.is_some() && limits.restrict_working_set);
         Ok(Session {
             cache,
             renderer,
@@ -353,6 +353,11 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
         // Interactive frames with level blending step stand-ins as the data they stand in for (see
         // `RenderSettings::steps_ignore_stand_ins`): arriving data then changes values, never sample positions.
         settings.steps_ignore_stand_ins = mode == Mode::Interactive && self.limits.blending_fade_frames.is_some();
+        // Interactive frames keep the working set restricted; a converged frame draws every ray at its own level, so
+        // nothing of it pops, and the eviction veto would only cost (about a tenth of a frame that evicts much).
+        self.cache.set_restricted(
+            mode == Mode::Interactive && self.limits.blending_fade_frames.is_some() && self.limits.restrict_working_set,
+        );
         if mode == Mode::Converged {
             settings.max_requests_per_ray = settings.max_requests_per_ray.max(CONVERGED_REQUESTS_PER_RAY);
             if self.limits.gather_sparsely && self.gather_sparsely_next {
