@@ -60,3 +60,16 @@ pub fn ray_box(origin: DVec3, direction: DVec3, lower: DVec3, size: f64) -> Opti
     }
     (t0 <= t1).then_some((t0, t1))
 }
+
+/// Random cameras for property tests: a target inside the middle of the unit cube, an eye `min_distance`..2.5 away in
+/// any direction but near the poles, a 40° field of view.
+pub fn random_camera(min_distance: f64) -> impl proptest::strategy::Strategy<Value = Camera> {
+    use proptest::strategy::Strategy;
+    (0.2f64..0.8, 0.2f64..0.8, 0.2f64..0.8, 0.0f64..std::f64::consts::TAU, -0.8f64..0.8, min_distance..2.5).prop_map(
+        |(tx, ty, tz, azimuth, elevation, distance)| {
+            let (s, c) = ((1.0 - elevation * elevation).sqrt(), elevation);
+            let eye = [tx + distance * s * azimuth.cos(), ty + distance * c, tz + distance * s * azimuth.sin()];
+            Camera { eye, target: [tx, ty, tz], up: [0.0, 1.0, 0.0], fov: 40.0 }
+        },
+    )
+}

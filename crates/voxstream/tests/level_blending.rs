@@ -2,6 +2,8 @@
 //! converges to the same bytes with blending on and off (and as a converged frame), on random camera paths too; and
 //! on a cold start at rest, the largest frame-to-frame pop is smaller with blending.
 
+mod common;
+
 use proptest::prelude::*;
 use voxstream::popping_run::FrameRecorder;
 use voxstream::scenes::{builtin, SceneProducer, SCENE_NAMES};
@@ -64,16 +66,6 @@ fn a_cold_start_at_rest_pops_less_with_blending() {
     assert!(on.popping_p99 < off.popping_p99, "p99: off {} on {}", off.popping_p99, on.popping_p99);
 }
 
-fn camera_strategy() -> impl Strategy<Value = Camera> {
-    (0.2f64..0.8, 0.2f64..0.8, 0.2f64..0.8, 0.0f64..std::f64::consts::TAU, -0.8f64..0.8, 0.3f64..2.5).prop_map(
-        |(tx, ty, tz, azimuth, elevation, distance)| {
-            let (s, c) = ((1.0 - elevation * elevation).sqrt(), elevation);
-            let eye = [tx + distance * s * azimuth.cos(), ty + distance * c, tz + distance * s * azimuth.sin()];
-            Camera { eye, target: [tx, ty, tz], up: [0.0, 1.0, 0.0], fov: 40.0 }
-        },
-    )
-}
-
 proptest! {
     #![proptest_config(ProptestConfig { cases: 12, failure_persistence: None, ..ProptestConfig::default() })]
 
@@ -84,7 +76,7 @@ proptest! {
         scene in 0usize..SCENE_NAMES.len(),
         limit in 4usize..200,
         fade_frames in 1u32..6,
-        path in proptest::collection::vec(camera_strategy(), 1..6),
+        path in proptest::collection::vec(common::random_camera(0.3), 1..6),
     ) {
         let scene = SCENE_NAMES[scene];
         let mut moving = session(scene, 24, limit, Some(fade_frames));

@@ -2,12 +2,14 @@
 //! paths started cold with bounded requests per frame, the data the rays can draw never differs by more than one
 //! level between neighbours when the restriction is on; without it, it does.
 
+mod common;
+
 use proptest::prelude::*;
 use voxstream::camera_path::{generated_path, PathKind};
 use voxstream::scenes::{builtin, SceneProducer, SCENE_NAMES};
 use voxstream_core::{CoreError, PoolCapacities, Producer};
 use voxstream_engine::{LoopLimits, Mode, Session};
-use voxstream_render::{Camera, RenderSettings};
+use voxstream_render::Camera;
 
 /// A session whose budget is `budget_factor` times the smallest the scene's tree allows.
 fn session(
@@ -22,21 +24,13 @@ fn session(
         Err(CoreError::BudgetTooSmall { minimum_bytes, .. }) => minimum_bytes,
         other => panic!("no budget is too small? {other:?}"),
     };
-    let settings = RenderSettings {
-        width: size,
-        height: size,
-        shading: scene.shading,
-        light_direction: scene.light,
-        ..RenderSettings::default()
-    };
     let limits = LoopLimits {
         requests_per_frame,
         blending_fade_frames: Some(voxstream_core::DEFAULT_FADE_FRAMES),
         restrict_working_set: restrict,
         ..LoopLimits::default()
     };
-    Session::new(scene.producer, &scene.transfer_function, settings, minimum * budget_factor, limits)
-        .expect("a session")
+    common::scene_session_with(scene.name, size, minimum * budget_factor, limits)
 }
 
 /// Renders `path` interactively; after each frame checks the cache and the restriction. Returns the frames at
@@ -70,16 +64,6 @@ fn a_zoom_from_a_cold_cache_stays_restricted_only_with_the_restriction() {
     assert!(forced > 0, "the restriction forced no split on this path");
 }
 
-fn camera_strategy() -> impl Strategy<Value = Camera> {
-    (0.2f64..0.8, 0.2f64..0.8, 0.2f64..0.8, 0.0f64..std::f64::consts::TAU, -0.8f64..0.8, 0.05f64..2.5).prop_map(
-        |(tx, ty, tz, azimuth, elevation, distance)| {
-            let (s, c) = ((1.0 - elevation * elevation).sqrt(), elevation);
-            let eye = [tx + distance * s * azimuth.cos(), ty + distance * c, tz + distance * s * azimuth.sin()];
-            Camera { eye, target: [tx, ty, tz], up: [0.0, 1.0, 0.0], fov: 40.0 }
-        },
-    )
-}
-
 proptest! {
     #![proptest_config(ProptestConfig { cases: 24, failure_persistence: None, ..ProptestConfig::default() })]
 
@@ -90,12 +74,11 @@ proptest! {
         scene in 0usize..SCENE_NAMES.len(),
         limit in 4usize..200,
         budget_factor in prop_oneof![Just(2u64), Just(4), Just(1000)],
-        path in proptest::collection::vec(camera_strategy(), 2..8),
+        path in proptest::collection::vec(common::random_camera(0.05), 2..8),
         steps in 2usize..12,
     ) {
         let scene = SCENE_NAMES[scene];
         let mut moving = session(scene, 48, limit, budget_factor, true);
-        let mut produced = 0;
         let mut yielded_before = 0;
         // `steps` frames from each key camera to the next, eye and target moving linearly.
         let frames = path.windows(2).flat_map(|pair| {
@@ -108,7 +91,6 @@ proptest! {
         for (index, camera) in frames.enumerate() {
             let frame = moving.render(&camera, Mode::Interactive).unwrap();
             yielded_before += frame.restriction_yielded;
-            produced += frame.bricks_produced;
             prop_assert!(moving.cache().check_invariants().is_ok());
             if yielded_before == 0 {
                 let restricted = moving.cache().check_restricted();
