@@ -535,7 +535,6 @@ impl<P: Producer> CacheManager<P> {
     /// them.
     fn pin_path(&mut self, key: NodeKey) {
         let per_tile = self.shape.nodes_per_tile();
-        let n = self.shape.n as u64;
         let mut id = NodeId::ROOT;
         let mut here = NodeKey::ROOT;
         loop {
@@ -545,9 +544,7 @@ impl<P: Producer> CacheManager<P> {
             }
             let (Some(tile), true) = (node.child_tile(), here.level < key.level) else { return };
             self.node_pool.touch(tile, self.frame);
-            let div = n.pow(key.level - here.level - 1);
-            let c = [0, 1, 2].map(|a| (key.ijk[a] / div) % n);
-            let child = (c[0] + n * (c[1] + n * c[2])) as u32;
+            let child = restriction::child_towards(here, key, self.shape.n);
             id = NodeId::new(tile, child, per_tile);
             here = here.child(child, self.shape.n);
         }

@@ -52,7 +52,6 @@ impl Reach {
 /// Walks from the root towards `key` through nodes with data.
 pub fn reach(pool: &NodePool, key: NodeKey) -> Reach {
     let shape = *pool.shape();
-    let n = shape.n as u64;
     let per_tile = shape.nodes_per_tile();
     let mut id = NodeId::ROOT;
     let mut here = NodeKey::ROOT;
@@ -72,12 +71,18 @@ pub fn reach(pool: &NodePool, key: NodeKey) -> Reach {
         let Some(tile) = node.child_tile() else {
             return Reach::Childless(id, here);
         };
-        let div = n.pow(key.level - here.level - 1);
-        let c = [0, 1, 2].map(|a| (key.ijk[a] / div) % n);
-        let child = (c[0] + n * (c[1] + n * c[2])) as u32;
+        let child = child_towards(here, key, shape.n);
         id = NodeId::new(tile, child, per_tile);
         here = here.child(child, shape.n);
     }
+}
+
+/// The index of the child of `here` on the way to `key` (deeper, inside `here`).
+pub fn child_towards(here: NodeKey, key: NodeKey, n: u32) -> u32 {
+    let n = n as u64;
+    let div = n.pow(key.level - here.level - 1);
+    let c = [0, 1, 2].map(|a| (key.ijk[a] / div) % n);
+    (c[0] + n * (c[1] + n * c[2])) as u32
 }
 
 /// The nodes at `level` (at most `key.level`) whose closed boxes touch `key`'s, inside the volume: its ancestor at
