@@ -32,7 +32,7 @@
 //!   overshoots somewhat at the set's boundary, where Σ mⱼ/ρⱼ·W is not 1). Voxel values map its range, which
 //!   includes 0 (empty space), to 0…1.
 
-use glam::DVec3;
+use glam::{DVec3, Vec3};
 use std::num::NonZero;
 
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
@@ -255,13 +255,15 @@ impl ParticleGrid {
 pub struct ParticleProducer {
     shape: TreeShape,
     fit: UnitCubeFit,
-    /// Positions in unit-cube units, sorted by grid cell.
-    positions: Vec<DVec3>,
-    /// Kernel support per particle, unit-cube units (same order).
-    support: Vec<f64>,
-    masses: Vec<f64>,
-    /// What each particle adds, times its kernel: its mass (density), or `mⱼ/ρⱼ·Aⱼ` (attribute).
-    weights: Vec<f64>,
+    /// Positions in unit-cube units, sorted by grid cell. Single precision (a 2⁻²⁴ step of the cube, far below the
+    /// finest voxel of 1/8192): placed there once when the index is built, and everything after sees these values.
+    positions: Vec<Vec3>,
+    /// Kernel support per particle, unit-cube units (same order; single precision as the positions).
+    support: Vec<f32>,
+    /// Masses as the file gives them (single precision), 1 where it gives none.
+    masses: Vec<f32>,
+    /// Attribute mode: what each particle adds, times its kernel, `mⱼ/ρⱼ·Aⱼ`. Density mode: `None`, the masses.
+    attribute_weights: Option<Vec<f64>>,
     max_support: f64,
     classes: Vec<SupportClass>,
     /// Largest density at a particle, unit-cube units.
@@ -296,17 +298,16 @@ impl ParticleProducer {
         TreeShape::new(2, settings.brick_size, 0)
             .map_err(|error| GeometryError::Invalid { message: error.to_string() })?;
         let count = particles.len();
-        let unit: Vec<DVec3> = particles.positions().iter().map(|p| fit.to_unit(*p)).collect();
-        let masses: Vec<f64> = if particles.masses().is_empty() {
-            vec![1.0; count]
-        } else {
-            particles.masses().iter().map(|&m| f64::from(m)).collect()
-        };
+        // Rounded to the single precision they are stored in, before anything is derived from them.
+        let unit: Vec<DVec3> = particles.positions().iter().map(|p| fit.to_unit(*p).as_vec3().as_dvec3()).collect();
+        let masses: Vec<f32> =
+            if particles.masses().is_empty() { vec![1.0; count] } else { particles.masses().to_vec() };
         let support: Vec<f64> = if particles.smoothing().is_empty() {
             adaptive_support(&unit)
         } else {
             particles.smoothing().iter().map(|&h| f64::from(h) * settings.smoothing_scale / fit.size).collect()
         };
+        let support: Vec<f64> = support.into_iter().map(|h| f64::from(h as f32)).collect();
         // The margin keeps every kernel inside the cube; a huge smoothing length only makes the field smoother.
         let max_support = support.iter().copied().fold(0.0, f64::max);
         let min_support = support.iter().copied().fold(f64::INFINITY, f64::min);
@@ -350,16 +351,16 @@ impl ParticleProducer {
                 counts: ParticleGrid::new(group.iter().map(|&(_, _, i)| unit[i as usize]), coarse),
             });
         }
-        let positions: Vec<DVec3> = order.iter().map(|&i| unit[i as usize]).collect();
-        let support: Vec<f64> = order.iter().map(|&i| support[i as usize]).collect();
-        let masses: Vec<f64> = order.iter().map(|&i| masses[i as usize]).collect();
-        let total_mass = masses.iter().sum();
+        let positions: Vec<Vec3> = order.iter().map(|&i| unit[i as usize].as_vec3()).collect();
+        let support: Vec<f32> = order.iter().map(|&i| support[i as usize] as f32).collect();
+        let masses: Vec<f32> = order.iter().map(|&i| masses[i as usize]).collect();
+        let total_mass = masses.iter().map(|&m| f64::from(m)).sum();
         let mut producer = ParticleProducer {
             shape,
             fit,
             positions,
             support,
-            weights: masses.clone(),
+            attribute_weights: None,
             masses,
             max_support,
             classes,
@@ -376,7 +377,7 @@ impl ParticleProducer {
         let probed = |i: &usize| settings.attribute || *i < narrow_end || i.is_multiple_of(64);
         let densities: Vec<f64> = (0..count)
             .into_par_iter()
-            .map(|i| if probed(&i) { producer.density(producer.positions[i], 0.0) } else { 0.0 })
+            .map(|i| if probed(&i) { producer.density(producer.positions[i].as_dvec3(), 0.0) } else { 0.0 })
             .collect();
         let max_density = densities.iter().copied().fold(0.0, f64::max);
         let mut probed_densities: Vec<f64> = densities.iter().copied().filter(|&d| d > 0.0).collect();
@@ -393,14 +394,16 @@ impl ParticleProducer {
         if settings.attribute {
             let values = particles.values().0;
             // Every particle's kernel is positive at its own centre, so ρⱼ > 0.
-            producer.weights = order
-                .iter()
-                .zip(&densities)
-                .zip(&producer.masses)
-                .map(|((&i, rho), m)| m / rho * f64::from(values[i as usize]))
-                .collect();
+            producer.attribute_weights = Some(
+                order
+                    .iter()
+                    .zip(&densities)
+                    .zip(&producer.masses)
+                    .map(|((&i, rho), &m)| f64::from(m) / rho * f64::from(values[i as usize]))
+                    .collect(),
+            );
             let at_particles: Vec<f64> =
-                (0..count).into_par_iter().map(|i| producer.field(producer.positions[i], 0.0)).collect();
+                (0..count).into_par_iter().map(|i| producer.field(producer.positions[i].as_dvec3(), 0.0)).collect();
             let lower = at_particles.iter().copied().fold(0.0, f64::min);
             let upper = at_particles.iter().copied().fold(0.0, f64::max);
             producer.lower = lower;
@@ -475,20 +478,29 @@ impl ParticleProducer {
 
     /// The density at unit point `p` with kernels no narrower than `min_support` (0: the particles' own).
     pub fn density(&self, p: DVec3, min_support: f64) -> f64 {
-        self.kernel_sum(&self.masses, p, min_support)
+        self.kernel_sum(|i| f64::from(self.masses[i]), p, min_support)
     }
 
     /// The field rendered (density, or the attribute's interpolant) at unit point `p`.
     pub fn field(&self, p: DVec3, min_support: f64) -> f64 {
-        self.kernel_sum(&self.weights, p, min_support)
+        self.kernel_sum(|i| self.weight(i), p, min_support)
     }
 
-    fn kernel_sum(&self, weights: &[f64], p: DVec3, min_support: f64) -> f64 {
+    /// What particle `i` adds, times its kernel: its mass (density), or `mⱼ/ρⱼ·Aⱼ` (attribute).
+    #[inline]
+    fn weight(&self, i: usize) -> f64 {
+        match &self.attribute_weights {
+            Some(weights) => weights[i],
+            None => f64::from(self.masses[i]),
+        }
+    }
+
+    fn kernel_sum(&self, weight: impl Fn(usize) -> f64, p: DVec3, min_support: f64) -> f64 {
         let mut sum = 0.0;
         self.gather(p, p, min_support, |range| {
             for i in range {
-                let h = self.level_support(self.support[i], min_support);
-                sum += weights[i] * cubic_spline((self.positions[i] - p).length(), h);
+                let h = self.level_support(f64::from(self.support[i]), min_support);
+                sum += weight(i) * cubic_spline((self.positions[i].as_dvec3() - p).length(), h);
             }
         });
         sum
@@ -497,7 +509,9 @@ impl ParticleProducer {
     /// Bytes held, for the memory budget.
     pub fn heap_bytes(&self) -> u64 {
         let counts: usize = self.classes.iter().map(|c| c.counts.prefix.len() * 4).sum();
-        (self.positions.len() * (24 + 8 + 8 + 8 + 8) + counts) as u64
+        // Position, support, mass and sorted cell key per particle, and the attribute's weight.
+        let weights = self.attribute_weights.as_ref().map_or(0, |w| w.len() * 8);
+        (self.positions.len() * (12 + 4 + 4 + 8) + weights + counts) as u64
     }
 }
 
@@ -573,8 +587,8 @@ impl Producer for ParticleProducer {
         let mut reached = false;
         self.gather(first, last, min_support, |range| {
             for i in range {
-                let p = self.positions[i];
-                let h = self.level_support(self.support[i], min_support);
+                let p = self.positions[i].as_dvec3();
+                let h = self.level_support(f64::from(self.support[i]), min_support);
                 // Does the kernel reach the box of the stored voxel centres (which holds every finer level's
                 // voxel centres too)? Finer levels use kernels no wider, so if none does, none will.
                 let outside = (first - p).max(p - last).max(DVec3::ZERO);
@@ -592,7 +606,7 @@ impl Producer for ParticleProducer {
                 let high = high.min(DVec3::splat((b - 1) as f64)).as_uvec3();
                 // The kernel's sphere, not its bounding cube: per row, only the chord inside the support (about
                 // half the cube's voxels), with the kernel's constants taken out of the loop.
-                let kernel = SplineKernel::new(h, self.weights[i]);
+                let kernel = SplineKernel::new(h, self.weight(i));
                 for vz in low.z..=high.z {
                     let dz = first.z + f64::from(vz) * voxel - p.z;
                     for vy in low.y..=high.y {
