@@ -240,7 +240,7 @@ impl<P: Producer> CacheManager<P> {
 
     /// Checks that the working set is restricted; returns the first violation. Used by tests.
     pub fn check_restricted(&self) -> Result<(), String> {
-        restriction::check(&self.node_pool)
+        restriction::check(&self.node_pool, |key| self.failed.contains(&key))
     }
 
     /// Ends any blending in progress: the next frame shows what is resident as it is (after an exact frame).
@@ -371,6 +371,17 @@ impl<P: Producer> CacheManager<P> {
         }
     }
 
+    /// What must be served before the node of `key` may become complete ([`restriction::prerequisites`]; failed
+    /// nodes count as satisfied).
+    fn prerequisites(&self, key: NodeKey) -> Vec<Reach> {
+        restriction::prerequisites(&self.node_pool, key, |k| self.failed.contains(&k))
+    }
+
+    /// Whether serving `request` now would break the restricted working set (when it is kept).
+    fn is_premature(&self, request: Request, key: NodeKey) -> bool {
+        self.restricted && request.kind == RequestKind::Produce && !self.prerequisites(key).is_empty()
+    }
+
     /// Produces and subdivides `work` on worker threads, with no lock held, a batch at a time so that
     /// produced-but-unapplied bricks stay a bounded transient; applies each batch in order. What cannot be applied
     /// (no room, or the restriction no longer allows it) is counted deferred, and the rays' own requests among it
@@ -383,11 +394,15 @@ impl<P: Producer> CacheManager<P> {
         unserved: &mut Vec<(Request, NodeKey)>,
     ) {
         for batch in work.chunks(self.capacities.production_batch.max(1) as usize) {
+            // Under the restriction, what is premature already is not produced at all.
+            let premature: Vec<bool> = batch.iter().map(|item| self.is_premature(item.request, item.key)).collect();
             let producer = &self.producer;
             let shape = self.shape;
             let results: Vec<WorkResult> = batch
                 .par_iter()
-                .map(|item| match item.request.kind {
+                .zip(&premature)
+                .map(|(item, &premature)| match item.request.kind {
+                    _ if premature => WorkResult::Premature,
                     RequestKind::Produce => WorkResult::Produced(produce_analysed(producer, item.key, &shape)),
                     RequestKind::Subdivide => WorkResult::Children(
                         (0..shape.nodes_per_tile()).map(|c| producer.oracle(item.key.child(c, shape.n))).collect(),
@@ -401,11 +416,9 @@ impl<P: Producer> CacheManager<P> {
                 if !self.still_wanted(request, key) {
                     continue;
                 }
-                let is_premature = self.restricted
-                    && request.kind == RequestKind::Produce
-                    && !restriction::prerequisites(&self.node_pool, key).is_empty();
-                let applied = !is_premature
+                let applied = !self.is_premature(request, key)
                     && match result {
+                        WorkResult::Premature => false,
                         WorkResult::Produced(Ok(brick)) => {
                             self.apply_produced(request.node, brick, Eviction::Allowed, report)
                         }
@@ -447,7 +460,8 @@ impl<P: Producer> CacheManager<P> {
         let mut waiting = work;
         while !waiting.is_empty() && limit > 0 {
             let mut round: Vec<Work> = Vec::new();
-            let mut planned: HashSet<Request> = HashSet::new();
+            // By node and kind: a forced step and a ray's request for the same node are one piece of work.
+            let mut planned: HashSet<(NodeId, RequestKind)> = HashSet::new();
             let mut next: Vec<(Request, NodeKey)> = Vec::new();
             for (request, key) in waiting {
                 if !self.still_wanted(request, key) {
@@ -459,7 +473,7 @@ impl<P: Producer> CacheManager<P> {
                 }
                 let steps = if request.kind == RequestKind::Produce { self.forced_steps(key) } else { Vec::new() };
                 if steps.is_empty() {
-                    if planned.insert(request) {
+                    if planned.insert((request.node, request.kind)) {
                         if request.kind == RequestKind::Produce {
                             self.pin_neighbourhood(key);
                         }
@@ -468,7 +482,7 @@ impl<P: Producer> CacheManager<P> {
                     continue;
                 }
                 for (step, step_key) in steps {
-                    if round.len() < limit && planned.insert(step) {
+                    if round.len() < limit && planned.insert((step.node, step.kind)) {
                         match step.kind {
                             RequestKind::Produce => self.pin_neighbourhood(step_key),
                             RequestKind::Subdivide => self.pin_path(step_key),
@@ -505,7 +519,7 @@ impl<P: Producer> CacheManager<P> {
             seen: &mut HashSet<NodeKey>,
             out: &mut Vec<(Request, NodeKey)>,
         ) {
-            for step in restriction::prerequisites(&cache.node_pool, key) {
+            for step in restriction::prerequisites(&cache.node_pool, key, |k| cache.failed.contains(&k)) {
                 match step {
                     Reach::Childless(node, step_key) => {
                         if seen.insert(step_key) {
@@ -577,7 +591,7 @@ impl<P: Producer> CacheManager<P> {
                 let key = parent_key.child(child, n);
                 if self.node_pool.node(node_id).data() == NodeData::Missing
                     && !self.failed.contains(&key)
-                    && !(self.restricted && !restriction::prerequisites(&self.node_pool, key).is_empty())
+                    && !(self.restricted && !self.prerequisites(key).is_empty())
                 {
                     candidates.push((node_id, key));
                 }
@@ -647,6 +661,16 @@ impl<P: Producer> CacheManager<P> {
                 if let Some(previous_owner) = evicted {
                     self.node_pool.node_mut(previous_owner).set_brick(None);
                     report.bricks_evicted += 1;
+                    // Restricted: a node without data keeps no children. Produced again later, it would otherwise
+                    // make its cached subtree complete at once, unchecked against neighbours evicted meanwhile.
+                    if self.restricted {
+                        if let Some(children) = self.node_pool.node(previous_owner).child_tile() {
+                            if !self.is_ancestor_tile(children, node_id) {
+                                self.node_pool.node_mut(previous_owner).set_child_tile(None);
+                                self.free_subtree(children);
+                            }
+                        }
+                    }
                 }
                 if let Some(range) = brick.subtree_range {
                     self.brick_pool.widen_range(slot, range);
@@ -687,6 +711,22 @@ impl<P: Producer> CacheManager<P> {
         }
         report.tiles_created += 1;
         Some(tile)
+    }
+
+    /// Whether `node` lies in the subtree rooted at `tile`.
+    fn is_ancestor_tile(&self, tile: TileId, node: NodeId) -> bool {
+        let per_tile = self.shape.nodes_per_tile();
+        let mut current = node.tile(per_tile);
+        loop {
+            if current == tile {
+                return true;
+            }
+            let parent = self.node_pool.record(current).parent;
+            if current == ROOT_TILE || parent == u32::MAX {
+                return false;
+            }
+            current = NodeId(parent).tile(per_tile);
+        }
     }
 
     /// Clears the parent's pointer to `tile`, then frees the tile's subtree.
@@ -795,7 +835,9 @@ fn freeing_breaks_restriction(pool: &NodePool, tile: TileId) -> bool {
         return false;
     }
     let parent = NodeKey { level: record.level - 1, ijk: record.parent_ijk };
-    restriction::finer_data_touches(pool, parent, record.level)
+    // Below a node that is not complete nothing is drawn, so nothing depends on it.
+    reach(pool, parent) == Reach::Complete(NodeId(record.parent))
+        && restriction::finer_data_touches(pool, parent, record.level)
 }
 
 /// Whether storing a produced brick may recycle the least recently used slot.
@@ -810,6 +852,8 @@ enum Eviction {
 enum WorkResult {
     Produced(Result<AnalysedBrick, ProduceError>),
     Children(Vec<Option<f32>>),
+    /// Not done: producing it would break the restricted working set.
+    Premature,
 }
 
 struct AnalysedBrick {
@@ -929,6 +973,55 @@ mod tests {
         assert_eq!(child_fades[..5], [0.0, 0.25, 0.5, 0.75, 1.0]);
         assert!(!cache.is_blending(), "all in: the view carries no caps");
         assert!(cache.view().brick_blends.is_empty());
+    }
+
+    /// A brick everywhere but at the level-1 node (1, 0, 0), whose production fails.
+    struct FailsOnce;
+    impl Producer for FailsOnce {
+        fn shape(&self) -> TreeShape {
+            TreeShape::new(2, 8, 3).unwrap()
+        }
+        fn produce(&self, key: NodeKey, voxels: &mut [u16]) -> Result<Produced, ProduceError> {
+            if key == (NodeKey { level: 1, ijk: [1, 0, 0] }) {
+                return Err(ProduceError { level: key.level, ijk: key.ijk, message: "unreadable".into() });
+            }
+            Ramp.produce(key, voxels)
+        }
+    }
+
+    #[test]
+    fn the_restriction_forces_coarser_neighbours_first_and_passes_over_failed_ones() {
+        let mut cache = CacheManager::new(FailsOnce, 16 << 20).unwrap();
+        cache.set_restricted(true);
+        let serve = |cache: &mut CacheManager<FailsOnce>, node: NodeId, kind: RequestKind| {
+            cache.begin_frame();
+            cache.feedback().push_requests(&[Request { node, kind, deficit: 1 }]);
+            let report = cache.end_frame(ServeOptions::ALL);
+            assert_eq!(cache.check_invariants(), Ok(()));
+            assert_eq!(cache.check_restricted(), Ok(()));
+            report
+        };
+        serve(&mut cache, NodeId::ROOT, RequestKind::Produce);
+        serve(&mut cache, NodeId::ROOT, RequestKind::Subdivide);
+        let tile = cache.node_pool().node(NodeId::ROOT).child_tile().unwrap();
+        let level1 = |c: u32| NodeId::new(tile, c, 8);
+        // (0, 0, 0) gets data and children; its children's level-1 neighbours have none yet.
+        serve(&mut cache, level1(0), RequestKind::Produce);
+        serve(&mut cache, level1(0), RequestKind::Subdivide);
+        let grandchildren = cache.node_pool().node(level1(0)).child_tile().unwrap();
+        // The level-2 node (1, 1, 0) touches the level-1 nodes (0 or 1, 0 or 1, 0): three of them still missing. Its
+        // request waits while they are produced (forced), then it is served in the same frame.
+        let corner = NodeId::new(grandchildren, 1 + 2, 8);
+        assert_eq!(cache.node_pool().key(corner), NodeKey { level: 2, ijk: [1, 1, 0] });
+        let report = serve(&mut cache, corner, RequestKind::Produce);
+        assert_eq!(report.forced, 3, "{report:?}");
+        assert_eq!(report.failures.len(), 1, "(1, 0, 0) fails");
+        assert!(
+            cache.node_pool().node(level1(2)).brick().is_some() && cache.node_pool().node(level1(3)).brick().is_some()
+        );
+        // Beside the failed node the request is served all the same: its ancestor stands in for good.
+        assert!(cache.node_pool().node(corner).brick().is_some(), "{report:?}");
+        assert_eq!(report.deferred, 0);
     }
 
     #[test]

@@ -151,7 +151,8 @@ impl NodePool {
 
     /// The tile that the next allocation at `frame` would recycle, if the pool is full and one is old enough.
     pub fn oldest_recyclable(&self, frame: u32) -> Option<TileId> {
-        if self.lru.high_water() < self.lru.capacity() {
+        // A tile never used, or released, is taken before any is recycled.
+        if self.lru.len() < self.lru.capacity() {
             return None;
         }
         let oldest = self.lru.iter_oldest_first().next()?;

@@ -121,14 +121,17 @@ pub fn boxes_touch(shape: &TreeShape, a: NodeKey, b: NodeKey) -> bool {
 
 /// What must be done before `key` may become complete: for each position one level up touching it that is not
 /// satisfied, the first step on the way there. Empty at levels 0 and 1, and when the restriction already allows it.
-pub fn prerequisites(pool: &NodePool, key: NodeKey) -> Vec<Reach> {
+/// A missing node whose production failed (`has_failed`) counts as satisfied: its ancestor stands in for good, and
+/// nothing can be done for it.
+pub fn prerequisites(pool: &NodePool, key: NodeKey, has_failed: impl Fn(NodeKey) -> bool) -> Vec<Reach> {
     if key.level < 2 {
         return Vec::new();
     }
     let mut steps: Vec<Reach> = Vec::new();
     for position in touching(pool.shape(), key, key.level - 1) {
         let step = reach(pool, position);
-        if !step.is_satisfied() && !steps.contains(&step) {
+        let is_failed = matches!(step, Reach::Missing(_, missing) if has_failed(missing));
+        if !step.is_satisfied() && !is_failed && !steps.contains(&step) {
             steps.push(step);
         }
     }
@@ -165,8 +168,9 @@ pub fn finer_data_touches(pool: &NodePool, key: NodeKey, level: u32) -> bool {
     false
 }
 
-/// Checks the restriction over every complete node; returns the first violation. Used by tests.
-pub fn check(pool: &NodePool) -> Result<(), String> {
+/// Checks the restriction over every complete node (failed nodes count as satisfied, see [`prerequisites`]);
+/// returns the first violation. Used by tests.
+pub fn check(pool: &NodePool, has_failed: impl Fn(NodeKey) -> bool) -> Result<(), String> {
     let shape = *pool.shape();
     let per_tile = shape.nodes_per_tile();
     let mut stack = vec![(NodeId::ROOT, NodeKey::ROOT)];
@@ -175,7 +179,7 @@ pub fn check(pool: &NodePool) -> Result<(), String> {
         if node.data() == NodeData::Missing {
             continue;
         }
-        if let (Some(_), Some(step)) = (node.brick(), prerequisites(pool, key).first()) {
+        if let (Some(_), Some(step)) = (node.brick(), prerequisites(pool, key, &has_failed).first()) {
             return Err(format!("complete node {key:?} has a coarser neighbour: {step:?}"));
         }
         if let Some(tile) = node.child_tile() {
