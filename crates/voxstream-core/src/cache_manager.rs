@@ -233,11 +233,6 @@ impl<P: Producer> CacheManager<P> {
         self.restricted = restricted;
     }
 
-    /// Whether the working set is kept restricted.
-    pub fn is_restricted(&self) -> bool {
-        self.restricted
-    }
-
     /// Checks that the working set is restricted; returns the first violation. Used by tests.
     pub fn check_restricted(&self) -> Result<(), String> {
         restriction::check(&self.node_pool, |key| self.failed.contains(&key))
@@ -510,8 +505,8 @@ impl<P: Producer> CacheManager<P> {
 
     /// The steps that must be served before the node of `key` may be produced, each ready now (its own steps done):
     /// for every incomplete position one level up touching it, the first missing node on the way (or, if that one
-    /// is not ready either, its own steps, recursively) or the first childless one. Failed nodes are passed over:
-    /// their ancestors stand in, and nothing can be done for them.
+    /// is not ready either, its own steps, recursively) or the first childless one. Failed nodes are never steps
+    /// ([`CacheManager::prerequisites`]): their ancestors stand in, and nothing can be done for them.
     fn forced_steps(&self, key: NodeKey) -> Vec<(Request, NodeKey)> {
         fn visit<P: Producer>(
             cache: &CacheManager<P>,
@@ -519,7 +514,7 @@ impl<P: Producer> CacheManager<P> {
             seen: &mut HashSet<NodeKey>,
             out: &mut Vec<(Request, NodeKey)>,
         ) {
-            for step in restriction::prerequisites(&cache.node_pool, key, |k| cache.failed.contains(&k)) {
+            for step in cache.prerequisites(key) {
                 match step {
                     Reach::Childless(node, step_key) => {
                         if seen.insert(step_key) {
@@ -527,7 +522,7 @@ impl<P: Producer> CacheManager<P> {
                         }
                     }
                     Reach::Missing(node, step_key) => {
-                        if cache.failed.contains(&step_key) || !seen.insert(step_key) {
+                        if !seen.insert(step_key) {
                             continue;
                         }
                         let before = out.len();

@@ -354,7 +354,7 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
         // `RenderSettings::steps_ignore_stand_ins`): arriving data then changes values, never sample positions.
         settings.steps_ignore_stand_ins = mode == Mode::Interactive && self.limits.blending_fade_frames.is_some();
         // Interactive frames keep the working set restricted; a converged frame draws every ray at its own level, so
-        // nothing of it pops, and the eviction veto would only cost (about a tenth of a frame that evicts much).
+        // nothing of it pops, and the eviction veto would only cost (a quarter of a frame that evicts much).
         self.cache.set_restricted(
             mode == Mode::Interactive && self.limits.blending_fade_frames.is_some() && self.limits.restrict_working_set,
         );
