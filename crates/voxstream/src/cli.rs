@@ -99,6 +99,9 @@ pub struct ViewArgs {
     /// Particle files: show the scalar attribute (as `render --attribute`).
     #[arg(long)]
     pub attribute: bool,
+    /// Particle files: the kernel's reach in smoothing lengths (as `render --smoothing-scale`).
+    #[arg(long, value_name = "FACTOR")]
+    pub smoothing_scale: Option<f64>,
     /// Stores only: decode every level into RAM first (as `render --in-memory`).
     #[arg(long)]
     pub in_memory: bool,
@@ -134,7 +137,7 @@ pub enum NormalsArg {
 #[derive(Args, Debug, Clone)]
 pub struct RenderArgs {
     /// A built-in scene (sponge, hypertexture, shell), a store folder made by `voxstream import`, or a mesh (.ply,
-    /// .obj, .off, .stl) or particle file (.ply points, .xyz/.csv, .gro, .pdb, .vtk, .vtp; any of them .gz).
+    /// .obj, .off, .stl) or particle file (.ply points, .xyz/.csv, .gro, .pdb, .vtk, .vtp, .vtu; any of them .gz).
     #[arg(default_value = crate::scenes::DEFAULT_SCENE)]
     pub source: String,
     /// Mesh files: add multi-octave noise to the distance field (GigaVoxels' hypertexture), amplitude as a fraction
@@ -148,6 +151,11 @@ pub struct RenderArgs {
     /// Particle files: render the particles' scalar attribute (SPH-interpolated) instead of their density.
     #[arg(long)]
     pub attribute: bool,
+    /// Particle files: the SPH kernel reaches FACTOR times the file's smoothing length. 1 (the default) where the
+    /// file's `h` is the kernel's support radius (Gadget's `hsml`); 2 for codes whose cubic spline reaches 2h
+    /// (PySPH, Monaghan's convention). Molecular files (.gro, .pdb): 2 times the atomic radius unless given.
+    #[arg(long, value_name = "FACTOR")]
+    pub smoothing_scale: Option<f64>,
     /// Output PNG (with --path, frames are numbered: frame_0000.png, …).
     #[arg(long, default_value = "frame.png")]
     pub out: PathBuf,
@@ -323,6 +331,9 @@ pub struct ImportArgs {
     /// Mesh files: noise amplitude as a fraction of the mesh's largest side (as `render --amplify`).
     #[arg(long, value_name = "AMPLITUDE")]
     pub amplify: Option<f64>,
+    /// Particle files: the kernel's reach in smoothing lengths (as `render --smoothing-scale`).
+    #[arg(long, value_name = "FACTOR")]
+    pub smoothing_scale: Option<f64>,
     /// The store folder to create.
     #[arg(long)]
     pub out: PathBuf,

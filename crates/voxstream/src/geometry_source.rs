@@ -18,6 +18,11 @@ use voxstream_render::{Camera, IsoSurface, TransferFunction, VolumePlacement};
 
 use crate::render_command::frame_box;
 
+/// The smallest and largest `--smoothing-scale`: beyond them a file's smoothing lengths are in other units, which
+/// the user should fix at the source rather than by a factor (and a huge reach would merge every particle).
+const MIN_SMOOTHING_SCALE: f64 = 0.01;
+const MAX_SMOOTHING_SCALE: f64 = 100.0;
+
 /// The flags that shape a geometry file's tree (from `render` or `import`).
 #[derive(Clone, Copy, Debug)]
 pub struct GeometryOptions {
@@ -27,6 +32,8 @@ pub struct GeometryOptions {
     pub resolution: Option<u64>,
     /// `--attribute`: particles' scalar attribute instead of their density.
     pub attribute: bool,
+    /// `--smoothing-scale`: the kernel's reach in the file's smoothing lengths (`None`: 1, or 2 for molecules).
+    pub smoothing_scale: Option<f64>,
     /// Image size, for the default camera.
     pub width: u32,
     /// Image height.
@@ -131,6 +138,9 @@ pub fn open(path: &Path, args: &GeometryOptions) -> Result<GeometrySource> {
             if args.attribute {
                 bail!("--attribute applies to particle files; {shown} holds a mesh");
             }
+            if args.smoothing_scale.is_some() {
+                bail!("--smoothing-scale applies to particle files; {shown} holds a mesh");
+            }
             let mesh = TriangleMesh::new(raw).with_context(|| format!("in {shown}"))?;
             let (lower, upper) = mesh.bounds();
             let settings = MeshTreeSettings::default();
@@ -175,10 +185,26 @@ pub fn open(path: &Path, args: &GeometryOptions) -> Result<GeometrySource> {
                 bail!("--amplify applies to meshes; {shown} holds particles");
             }
             let molecular = is_molecular(path);
+            let smoothing_scale = match args.smoothing_scale {
+                None => {
+                    if molecular {
+                        2.0
+                    } else {
+                        1.0
+                    }
+                }
+                Some(scale) if scale.is_finite() && (MIN_SMOOTHING_SCALE..=MAX_SMOOTHING_SCALE).contains(&scale) => {
+                    scale
+                }
+                Some(scale) => bail!(
+                    "--smoothing-scale {scale}: the kernel's reach must be between {MIN_SMOOTHING_SCALE} and \
+                     {MAX_SMOOTHING_SCALE} smoothing lengths (1 where the file's h is the support, 2 for PySPH)"
+                ),
+            };
             let particles = ParticleSet::new(raw).with_context(|| format!("in {shown}"))?;
             let settings = ParticleTreeSettings {
                 resolution: args.resolution,
-                smoothing_scale: if molecular { 2.0 } else { 1.0 },
+                smoothing_scale,
                 attribute: args.attribute,
                 ..ParticleTreeSettings::default()
             };

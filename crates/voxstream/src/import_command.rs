@@ -26,6 +26,7 @@ pub fn run(args: &ImportArgs) -> Result<()> {
             amplify: args.amplify,
             resolution: Some(args.resolution.unwrap_or(DEFAULT_BAKE_RESOLUTION)),
             attribute: false,
+            smoothing_scale: args.smoothing_scale,
             width: 512,
             height: 512,
         };

@@ -67,6 +67,7 @@ fn unreachable_default() -> RenderArgs {
         amplify: None,
         resolution: None,
         attribute: false,
+        smoothing_scale: None,
         out: "frame.png".into(),
         width: 512,
         height: 512,

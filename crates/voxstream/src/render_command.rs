@@ -130,6 +130,7 @@ pub fn open_source(args: &RenderArgs, budget: &MemoryBudget, user: impl SourceUs
             amplify: args.amplify,
             resolution: args.resolution,
             attribute: args.attribute,
+            smoothing_scale: args.smoothing_scale,
             width: args.width,
             height: args.height,
         };

@@ -59,6 +59,7 @@ fn render_args(args: &ViewArgs) -> Result<RenderArgs> {
     render.amplify = args.amplify;
     render.resolution = args.resolution;
     render.attribute = args.attribute;
+    render.smoothing_scale = args.smoothing_scale;
     render.in_memory = args.in_memory;
     render.backend = args.backend;
     render.gpu_filter = args.gpu_filter;

@@ -16,6 +16,7 @@
 //! | `.pdb` | [`pdb`] | atoms as particles with per-element radii |
 //! | `.vtk` | [`vtk_legacy`] (ASCII and binary `POLYDATA`/`UNSTRUCTURED_GRID` points) | particles |
 //! | `.vtp` | [`vtp`] (VTK XML PolyData points) | particles |
+//! | `.vtu` | [`vtp`] (VTK XML UnstructuredGrid points, e.g. PySPH's `dump_vtk`) | particles |
 
 use std::io::Read;
 use std::path::Path;
@@ -49,8 +50,8 @@ pub enum RawGeometry {
 }
 
 /// File-name endings (lower case, `.gz` excluded) that [`read_geometry`] reads.
-pub const GEOMETRY_FILE_ENDINGS: [&str; 11] =
-    [".ply", ".obj", ".off", ".stl", ".xyz", ".csv", ".txt", ".gro", ".pdb", ".vtk", ".vtp"];
+pub const GEOMETRY_FILE_ENDINGS: [&str; 12] =
+    [".ply", ".obj", ".off", ".stl", ".xyz", ".csv", ".txt", ".gro", ".pdb", ".vtk", ".vtp", ".vtu"];
 
 /// Whether `path`'s name ends in one of [`GEOMETRY_FILE_ENDINGS`] (optionally followed by `.gz`).
 pub fn is_geometry_file_name(path: &Path) -> bool {
@@ -119,6 +120,7 @@ pub fn parse_geometry(bytes: &[u8], ending: &str, path: &Path) -> Result<RawGeom
         ".pdb" => RawGeometry::Particles(pdb::parse(bytes, path)?),
         ".vtk" => RawGeometry::Particles(vtk_legacy::parse(bytes, path)?),
         ".vtp" => RawGeometry::Particles(vtp::parse(bytes, path)?),
+        ".vtu" => RawGeometry::Particles(vtp::parse_dataset(bytes, path, vtp::Dataset::UnstructuredGrid)?),
         other => {
             return Err(GeometryError::Unsupported {
                 path: path.to_path_buf(),

@@ -1,5 +1,7 @@
-//! VTK XML PolyData (`.vtp`, <https://docs.vtk.org/en/latest/design_documents/VTKFileFormats.html>): the points of
-//! every `Piece` as particles, with arrays of their `PointData`.
+//! VTK XML PolyData (`.vtp`) and UnstructuredGrid (`.vtu`,
+//! <https://docs.vtk.org/en/latest/design_documents/VTKFileFormats.html>): the points of every `Piece` as particles,
+//! with arrays of their `PointData`. SPH codes write their particles as either (PySPH's `pysph dump_vtk` writes
+//! `.vtu`, one vertex cell per particle; the cells are not needed and not read).
 //!
 //! Arrays are read inline (`ascii`, `binary`: base64) or appended (`raw` or `base64`), uncompressed or
 //! zlib-compressed (`vtkZLibDataCompressor`), little- or big-endian, with UInt32 or UInt64 block headers, of any
@@ -16,8 +18,9 @@
 //! same bytes: all binary and appended arrays together may decode to no more than the file could hold (its length
 //! uncompressed, 1032 times it compressed), which bounds what the reader allocates whatever the pieces announce.
 //!
-//! Not read: cells (`Verts`, `Lines`, `Strips`, `Polys`), cell and field data, other dataset types (`.vtu`, `.vti`:
-//! their names do not end in `.vtp`), other compressors (LZ4, LZMA), `String` and `Bit` arrays.
+//! Not read: cells (`Verts`, `Lines`, `Strips`, `Polys`; an unstructured grid's `Cells`), cell and field data, other
+//! dataset types (`.vti` and the rest), other compressors (LZ4, LZMA), `String` and `Bit` arrays. The `VTKFile`
+//! type must match the file name's ending.
 
 use std::cell::Cell;
 use std::io::Read;
@@ -167,8 +170,40 @@ fn find(haystack: &[u8], needle: &[u8]) -> Option<usize> {
     haystack.windows(needle.len()).position(|w| w == needle)
 }
 
+/// The dataset types read, by file-name ending.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Dataset {
+    /// `.vtp`.
+    PolyData,
+    /// `.vtu`.
+    UnstructuredGrid,
+}
+
+impl Dataset {
+    /// The `VTKFile` element's `type`.
+    fn type_name(self) -> &'static str {
+        match self {
+            Dataset::PolyData => "PolyData",
+            Dataset::UnstructuredGrid => "UnstructuredGrid",
+        }
+    }
+
+    /// The file-name ending.
+    fn ending(self) -> &'static str {
+        match self {
+            Dataset::PolyData => ".vtp",
+            Dataset::UnstructuredGrid => ".vtu",
+        }
+    }
+}
+
 /// Parses a `.vtp` file.
 pub fn parse(bytes: &[u8], path: &Path) -> Result<RawParticles, GeometryError> {
+    parse_dataset(bytes, path, Dataset::PolyData)
+}
+
+/// Parses a `.vtp` or `.vtu` file: `dataset` is what its name announces.
+pub fn parse_dataset(bytes: &[u8], path: &Path, dataset: Dataset) -> Result<RawParticles, GeometryError> {
     let bad = |at: usize, message: String| GeometryError::format(path, Some(line_at(bytes, at)), message);
     let unsupported = |message: String| GeometryError::Unsupported { path: path.into(), message };
     // The XML part ends where appended raw data begins.
@@ -198,8 +233,17 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawParticles, GeometryError> {
                     b"VTKFile" => {
                         seen_file = true;
                         let kind = attr("type").unwrap_or_default();
-                        if kind != "PolyData" {
-                            return Err(unsupported(format!("VTKFile type '{kind}': only PolyData is read from .vtp")));
+                        if kind != dataset.type_name() {
+                            let other = [Dataset::PolyData, Dataset::UnstructuredGrid]
+                                .into_iter()
+                                .find(|d| d.type_name() == kind)
+                                .map(|d| format!(" (name the file {} to read it)", d.ending()))
+                                .unwrap_or_default();
+                            return Err(unsupported(format!(
+                                "VTKFile type '{kind}': only {} is read from {}{other}",
+                                dataset.type_name(),
+                                dataset.ending()
+                            )));
                         }
                         header.big_endian = attr("byte_order").as_deref() == Some("BigEndian");
                         header.header_u64 = attr("header_type").as_deref() == Some("UInt64");
@@ -892,6 +936,74 @@ _{first}{}
         let p = parse_bytes(text.as_bytes()).unwrap();
         assert_eq!(p.positions, vec![[4.0, 5.0, 6.0]]);
         assert_eq!(p.masses, vec![3.0]);
+    }
+
+    /// The layout PySPH's `dump_vtk` (through pyvisfile) writes: an unstructured grid of one vertex cell per particle,
+    /// every array appended as its own base64 run of a UInt32 byte count and the values.
+    #[test]
+    fn unstructured_grid_as_pysph_writes_it() {
+        let run = |data: Vec<u8>| b64(&[(data.len() as u32).to_le_bytes().to_vec(), data].concat());
+        let arrays = [
+            ("Float64", "rho", 1, run(le_bytes(&[1000.5f64, 1001.5], f64::to_le_bytes))),
+            ("Float64", "m", 1, run(le_bytes(&[0.064f64, 0.064], f64::to_le_bytes))),
+            ("Float64", "h", 1, run(le_bytes(&[0.052f64, 0.052], f64::to_le_bytes))),
+            ("Float64", "velocity", 3, run(le_bytes(&[0.0f64, 1.0, 2.0, 3.0, 4.0, 5.0], f64::to_le_bytes))),
+            ("Float64", "points", 3, run(le_bytes(&[0.1f64, 0.2, 0.3, 1.1, 1.2, 1.3], f64::to_le_bytes))),
+            ("Int64", "connectivity", 1, run(le_bytes(&[0i64, 1], i64::to_le_bytes))),
+        ];
+        let mut offset = 0;
+        let mut elements = Vec::new();
+        for (ty, name, components, text) in &arrays {
+            elements.push(format!(
+                r#"<DataArray type="{ty}" Name="{name}" NumberOfComponents="{components}" format="appended" offset="{offset}"/>"#
+            ));
+            offset += text.len();
+        }
+        let appended: String = arrays.iter().map(|a| a.3.as_str()).collect();
+        let text = format!(
+            r#"<?xml version="1.0"?>
+<VTKFile type="UnstructuredGrid" version="0.1" byte_order="LittleEndian">
+<UnstructuredGrid>
+<Piece NumberOfPoints="2" NumberOfCells="2">
+<PointData>
+{}
+{}
+{}
+{}
+</PointData>
+<Points>
+{}
+</Points>
+<Cells>
+{}
+</Cells>
+</Piece>
+</UnstructuredGrid>
+<AppendedData encoding="base64">
+_{appended}
+</AppendedData>
+</VTKFile>
+"#,
+            elements[0], elements[1], elements[2], elements[3], elements[4], elements[5]
+        );
+        let p = parse_dataset(text.as_bytes(), Path::new("p.vtu"), Dataset::UnstructuredGrid).unwrap();
+        assert_eq!(p.positions, vec![[0.1, 0.2, 0.3], [1.1, 1.2, 1.3]]);
+        assert_eq!(p.smoothing, vec![0.052, 0.052]);
+        assert_eq!(p.masses, vec![0.064, 0.064]);
+        assert_eq!(p.values, vec![1000.5, 1001.5]);
+        assert_eq!(p.value_name, "rho");
+        // The type must be what the name says.
+        assert_eq!(
+            error(text.as_bytes()),
+            "p.vtp: unsupported: VTKFile type 'UnstructuredGrid': only PolyData is read from .vtp (name the file .vtu to \
+             read it)"
+        );
+        let polydata = parse_dataset(ASCII.as_bytes(), Path::new("p.vtu"), Dataset::UnstructuredGrid);
+        assert_eq!(
+            polydata.unwrap_err().to_string(),
+            "p.vtu: unsupported: VTKFile type 'PolyData': only UnstructuredGrid is read from .vtu (name the file .vtp to \
+             read it)"
+        );
     }
 
     #[test]
