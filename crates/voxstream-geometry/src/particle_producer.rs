@@ -47,6 +47,10 @@ use crate::particles::ParticleSet;
 /// The top of the density scale, in median densities at the particles (see [`ParticleProducer::value_range`]).
 pub const DENSITY_RANGE: f64 = 1000.0;
 
+/// The factors [`ParticleTreeSettings::smoothing_scale`] may take: beyond them a file's smoothing lengths are in other
+/// units, which belongs fixed at the source rather than by a factor (and a huge reach would merge every particle).
+pub const SMOOTHING_SCALE_RANGE: std::ops::RangeInclusive<f64> = 0.01..=100.0;
+
 /// The kernel's support, in voxels of a level, below which a level widens the kernel.
 pub const MIN_SUPPORT_VOXELS: f64 = 2.0;
 
@@ -289,9 +293,14 @@ impl ParticleProducer {
         }
         let (lower, upper) = particles.bounds();
         let fit = UnitCubeFit::checked_around(lower, upper, settings.fill)?;
-        if !(settings.smoothing_scale.is_finite() && settings.smoothing_scale > 0.0) {
+        if !SMOOTHING_SCALE_RANGE.contains(&settings.smoothing_scale) {
             return Err(GeometryError::Invalid {
-                message: format!("smoothing scale {} must be positive", settings.smoothing_scale),
+                message: format!(
+                    "smoothing scale {} must be between {} and {}",
+                    settings.smoothing_scale,
+                    SMOOTHING_SCALE_RANGE.start(),
+                    SMOOTHING_SCALE_RANGE.end()
+                ),
             });
         }
         // The brick size is checked before it divides anything.

@@ -10,6 +10,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use voxstream_core::{NodeKey, ProduceError, Produced, Producer, TreeShape};
 use voxstream_geometry::formats::{read_geometry, RawGeometry};
+use voxstream_geometry::particle_producer::SMOOTHING_SCALE_RANGE;
 use voxstream_geometry::{
     Amplification, MeshProducer, MeshTreeSettings, ParticleProducer, ParticleSet, ParticleTreeSettings, TriangleMesh,
     UnitCubeFit,
@@ -17,11 +18,6 @@ use voxstream_geometry::{
 use voxstream_render::{Camera, IsoSurface, TransferFunction, VolumePlacement};
 
 use crate::render_command::frame_box;
-
-/// The smallest and largest `--smoothing-scale`: beyond them a file's smoothing lengths are in other units, which
-/// the user should fix at the source rather than by a factor (and a huge reach would merge every particle).
-const MIN_SMOOTHING_SCALE: f64 = 0.01;
-const MAX_SMOOTHING_SCALE: f64 = 100.0;
 
 /// The flags that shape a geometry file's tree (from `render` or `import`).
 #[derive(Clone, Copy, Debug)]
@@ -186,19 +182,14 @@ pub fn open(path: &Path, args: &GeometryOptions) -> Result<GeometrySource> {
             }
             let molecular = is_molecular(path);
             let smoothing_scale = match args.smoothing_scale {
-                None => {
-                    if molecular {
-                        2.0
-                    } else {
-                        1.0
-                    }
-                }
-                Some(scale) if scale.is_finite() && (MIN_SMOOTHING_SCALE..=MAX_SMOOTHING_SCALE).contains(&scale) => {
-                    scale
-                }
+                None if molecular => 2.0,
+                None => 1.0,
+                Some(scale) if SMOOTHING_SCALE_RANGE.contains(&scale) => scale,
                 Some(scale) => bail!(
-                    "--smoothing-scale {scale}: the kernel's reach must be between {MIN_SMOOTHING_SCALE} and \
-                     {MAX_SMOOTHING_SCALE} smoothing lengths (1 where the file's h is the support, 2 for PySPH)"
+                    "--smoothing-scale {scale}: the kernel's reach must be between {} and {} smoothing lengths (1 \
+                     where the file's h is the support, 2 for PySPH)",
+                    SMOOTHING_SCALE_RANGE.start(),
+                    SMOOTHING_SCALE_RANGE.end()
                 ),
             };
             let particles = ParticleSet::new(raw).with_context(|| format!("in {shown}"))?;
