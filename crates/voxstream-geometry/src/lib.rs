@@ -18,9 +18,12 @@ pub use particles::{ParticleSet, RawParticles};
 pub use triangle_mesh::{RawMesh, TriangleMesh};
 pub mod mesh_distance;
 pub mod mesh_producer;
+pub mod particle_index;
 pub mod particle_producer;
+pub mod superbrick_particles;
 pub mod triangle_bvh;
 
 pub use mesh_distance::{MeshDistance, UnitCubeFit};
 pub use mesh_producer::{Amplification, MeshProducer, MeshTreeSettings};
 pub use particle_producer::{ParticleProducer, ParticleTreeSettings};
+pub use superbrick_particles::{OutOfCoreSettings, ParticleChunks, SuperbrickParticleProducer, SuperbrickStatistics};

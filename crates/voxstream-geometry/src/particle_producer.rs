@@ -18,21 +18,21 @@
 //!   `[0, ρ_max]` in the file's mass per file volume unit.
 //! - **Smoothing lengths:** the file's, or, where it has none, `h = 2·(distance to the 8th nearest neighbour)` per
 //!   particle (a k-d tree, `kiddo`): narrow kernels in dense clusters, wide ones in sparse outskirts.
-//! - **Index:** particles grouped in support classes (powers of two of the smallest `h`), each sorted by its cells
-//!   on a grid no finer than its widest kernel, so gathering around a point visits about as many particles as reach
-//!   it, whatever the spread of `h`.
+//! - **Index:** a [`crate::particle_index`] over every particle: support classes (powers of two of the smallest
+//!   `h`), each sorted by its cells on a grid no finer than its widest kernel, so gathering around a point visits
+//!   about as many particles as reach it, whatever the spread of `h`.
 //! - **Oracle:** a node is empty when no particle of any class lies within its box widened by that class's support,
 //!   counted with each class's summed-area table: empty space is never produced.
 //!
-//! The grid is built in memory: particle sets larger than memory (Reichl's out-of-core superbricks) are not
-//! supported yet.
+//! The index is built in memory; particle sets larger than memory go to the out-of-core
+//! [`crate::SuperbrickParticleProducer`] (Reichl's superbricks), which makes the same bricks.
 //! - **Attribute:** with [`ParticleTreeSettings::attribute`], the particles' scalar attribute is resampled instead,
 //!   with the standard SPH interpolant `A(x) = Σ mⱼ/ρⱼ·Aⱼ·W(|x − xⱼ|, h)` (ρⱼ the density at particle j): it
 //!   reproduces the attribute inside the particle set and fades to 0 outside it (not Shepard-normalised, so it
 //!   overshoots somewhat at the set's boundary, where Σ mⱼ/ρⱼ·W is not 1). Voxel values map its range, which
 //!   includes 0 (empty space), to 0…1.
 
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 use std::num::NonZero;
 
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
@@ -42,6 +42,8 @@ use voxstream_procedural::brick_fill::voxel_centre;
 
 use crate::error::GeometryError;
 use crate::mesh_distance::UnitCubeFit;
+pub use crate::particle_index::cubic_spline;
+use crate::particle_index::ParticleIndex;
 use crate::particles::ParticleSet;
 
 /// The top of the density scale, in median densities at the particles (see [`ParticleProducer::value_range`]).
@@ -53,50 +55,6 @@ pub const SMOOTHING_SCALE_RANGE: std::ops::RangeInclusive<f64> = 0.01..=100.0;
 
 /// The kernel's support, in voxels of a level, below which a level widens the kernel.
 pub const MIN_SUPPORT_VOXELS: f64 = 2.0;
-
-/// The normalised cubic spline kernel with support `h`.
-#[inline]
-pub fn cubic_spline(r: f64, h: f64) -> f64 {
-    let q = r / h;
-    let sigma = 8.0 / (std::f64::consts::PI * h * h * h);
-    if q <= 0.5 {
-        sigma * (1.0 - 6.0 * q * q + 6.0 * q * q * q)
-    } else if q <= 1.0 {
-        let t = 1.0 - q;
-        sigma * 2.0 * t * t * t
-    } else {
-        0.0
-    }
-}
-
-/// [`cubic_spline`] of one support, times a particle's weight, with its constants computed once.
-#[derive(Clone, Copy, Debug)]
-struct SplineKernel {
-    h_squared: f64,
-    inverse_h: f64,
-    /// The weight times the normalisation `8 / (π h³)`.
-    scale: f64,
-}
-
-impl SplineKernel {
-    fn new(h: f64, weight: f64) -> SplineKernel {
-        SplineKernel { h_squared: h * h, inverse_h: 1.0 / h, scale: weight * 8.0 / (std::f64::consts::PI * h * h * h) }
-    }
-
-    /// `weight · cubic_spline(r, h)`.
-    #[inline]
-    fn weighted_at(&self, r: f64) -> f64 {
-        let q = r * self.inverse_h;
-        if q <= 0.5 {
-            self.scale * (1.0 - 6.0 * q * q + 6.0 * q * q * q)
-        } else if q <= 1.0 {
-            let t = 1.0 - q;
-            self.scale * 2.0 * t * t * t
-        } else {
-            0.0
-        }
-    }
-}
 
 /// How particles become a tree.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -122,154 +80,16 @@ impl Default for ParticleTreeSettings {
     }
 }
 
-/// Particle counts on a coarse uniform grid (at most 64³ cells) as a summed-area table: the oracle's O(1) test.
-#[derive(Clone, Debug)]
-pub struct ParticleGrid {
-    /// Cells per axis.
-    cells: usize,
-    /// Summed-area table, `(cells + 1)³`.
-    prefix: Vec<u32>,
-}
-
-/// The particles' cells on a fine grid (cell ≥ the largest support, up to 2²⁰ per axis), as sorted keys
-/// `(z·cells + y)·cells + x`: the particles of a box are found by binary searches per row of cells, so memory is one
-/// key per particle whatever the grid's size.
-#[derive(Clone, Debug)]
-pub struct SortedCells {
-    cells: u64,
-    keys: Vec<u64>,
-}
-
-/// Most support classes (powers of two of the smallest support).
-const MAX_CLASSES: usize = 24;
-
-/// The particles whose supports lie within a factor of two: a contiguous run of the sorted particles, on cells no
-/// smaller than their largest support, so that gathering around a point visits about as many particles as reach it.
-#[derive(Clone, Debug)]
-struct SupportClass {
-    /// Index of the class's first particle.
-    first: usize,
-    max_support: f64,
-    cells: SortedCells,
-    /// The class's counts for the oracle.
-    counts: ParticleGrid,
-}
-
-/// Rows of cells searched one by one below this; above, whole slabs (the particles' own distance tests then skip
-/// the extra ones).
-const MAX_ROWS: u64 = 4096;
-
-impl SortedCells {
-    fn cell_of(&self, p: DVec3) -> [u64; 3] {
-        let scale = self.cells as f64;
-        [0, 1, 2].map(|a| ((p[a] * scale).floor().max(0.0) as u64).min(self.cells - 1))
-    }
-
-    fn key(&self, [x, y, z]: [u64; 3]) -> u64 {
-        (z * self.cells + y) * self.cells + x
-    }
-
-    /// Calls `f` with index ranges (into the sorted particles) covering every particle in the cells overlapping the
-    /// box `lower..upper`, and perhaps others.
-    fn for_each_range(&self, lower: DVec3, upper: DVec3, mut f: impl FnMut(std::ops::Range<usize>)) {
-        let [x0, y0, z0] = self.cell_of(lower);
-        let [x1, y1, z1] = self.cell_of(upper);
-        let mut span = |from: u64, to: u64| {
-            let a = self.keys.partition_point(|&k| k < from);
-            let b = self.keys.partition_point(|&k| k <= to);
-            if a < b {
-                f(a..b);
-            }
-        };
-        let last = self.cells - 1;
-        if (y1 - y0 + 1) * (z1 - z0 + 1) <= MAX_ROWS {
-            for z in z0..=z1 {
-                for y in y0..=y1 {
-                    span(self.key([x0, y, z]), self.key([x1, y, z]));
-                }
-            }
-        } else if z1 - z0 < MAX_ROWS {
-            for z in z0..=z1 {
-                span(self.key([0, y0, z]), self.key([last, y1, z]));
-            }
-        } else {
-            span(self.key([0, 0, z0]), self.key([last, last, z1]));
-        }
-    }
-}
-
-impl ParticleGrid {
-    /// Counts `points` (unit-cube positions) on `cells`³ cells.
-    fn new(points: impl Iterator<Item = DVec3>, cells: usize) -> ParticleGrid {
-        let scale = cells as f64;
-        let mut counts = vec![0u32; cells * cells * cells];
-        for p in points {
-            let c = [0, 1, 2].map(|a| ((p[a] * scale).floor().max(0.0) as usize).min(cells - 1));
-            counts[(c[2] * cells + c[1]) * cells + c[0]] += 1;
-        }
-        let n = cells + 1;
-        let mut prefix = vec![0u32; n * n * n];
-        let at = |x: usize, y: usize, z: usize| (z * n + y) * n + x;
-        for z in 0..cells {
-            for y in 0..cells {
-                for x in 0..cells {
-                    let value = counts[(z * cells + y) * cells + x] as i64
-                        + prefix[at(x, y + 1, z + 1)] as i64
-                        + prefix[at(x + 1, y, z + 1)] as i64
-                        + prefix[at(x + 1, y + 1, z)] as i64
-                        - prefix[at(x, y, z + 1)] as i64
-                        - prefix[at(x, y + 1, z)] as i64
-                        - prefix[at(x + 1, y, z)] as i64
-                        + prefix[at(x, y, z)] as i64;
-                    prefix[at(x + 1, y + 1, z + 1)] = value as u32;
-                }
-            }
-        }
-        ParticleGrid { cells, prefix }
-    }
-
-    fn cell_of(&self, p: DVec3) -> [usize; 3] {
-        let scale = self.cells as f64;
-        [0, 1, 2].map(|a| ((p[a] * scale).floor().max(0.0) as usize).min(self.cells - 1))
-    }
-
-    /// Cell ranges (inclusive) covering the box `lower..upper` (unit units).
-    fn cell_range(&self, lower: DVec3, upper: DVec3) -> ([usize; 3], [usize; 3]) {
-        (self.cell_of(lower), self.cell_of(upper))
-    }
-
-    /// Particles in the cells `from..=to`.
-    fn count(&self, from: [usize; 3], to: [usize; 3]) -> u64 {
-        let n = self.cells + 1;
-        let at = |x: usize, y: usize, z: usize| u64::from(self.prefix[(z * n + y) * n + x]);
-        let [x0, y0, z0] = from;
-        let [x1, y1, z1] = to.map(|v| v + 1);
-        // Inclusion–exclusion over the eight corners (as i64: intermediate sums may go below zero).
-        let sum = at(x1, y1, z1) as i64 - at(x0, y1, z1) as i64 - at(x1, y0, z1) as i64 - at(x1, y1, z0) as i64
-            + at(x0, y0, z1) as i64
-            + at(x0, y1, z0) as i64
-            + at(x1, y0, z0) as i64
-            - at(x0, y0, z0) as i64;
-        sum.max(0) as u64
-    }
-}
-
 /// The particle producer (N = 2).
 #[derive(Clone, Debug)]
 pub struct ParticleProducer {
     shape: TreeShape,
     fit: UnitCubeFit,
-    /// Positions in unit-cube units, sorted by grid cell. Single precision (a 2⁻²⁴ step of the cube, far below the
-    /// finest voxel of 1/8192): placed there once when the index is built, and everything after sees these values.
-    positions: Vec<Vec3>,
-    /// Kernel support per particle, unit-cube units (same order; single precision as the positions).
-    support: Vec<f32>,
-    /// Masses as the file gives them (single precision), 1 where it gives none.
-    masses: Vec<f32>,
-    /// Attribute mode: what each particle adds, times its kernel, `mⱼ/ρⱼ·Aⱼ`. Density mode: `None`, the masses.
+    /// Every particle, binned (unit-cube units).
+    index: ParticleIndex,
+    /// Attribute mode: what each particle adds, times its kernel, `mⱼ/ρⱼ·Aⱼ` (index order). Density mode: `None`,
+    /// the masses.
     attribute_weights: Option<Vec<f64>>,
-    max_support: f64,
-    classes: Vec<SupportClass>,
     /// Largest density at a particle, unit-cube units.
     max_density: f64,
     /// Median density at the probed particles, unit-cube units.
@@ -317,8 +137,6 @@ impl ParticleProducer {
             particles.smoothing().iter().map(|&h| f64::from(h) * settings.smoothing_scale / fit.size).collect()
         };
         let support: Vec<f64> = support.into_iter().map(|h| f64::from(h as f32)).collect();
-        // The margin keeps every kernel inside the cube; a huge smoothing length only makes the field smoother.
-        let max_support = support.iter().copied().fold(0.0, f64::max);
         let min_support = support.iter().copied().fold(f64::INFINITY, f64::min);
         let resolution =
             settings.resolution.unwrap_or_else(|| (4.0 / min_support.max(1e-9)).clamp(256.0, 8192.0) as u64);
@@ -329,50 +147,13 @@ impl ParticleProducer {
 
         // Particles by support class (powers of two from the smallest), each class on a grid of cells no smaller
         // than its own largest support, sorted by (class, cell).
-        let class_of = |h: f64| ((h / min_support.max(1e-12)).log2().floor().max(0.0) as usize).min(MAX_CLASSES - 1);
-        let mut class_max = [0.0f64; MAX_CLASSES];
-        for &h in &support {
-            let c = class_of(h);
-            class_max[c] = class_max[c].max(h);
-        }
-        let class_cells = class_max.map(|h| if h > 0.0 { ((1.0 / h).floor() as u64).clamp(1, 1 << 20) } else { 1 });
-        let mut keyed: Vec<(usize, u64, u32)> = unit
-            .par_iter()
-            .zip(&support)
-            .enumerate()
-            .map(|(i, (p, &h))| {
-                let c = class_of(h);
-                let cells = SortedCells { cells: class_cells[c], keys: Vec::new() };
-                (c, cells.key(cells.cell_of(*p)), i as u32)
-            })
-            .collect();
-        keyed.par_sort_unstable();
-        let order: Vec<u32> = keyed.iter().map(|&(_, _, i)| i).collect();
-        let mut classes = Vec::new();
-        for group in keyed.chunk_by(|a, b| a.0 == b.0) {
-            let class = group[0].0;
-            let first = classes.last().map_or(0, |c: &SupportClass| c.first + c.cells.keys.len());
-            let coarse = ((1.0 / class_max[class]).floor() as usize).clamp(1, 64);
-            classes.push(SupportClass {
-                first,
-                max_support: class_max[class],
-                cells: SortedCells { cells: class_cells[class], keys: group.iter().map(|&(_, k, _)| k).collect() },
-                counts: ParticleGrid::new(group.iter().map(|&(_, _, i)| unit[i as usize]), coarse),
-            });
-        }
-        let positions: Vec<Vec3> = order.iter().map(|&i| unit[i as usize].as_vec3()).collect();
-        let support: Vec<f32> = order.iter().map(|&i| support[i as usize] as f32).collect();
-        let masses: Vec<f32> = order.iter().map(|&i| masses[i as usize]).collect();
-        let total_mass = masses.iter().map(|&m| f64::from(m)).sum();
+        let (index, order) = ParticleIndex::build(&unit, &support, &masses, true);
+        let total_mass = index.masses.iter().map(|&m| f64::from(m)).sum();
         let mut producer = ParticleProducer {
             shape,
             fit,
-            positions,
-            support,
+            index,
             attribute_weights: None,
-            masses,
-            max_support,
-            classes,
             max_density: 1.0,
             typical_density: 1.0,
             total_mass,
@@ -382,11 +163,11 @@ impl ParticleProducer {
         };
         // The largest density is where the kernels are narrowest (the densest particles): exactly at every particle
         // of the two narrowest classes, and at one in 64 of the others (the attribute needs every particle's).
-        let narrow_end = producer.classes.get(2).map_or(count, |c| c.first);
+        let narrow_end = producer.index.class_start(2).unwrap_or(count);
         let probed = |i: &usize| settings.attribute || *i < narrow_end || i.is_multiple_of(64);
         let densities: Vec<f64> = (0..count)
             .into_par_iter()
-            .map(|i| if probed(&i) { producer.density(producer.positions[i].as_dvec3(), 0.0) } else { 0.0 })
+            .map(|i| if probed(&i) { producer.density(producer.index.positions[i].as_dvec3(), 0.0) } else { 0.0 })
             .collect();
         let max_density = densities.iter().copied().fold(0.0, f64::max);
         let mut probed_densities: Vec<f64> = densities.iter().copied().filter(|&d| d > 0.0).collect();
@@ -407,12 +188,14 @@ impl ParticleProducer {
                 order
                     .iter()
                     .zip(&densities)
-                    .zip(&producer.masses)
+                    .zip(&producer.index.masses)
                     .map(|((&i, rho), &m)| f64::from(m) / rho * f64::from(values[i as usize]))
                     .collect(),
             );
-            let at_particles: Vec<f64> =
-                (0..count).into_par_iter().map(|i| producer.field(producer.positions[i].as_dvec3(), 0.0)).collect();
+            let at_particles: Vec<f64> = (0..count)
+                .into_par_iter()
+                .map(|i| producer.field(producer.index.positions[i].as_dvec3(), 0.0))
+                .collect();
             let lower = at_particles.iter().copied().fold(0.0, f64::min);
             let upper = at_particles.iter().copied().fold(0.0, f64::max);
             producer.lower = lower;
@@ -450,7 +233,7 @@ impl ParticleProducer {
 
     /// How far beyond the particles' bounds (unit-cube units) the finest level's density reaches: the largest support.
     pub fn margin(&self) -> f64 {
-        self.max_support.max(MIN_SUPPORT_VOXELS * self.shape.voxel_size(self.shape.max_level))
+        self.index.max_support.max(MIN_SUPPORT_VOXELS * self.shape.voxel_size(self.shape.max_level))
     }
 
     /// Total mass.
@@ -468,31 +251,14 @@ impl ParticleProducer {
         self.upper
     }
 
-    /// Calls `f` with index ranges covering every particle whose kernel (no narrower than `min_support`) can reach the
-    /// box `lower..upper`, and perhaps others (each caller tests the distance).
-    fn gather(&self, lower: DVec3, upper: DVec3, min_support: f64, mut f: impl FnMut(std::ops::Range<usize>)) {
-        for class in &self.classes {
-            let reach = DVec3::splat(class.max_support.max(min_support));
-            class.cells.for_each_range(lower - reach, upper + reach, |range| {
-                f(class.first + range.start..class.first + range.end)
-            });
-        }
-    }
-
-    /// Kernel support used at `level`'s voxel size for a particle of support `h`.
-    #[inline]
-    fn level_support(&self, h: f64, min_support: f64) -> f64 {
-        h.max(min_support)
-    }
-
     /// The density at unit point `p` with kernels no narrower than `min_support` (0: the particles' own).
     pub fn density(&self, p: DVec3, min_support: f64) -> f64 {
-        self.kernel_sum(|i| f64::from(self.masses[i]), p, min_support)
+        self.index.kernel_sum(|i| f64::from(self.index.masses[i]), p, min_support)
     }
 
     /// The field rendered (density, or the attribute's interpolant) at unit point `p`.
     pub fn field(&self, p: DVec3, min_support: f64) -> f64 {
-        self.kernel_sum(|i| self.weight(i), p, min_support)
+        self.index.kernel_sum(|i| self.weight(i), p, min_support)
     }
 
     /// What particle `i` adds, times its kernel: its mass (density), or `mⱼ/ρⱼ·Aⱼ` (attribute).
@@ -500,27 +266,13 @@ impl ParticleProducer {
     fn weight(&self, i: usize) -> f64 {
         match &self.attribute_weights {
             Some(weights) => weights[i],
-            None => f64::from(self.masses[i]),
+            None => f64::from(self.index.masses[i]),
         }
     }
 
-    fn kernel_sum(&self, weight: impl Fn(usize) -> f64, p: DVec3, min_support: f64) -> f64 {
-        let mut sum = 0.0;
-        self.gather(p, p, min_support, |range| {
-            for i in range {
-                let h = self.level_support(f64::from(self.support[i]), min_support);
-                sum += weight(i) * cubic_spline((self.positions[i].as_dvec3() - p).length(), h);
-            }
-        });
-        sum
-    }
-
-    /// Bytes held, for the memory budget.
+    /// Bytes held, for the memory budget: the index, and the attribute's weights.
     pub fn heap_bytes(&self) -> u64 {
-        let counts: usize = self.classes.iter().map(|c| c.counts.prefix.len() * 4).sum();
-        // Position, support, mass and sorted cell key per particle, and the attribute's weight.
-        let weights = self.attribute_weights.as_ref().map_or(0, |w| w.len() * 8);
-        (self.positions.len() * (12 + 4 + 4 + 8) + weights + counts) as u64
+        self.index.heap_bytes() + self.attribute_weights.as_ref().map_or(0, |w| w.len() as u64 * 8)
     }
 }
 
@@ -568,20 +320,10 @@ impl Producer for ParticleProducer {
     fn oracle(&self, key: NodeKey) -> Option<f32> {
         let (lower, size) = key.bounds(&self.shape);
         let voxel = size / f64::from(self.shape.brick_size);
-        let node_lower = DVec3::from(lower);
-        for class in &self.classes {
-            let reach = class.max_support.max(MIN_SUPPORT_VOXELS * voxel) + voxel;
-            let lower = node_lower - DVec3::splat(reach);
-            let upper = node_lower + DVec3::splat(size + reach);
-            if upper.min_element() < 0.0 || lower.max_element() > 1.0 {
-                continue;
-            }
-            let (from, to) = class.counts.cell_range(lower, upper);
-            if class.counts.count(from, to) > 0 {
-                return None;
-            }
+        match self.index.may_reach(DVec3::from(lower), size, MIN_SUPPORT_VOXELS * voxel, voxel) {
+            true => None,
+            false => Some(self.empty_value()),
         }
-        Some(self.empty_value())
     }
 
     fn produce(&self, key: NodeKey, voxels: &mut [u16]) -> Result<Produced, ProduceError> {
@@ -591,55 +333,8 @@ impl Producer for ParticleProducer {
         let min_support = MIN_SUPPORT_VOXELS * voxel;
         // Stored voxel (i, j, k) is centred at first + (i, j, k)·voxel.
         let first = voxel_centre(&self.shape, &key, 0, 0, 0);
-        let last = first + DVec3::splat((b - 1) as f64 * voxel);
         let mut density = vec![0.0f64; b * b * b];
-        let mut reached = false;
-        self.gather(first, last, min_support, |range| {
-            for i in range {
-                let p = self.positions[i].as_dvec3();
-                let h = self.level_support(f64::from(self.support[i]), min_support);
-                // Does the kernel reach the box of the stored voxel centres (which holds every finer level's
-                // voxel centres too)? Finer levels use kernels no wider, so if none does, none will.
-                let outside = (first - p).max(p - last).max(DVec3::ZERO);
-                if outside.length() >= h {
-                    continue;
-                }
-                reached = true;
-                // Voxel index range within the kernel's support.
-                let low = ((p - DVec3::splat(h) - first) / voxel).ceil();
-                let high = ((p + DVec3::splat(h) - first) / voxel).floor();
-                if high.min_element() < 0.0 || low.max_element() > (b - 1) as f64 {
-                    continue;
-                }
-                let low = low.max(DVec3::ZERO).as_uvec3();
-                let high = high.min(DVec3::splat((b - 1) as f64)).as_uvec3();
-                // The kernel's sphere, not its bounding cube: per row, only the chord inside the support (about
-                // half the cube's voxels), with the kernel's constants taken out of the loop.
-                let kernel = SplineKernel::new(h, self.weight(i));
-                for vz in low.z..=high.z {
-                    let dz = first.z + f64::from(vz) * voxel - p.z;
-                    for vy in low.y..=high.y {
-                        let dy = first.y + f64::from(vy) * voxel - p.y;
-                        let chord_squared = kernel.h_squared - (dy * dy + dz * dz);
-                        if chord_squared <= 0.0 {
-                            continue;
-                        }
-                        let half_chord = chord_squared.sqrt();
-                        let from = ((p.x - half_chord - first.x) / voxel).ceil().max(f64::from(low.x));
-                        let to = ((p.x + half_chord - first.x) / voxel).floor().min(f64::from(high.x));
-                        if from > to {
-                            continue;
-                        }
-                        let row = (vz as usize * b + vy as usize) * b;
-                        let yz_squared = dy * dy + dz * dz;
-                        for vx in from as u32..=to as u32 {
-                            let dx = first.x + f64::from(vx) * voxel - p.x;
-                            density[row + vx as usize] += kernel.weighted_at((dx * dx + yz_squared).sqrt());
-                        }
-                    }
-                }
-            }
-        });
+        let reached = self.index.splat(|i| self.weight(i), first, voxel, b, min_support, &mut density);
         if !reached {
             let content = match self.empty_value() {
                 0.0 => NodeContent::Empty,

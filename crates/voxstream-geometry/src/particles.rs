@@ -31,35 +31,10 @@ pub struct ParticleSet {
 impl ParticleSet {
     /// Validates `raw`.
     pub fn new(raw: RawParticles) -> Result<ParticleSet, GeometryError> {
-        let count = raw.positions.len();
-        if count == 0 {
+        if raw.positions.is_empty() {
             return Err(GeometryError::Invalid { message: "the file holds no particles".into() });
         }
-        for (name, column) in [("smoothing lengths", &raw.smoothing), ("masses", &raw.masses), ("values", &raw.values)]
-        {
-            if !column.is_empty() && column.len() != count {
-                return Err(GeometryError::Invalid {
-                    message: format!("{} {name} for {count} particles", column.len()),
-                });
-            }
-        }
-        if let Some(i) = raw.positions.iter().position(|p| p.iter().any(|c| !c.is_finite())) {
-            return Err(GeometryError::Invalid {
-                message: format!("particle {i} has a non-finite position {:?}: fix or remove it", raw.positions[i]),
-            });
-        }
-        for (name, column) in [("smoothing length", &raw.smoothing), ("mass", &raw.masses)] {
-            if let Some(i) = column.iter().position(|v| !(v.is_finite() && *v > 0.0)) {
-                return Err(GeometryError::Invalid {
-                    message: format!("particle {i} has {name} {}: it must be positive and finite", column[i]),
-                });
-            }
-        }
-        if let Some(i) = raw.values.iter().position(|v| !v.is_finite()) {
-            return Err(GeometryError::Invalid {
-                message: format!("particle {i} has {} {}: values must be finite", raw.value_name, raw.values[i]),
-            });
-        }
+        check_particles(&raw, 0)?;
         Ok(ParticleSet { raw })
     }
 
@@ -105,6 +80,40 @@ impl ParticleSet {
         }
         (lower, upper)
     }
+}
+
+/// Checks a run of particles whose first is particle `first` of its file (errors name the file's index): columns as
+/// long as the positions, finite positions, positive and finite smoothing lengths and masses, finite values.
+pub fn check_particles(raw: &RawParticles, first: u64) -> Result<(), GeometryError> {
+    let count = raw.positions.len();
+    for (name, column) in [("smoothing lengths", &raw.smoothing), ("masses", &raw.masses), ("values", &raw.values)] {
+        if !column.is_empty() && column.len() != count {
+            return Err(GeometryError::Invalid { message: format!("{} {name} for {count} particles", column.len()) });
+        }
+    }
+    let index = |i: usize| first + i as u64;
+    if let Some(i) = raw.positions.iter().position(|p| p.iter().any(|c| !c.is_finite())) {
+        return Err(GeometryError::Invalid {
+            message: format!(
+                "particle {} has a non-finite position {:?}: fix or remove it",
+                index(i),
+                raw.positions[i]
+            ),
+        });
+    }
+    for (name, column) in [("smoothing length", &raw.smoothing), ("mass", &raw.masses)] {
+        if let Some(i) = column.iter().position(|v| !(v.is_finite() && *v > 0.0)) {
+            return Err(GeometryError::Invalid {
+                message: format!("particle {} has {name} {}: it must be positive and finite", index(i), column[i]),
+            });
+        }
+    }
+    if let Some(i) = raw.values.iter().position(|v| !v.is_finite()) {
+        return Err(GeometryError::Invalid {
+            message: format!("particle {} has {} {}: values must be finite", index(i), raw.value_name, raw.values[i]),
+        });
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -102,6 +102,10 @@ pub struct ViewArgs {
     /// Particle files: the kernel's reach in smoothing lengths (as `render --smoothing-scale`).
     #[arg(long, value_name = "FACTOR")]
     pub smoothing_scale: Option<f64>,
+    /// Binary PLY point files: read them out of core, holding about MIB of particles in memory (as `render
+    /// --particle-memory`).
+    #[arg(long, value_name = "MIB")]
+    pub particle_memory: Option<u64>,
     /// Stores only: decode every level into RAM first (as `render --in-memory`).
     #[arg(long)]
     pub in_memory: bool,
@@ -156,6 +160,11 @@ pub struct RenderArgs {
     /// (PySPH, Monaghan's convention). Molecular files (.gro, .pdb): 2 times the atomic radius unless given.
     #[arg(long, value_name = "FACTOR")]
     pub smoothing_scale: Option<f64>,
+    /// Binary PLY point files: read the particles out of core, binned once into superbricks in a spill file (20
+    /// bytes per particle, in $TMPDIR), holding about MIB of them in memory. Chosen by itself, with a quarter of the
+    /// machine's memory, for a PLY point file that would take more than half of it.
+    #[arg(long, value_name = "MIB")]
+    pub particle_memory: Option<u64>,
     /// Output PNG (with --path, frames are numbered: frame_0000.png, …).
     #[arg(long, default_value = "frame.png")]
     pub out: PathBuf,
@@ -334,6 +343,10 @@ pub struct ImportArgs {
     /// Particle files: the kernel's reach in smoothing lengths (as `render --smoothing-scale`).
     #[arg(long, value_name = "FACTOR")]
     pub smoothing_scale: Option<f64>,
+    /// Binary PLY point files: read them out of core, holding about MIB of particles in memory (as `render
+    /// --particle-memory`).
+    #[arg(long, value_name = "MIB")]
+    pub particle_memory: Option<u64>,
     /// The store folder to create.
     #[arg(long)]
     pub out: PathBuf,

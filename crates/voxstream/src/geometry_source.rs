@@ -5,15 +5,18 @@
 //! made when rays ask for them, so nothing is voxelised in advance.
 
 use std::path::Path;
+use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use voxstream_core::{NodeKey, ProduceError, Produced, Producer, TreeShape};
+use voxstream_geometry::formats::ply::PlyPointStream;
 use voxstream_geometry::formats::{read_geometry, RawGeometry};
 use voxstream_geometry::particle_producer::SMOOTHING_SCALE_RANGE;
+use voxstream_geometry::superbrick_particles::{OutOfCoreSettings, MIN_MEMORY_BYTES};
 use voxstream_geometry::{
-    Amplification, MeshProducer, MeshTreeSettings, ParticleProducer, ParticleSet, ParticleTreeSettings, TriangleMesh,
-    UnitCubeFit,
+    Amplification, MeshProducer, MeshTreeSettings, ParticleProducer, ParticleSet, ParticleTreeSettings,
+    SuperbrickParticleProducer, TriangleMesh, UnitCubeFit,
 };
 use voxstream_render::{Camera, IsoSurface, TransferFunction, VolumePlacement};
 
@@ -30,6 +33,8 @@ pub struct GeometryOptions {
     pub attribute: bool,
     /// `--smoothing-scale`: the kernel's reach in the file's smoothing lengths (`None`: 1, or 2 for molecules).
     pub smoothing_scale: Option<f64>,
+    /// `--particle-memory`: read a binary PLY point file out of core with this many MiB for its particles.
+    pub particle_memory: Option<u64>,
     /// Image size, for the default camera.
     pub width: u32,
     /// Image height.
@@ -43,6 +48,8 @@ pub enum GeometryProducer {
     Mesh(MeshProducer),
     /// SPH density bricks of particles.
     Particles(ParticleProducer),
+    /// SPH density bricks of particles read out of core (superbricks in a spill file; shared, not copied).
+    StreamedParticles(Arc<SuperbrickParticleProducer>),
 }
 
 impl GeometryProducer {
@@ -51,6 +58,7 @@ impl GeometryProducer {
         match self {
             GeometryProducer::Mesh(p) => p.margin(),
             GeometryProducer::Particles(p) => p.margin(),
+            GeometryProducer::StreamedParticles(p) => p.margin(),
         }
     }
 
@@ -59,6 +67,7 @@ impl GeometryProducer {
         match self {
             GeometryProducer::Mesh(p) => p.fit(),
             GeometryProducer::Particles(p) => p.fit(),
+            GeometryProducer::StreamedParticles(p) => p.fit(),
         }
     }
 }
@@ -68,6 +77,7 @@ impl Producer for GeometryProducer {
         match self {
             GeometryProducer::Mesh(p) => p.shape(),
             GeometryProducer::Particles(p) => p.shape(),
+            GeometryProducer::StreamedParticles(p) => p.shape(),
         }
     }
 
@@ -75,6 +85,7 @@ impl Producer for GeometryProducer {
         match self {
             GeometryProducer::Mesh(p) => p.oracle(key),
             GeometryProducer::Particles(p) => p.oracle(key),
+            GeometryProducer::StreamedParticles(p) => p.oracle(key),
         }
     }
 
@@ -82,6 +93,7 @@ impl Producer for GeometryProducer {
         match self {
             GeometryProducer::Mesh(p) => p.produce(key, voxels),
             GeometryProducer::Particles(p) => p.produce(key, voxels),
+            GeometryProducer::StreamedParticles(p) => p.produce(key, voxels),
         }
     }
 }
@@ -122,13 +134,16 @@ fn is_molecular(path: &Path) -> bool {
 /// Reads `path` and builds its producer with the flags of `args`.
 pub fn open(path: &Path, args: &GeometryOptions) -> Result<GeometrySource> {
     let started = Instant::now();
-    let raw = read_geometry(path)?;
     let shown = path.display();
     if let Some(resolution) = args.resolution {
         if !(16..=1 << 20).contains(&resolution) {
             bail!("--resolution {resolution} is out of range: give 16 to 1048576 voxels per axis");
         }
     }
+    if let Some(memory) = out_of_core_memory(path, args)? {
+        return open_out_of_core(path, args, memory, started);
+    }
+    let raw = read_geometry(path)?;
     match raw {
         RawGeometry::Mesh(raw) => {
             if args.attribute {
@@ -181,17 +196,7 @@ pub fn open(path: &Path, args: &GeometryOptions) -> Result<GeometrySource> {
                 bail!("--amplify applies to meshes; {shown} holds particles");
             }
             let molecular = is_molecular(path);
-            let smoothing_scale = match args.smoothing_scale {
-                None if molecular => 2.0,
-                None => 1.0,
-                Some(scale) if SMOOTHING_SCALE_RANGE.contains(&scale) => scale,
-                Some(scale) => bail!(
-                    "--smoothing-scale {scale}: the kernel's reach must be between {} and {} smoothing lengths (1 \
-                     where the file's h is the support, 2 for PySPH)",
-                    SMOOTHING_SCALE_RANGE.start(),
-                    SMOOTHING_SCALE_RANGE.end()
-                ),
-            };
+            let smoothing_scale = smoothing_scale(args, molecular)?;
             let particles = ParticleSet::new(raw).with_context(|| format!("in {shown}"))?;
             let settings = ParticleTreeSettings {
                 resolution: args.resolution,
@@ -244,6 +249,104 @@ pub fn open(path: &Path, args: &GeometryOptions) -> Result<GeometrySource> {
             })
         }
     }
+}
+
+/// `--smoothing-scale` checked, or its default (2 for molecules, 1 otherwise).
+fn smoothing_scale(args: &GeometryOptions, molecular: bool) -> Result<f64> {
+    Ok(match args.smoothing_scale {
+        None if molecular => 2.0,
+        None => 1.0,
+        Some(scale) if SMOOTHING_SCALE_RANGE.contains(&scale) => scale,
+        Some(scale) => bail!(
+            "--smoothing-scale {scale}: the kernel's reach must be between {} and {} smoothing lengths (1 where the \
+             file's h is the support, 2 for PySPH)",
+            SMOOTHING_SCALE_RANGE.start(),
+            SMOOTHING_SCALE_RANGE.end()
+        ),
+    })
+}
+
+/// Bytes a particle takes in memory while the in-memory producer is built (the file's columns in double and single
+/// precision, the sorted index and the build's temporaries), for choosing out of core by itself.
+const IN_MEMORY_BYTES_PER_PARTICLE: u64 = 160;
+
+/// Whether to read `path` out of core, and with how many bytes: `--particle-memory` (binary PLY point files only),
+/// or by itself for a binary PLY point file whose particles would take more than half of the machine's memory.
+fn out_of_core_memory(path: &Path, args: &GeometryOptions) -> Result<Option<u64>> {
+    let shown = path.display();
+    let is_ply = path.to_string_lossy().to_lowercase().ends_with(".ply");
+    if let Some(mib) = args.particle_memory {
+        if !is_ply {
+            bail!(
+                "--particle-memory reads binary PLY point files out of core; {shown} is read whole (convert it to a \
+                 binary PLY with x y z [h] [mass] vertex properties to stream it)"
+            );
+        }
+        let bytes = mib.checked_mul(1 << 20).filter(|&b| b >= MIN_MEMORY_BYTES);
+        let Some(bytes) = bytes.filter(|&b| b <= 1 << 50) else {
+            bail!("--particle-memory {mib}: give {} MiB or more (and less than 1 PiB)", MIN_MEMORY_BYTES >> 20);
+        };
+        return Ok(Some(bytes));
+    }
+    if !is_ply {
+        return Ok(None);
+    }
+    // A PLY the streaming reader refuses (ASCII, a mesh, a malformed header) is read whole, as before, and its own
+    // reader names any problem.
+    let Ok(stream) = PlyPointStream::open(path) else { return Ok(None) };
+    let machine = voxstream_engine::memory_budget::machine_memory_bytes().unwrap_or(u64::MAX);
+    let needed = stream.count().saturating_mul(IN_MEMORY_BYTES_PER_PARTICLE);
+    Ok((needed > machine / 2).then(|| (machine / 4).max(MIN_MEMORY_BYTES)))
+}
+
+/// Reads a binary PLY point file out of core with `memory` bytes for its particles.
+fn open_out_of_core(path: &Path, args: &GeometryOptions, memory: u64, started: Instant) -> Result<GeometrySource> {
+    let shown = path.display();
+    if args.amplify.is_some() {
+        bail!("--amplify applies to meshes; {shown} holds particles");
+    }
+    if args.attribute {
+        bail!(
+            "--attribute is not available out of core yet (the interpolant needs every particle's density first): \
+             render the density, or leave out --particle-memory"
+        );
+    }
+    let settings = ParticleTreeSettings {
+        resolution: args.resolution,
+        smoothing_scale: smoothing_scale(args, false)?,
+        ..ParticleTreeSettings::default()
+    };
+    let out_of_core = OutOfCoreSettings { memory_bytes: memory, spill_directory: std::env::temp_dir() };
+    let stream = PlyPointStream::open(path)?;
+    let producer = SuperbrickParticleProducer::new(&stream, settings, &out_of_core)
+        .with_context(|| format!("in {shown} (read out of core)"))?;
+    let statistics = producer.statistics();
+    let value_range = producer.value_range();
+    let fit = producer.fit();
+    let margin = producer.margin();
+    let bounds = producer.bounds();
+    let description = format!(
+        "{shown}: {} particles read out of core ({}³ superbricks in a {} MiB spill file, {} MiB for particles), {}³ \
+         virtual voxels, binned in {:.1} s; density 0 to {:.4e} (mass per file unit³)",
+        statistics.particles,
+        statistics.superbricks_per_axis,
+        statistics.spill_bytes >> 20,
+        memory >> 20,
+        producer.shape().virtual_resolution(),
+        started.elapsed().as_secs_f64(),
+        value_range[1]
+    );
+    Ok(GeometrySource {
+        index_bytes: producer.heap_bytes(),
+        placement: placement(fit),
+        transfer_function: particle_transfer_function(producer.typical_density(), value_range[1])?,
+        camera: default_camera(&fit, margin, bounds, args),
+        producer: GeometryProducer::StreamedParticles(Arc::new(producer)),
+        value_range,
+        default_surfaces: Vec::new(),
+        bounds,
+        description,
+    })
 }
 
 /// The default view of the object's bounds widened by its margin (the band or the kernels), so that a single

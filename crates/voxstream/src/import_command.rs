@@ -27,6 +27,7 @@ pub fn run(args: &ImportArgs) -> Result<()> {
             resolution: Some(args.resolution.unwrap_or(DEFAULT_BAKE_RESOLUTION)),
             attribute: false,
             smoothing_scale: args.smoothing_scale,
+            particle_memory: args.particle_memory,
             width: 512,
             height: 512,
         };

@@ -68,6 +68,7 @@ fn unreachable_default() -> RenderArgs {
         resolution: None,
         attribute: false,
         smoothing_scale: None,
+        particle_memory: None,
         out: "frame.png".into(),
         width: 512,
         height: 512,

@@ -131,6 +131,7 @@ pub fn open_source(args: &RenderArgs, budget: &MemoryBudget, user: impl SourceUs
             resolution: args.resolution,
             attribute: args.attribute,
             smoothing_scale: args.smoothing_scale,
+            particle_memory: args.particle_memory,
             width: args.width,
             height: args.height,
         };

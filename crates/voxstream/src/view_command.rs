@@ -60,6 +60,7 @@ fn render_args(args: &ViewArgs) -> Result<RenderArgs> {
     render.resolution = args.resolution;
     render.attribute = args.attribute;
     render.smoothing_scale = args.smoothing_scale;
+    render.particle_memory = args.particle_memory;
     render.in_memory = args.in_memory;
     render.backend = args.backend;
     render.gpu_filter = args.gpu_filter;
