@@ -522,3 +522,95 @@ fn a_mesh_baked_into_a_store_renders_like_the_mesh() {
         "apply to mesh and particle files",
     );
 }
+
+/// A binary PLY point file of `count` particles (x y z h mass as floats, and a colour the reader skips) in a clumpy
+/// ball, returned with the path.
+fn write_particle_ply(dir: &Path, count: usize) -> PathBuf {
+    let mut state = 77u64;
+    let mut next = move || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let clumps: Vec<[f64; 4]> =
+        (0..24).map(|_| [next() * 2.0 - 1.0, next() * 2.0 - 1.0, next() * 2.0 - 1.0, 0.05 + 0.2 * next()]).collect();
+    let path = dir.join("clumps.ply");
+    let mut bytes = format!(
+        "ply\nformat binary_little_endian 1.0\ncomment made by voxstream's tests\nelement vertex {count}\nproperty float x\n\
+         property float y\nproperty float z\nproperty float h\nproperty float mass\nproperty uchar red\nend_header\n"
+    )
+    .into_bytes();
+    for i in 0..count {
+        let [cx, cy, cz, sigma] = clumps[i % clumps.len()];
+        // A box-filtered ball: three uniform offsets summed are close enough to a Gaussian here.
+        let mut offset = || (next() + next() + next() - 1.5) * sigma;
+        let p = [cx + offset(), cy + offset(), cz + offset()];
+        for v in [p[0] as f32, p[1] as f32, p[2] as f32, 0.04, 1.0 + (i % 3) as f32] {
+            bytes.extend_from_slice(&v.to_le_bytes());
+        }
+        bytes.push((i % 256) as u8);
+    }
+    std::fs::write(&path, bytes).unwrap();
+    path
+}
+
+/// A particle file read out of core (`--particle-memory`: superbricks in a spill file, an LRU cache of them) renders
+/// as the same file read into memory: the bricks at and below the superbricks' level are the same sums of the same
+/// kernels, the coarser ones come from aggregated particles.
+#[test]
+fn a_particle_file_read_out_of_core_renders_as_in_memory() {
+    let dir = scratch("out-of-core");
+    let path = write_particle_ply(&dir, 200_000);
+    for (name, extra) in [("density", vec![]), ("surface", vec!["--iso", "2e4"])] {
+        let memory = render(&path, 160, &extra, &dir.join(format!("{name}-memory.png")));
+        let mut streamed_args = extra.clone();
+        streamed_args.extend(["--particle-memory", "8"]);
+        let streamed = render(&path, 160, &streamed_args, &dir.join(format!("{name}-streamed.png")));
+        let lit = memory.2.iter().filter(|&&v| v > 20).count();
+        assert!(lit > memory.2.len() / 20, "{name}: the clumps fill the view ({lit} channels lit)");
+        let differences: Vec<u32> = memory.2.iter().zip(&streamed.2).map(|(a, b)| u32::from(a.abs_diff(*b))).collect();
+        let mean = differences.iter().sum::<u32>() as f64 / differences.len() as f64;
+        let large = differences.iter().filter(|&&d| d > 8).count() as f64 / differences.len() as f64;
+        eprintln!("{name}: mean difference {mean:.3}, {:.3}% above 8", large * 100.0);
+        assert!(mean < 0.5 && large < 0.005, "{name}: mean {mean}, {large} above 8");
+    }
+    // The description says it was read out of core.
+    let out = dir.join("described.png");
+    let output = run(&[
+        "render",
+        path.to_str().unwrap(),
+        "--particle-memory",
+        "8",
+        "--width",
+        "32",
+        "--height",
+        "32",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    assert!(stderr(&output).contains("200000 particles read out of core"), "{}", stderr(&output));
+    assert!(!stderr(&output).contains("(1³ superbricks"), "the budget splits the set: {}", stderr(&output));
+    // Bad uses get one line each.
+    assert_fails(
+        &["render", path.to_str().unwrap(), "--particle-memory", "2"],
+        "--particle-memory 2: give 8 MiB or more",
+    );
+    let text = dir.join("points.xyz");
+    std::fs::write(&text, "0 0 0\n1 1 1\n").unwrap();
+    assert_fails(
+        &["render", text.to_str().unwrap(), "--particle-memory", "64"],
+        "--particle-memory reads binary PLY point files out of core",
+    );
+    assert_fails(
+        &["render", path.to_str().unwrap(), "--particle-memory", "64", "--attribute"],
+        "--attribute is not available out of core yet",
+    );
+    let truncated = dir.join("truncated.ply");
+    let bytes = std::fs::read(&path).unwrap();
+    std::fs::write(&truncated, &bytes[..bytes.len() - 100]).unwrap();
+    assert_fails(
+        &["render", truncated.to_str().unwrap(), "--particle-memory", "64"],
+        "header announces 200000 vertices (21 bytes each",
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

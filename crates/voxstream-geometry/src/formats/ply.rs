@@ -998,4 +998,102 @@ mod tests {
             }
         }
     }
+
+    fn stream_file(name: &str, bytes: &[u8]) -> std::path::PathBuf {
+        let path = std::env::temp_dir().join(format!("voxstream-ply-stream-{}-{name}.ply", std::process::id()));
+        std::fs::write(&path, bytes).unwrap();
+        path
+    }
+
+    fn streamed(stream: &PlyPointStream) -> RawParticles {
+        let mut all = RawParticles { value_name: stream.value_name.clone(), ..RawParticles::default() };
+        let mut next = 0;
+        stream
+            .for_each_chunk(&mut |first, run| {
+                assert_eq!(first, next);
+                next += run.positions.len() as u64;
+                all.positions.extend(&run.positions);
+                all.smoothing.extend(&run.smoothing);
+                all.masses.extend(&run.masses);
+                all.values.extend(&run.values);
+                Ok(())
+            })
+            .unwrap();
+        all
+    }
+
+    #[test]
+    fn a_binary_point_file_streams_the_particles_parse_reads() {
+        // A leading element the stream reads past, then vertices with a skipped colour, in both byte orders; enough
+        // vertices for several chunks.
+        let count = 300_000u32;
+        for big in [false, true] {
+            let order = if big { "big" } else { "little" };
+            let mut bytes = format!(
+                "ply\nformat binary_{order}_endian 1.0\nelement camera 2\nproperty double f\nelement vertex {count}\n\
+                 property float x\nproperty double y\nproperty float z\nproperty uchar red\nproperty float hsml\n\
+                 property float temperature\nelement face 0\nproperty list uchar int vertex_indices\nend_header\n"
+            )
+            .into_bytes();
+            let put = |bytes: &mut Vec<u8>, v: &[u8]| {
+                let mut v = v.to_vec();
+                if big {
+                    v.reverse();
+                }
+                bytes.extend_from_slice(&v);
+            };
+            for _ in 0..2 {
+                put(&mut bytes, &7.0f64.to_le_bytes());
+            }
+            for i in 0..count {
+                let f = i as f32;
+                put(&mut bytes, &(f * 0.5).to_le_bytes());
+                put(&mut bytes, &(f64::from(f) * 0.25).to_le_bytes());
+                put(&mut bytes, &(-f).to_le_bytes());
+                bytes.push(200);
+                put(&mut bytes, &(1.0 + f * 1e-6).to_le_bytes());
+                put(&mut bytes, &(f * 2.0).to_le_bytes());
+            }
+            let path = stream_file(order, &bytes);
+            let stream = PlyPointStream::open(&path).unwrap();
+            assert_eq!(stream.count(), u64::from(count));
+            assert_eq!(stream.columns(), [true, false, true]);
+            let whole = match parse(&bytes, &path).unwrap() {
+                RawGeometry::Particles(particles) => particles,
+                RawGeometry::Mesh(_) => panic!("points expected"),
+            };
+            assert_eq!(streamed(&stream), whole);
+            std::fs::remove_file(&path).ok();
+        }
+    }
+
+    #[test]
+    fn files_the_stream_cannot_read_are_named() {
+        let header = |format: &str, rest: &str| {
+            format!("ply\nformat {format} 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\n{rest}end_header\n")
+        };
+        let refused = |name: &str, bytes: Vec<u8>, needle: &str| {
+            let path = stream_file(name, &bytes);
+            let error = PlyPointStream::open(&path).unwrap_err().to_string();
+            assert!(error.contains(needle), "{name}: {error}");
+            std::fs::remove_file(&path).ok();
+        };
+        refused("ascii", header("ascii", "").into_bytes(), "write it as binary_little_endian");
+        let mut mesh =
+            header("binary_little_endian", "element face 1\nproperty list uchar int vertex_indices\n").into_bytes();
+        mesh.extend([0u8; 24 + 13]);
+        refused("mesh", mesh, "holds faces (a mesh)");
+        let mut short = header("binary_little_endian", "").into_bytes();
+        short.extend([0u8; 23]);
+        refused("short", short, "header announces 2 vertices (12 bytes each");
+        let mut list = header("binary_little_endian", "property list uchar float extra\n").into_bytes();
+        list.extend([0u8; 40]);
+        refused("list", list, "list property 'extra'");
+        let mut huge = "ply\nformat binary_little_endian 1.0\nelement vertex 18446744073709551615\nproperty double x\n\
+                        property double y\nproperty double z\nend_header\n"
+            .as_bytes()
+            .to_vec();
+        huge.extend([0u8; 48]);
+        refused("huge", huge, "header announces 18446744073709551615 vertices");
+    }
 }
