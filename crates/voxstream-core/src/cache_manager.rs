@@ -393,17 +393,21 @@ impl<P: Producer> CacheManager<P> {
             let premature: Vec<bool> = batch.iter().map(|item| self.is_premature(item.request, item.key)).collect();
             let producer = &self.producer;
             let shape = self.shape;
-            let results: Vec<WorkResult> = batch
-                .par_iter()
-                .zip(&premature)
-                .map(|(item, &premature)| match item.request.kind {
-                    _ if premature => WorkResult::Premature,
-                    RequestKind::Produce => WorkResult::Produced(produce_analysed(producer, item.key, &shape)),
-                    RequestKind::Subdivide => WorkResult::Children(
-                        (0..shape.nodes_per_tile()).map(|c| producer.oracle(item.key.child(c, shape.n))).collect(),
-                    ),
-                })
-                .collect();
+            let results: Vec<WorkResult> = in_space_order(
+                batch,
+                |item| item.key,
+                &shape,
+                |index| {
+                    let item = &batch[index];
+                    match item.request.kind {
+                        _ if premature[index] => WorkResult::Premature,
+                        RequestKind::Produce => WorkResult::Produced(produce_analysed(producer, item.key, &shape)),
+                        RequestKind::Subdivide => WorkResult::Children(
+                            (0..shape.nodes_per_tile()).map(|c| producer.oracle(item.key.child(c, shape.n))).collect(),
+                        ),
+                    }
+                },
+            );
             for (item, result) in batch.iter().zip(results) {
                 let (request, key) = (item.request, item.key);
                 // A forced step served earlier in the batch, or a recycled tile, may have made it moot; under the
@@ -604,8 +608,12 @@ impl<P: Producer> CacheManager<P> {
             remaining = rest;
             let producer = &self.producer;
             let shape = self.shape;
-            let results: Vec<Result<AnalysedBrick, ProduceError>> =
-                batch.par_iter().map(|&(_, key)| produce_analysed(producer, key, &shape)).collect();
+            let results: Vec<Result<AnalysedBrick, ProduceError>> = in_space_order(
+                batch,
+                |&(_, key)| key,
+                &shape,
+                |index| produce_analysed(producer, batch[index].1, &shape),
+            );
             for (&(node_id, _), result) in batch.iter().zip(results) {
                 let Ok(brick) = result else { continue };
                 let is_brick = brick.content == NodeContent::Brick;
@@ -860,6 +868,47 @@ struct AnalysedBrick {
 }
 
 /// Asks `producer` for the brick of `key`, then analyses it.
+/// `work(i)` for every item of `batch`, on worker threads, computed in space-filling-curve order of the items' nodes
+/// (the Morton code of each node's corner at the finest level, then the level) and returned in the batch's order.
+///
+/// Nodes near each other in space are then made by the same thread close together in time, so a producer reading
+/// spatial bins (a store's chunks, out-of-core particle superbricks) finds them still cached: the batch's order is
+/// the rays' priority, not space. What is produced and the order results are applied in do not change.
+fn in_space_order<T: Sync, R: Send>(
+    batch: &[T],
+    key_of: impl Fn(&T) -> NodeKey,
+    shape: &TreeShape,
+    work: impl Fn(usize) -> R + Sync,
+) -> Vec<R> {
+    let mut order: Vec<(u64, u32, usize)> = batch
+        .iter()
+        .enumerate()
+        .map(|(index, item)| {
+            let key = key_of(item);
+            let scale = shape.max_level.saturating_sub(key.level);
+            let corner = key.ijk.map(|c| c.checked_shl(scale).unwrap_or(0));
+            (morton_code(corner), key.level, index)
+        })
+        .collect();
+    order.sort_unstable();
+    let mut results: Vec<(usize, R)> = order.par_iter().map(|&(_, _, index)| (index, work(index))).collect();
+    results.sort_unstable_by_key(|&(index, _)| index);
+    results.into_iter().map(|(_, result)| result).collect()
+}
+
+/// The Morton (Z-order) code of `ijk`'s low 21 bits per axis.
+fn morton_code(ijk: [u64; 3]) -> u64 {
+    fn spread(v: u64) -> u64 {
+        let mut x = v & 0x1f_ffff;
+        x = (x | x << 32) & 0x1f00000000ffff;
+        x = (x | x << 16) & 0x1f0000ff0000ff;
+        x = (x | x << 8) & 0x100f00f00f00f00f;
+        x = (x | x << 4) & 0x10c30c30c30c30c3;
+        (x | x << 2) & 0x1249249249249249
+    }
+    spread(ijk[0]) | spread(ijk[1]) << 1 | spread(ijk[2]) << 2
+}
+
 fn produce_analysed<P: Producer>(producer: &P, key: NodeKey, shape: &TreeShape) -> Result<AnalysedBrick, ProduceError> {
     let mut voxels = vec![0u16; shape.voxels_per_brick()];
     let produced = producer.produce(key, &mut voxels)?;
@@ -982,6 +1031,21 @@ mod tests {
             }
             Ramp.produce(key, voxels)
         }
+    }
+
+    #[test]
+    fn morton_codes_interleave_the_axes() {
+        assert_eq!(morton_code([1, 0, 0]), 1);
+        assert_eq!(morton_code([0, 1, 0]), 2);
+        assert_eq!(morton_code([0, 0, 1]), 4);
+        assert_eq!(morton_code([3, 5, 6]), 0b110_101_011);
+        assert_eq!(morton_code([(1 << 21) - 1; 3]), (1 << 63) - 1);
+        // Results come back in the batch's order whatever the order of work.
+        let shape = TreeShape::new(2, 8, 4).unwrap();
+        let keys: Vec<NodeKey> =
+            (0..50u64).map(|i| NodeKey { level: (i % 5) as u32, ijk: [i % 3, (i * 7) % 5, i % 2] }).collect();
+        let results = in_space_order(&keys, |k| *k, &shape, |i| keys[i]);
+        assert_eq!(results, keys);
     }
 
     #[test]

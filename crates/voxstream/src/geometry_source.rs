@@ -295,8 +295,14 @@ fn out_of_core_memory(path: &Path, args: &GeometryOptions) -> Result<Option<u64>
     // reader names any problem.
     let Ok(stream) = PlyPointStream::open(path) else { return Ok(None) };
     let machine = voxstream_engine::memory_budget::machine_memory_bytes().unwrap_or(u64::MAX);
-    let needed = stream.count().saturating_mul(IN_MEMORY_BYTES_PER_PARTICLE);
-    Ok((needed > machine / 2).then(|| (machine / 4).max(MIN_MEMORY_BYTES)))
+    Ok(automatic_particle_memory(stream.count(), machine))
+}
+
+/// The memory to read `count` particles out of core with, on a machine of `machine` bytes: a quarter of it where
+/// reading them into memory would take more than half; `None` (read into memory) otherwise.
+fn automatic_particle_memory(count: u64, machine: u64) -> Option<u64> {
+    let needed = count.saturating_mul(IN_MEMORY_BYTES_PER_PARTICLE);
+    (needed > machine / 2).then(|| (machine / 4).max(MIN_MEMORY_BYTES))
 }
 
 /// Reads a binary PLY point file out of core with `memory` bytes for its particles.
@@ -406,4 +412,21 @@ fn attribute_transfer_function([lower, upper]: [f64; 2]) -> Result<TransferFunct
         points.push([upper, 1.0, 0.55, 0.15, 0.25]);
     }
     TransferFunction::new(points, None).context("no colour map fits the attribute's range")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn particle_sets_larger_than_half_the_memory_are_read_out_of_core() {
+        let gib = 1u64 << 30;
+        // 24 GiB: up to about 80 million particles in memory; beyond, out of core with 6 GiB.
+        assert_eq!(automatic_particle_memory(1_000_000, 24 * gib), None);
+        assert_eq!(automatic_particle_memory(80_000_000, 24 * gib), None);
+        assert_eq!(automatic_particle_memory(81_000_000, 24 * gib), Some(6 * gib));
+        assert_eq!(automatic_particle_memory(u64::MAX, 24 * gib), Some(6 * gib));
+        // A tiny machine still gets the smallest budget.
+        assert_eq!(automatic_particle_memory(1_000_000, 16 << 20), Some(MIN_MEMORY_BYTES));
+    }
 }
