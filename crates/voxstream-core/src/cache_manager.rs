@@ -867,7 +867,6 @@ struct AnalysedBrick {
     subtree_range: Option<[u16; 2]>,
 }
 
-/// Asks `producer` for the brick of `key`, then analyses it.
 /// `work(i)` for every item of `batch`, on worker threads, computed in space-filling-curve order of the items' nodes
 /// (the Morton code of each node's corner at the finest level, then the level) and returned in the batch's order.
 ///
@@ -885,8 +884,10 @@ fn in_space_order<T: Sync, R: Send>(
         .enumerate()
         .map(|(index, item)| {
             let key = key_of(item);
-            let scale = shape.max_level.saturating_sub(key.level);
-            let corner = key.ijk.map(|c| c.checked_shl(scale).unwrap_or(0));
+            // The node's corner in nodes of the finest level (N^(levels below) per node; an order, so an overflow
+            // only costs locality).
+            let scale = u64::from(shape.n).saturating_pow(shape.max_level.saturating_sub(key.level));
+            let corner = key.ijk.map(|c| c.saturating_mul(scale));
             (morton_code(corner), key.level, index)
         })
         .collect();
@@ -909,6 +910,7 @@ fn morton_code(ijk: [u64; 3]) -> u64 {
     spread(ijk[0]) | spread(ijk[1]) << 1 | spread(ijk[2]) << 2
 }
 
+/// Asks `producer` for the brick of `key`, then analyses it.
 fn produce_analysed<P: Producer>(producer: &P, key: NodeKey, shape: &TreeShape) -> Result<AnalysedBrick, ProduceError> {
     let mut voxels = vec![0u16; shape.voxels_per_brick()];
     let produced = producer.produce(key, &mut voxels)?;

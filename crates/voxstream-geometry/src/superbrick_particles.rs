@@ -8,23 +8,28 @@
 //! 1. **Three streaming passes over the file** ([`ParticleChunks`], e.g. a binary PLY read a few MB at a time): the
 //!    bounds, count and smoothing-length range (every chunk validated as the in-memory set is); the particles per
 //!    superbrick; then each particle written, in unit-cube units, to its superbrick's run of a spill file (an
-//!    external counting sort: 20 bytes per particle, in an unnamed temporary file deleted when the producer drops).
+//!    external counting sort: 24 bytes per particle, in an unnamed temporary file deleted when the producer drops).
 //! 2. **Superbricks:** `S³` bins, `S` the smallest power of two (at most [`MAX_SUPERBRICKS_PER_AXIS`]) that puts
 //!    at most a 216th of the memory budget in a superbrick on average (a neighbourhood of 27 fits eight times over:
-//!    small superbricks keep the cache's working set close to what the rays ask for, and each load cheap), and no
-//!    more than half a superbrick's width as a kernel's reach, so that a node's kernels come from its superbrick and
-//!    at most its 26 neighbours. Each superbrick's run is rewritten once in its index's order, so a load sorts
-//!    sorted keys.
+//!    small superbricks keep the cache's working set close to what the rays ask for, and each load cheap), and
+//!    kernels reaching at most half a superbrick's width (all but the widest thousandth), so that a node's kernels
+//!    come from its superbrick and at most its 26 neighbours. Each superbrick records its particles' bounds and widest
+//!    kernel (its extent): a brick loads only the superbricks whose kernels reach it, and the few widest kernels are
+//!    found through their superbricks' extents without shrinking the rest. Each superbrick's run is rewritten once
+//!    in its index's order, so a load sorts sorted keys. At most 2³² particles per superbrick.
 //! 3. **Smoothing lengths** where the file has none: the in-memory rule (`h = 2·` the 8th neighbour's distance,
-//!    capped at 4× the median) with the k-d tree built per superbrick over it and the neighbours' particles within a
-//!    quarter of its width (exact for every `h` up to half the width, where the cap also stops it), the median taken
-//!    from a fine histogram.
-//! 4. **One pass over the superbricks** with their neighbourhoods: the density probe (largest and median density at
-//!    the particles, as the in-memory producer probes them), the oracle's counts per support class, and the
-//!    aggregated particles of the coarse levels.
+//!    capped at 4× the median) with one more cap, half a superbrick's width (the in-memory one is a tenth of the
+//!    cube): a k-d tree per superbrick over it and the neighbours' particles within a quarter of its width finds
+//!    every `h` up to that cap exactly. The median is taken from a fine histogram.
+//! 4. **One pass over the superbricks**, each with the neighbours' particles whose kernels reach it: the density
+//!    probe (largest and median density at the particles, probed as in memory: every particle of the two narrowest
+//!    support classes present, one in 64 of the others), the oracle's counts per support class, and the aggregated
+//!    particles of the coarse levels.
 //! 5. **Levels at or below the superbricks' size** (a node inside one superbrick): resampled exactly as in memory
 //!    from the particles of the superbricks its kernels reach, loaded on demand into an LRU cache of indices
-//!    ([`crate::particle_index`]) that holds at most the budget's particles (plus those in use by bricks being made).
+//!    ([`crate::particle_index`]) that holds at most the budget's particles (plus those in use by bricks being made;
+//!    two threads needing the same superbrick at once may both load it). Not counted in the budget: the build
+//!    passes' neighbourhoods (a superbrick and the kernels reaching it) and the coarse levels' aggregates.
 //! 6. **Coarser levels** (a node spanning superbricks): from particles aggregated per voxel of the level (mass
 //!    summed, placed at the centre of mass, mass-weighted mean smoothing length; kernels of different widths kept
 //!    apart) on cells half a voxel wide, built bottom-up and held in memory: at most `(brick·S)³` aggregates for
@@ -32,7 +37,9 @@
 //!    the profile is approximated (within 1.1% of the density scale on the tests' cloud; the kernel there is two
 //!    voxels wide).
 //!
-//! Not supported out of core: the attribute interpolant (it needs every particle's density before any brick).
+//! 7. **The attribute** ([`ParticleTreeSettings::attribute`]): the probe pass computes the density at every particle
+//!    and stores each particle's weight `mⱼ/ρⱼ·Aⱼ` in the spill file; one more pass over the superbricks evaluates the
+//!    interpolant at every particle for its range, as the in-memory producer does.
 
 use std::collections::HashMap;
 use std::os::unix::fs::FileExt;
@@ -59,8 +66,8 @@ use crate::ParticleTreeSettings;
 pub trait ParticleChunks: Sync {
     /// Number of particles.
     fn count(&self) -> u64;
-    /// Whether the particles carry smoothing lengths and masses.
-    fn has_smoothing_and_masses(&self) -> [bool; 2];
+    /// Whether the particles carry smoothing lengths, masses and values.
+    fn columns(&self) -> [bool; 3];
     /// Calls `f` with consecutive runs of the particles and the index of each run's first.
     fn for_each_chunk(
         &self,
@@ -73,9 +80,8 @@ impl ParticleChunks for PlyPointStream {
         PlyPointStream::count(self)
     }
 
-    fn has_smoothing_and_masses(&self) -> [bool; 2] {
-        let [smoothing, masses, _] = self.columns();
-        [smoothing, masses]
+    fn columns(&self) -> [bool; 3] {
+        PlyPointStream::columns(self)
     }
 
     fn for_each_chunk(
@@ -92,8 +98,8 @@ impl ParticleChunks for ParticleSet {
         self.len() as u64
     }
 
-    fn has_smoothing_and_masses(&self) -> [bool; 2] {
-        [!self.smoothing().is_empty(), !self.masses().is_empty()]
+    fn columns(&self) -> [bool; 3] {
+        [!self.smoothing().is_empty(), !self.masses().is_empty(), !self.values().0.is_empty()]
     }
 
     fn for_each_chunk(
@@ -108,8 +114,8 @@ impl ParticleChunks for ParticleSet {
                 positions: self.positions()[from..to].to_vec(),
                 smoothing: column(self.smoothing(), from, to),
                 masses: column(self.masses(), from, to),
-                values: Vec::new(),
-                value_name: String::new(),
+                values: column(self.values().0, from, to),
+                value_name: self.values().1.to_string(),
             };
             f(from as u64, &run)?;
         }
@@ -127,18 +133,24 @@ pub const BYTES_PER_LOADED_PARTICLE: u64 = 64;
 /// The smallest memory budget: room for 27 superbricks of a few thousand particles.
 pub const MIN_MEMORY_BYTES: u64 = 8 << 20;
 
-/// Bytes of a particle in the spill file: unit-cube position, support, mass (`f32` little-endian each).
-const RECORD_BYTES: usize = 20;
+/// Bytes of a particle in the spill file: unit-cube position, support, mass, weight (`f32` little-endian each).
+const RECORD_BYTES: usize = 24;
 
-/// A particle as the spill file holds it: `[x, y, z, support, mass]`, unit-cube units (support 0: not yet known).
-type Record = [f32; 5];
+/// A particle as the spill file holds it: `[x, y, z, support, mass, weight]`, unit-cube units (support 0: not yet
+/// known). The weight is what the particle adds times its kernel: its mass (density), or `mⱼ/ρⱼ·Aⱼ` (attribute; the
+/// value `Aⱼ` until the probe knows `ρⱼ`).
+type Record = [f32; 6];
+
+/// Where a record keeps its mass, and its weight.
+const MASS: usize = 4;
+const WEIGHT: usize = 5;
 
 /// How the out-of-core producer holds the particles.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct OutOfCoreSettings {
     /// Memory for loaded superbricks, bytes (at least [`MIN_MEMORY_BYTES`]).
     pub memory_bytes: u64,
-    /// Directory of the spill file (20 bytes per particle).
+    /// Directory of the spill file (24 bytes per particle).
     pub spill_directory: std::path::PathBuf,
 }
 
@@ -203,8 +215,10 @@ pub struct SuperbrickParticleProducer {
     total_mass: f64,
     max_density: f64,
     typical_density: f64,
-    /// The density the voxel value 1 stands for (unit-cube units).
+    /// The field values the voxel values 0 and 1 stand for (unit-cube units for the density).
+    lower: f64,
     upper: f64,
+    attribute: bool,
 }
 
 /// Where a superbrick's kernels reach: its particles' bounds and their largest support (unit-cube units).
@@ -248,11 +262,16 @@ impl LogHistogram {
 
     /// The median's bin centre (`None`: empty).
     fn median(&self) -> Option<f64> {
-        let half = self.count.div_ceil(2).max(1);
+        self.quantile(0.5)
+    }
+
+    /// The bin centre of the `q`-quantile (`None`: empty).
+    fn quantile(&self, q: f64) -> Option<f64> {
+        let wanted = ((self.count as f64 * q).ceil() as u64).clamp(1, self.count.max(1));
         let mut seen = 0;
         for (bin, &n) in self.bins.iter().enumerate() {
             seen += n;
-            if seen >= half {
+            if seen >= wanted {
                 return Some(2f64.powf((bin as f64 + 0.5) / Self::PER_OCTAVE + Self::LOWEST));
             }
         }
@@ -260,12 +279,13 @@ impl LogHistogram {
     }
 }
 
-/// Particles aggregated per half voxel of a coarse level: mass, mass-weighted position and support.
+/// Particles aggregated per half voxel of a coarse level: mass, mass-weighted position and support, summed weight.
 #[derive(Clone, Copy, Debug, Default)]
 struct Aggregate {
     mass: f64,
     weighted_position: DVec3,
     weighted_support: f64,
+    weight: f64,
 }
 
 /// Aggregates per (cell, width class) of one coarse level.
@@ -274,7 +294,7 @@ type Aggregates = HashMap<(u64, u8), Aggregate>;
 /// Aggregation cells per voxel edge of a coarse level.
 const AGGREGATE_CELLS_PER_VOXEL: f64 = 2.0;
 
-fn aggregate_into(aggregates: &mut Aggregates, shape: &TreeShape, level: u32, p: DVec3, h: f64, m: f64) {
+fn aggregate_into(aggregates: &mut Aggregates, shape: &TreeShape, level: u32, p: DVec3, h: f64, m: f64, w: f64) {
     let voxel = shape.voxel_size(level);
     let cell_size = voxel / AGGREGATE_CELLS_PER_VOXEL;
     let cells = (1.0 / cell_size).round() as u64;
@@ -286,20 +306,22 @@ fn aggregate_into(aggregates: &mut Aggregates, shape: &TreeShape, level: u32, p:
     entry.mass += m;
     entry.weighted_position += p * m;
     entry.weighted_support += h * m;
+    entry.weight += w;
 }
 
-/// The aggregates as particles: unit positions (single precision), supports, masses.
-fn aggregated_particles(aggregates: &Aggregates) -> (Vec<DVec3>, Vec<f64>, Vec<f32>) {
-    let mut entries: Vec<&Aggregate> = aggregates.values().collect();
-    // A fixed order (by position) so that the same file gives the same bricks.
-    entries.sort_by(|a, b| {
-        let (pa, pb) = (a.weighted_position / a.mass, b.weighted_position / b.mass);
-        pa.to_array().partial_cmp(&pb.to_array()).unwrap_or(std::cmp::Ordering::Equal)
-    });
-    let positions = entries.iter().map(|a| (a.weighted_position / a.mass).as_vec3().as_dvec3()).collect();
-    let support = entries.iter().map(|a| f64::from((a.weighted_support / a.mass) as f32)).collect();
-    let masses = entries.iter().map(|a| a.mass as f32).collect();
-    (positions, support, masses)
+/// The aggregates as particles: unit position (single precision), support, mass, weight.
+fn aggregated_particles(aggregates: &Aggregates) -> Vec<(DVec3, f64, f64, f64)> {
+    let mut entries: Vec<(&(u64, u8), &Aggregate)> = aggregates.iter().collect();
+    // A fixed order (by cell and width) so that the same file gives the same bricks.
+    entries.sort_unstable_by_key(|(key, _)| **key);
+    let entries: Vec<&Aggregate> = entries.into_iter().map(|(_, a)| a).collect();
+    entries
+        .iter()
+        .map(|a| {
+            let p = (a.weighted_position / a.mass).as_vec3().as_dvec3();
+            (p, f64::from((a.weighted_support / a.mass) as f32), a.mass, a.weight)
+        })
+        .collect()
 }
 
 impl SuperbrickParticleProducer {
@@ -310,10 +332,10 @@ impl SuperbrickParticleProducer {
         out_of_core: &OutOfCoreSettings,
     ) -> Result<SuperbrickParticleProducer, GeometryError> {
         let invalid = |message: String| GeometryError::Invalid { message };
-        if settings.attribute {
+        let [has_smoothing, has_masses, has_values] = source.columns();
+        if settings.attribute && !has_values {
             return Err(invalid(
-                "an attribute cannot be rendered out of core yet (its interpolant needs every particle's density \
-                 first): render the density, or read the particles into memory"
+                "the particles have no scalar attribute to render (a value column); render their density instead"
                     .into(),
             ));
         }
@@ -333,16 +355,19 @@ impl SuperbrickParticleProducer {
             )));
         }
         TreeShape::new(2, settings.brick_size, 0).map_err(|error| invalid(error.to_string()))?;
-        let [has_smoothing, has_masses] = source.has_smoothing_and_masses();
 
         // Pass 1: count, bounds, smoothing lengths, mass; every run validated.
         let mut count = 0u64;
         let (mut lower, mut upper) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
         let (mut min_h, mut max_h) = (f64::INFINITY, 0.0f64);
+        let mut file_supports = LogHistogram::new();
         let mut total_mass = 0.0;
         source.for_each_chunk(&mut |first, run| {
             check_particles(run, first)?;
-            if run.smoothing.is_empty() == has_smoothing || run.masses.is_empty() == has_masses {
+            if run.smoothing.is_empty() == has_smoothing
+                || run.masses.is_empty() == has_masses
+                || run.values.is_empty() == has_values
+            {
                 return Err(invalid(format!("particle {first}: the columns change within the file")));
             }
             count += run.positions.len() as u64;
@@ -354,6 +379,7 @@ impl SuperbrickParticleProducer {
             }
             for &h in &run.smoothing {
                 min_h = min_h.min(f64::from(h));
+                file_supports.add(f64::from(h));
                 max_h = max_h.max(f64::from(h));
             }
             total_mass +=
@@ -362,9 +388,6 @@ impl SuperbrickParticleProducer {
         })?;
         if count == 0 {
             return Err(invalid("the file holds no particles".into()));
-        }
-        if count > u64::from(u32::MAX) * MAX_SUPERBRICKS_PER_AXIS.pow(3) {
-            return Err(invalid(format!("{count} particles: at most 2³² per superbrick are read")));
         }
         let fit = UnitCubeFit::checked_around(lower, upper, settings.fill)?;
         let to_support = |h: f32| f64::from((f64::from(h) * settings.smoothing_scale / fit.size) as f32);
@@ -392,8 +415,10 @@ impl SuperbrickParticleProducer {
             per_axis *= 2;
         }
         if has_smoothing {
-            let max_support = to_support(max_h as f32);
-            while per_axis > 1 && per_axis as f64 * max_support > 0.5 {
+            // Kernels reaching at most half a superbrick (all but the widest thousandth: a few huge kernels must
+            // not make the whole set one superbrick; theirs are found through the superbricks' extents).
+            let wide = to_support(file_supports.quantile(0.999).unwrap_or(max_h).min(max_h) as f32);
+            while per_axis > 1 && per_axis as f64 * wide > 0.5 {
                 per_axis /= 2;
             }
         }
@@ -419,6 +444,13 @@ impl SuperbrickParticleProducer {
         if starts[bins] != count {
             return Err(invalid("the file changed while it was read".into()));
         }
+        let largest = starts.windows(2).map(|w| w[1] - w[0]).max().unwrap_or(0);
+        if largest > u64::from(u32::MAX) {
+            return Err(invalid(format!(
+                "{largest} particles in one superbrick of {per_axis}³: at most 2³² are read (split the file's densest \
+                 region, or give more --particle-memory)"
+            )));
+        }
 
         // Pass 3: each particle to its superbrick's run of the spill file.
         let spill_io = |error| GeometryError::Io { path: out_of_core.spill_directory.clone(), error };
@@ -435,7 +467,8 @@ impl SuperbrickParticleProducer {
                     let unit = unit_of(*p);
                     let h = if has_smoothing { to_support(run.smoothing[i]) as f32 } else { 0.0 };
                     let m = if has_masses { run.masses[i] } else { 1.0 };
-                    (superbrick_of(unit), [unit.x as f32, unit.y as f32, unit.z as f32, h, m])
+                    let w = if settings.attribute { run.values[i] } else { m };
+                    (superbrick_of(unit), [unit.x as f32, unit.y as f32, unit.z as f32, h, m, w])
                 })
                 .collect();
             binned.sort_by_key(|&(bin, _)| bin);
@@ -450,6 +483,9 @@ impl SuperbrickParticleProducer {
             }
             Ok(())
         })?;
+        if cursor.iter().zip(&starts[1..]).any(|(written, end)| written != end) {
+            return Err(invalid("the file changed while it was read".into()));
+        }
 
         let mut producer = SuperbrickParticleProducer {
             shape: TreeShape::new(2, settings.brick_size, 0).map_err(|error| invalid(error.to_string()))?,
@@ -469,7 +505,9 @@ impl SuperbrickParticleProducer {
             total_mass,
             max_density: 1.0,
             typical_density: 1.0,
+            lower: 0.0,
             upper: 1.0,
+            attribute: settings.attribute,
         };
 
         // Smoothing lengths where the file has none: per superbrick, over it and its neighbours' nearby particles.
@@ -488,8 +526,11 @@ impl SuperbrickParticleProducer {
                     .chain(&neighbours)
                     .map(|r| [f64::from(r[0]), f64::from(r[1]), f64::from(r[2])])
                     .collect();
-                let h: Vec<f64> = if points.len() < 2 {
+                let h: Vec<f64> = if count < 2 {
                     vec![0.05f64.min(cap)]
+                } else if points.len() <= SMOOTHING_NEIGHBOURS.min(count as usize - 1) {
+                    // The 8th neighbour (or the set's farthest) lies beyond `reach`: its h is past the cap.
+                    vec![cap; own.len()]
                 } else {
                     let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&points);
                     let k = (SMOOTHING_NEIGHBOURS + 1).min(points.len());
@@ -522,7 +563,7 @@ impl SuperbrickParticleProducer {
             let records = producer.read(bin).map_err(spill_io)?;
             // Rewritten in the order its index sorts them (support class, cell), so that each later load of the
             // superbrick sorts sorted keys (a linear pass) instead of shuffled ones.
-            let (positions, support, masses) = index_input(records.iter());
+            let (positions, support, masses) = index_input(records.iter(), MASS);
             let (_, order) = ParticleIndex::build(&positions, &support, &masses, false);
             let records: Vec<Record> = order.iter().map(|&i| records[i as usize]).collect();
             encode(records.iter(), &mut bytes);
@@ -545,33 +586,54 @@ impl SuperbrickParticleProducer {
         debug_assert!(superbrick_level <= max_level);
 
         // The probe, the oracle's counts and the coarse levels' aggregates, a superbrick at a time.
-        let class_support = |c: usize| (min_support * 2f64.powi(c as i32 + 1)).min(max_support);
+        // The last class holds every wider kernel.
+        let class_support = |c: usize| match c {
+            c if c + 1 == MAX_CLASSES => max_support,
+            c => (min_support * 2f64.powi(c as i32 + 1)).min(max_support),
+        };
+        // As in memory, every particle of the two narrowest classes present is probed (the density peaks there).
+        let mut present = [false; MAX_CLASSES];
+        for bin in 0..bins {
+            for record in producer.read(bin).map_err(spill_io)? {
+                present[class_of(f64::from(record[3]), min_support)] = true;
+            }
+        }
+        let narrow_end = (0..MAX_CLASSES).filter(|&c| present[c]).nth(2).unwrap_or(MAX_CLASSES);
         let mut counts: Vec<Option<GridCounts>> = vec![None; MAX_CLASSES];
         let mut densities = LogHistogram::new();
         let mut max_density = 0.0f64;
         let mut aggregates = Aggregates::new();
         for bin in 0..bins {
-            let own = producer.read(bin).map_err(spill_io)?;
+            let mut own = producer.read(bin).map_err(spill_io)?;
             if own.is_empty() {
                 continue;
             }
-            let neighbours = producer.neighbourhood(bin, max_support).map_err(spill_io)?;
-            let (positions, support, masses) = index_input(own.iter().chain(&neighbours));
+            let neighbours = producer.kernels_reaching(bin).map_err(spill_io)?;
+            let (positions, support, masses) = index_input(own.iter().chain(&neighbours), MASS);
             let (index, _) = ParticleIndex::build(&positions, &support, &masses, false);
             let first = producer.starts[bin];
+            // The attribute needs every particle's density.
             let probed: Vec<f64> = (0..own.len())
                 .into_par_iter()
                 .map(|i| {
-                    let narrow = class_of(support[i], min_support) < 2;
-                    match narrow || (first + i as u64).is_multiple_of(64) {
+                    let narrow = class_of(support[i], min_support) < narrow_end;
+                    match settings.attribute || narrow || (first + i as u64).is_multiple_of(64) {
                         true => index.kernel_sum(|j| f64::from(index.masses[j]), positions[i], 0.0),
                         false => 0.0,
                     }
                 })
                 .collect();
-            for d in probed {
+            for &d in &probed {
                 max_density = max_density.max(d);
                 densities.add(d);
+            }
+            if settings.attribute {
+                // Every particle's kernel is positive at its own centre, so ρⱼ > 0.
+                for (record, rho) in own.iter_mut().zip(&probed) {
+                    record[WEIGHT] = (f64::from(record[MASS]) / rho * f64::from(record[WEIGHT])) as f32;
+                }
+                encode(own.iter(), &mut bytes);
+                producer.spill.write_all_at(&bytes, first * RECORD_BYTES as u64).map_err(spill_io)?;
             }
             for i in 0..own.len() {
                 let class = class_of(support[i], min_support);
@@ -581,6 +643,7 @@ impl SuperbrickParticleProducer {
                 }
                 if superbrick_level > 0 {
                     let level = superbrick_level - 1;
+                    let weight = f64::from(own[i][WEIGHT]);
                     aggregate_into(
                         &mut aggregates,
                         &producer.shape,
@@ -588,6 +651,7 @@ impl SuperbrickParticleProducer {
                         positions[i],
                         support[i],
                         f64::from(masses[i]),
+                        weight,
                     );
                 }
             }
@@ -600,23 +664,39 @@ impl SuperbrickParticleProducer {
         producer.max_density = if max_density > 0.0 { max_density } else { 1.0 };
         producer.typical_density = densities.median().unwrap_or(producer.max_density);
         producer.upper = producer.max_density.min(DENSITY_RANGE * producer.typical_density.max(f64::MIN_POSITIVE));
+        if settings.attribute {
+            // The interpolant's range at every particle, as in memory: one more pass with the weights.
+            let (mut lower, mut upper) = (0.0f64, 0.0f64);
+            for bin in 0..bins {
+                let own = producer.read(bin).map_err(spill_io)?;
+                if own.is_empty() {
+                    continue;
+                }
+                let neighbours = producer.kernels_reaching(bin).map_err(spill_io)?;
+                let (positions, support, weights) = index_input(own.iter().chain(&neighbours), WEIGHT);
+                let (index, _) = ParticleIndex::build(&positions, &support, &weights, false);
+                let fields: Vec<f64> = (0..own.len())
+                    .into_par_iter()
+                    .map(|i| index.kernel_sum(|j| f64::from(index.masses[j]), positions[i], 0.0))
+                    .collect();
+                lower = fields.iter().copied().fold(lower, f64::min);
+                upper = fields.iter().copied().fold(upper, f64::max);
+            }
+            producer.lower = lower;
+            producer.upper = if upper > lower { upper } else { lower + 1.0 };
+        }
 
         // Coarse levels, bottom-up: each from the aggregates of the one below.
         let mut coarse = Vec::new();
         for level in (0..superbrick_level).rev() {
-            let (positions, support, masses) = aggregated_particles(&aggregates);
-            let (index, _) = ParticleIndex::build(&positions, &support, &masses, false);
+            let particles = aggregated_particles(&aggregates);
+            let (positions, support): (Vec<DVec3>, Vec<f64>) = particles.iter().map(|a| (a.0, a.1)).unzip();
+            let weights: Vec<f32> = particles.iter().map(|a| a.3 as f32).collect();
+            let (index, _) = ParticleIndex::build(&positions, &support, &weights, false);
             if level > 0 {
                 aggregates = Aggregates::new();
-                for i in 0..positions.len() {
-                    aggregate_into(
-                        &mut aggregates,
-                        &producer.shape,
-                        level - 1,
-                        positions[i],
-                        support[i],
-                        f64::from(masses[i]),
-                    );
+                for &(p, h, m, w) in &particles {
+                    aggregate_into(&mut aggregates, &producer.shape, level - 1, p, h, m, w);
                 }
             }
             coarse.push(index);
@@ -635,7 +715,7 @@ impl SuperbrickParticleProducer {
             .chunks_exact(RECORD_BYTES)
             .map(|r| {
                 let mut record: Record =
-                    [0, 4, 8, 12, 16].map(|o| f32::from_le_bytes([r[o], r[o + 1], r[o + 2], r[o + 3]]));
+                    [0, 4, 8, 12, 16, 20].map(|o| f32::from_le_bytes([r[o], r[o + 1], r[o + 2], r[o + 3]]));
                 record[3] = record[3].min(self.support_cap);
                 record
             })
@@ -657,6 +737,31 @@ impl SuperbrickParticleProducer {
             records.extend(self.read(other)?.into_iter().filter(|r| {
                 let p = DVec3::new(f64::from(r[0]), f64::from(r[1]), f64::from(r[2]));
                 p.cmpge(lower).all() && p.cmple(upper).all()
+            }));
+        }
+        Ok(records)
+    }
+
+    /// The particles of the other superbricks whose kernels reach superbrick `bin`'s box (as far as each particle's
+    /// own support: a few wide kernels do not bring in their superbricks' narrow ones).
+    fn kernels_reaching(&self, bin: usize) -> std::io::Result<Vec<Record>> {
+        let s = self.per_axis;
+        let ijk = [bin as u64 % s, bin as u64 / s % s, bin as u64 / s / s];
+        let width = 1.0 / s as f64;
+        let lower = DVec3::from(ijk.map(|c| c as f64 * width));
+        let upper = lower + DVec3::splat(width);
+        let reach = DVec3::splat(self.max_support);
+        let mut records = Vec::new();
+        for other in self.bins_overlapping(lower - reach, upper + reach) {
+            if other == bin
+                || self.starts[other] == self.starts[other + 1]
+                || !self.extents[other].reaches(lower, upper, 0.0)
+            {
+                continue;
+            }
+            records.extend(self.read(other)?.into_iter().filter(|r| {
+                let p = DVec3::new(f64::from(r[0]), f64::from(r[1]), f64::from(r[2]));
+                (lower - p).max(p - upper).max(DVec3::ZERO).length() < f64::from(r[3])
             }));
         }
         Ok(records)
@@ -691,7 +796,7 @@ impl SuperbrickParticleProducer {
             }
         }
         let records = self.read(bin)?;
-        let (positions, support, masses) = index_input(records.iter());
+        let (positions, support, masses) = index_input(records.iter(), WEIGHT);
         let index = Arc::new(ParticleIndex::build(&positions, &support, &masses, false).0);
         let mut cache = self.cache.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
         cache.clock += 1;
@@ -725,9 +830,19 @@ impl SuperbrickParticleProducer {
         self.bounds
     }
 
-    /// `[0, ρ_top]` in file mass per file volume (as [`crate::ParticleProducer::value_range`]).
+    /// `[0, ρ_top]` in file mass per file volume, or the attribute's interpolated range (as
+    /// [`crate::ParticleProducer::value_range`]).
     pub fn value_range(&self) -> [f64; 2] {
-        [0.0, self.upper / self.fit.size.powi(3)]
+        if self.attribute {
+            [self.lower, self.upper]
+        } else {
+            [0.0, self.upper / self.fit.size.powi(3)]
+        }
+    }
+
+    /// The voxel value (0 to 1) where no particle reaches.
+    fn empty_value(&self) -> f32 {
+        quantize((-self.lower / (self.upper - self.lower)) as f32) as f32 / 65535.0
     }
 
     /// The median density at the probed particles, file mass per file volume.
@@ -782,15 +897,15 @@ impl SuperbrickParticleProducer {
     }
 }
 
-/// Records as the index's input: unit positions, supports, masses.
-fn index_input<'a>(records: impl Iterator<Item = &'a Record>) -> (Vec<DVec3>, Vec<f64>, Vec<f32>) {
+/// Records as the index's input: unit positions, supports, and the `column` (mass or weight) as the index's masses.
+fn index_input<'a>(records: impl Iterator<Item = &'a Record>, column: usize) -> (Vec<DVec3>, Vec<f64>, Vec<f32>) {
     let mut positions = Vec::new();
     let mut support = Vec::new();
     let mut masses = Vec::new();
     for r in records {
         positions.push(DVec3::new(f64::from(r[0]), f64::from(r[1]), f64::from(r[2])));
         support.push(f64::from(r[3]));
-        masses.push(r[4]);
+        masses.push(r[column]);
     }
     (positions, support, masses)
 }
@@ -819,7 +934,7 @@ impl Producer for SuperbrickParticleProducer {
         if reaches {
             None
         } else {
-            Some(0.0)
+            Some(self.empty_value())
         }
     }
 
@@ -849,11 +964,15 @@ impl Producer for SuperbrickParticleProducer {
             }
         }
         if !reached {
-            return Ok(Produced { content: NodeContent::Empty, is_terminal: true });
+            let content = match self.empty_value() {
+                0.0 => NodeContent::Empty,
+                value => NodeContent::Constant(value),
+            };
+            return Ok(Produced { content, is_terminal: true });
         }
-        let scale = 1.0 / self.upper;
+        let scale = 1.0 / (self.upper - self.lower);
         for (voxel, value) in voxels.iter_mut().zip(&density) {
-            *voxel = quantize((value * scale).clamp(0.0, 1.0) as f32);
+            *voxel = quantize(((value - self.lower) * scale).clamp(0.0, 1.0) as f32);
         }
         Ok(Produced { content: NodeContent::Brick, is_terminal: key.level >= self.shape.max_level })
     }
@@ -896,8 +1015,8 @@ mod tests {
         OutOfCoreSettings { memory_bytes, spill_directory: std::env::temp_dir() }
     }
 
-    /// The largest difference between the two producers' densities over the non-empty nodes of `level` (every
-    /// `stride`-th), relative to the in-memory density scale, and the number of nodes compared.
+    /// The largest difference between the two producers' fields over the non-empty nodes of `level` (every
+    /// `stride`-th), relative to the in-memory value range, and the number of nodes compared.
     fn largest_difference(
         memory: &ParticleProducer,
         streamed: &SuperbrickParticleProducer,
@@ -920,14 +1039,19 @@ mod tests {
             let pb = streamed.produce(key, &mut b).unwrap();
             if pa.content == NodeContent::Brick || pb.content == NodeContent::Brick {
                 compared += 1;
-                let value = |v: &[u16], i: usize, p: &Produced, scale: f64| match p.content {
-                    NodeContent::Brick => f64::from(v[i]) / 65535.0 * scale,
-                    _ => 0.0,
+                let value = |v: &[u16], i: usize, p: &Produced, [lower, upper]: [f64; 2]| {
+                    let unit = match p.content {
+                        NodeContent::Brick => f64::from(v[i]) / 65535.0,
+                        NodeContent::Constant(c) => f64::from(c),
+                        NodeContent::Empty => 0.0,
+                    };
+                    lower + unit * (upper - lower)
                 };
+                let [lower, upper] = memory.value_range();
                 for i in 0..a.len() {
-                    let da = value(&a, i, &pa, memory.density_scale());
-                    let db = value(&b, i, &pb, streamed.density_scale());
-                    worst = worst.max((da - db).abs() / memory.density_scale());
+                    let da = value(&a, i, &pa, memory.value_range());
+                    let db = value(&b, i, &pb, streamed.value_range());
+                    worst = worst.max((da - db).abs() / (upper - lower));
                 }
             }
         }
@@ -1041,13 +1165,80 @@ mod tests {
     }
 
     #[test]
+    fn an_attribute_out_of_core_equals_the_in_memory_one() {
+        // A temperature rising along x: the SPH interpolant with weights mⱼ/ρⱼ·Aⱼ, ρⱼ probed at every particle.
+        let positions = cloud(20_000, 13);
+        let values: Vec<f32> = positions.iter().map(|p| (p[0] - 10.0) as f32 * 3.0 + 1.0).collect();
+        let set = ParticleSet::new(RawParticles {
+            smoothing: vec![0.6; positions.len()],
+            masses: (0..positions.len()).map(|i| 1.0 + (i % 2) as f32).collect(),
+            positions,
+            values,
+            value_name: "temperature".into(),
+        })
+        .unwrap();
+        let settings =
+            ParticleTreeSettings { resolution: Some(128), attribute: true, ..ParticleTreeSettings::default() };
+        let memory = ParticleProducer::new(&set, settings).unwrap();
+        let streamed = SuperbrickParticleProducer::new(&set, settings, &out_of_core(MIN_MEMORY_BYTES)).unwrap();
+        let statistics = streamed.statistics();
+        assert!(statistics.superbricks_per_axis >= 4, "{statistics:?}");
+        let ([a0, a1], [b0, b1]) = (memory.value_range(), streamed.value_range());
+        assert!(a0 < -10.0 && a1 > 10.0, "the range covers the temperatures: {a0} {a1}");
+        assert!((a0 - b0).abs() < 1e-4 * (a1 - a0) && (a1 - b1).abs() < 1e-4 * (a1 - a0), "{a0} {a1} / {b0} {b1}");
+        // Empty space is the voxel value of 0 in both.
+        let far = NodeKey { level: 1, ijk: [0, 0, 0] };
+        assert_eq!(memory.oracle(far).is_some(), streamed.oracle(far).is_some());
+        for level in statistics.superbrick_level..=memory.shape().max_level {
+            let stride = if level == statistics.superbrick_level { 1 } else { 7 };
+            let (worst, compared) = largest_difference(&memory, &streamed, level, stride);
+            assert!(compared > 10, "level {level}: {compared}");
+            assert!(worst <= 2.0 / 65535.0, "level {level}: {worst}");
+        }
+        for level in 0..statistics.superbrick_level {
+            let (worst, _) = largest_difference(&memory, &streamed, level, 1);
+            assert!(worst < 0.02, "level {level}: {worst}");
+        }
+    }
+
+    #[test]
+    fn isolated_and_widely_smoothed_particles_match_the_in_memory_producer() {
+        // An isolated trio (fewer than 8 neighbours anywhere near: in memory their h hits the cap, and must out of
+        // core too), and one particle whose kernel spans the cube (it must not make the whole set one superbrick).
+        let mut positions = cloud(40_000, 17);
+        positions.extend([[40.0, 20.0, 30.0], [40.01, 20.0, 30.0], [40.0, 20.01, 30.0]]);
+        let adaptive =
+            ParticleSet::new(RawParticles { positions: positions.clone(), ..RawParticles::default() }).unwrap();
+        let settings = ParticleTreeSettings { resolution: Some(64), ..ParticleTreeSettings::default() };
+        let memory = ParticleProducer::new(&adaptive, settings).unwrap();
+        let streamed = SuperbrickParticleProducer::new(&adaptive, settings, &out_of_core(MIN_MEMORY_BYTES)).unwrap();
+        assert!(streamed.statistics().superbricks_per_axis >= 4, "{:?}", streamed.statistics());
+        for level in streamed.statistics().superbrick_level..=memory.shape().max_level {
+            let (worst, compared) = largest_difference(&memory, &streamed, level, 1);
+            assert!(compared > 10);
+            assert!(worst < 0.01, "adaptive, level {level}: {worst}");
+        }
+        let mut smoothing = vec![0.5f32; positions.len()];
+        smoothing[7] = 40.0;
+        let wide = ParticleSet::new(RawParticles { positions, smoothing, ..RawParticles::default() }).unwrap();
+        let memory = ParticleProducer::new(&wide, settings).unwrap();
+        let streamed = SuperbrickParticleProducer::new(&wide, settings, &out_of_core(MIN_MEMORY_BYTES)).unwrap();
+        assert!(streamed.statistics().superbricks_per_axis >= 4, "{:?}", streamed.statistics());
+        for level in streamed.statistics().superbrick_level..=memory.shape().max_level {
+            let (worst, compared) = largest_difference(&memory, &streamed, level, 1);
+            assert!(compared > 10);
+            assert!(worst <= 1.0 / 65535.0, "one wide kernel, level {level}: {worst}");
+        }
+    }
+
+    #[test]
     fn bad_settings_are_named() {
         let set = ParticleSet::new(RawParticles { positions: cloud(10, 1), ..RawParticles::default() }).unwrap();
         let small = SuperbrickParticleProducer::new(&set, ParticleTreeSettings::default(), &out_of_core(1 << 20));
         assert!(small.unwrap_err().to_string().contains("give at least 8 MiB"));
         let attribute = ParticleTreeSettings { attribute: true, ..ParticleTreeSettings::default() };
         let error = SuperbrickParticleProducer::new(&set, attribute, &out_of_core(MIN_MEMORY_BYTES)).unwrap_err();
-        assert!(error.to_string().contains("cannot be rendered out of core"), "{error}");
+        assert!(error.to_string().contains("no scalar attribute"), "{error}");
         let missing = OutOfCoreSettings {
             memory_bytes: MIN_MEMORY_BYTES,
             spill_directory: "/nonexistent/voxstream-spill".into(),

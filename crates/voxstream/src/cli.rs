@@ -160,7 +160,7 @@ pub struct RenderArgs {
     /// (PySPH, Monaghan's convention). Molecular files (.gro, .pdb): 2 times the atomic radius unless given.
     #[arg(long, value_name = "FACTOR")]
     pub smoothing_scale: Option<f64>,
-    /// Binary PLY point files: read the particles out of core, binned once into superbricks in a spill file (20
+    /// Binary PLY point files: read the particles out of core, binned once into superbricks in a spill file (24
     /// bytes per particle, in $TMPDIR), holding about MIB of them in memory. Chosen by itself, with a quarter of the
     /// machine's memory, for a PLY point file that would take more than half of it.
     #[arg(long, value_name = "MIB")]

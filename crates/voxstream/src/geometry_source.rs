@@ -311,15 +311,10 @@ fn open_out_of_core(path: &Path, args: &GeometryOptions, memory: u64, started: I
     if args.amplify.is_some() {
         bail!("--amplify applies to meshes; {shown} holds particles");
     }
-    if args.attribute {
-        bail!(
-            "--attribute is not available out of core yet (the interpolant needs every particle's density first): \
-             render the density, or leave out --particle-memory"
-        );
-    }
     let settings = ParticleTreeSettings {
         resolution: args.resolution,
         smoothing_scale: smoothing_scale(args, false)?,
+        attribute: args.attribute,
         ..ParticleTreeSettings::default()
     };
     let out_of_core = OutOfCoreSettings { memory_bytes: memory, spill_directory: std::env::temp_dir() };
@@ -331,21 +326,30 @@ fn open_out_of_core(path: &Path, args: &GeometryOptions, memory: u64, started: I
     let fit = producer.fit();
     let margin = producer.margin();
     let bounds = producer.bounds();
+    let field = if args.attribute {
+        format!("{} {:.4e} to {:.4e}", stream.value_name(), value_range[0], value_range[1])
+    } else {
+        format!("density 0 to {:.4e} (mass per file unit³)", value_range[1])
+    };
     let description = format!(
         "{shown}: {} particles read out of core ({}³ superbricks in a {} MiB spill file, {} MiB for particles), {}³ \
-         virtual voxels, binned in {:.1} s; density 0 to {:.4e} (mass per file unit³)",
+         virtual voxels, binned in {:.1} s; {field}",
         statistics.particles,
         statistics.superbricks_per_axis,
         statistics.spill_bytes >> 20,
         memory >> 20,
         producer.shape().virtual_resolution(),
         started.elapsed().as_secs_f64(),
-        value_range[1]
     );
+    let transfer_function = if args.attribute {
+        attribute_transfer_function(value_range)?
+    } else {
+        particle_transfer_function(producer.typical_density(), value_range[1])?
+    };
     Ok(GeometrySource {
         index_bytes: producer.heap_bytes(),
         placement: placement(fit),
-        transfer_function: particle_transfer_function(producer.typical_density(), value_range[1])?,
+        transfer_function,
         camera: default_camera(&fit, margin, bounds, args),
         producer: GeometryProducer::StreamedParticles(Arc::new(producer)),
         value_range,

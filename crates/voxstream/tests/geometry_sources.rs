@@ -523,8 +523,8 @@ fn a_mesh_baked_into_a_store_renders_like_the_mesh() {
     );
 }
 
-/// A binary PLY point file of `count` particles (x y z h mass as floats, and a colour the reader skips) in a clumpy
-/// ball, returned with the path.
+/// A binary PLY point file of `count` particles (x y z h mass temperature as floats, and a colour the reader skips)
+/// in a clumpy ball, returned with the path.
 fn write_particle_ply(dir: &Path, count: usize) -> PathBuf {
     let mut state = 77u64;
     let mut next = move || {
@@ -536,7 +536,8 @@ fn write_particle_ply(dir: &Path, count: usize) -> PathBuf {
     let path = dir.join("clumps.ply");
     let mut bytes = format!(
         "ply\nformat binary_little_endian 1.0\ncomment made by voxstream's tests\nelement vertex {count}\nproperty float x\n\
-         property float y\nproperty float z\nproperty float h\nproperty float mass\nproperty uchar red\nend_header\n"
+         property float y\nproperty float z\nproperty float h\nproperty float mass\nproperty uchar red\n\
+         property float temperature\nend_header\n"
     )
     .into_bytes();
     for i in 0..count {
@@ -548,6 +549,7 @@ fn write_particle_ply(dir: &Path, count: usize) -> PathBuf {
             bytes.extend_from_slice(&v.to_le_bytes());
         }
         bytes.push((i % 256) as u8);
+        bytes.extend_from_slice(&(300.0 + 50.0 * p[1] as f32).to_le_bytes());
     }
     std::fs::write(&path, bytes).unwrap();
     path
@@ -560,7 +562,7 @@ fn write_particle_ply(dir: &Path, count: usize) -> PathBuf {
 fn a_particle_file_read_out_of_core_renders_as_in_memory() {
     let dir = scratch("out-of-core");
     let path = write_particle_ply(&dir, 200_000);
-    for (name, extra) in [("density", vec![]), ("surface", vec!["--iso", "2e4"])] {
+    for (name, extra) in [("density", vec![]), ("surface", vec!["--iso", "2e4"]), ("attribute", vec!["--attribute"])] {
         let memory = render(&path, 160, &extra, &dir.join(format!("{name}-memory.png")));
         let mut streamed_args = extra.clone();
         streamed_args.extend(["--particle-memory", "8"]);
@@ -601,16 +603,12 @@ fn a_particle_file_read_out_of_core_renders_as_in_memory() {
         &["render", text.to_str().unwrap(), "--particle-memory", "64"],
         "--particle-memory reads binary PLY point files out of core",
     );
-    assert_fails(
-        &["render", path.to_str().unwrap(), "--particle-memory", "64", "--attribute"],
-        "--attribute is not available out of core yet",
-    );
     let truncated = dir.join("truncated.ply");
     let bytes = std::fs::read(&path).unwrap();
     std::fs::write(&truncated, &bytes[..bytes.len() - 100]).unwrap();
     assert_fails(
         &["render", truncated.to_str().unwrap(), "--particle-memory", "64"],
-        "header announces 200000 vertices (21 bytes each",
+        "header announces 200000 vertices (25 bytes each",
     );
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -150,6 +150,11 @@ impl PlyPointStream {
         self.count
     }
 
+    /// The name of the value property (`""` if none).
+    pub fn value_name(&self) -> &str {
+        &self.value_name
+    }
+
     /// Whether the vertices carry a smoothing length, a mass and a value.
     pub fn columns(&self) -> [bool; 3] {
         [Role::Smoothing, Role::Mass, Role::Value].map(|r| self.layout.iter().any(|(_, role)| *role == r))
