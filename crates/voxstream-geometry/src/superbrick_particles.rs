@@ -28,7 +28,7 @@
 //! 5. **Levels at or below the superbricks' size** (a node inside one superbrick): resampled exactly as in memory
 //!    from the particles of the superbricks its kernels reach, loaded on demand into an LRU cache of indices
 //!    ([`crate::particle_index`]) that holds at most the budget's particles (plus those in use by bricks being made;
-//!    two threads needing the same superbrick at once may both load it). Not counted in the budget: the build
+//!    a thread needing a superbrick another is loading waits for it). Not counted in the budget: the build
 //!    passes' neighbourhoods (a superbrick and the kernels reaching it) and the coarse levels' aggregates.
 //! 6. **Coarser levels** (a node spanning superbricks): from particles aggregated per voxel of the level (mass
 //!    summed, placed at the centre of mass, mass-weighted mean smoothing length; kernels of different widths kept
@@ -181,6 +181,8 @@ pub struct SuperbrickStatistics {
 #[derive(Debug, Default)]
 struct SuperbrickCache {
     loaded: HashMap<u32, (Arc<ParticleIndex>, u64)>,
+    /// Superbricks a thread is loading: others wait for it rather than load them twice.
+    loading: std::collections::HashSet<u32>,
     particles: u64,
     peak: u64,
     clock: u64,
@@ -211,6 +213,8 @@ pub struct SuperbrickParticleProducer {
     oracle: Vec<(f64, ParticleGrid)>,
     max_support: f64,
     cache: Mutex<SuperbrickCache>,
+    /// Signalled when a load ends.
+    loaded_signal: std::sync::Condvar,
     budget_particles: u64,
     total_mass: f64,
     max_density: f64,
@@ -501,6 +505,7 @@ impl SuperbrickParticleProducer {
             oracle: Vec::new(),
             max_support: 0.0,
             cache: Mutex::new(SuperbrickCache::default()),
+            loaded_signal: std::sync::Condvar::new(),
             budget_particles,
             total_mass,
             max_density: 1.0,
@@ -786,31 +791,38 @@ impl SuperbrickParticleProducer {
     /// Superbrick `bin`'s index, from the cache or loaded into it (evicting the least recently used beyond the
     /// budget).
     fn superbrick(&self, bin: usize) -> std::io::Result<Arc<ParticleIndex>> {
+        let key = bin as u32;
         {
             let mut cache = self.cache.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
-            cache.clock += 1;
-            let clock = cache.clock;
-            if let Some((index, used)) = cache.loaded.get_mut(&(bin as u32)) {
-                *used = clock;
-                return Ok(Arc::clone(index));
+            loop {
+                cache.clock += 1;
+                let clock = cache.clock;
+                if let Some((index, used)) = cache.loaded.get_mut(&key) {
+                    *used = clock;
+                    return Ok(Arc::clone(index));
+                }
+                // Not cached: load it, unless another thread is (then wait for it and look again).
+                if cache.loading.insert(key) {
+                    break;
+                }
+                cache = self.loaded_signal.wait(cache).unwrap_or_else(|poisoned| poisoned.into_inner());
             }
         }
-        let records = self.read(bin)?;
-        let (positions, support, masses) = index_input(records.iter(), WEIGHT);
-        let index = Arc::new(ParticleIndex::build(&positions, &support, &masses, false).0);
+        let loaded = self.read(bin).map(|records| {
+            let (positions, support, masses) = index_input(records.iter(), WEIGHT);
+            Arc::new(ParticleIndex::build(&positions, &support, &masses, false).0)
+        });
         let mut cache = self.cache.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        cache.loading.remove(&key);
+        self.loaded_signal.notify_all();
+        let index = loaded?;
         cache.clock += 1;
         let clock = cache.clock;
-        if let Some((loaded, used)) = cache.loaded.get_mut(&(bin as u32)) {
-            // Another thread loaded it meanwhile.
-            *used = clock;
-            return Ok(Arc::clone(loaded));
-        }
         cache.loads += 1;
         cache.particles += index.len() as u64;
-        cache.loaded.insert(bin as u32, (Arc::clone(&index), clock));
+        cache.loaded.insert(key, (Arc::clone(&index), clock));
         while cache.particles > self.budget_particles && cache.loaded.len() > 1 {
-            let oldest = cache.loaded.iter().filter(|(b, _)| **b != bin as u32).min_by_key(|(_, (_, used))| *used);
+            let oldest = cache.loaded.iter().filter(|(b, _)| **b != key).min_by_key(|(_, (_, used))| *used);
             let Some((&oldest, _)) = oldest else { break };
             if let Some((evicted, _)) = cache.loaded.remove(&oldest) {
                 cache.particles -= evicted.len() as u64;
