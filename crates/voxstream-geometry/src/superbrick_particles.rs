@@ -5,7 +5,8 @@
 //! This producer makes the same bricks as the in-memory [`crate::ParticleProducer`], holding only a bounded set of
 //! superbricks in memory:
 //!
-//! 1. **Three streaming passes over the file** ([`ParticleChunks`], e.g. a binary PLY read a few MB at a time): the
+//! 1. **Three streaming passes over the file** ([`ParticleChunks`]: a binary PLY read a few MB at a time, or columns
+//!    of text a line at a time): the
 //!    bounds, count and smoothing-length range (every chunk validated as the in-memory set is); the particles per
 //!    superbrick; then each particle written, in unit-cube units, to its superbrick's run of a spill file (an
 //!    external counting sort: 24 bytes per particle, in an unnamed temporary file deleted when the producer drops).
@@ -54,6 +55,7 @@ use voxstream_procedural::brick_fill::voxel_centre;
 
 use crate::error::GeometryError;
 use crate::formats::ply::PlyPointStream;
+use crate::formats::xyz::TextPointStream;
 use crate::mesh_distance::UnitCubeFit;
 use crate::particle_index::{class_of, oracle_cells, GridCounts, ParticleGrid, ParticleIndex, MAX_CLASSES};
 use crate::particle_producer::{
@@ -64,8 +66,6 @@ use crate::ParticleTreeSettings;
 
 /// A particle set read in passes, a run of particles at a time.
 pub trait ParticleChunks: Sync {
-    /// Number of particles.
-    fn count(&self) -> u64;
     /// Whether the particles carry smoothing lengths, masses and values.
     fn columns(&self) -> [bool; 3];
     /// Calls `f` with consecutive runs of the particles and the index of each run's first.
@@ -76,10 +76,6 @@ pub trait ParticleChunks: Sync {
 }
 
 impl ParticleChunks for PlyPointStream {
-    fn count(&self) -> u64 {
-        PlyPointStream::count(self)
-    }
-
     fn columns(&self) -> [bool; 3] {
         PlyPointStream::columns(self)
     }
@@ -93,11 +89,20 @@ impl ParticleChunks for PlyPointStream {
 }
 
 /// A set in memory, in runs of 65,536 (for tests, and to compare with the in-memory producer).
-impl ParticleChunks for ParticleSet {
-    fn count(&self) -> u64 {
-        self.len() as u64
+impl ParticleChunks for TextPointStream {
+    fn columns(&self) -> [bool; 3] {
+        TextPointStream::columns(self)
     }
 
+    fn for_each_chunk(
+        &self,
+        f: &mut dyn FnMut(u64, &RawParticles) -> Result<(), GeometryError>,
+    ) -> Result<(), GeometryError> {
+        TextPointStream::for_each_chunk(self, f)
+    }
+}
+
+impl ParticleChunks for ParticleSet {
     fn columns(&self) -> [bool; 3] {
         [!self.smoothing().is_empty(), !self.masses().is_empty(), !self.values().0.is_empty()]
     }
@@ -990,14 +995,33 @@ impl Producer for SuperbrickParticleProducer {
     }
 }
 
-/// Reads a binary PLY point file out of core (see [`PlyPointStream`]).
-pub fn open_ply_out_of_core(
+/// File-name endings [`open_out_of_core`] streams.
+pub const STREAMED_FILE_ENDINGS: [&str; 4] = [".ply", ".xyz", ".csv", ".txt"];
+
+/// Reads a particle file out of core: a binary PLY point file ([`PlyPointStream`]) or columns of text
+/// ([`TextPointStream`]), by its name's ending. Returns the producer and the scalar attribute's name.
+pub fn open_out_of_core(
     path: &Path,
     settings: ParticleTreeSettings,
     out_of_core: &OutOfCoreSettings,
-) -> Result<SuperbrickParticleProducer, GeometryError> {
-    let stream = PlyPointStream::open(path)?;
-    SuperbrickParticleProducer::new(&stream, settings, out_of_core)
+) -> Result<(SuperbrickParticleProducer, String), GeometryError> {
+    let name = path.to_string_lossy().to_lowercase();
+    if name.ends_with(".ply") {
+        let stream = PlyPointStream::open(path)?;
+        Ok((SuperbrickParticleProducer::new(&stream, settings, out_of_core)?, stream.value_name().to_string()))
+    } else if STREAMED_FILE_ENDINGS.iter().any(|e| name.ends_with(e)) {
+        let stream = TextPointStream::open(path)?;
+        Ok((SuperbrickParticleProducer::new(&stream, settings, out_of_core)?, stream.value_name().to_string()))
+    } else {
+        Err(GeometryError::Unsupported {
+            path: path.to_path_buf(),
+            message: format!(
+                "out of core reads {} files; convert this one to a binary PLY (x y z [h] [mass] [value] vertex \
+                 properties)",
+                STREAMED_FILE_ENDINGS.join(", ")
+            ),
+        })
+    }
 }
 
 #[cfg(test)]

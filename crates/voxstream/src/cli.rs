@@ -102,7 +102,7 @@ pub struct ViewArgs {
     /// Particle files: the kernel's reach in smoothing lengths (as `render --smoothing-scale`).
     #[arg(long, value_name = "FACTOR")]
     pub smoothing_scale: Option<f64>,
-    /// Binary PLY point files: read them out of core, holding about MIB of particles in memory (as `render
+    /// Binary PLY point files and columns of text: read them out of core, holding about MIB of particles in memory (as `render
     /// --particle-memory`).
     #[arg(long, value_name = "MIB")]
     pub particle_memory: Option<u64>,
@@ -160,7 +160,8 @@ pub struct RenderArgs {
     /// (PySPH, Monaghan's convention). Molecular files (.gro, .pdb): 2 times the atomic radius unless given.
     #[arg(long, value_name = "FACTOR")]
     pub smoothing_scale: Option<f64>,
-    /// Binary PLY point files: read the particles out of core, binned once into superbricks in a spill file (24
+    /// Binary PLY point files and columns of text (.xyz, .csv, .txt): read the particles out of core, binned once into
+    /// superbricks in a spill file (24
     /// bytes per particle, in $TMPDIR), holding about MIB of them in memory. Chosen by itself, with a quarter of the
     /// machine's memory, for a PLY point file that would take more than half of it.
     #[arg(long, value_name = "MIB")]
@@ -343,7 +344,7 @@ pub struct ImportArgs {
     /// Particle files: the kernel's reach in smoothing lengths (as `render --smoothing-scale`).
     #[arg(long, value_name = "FACTOR")]
     pub smoothing_scale: Option<f64>,
-    /// Binary PLY point files: read them out of core, holding about MIB of particles in memory (as `render
+    /// Binary PLY point files and columns of text: read them out of core, holding about MIB of particles in memory (as `render
     /// --particle-memory`).
     #[arg(long, value_name = "MIB")]
     pub particle_memory: Option<u64>,

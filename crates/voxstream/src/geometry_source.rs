@@ -13,7 +13,9 @@ use voxstream_core::{NodeKey, ProduceError, Produced, Producer, TreeShape};
 use voxstream_geometry::formats::ply::PlyPointStream;
 use voxstream_geometry::formats::{read_geometry, RawGeometry};
 use voxstream_geometry::particle_producer::SMOOTHING_SCALE_RANGE;
-use voxstream_geometry::superbrick_particles::{OutOfCoreSettings, MIN_MEMORY_BYTES};
+use voxstream_geometry::superbrick_particles::{
+    open_out_of_core, OutOfCoreSettings, MIN_MEMORY_BYTES, STREAMED_FILE_ENDINGS,
+};
 use voxstream_geometry::{
     Amplification, MeshProducer, MeshTreeSettings, ParticleProducer, ParticleSet, ParticleTreeSettings,
     SuperbrickParticleProducer, TriangleMesh, UnitCubeFit,
@@ -141,7 +143,7 @@ pub fn open(path: &Path, args: &GeometryOptions) -> Result<GeometrySource> {
         }
     }
     if let Some(memory) = out_of_core_memory(path, args)? {
-        return open_out_of_core(path, args, memory, started);
+        return open_streamed(path, args, memory, started);
     }
     let raw = read_geometry(path)?;
     match raw {
@@ -274,12 +276,14 @@ const IN_MEMORY_BYTES_PER_PARTICLE: u64 = 160;
 /// or by itself for a binary PLY point file whose particles would take more than half of the machine's memory.
 fn out_of_core_memory(path: &Path, args: &GeometryOptions) -> Result<Option<u64>> {
     let shown = path.display();
-    let is_ply = path.to_string_lossy().to_lowercase().ends_with(".ply");
+    let name = path.to_string_lossy().to_lowercase();
+    let is_ply = name.ends_with(".ply");
     if let Some(mib) = args.particle_memory {
-        if !is_ply {
+        if !STREAMED_FILE_ENDINGS.iter().any(|e| name.ends_with(e)) {
             bail!(
-                "--particle-memory reads binary PLY point files out of core; {shown} is read whole (convert it to a \
-                 binary PLY with x y z [h] [mass] vertex properties to stream it)"
+                "--particle-memory reads binary PLY point files and columns of text (.xyz, .csv, .txt) out of core; \
+                 {shown} is read whole (convert it to a binary PLY with x y z [h] [mass] [value] vertex properties \
+                 to stream it)"
             );
         }
         let bytes = mib.checked_mul(1 << 20).filter(|&b| b >= MIN_MEMORY_BYTES);
@@ -305,8 +309,8 @@ fn automatic_particle_memory(count: u64, machine: u64) -> Option<u64> {
     (needed > machine / 2).then(|| (machine / 4).max(MIN_MEMORY_BYTES))
 }
 
-/// Reads a binary PLY point file out of core with `memory` bytes for its particles.
-fn open_out_of_core(path: &Path, args: &GeometryOptions, memory: u64, started: Instant) -> Result<GeometrySource> {
+/// Reads a binary PLY point file or columns of text out of core with `memory` bytes for its particles.
+fn open_streamed(path: &Path, args: &GeometryOptions, memory: u64, started: Instant) -> Result<GeometrySource> {
     let shown = path.display();
     if args.amplify.is_some() {
         bail!("--amplify applies to meshes; {shown} holds particles");
@@ -318,16 +322,15 @@ fn open_out_of_core(path: &Path, args: &GeometryOptions, memory: u64, started: I
         ..ParticleTreeSettings::default()
     };
     let out_of_core = OutOfCoreSettings { memory_bytes: memory, spill_directory: std::env::temp_dir() };
-    let stream = PlyPointStream::open(path)?;
-    let producer = SuperbrickParticleProducer::new(&stream, settings, &out_of_core)
-        .with_context(|| format!("in {shown} (read out of core)"))?;
+    let (producer, value_name) =
+        open_out_of_core(path, settings, &out_of_core).with_context(|| format!("in {shown} (read out of core)"))?;
     let statistics = producer.statistics();
     let value_range = producer.value_range();
     let fit = producer.fit();
     let margin = producer.margin();
     let bounds = producer.bounds();
     let field = if args.attribute {
-        format!("{} {:.4e} to {:.4e}", stream.value_name(), value_range[0], value_range[1])
+        format!("{value_name} {:.4e} to {:.4e}", value_range[0], value_range[1])
     } else {
         format!("density 0 to {:.4e} (mass per file unit³)", value_range[1])
     };

@@ -524,7 +524,7 @@ fn a_mesh_baked_into_a_store_renders_like_the_mesh() {
 }
 
 /// A binary PLY point file of `count` particles (x y z h mass temperature as floats, and a colour the reader skips)
-/// in a clumpy ball, returned with the path.
+/// in a clumpy ball, returned with the path; and the same particles as CSV text (`clumps.csv` beside it).
 fn write_particle_ply(dir: &Path, count: usize) -> PathBuf {
     let mut state = 77u64;
     let mut next = move || {
@@ -540,6 +540,7 @@ fn write_particle_ply(dir: &Path, count: usize) -> PathBuf {
          property float temperature\nend_header\n"
     )
     .into_bytes();
+    let mut text = String::from("x,y,z,h,mass,temperature\n");
     for i in 0..count {
         let [cx, cy, cz, sigma] = clumps[i % clumps.len()];
         // A box-filtered ball: three uniform offsets summed are close enough to a Gaussian here.
@@ -550,7 +551,10 @@ fn write_particle_ply(dir: &Path, count: usize) -> PathBuf {
         }
         bytes.push((i % 256) as u8);
         bytes.extend_from_slice(&(300.0 + 50.0 * p[1] as f32).to_le_bytes());
+        let [x, y, z] = p.map(|c| c as f32);
+        text.push_str(&format!("{x},{y},{z},0.04,{},{}\n", 1.0 + (i % 3) as f32, 300.0 + 50.0 * p[1] as f32));
     }
+    std::fs::write(dir.join("clumps.csv"), text).unwrap();
     std::fs::write(&path, bytes).unwrap();
     path
 }
@@ -575,6 +579,19 @@ fn a_particle_file_read_out_of_core_renders_as_in_memory() {
         eprintln!("{name}: mean difference {mean:.3}, {:.3}% above 8", large * 100.0);
         assert!(mean < 0.5 && large < 0.005, "{name}: mean {mean}, {large} above 8");
     }
+    // Columns of text stream too, and give the same image.
+    let csv = dir.join("clumps.csv");
+    let memory = render(&csv, 160, &[], &dir.join("csv-memory.png"));
+    let streamed = render(&csv, 160, &["--particle-memory", "8"], &dir.join("csv-streamed.png"));
+    let ply = render(&path, 160, &[], &dir.join("density-memory.png"));
+    let mean_difference =
+        |a: &[u8], b: &[u8]| a.iter().zip(b).map(|(a, b)| f64::from(a.abs_diff(*b))).sum::<f64>() / a.len() as f64;
+    // The CSV's decimals are the PLY's floats only to within their last digit: nearly the same image.
+    let text_and_binary = mean_difference(&memory.2, &ply.2);
+    assert!(text_and_binary < 0.5, "the CSV holds the PLY's particles: mean difference {text_and_binary}");
+    let streamed_text = mean_difference(&memory.2, &streamed.2);
+    eprintln!("CSV: mean difference {streamed_text:.3} out of core, {text_and_binary:.3} against the PLY");
+    assert!(streamed_text < 0.5, "CSV out of core: mean difference {streamed_text}");
     // The description says it was read out of core.
     let out = dir.join("described.png");
     let output = run(&[
@@ -597,11 +614,11 @@ fn a_particle_file_read_out_of_core_renders_as_in_memory() {
         &["render", path.to_str().unwrap(), "--particle-memory", "2"],
         "--particle-memory 2: give 8 MiB or more",
     );
-    let text = dir.join("points.xyz");
-    std::fs::write(&text, "0 0 0\n1 1 1\n").unwrap();
+    let molecule = dir.join("atoms.gro");
+    std::fs::write(&molecule, "not read\n").unwrap();
     assert_fails(
-        &["render", text.to_str().unwrap(), "--particle-memory", "64"],
-        "--particle-memory reads binary PLY point files out of core",
+        &["render", molecule.to_str().unwrap(), "--particle-memory", "64"],
+        "--particle-memory reads binary PLY point files and columns of text (.xyz, .csv, .txt) out of core",
     );
     let truncated = dir.join("truncated.ply");
     let bytes = std::fs::read(&path).unwrap();

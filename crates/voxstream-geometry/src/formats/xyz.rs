@@ -108,28 +108,44 @@ fn fields(line: &str) -> Vec<&str> {
 
 /// Parses columns of text.
 pub fn parse(bytes: &[u8], path: &Path) -> Result<RawParticles, GeometryError> {
-    let mut raw = RawParticles::default();
-    let mut layout: Option<Layout> = None;
-    let mut first_line = 0u64;
+    let mut lines = Lines::default();
     for (line, number) in bytes.split(|&b| b == b'\n').zip(1u64..) {
+        lines.read(line, number, path)?;
+    }
+    Ok(lines.raw)
+}
+
+/// The reading state: the columns' layout once the first line has given it, and the particles read since the last
+/// [`Lines::take`].
+#[derive(Default)]
+struct Lines {
+    layout: Option<Layout>,
+    first_line: u64,
+    raw: RawParticles,
+}
+
+impl Lines {
+    /// Reads line `number` (without its `\n`).
+    fn read(&mut self, line: &[u8], number: u64, path: &Path) -> Result<(), GeometryError> {
         let bad = |message: String| GeometryError::format(path, Some(number), message);
         let line = std::str::from_utf8(line).map_err(|_| bad("not text (invalid UTF-8)".into()))?;
         let line = line.split('#').next().unwrap_or("").trim();
         if line.is_empty() {
-            continue;
+            return Ok(());
         }
         let fields = fields(line);
         if let Some(empty) = fields.iter().position(|f| f.is_empty()) {
             return Err(bad(format!("field {} is empty", empty + 1)));
         }
-        let layout = match &layout {
+        let first_line = &mut self.first_line;
+        let layout = match &mut self.layout {
             Some(layout) => layout,
             None => {
-                first_line = number;
+                *first_line = number;
                 let numeric = fields.iter().all(|f| f.parse::<f64>().is_ok());
                 if !numeric {
-                    layout = Some(Layout::named(&fields).map_err(bad)?);
-                    continue;
+                    self.layout = Some(Layout::named(&fields).map_err(bad)?);
+                    return Ok(());
                 }
                 if let [count] = fields.as_slice() {
                     if count.parse::<u64>().is_ok() {
@@ -139,7 +155,7 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawParticles, GeometryError> {
                         )));
                     }
                 }
-                layout.insert(Layout::unnamed(fields.len()).ok_or_else(|| {
+                self.layout.insert(Layout::unnamed(fields.len()).ok_or_else(|| {
                     bad(format!(
                         "{} columns: without a header line naming them, a line holds 3 to 5 (x y z [h] [value])",
                         fields.len()
@@ -147,6 +163,7 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawParticles, GeometryError> {
                 })?)
             }
         };
+        let first_line = self.first_line;
         if fields.len() != layout.columns {
             return Err(bad(format!(
                 "expected {} columns (as on line {first_line}), found {}",
@@ -158,6 +175,7 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawParticles, GeometryError> {
             let text = fields.get(column).copied().unwrap_or("");
             text.parse::<f64>().map_err(|_| bad(format!("column {}: '{text}' is not a number", column + 1)))
         };
+        let raw = &mut self.raw;
         let [x, y, z] = layout.position;
         raw.positions.push([number_at(x)?, number_at(y)?, number_at(z)?]);
         if let Some(c) = layout.smoothing {
@@ -172,8 +190,119 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawParticles, GeometryError> {
                 raw.value_name.clone_from(name);
             }
         }
+        Ok(())
     }
-    Ok(raw)
+}
+
+/// The longest line [`TextPointStream`] reads (a file without line breaks is not columns of text).
+const STREAM_LINE_BYTES: u64 = 1 << 20;
+
+/// Particles a [`TextPointStream`] chunk holds.
+const STREAM_CHUNK_PARTICLES: usize = 1 << 16;
+
+/// Columns of text read a line at a time, for particle sets larger than memory: each pass reads the file again and
+/// hands on the particles in chunks, with the errors [`parse`] gives (file, line, problem). Not compressed files.
+#[derive(Clone, Debug)]
+pub struct TextPointStream {
+    path: std::path::PathBuf,
+    /// Whether the lines carry a smoothing length, a mass and a value (from the first line).
+    columns: [bool; 3],
+    value_name: String,
+}
+
+impl TextPointStream {
+    /// Opens `path` and reads up to its first particle, for the columns' layout.
+    pub fn open(path: &Path) -> Result<TextPointStream, GeometryError> {
+        if path.to_string_lossy().to_lowercase().ends_with(".gz") {
+            return Err(GeometryError::Unsupported {
+                path: path.to_path_buf(),
+                message: "a compressed file is read whole; decompress it to read it out of core".into(),
+            });
+        }
+        let mut columns = None;
+        let mut stream = TextPointStream { path: path.to_path_buf(), columns: [false; 3], value_name: String::new() };
+        let mut value_name = String::new();
+        stream.pass(&mut |_, _, lines| {
+            if let Some(layout) = &lines.layout {
+                columns = Some([layout.smoothing.is_some(), layout.mass.is_some(), layout.value.is_some()]);
+                value_name = layout.value.as_ref().map(|(_, name)| name.clone()).unwrap_or_default();
+            }
+            Ok(columns.is_none())
+        })?;
+        stream.value_name = value_name;
+        stream.columns = columns.ok_or_else(|| GeometryError::Invalid {
+            message: format!("{}: the file holds no particles", path.display()),
+        })?;
+        Ok(stream)
+    }
+
+    /// Whether the lines carry a smoothing length, a mass and a value.
+    pub fn columns(&self) -> [bool; 3] {
+        self.columns
+    }
+
+    /// The value column's name (`""` if none).
+    pub fn value_name(&self) -> &str {
+        &self.value_name
+    }
+
+    /// Reads the file's lines, calling `after` after each (with the index of the first particle not yet handed on and
+    /// the state) until it returns false or the file ends.
+    fn pass(
+        &self,
+        after: &mut dyn FnMut(bool, u64, &mut Lines) -> Result<bool, GeometryError>,
+    ) -> Result<(), GeometryError> {
+        use std::io::BufRead;
+        let io = |error| GeometryError::Io { path: self.path.clone(), error };
+        let file = std::fs::File::open(&self.path).map_err(io)?;
+        let mut reader = std::io::BufReader::with_capacity(1 << 20, file);
+        let mut lines = Lines::default();
+        let mut line = Vec::new();
+        let mut handed = 0u64;
+        for number in 1u64.. {
+            line.clear();
+            let read =
+                std::io::Read::take(&mut reader, STREAM_LINE_BYTES + 1).read_until(b'\n', &mut line).map_err(io)?;
+            let end = read == 0;
+            if !end {
+                if line.last() == Some(&b'\n') {
+                    line.pop();
+                } else if line.len() as u64 > STREAM_LINE_BYTES {
+                    return Err(GeometryError::format(
+                        &self.path,
+                        Some(number),
+                        format!("a line longer than {STREAM_LINE_BYTES} bytes: not columns of text"),
+                    ));
+                }
+                lines.read(&line, number, &self.path)?;
+            }
+            let before = lines.raw.positions.len() as u64;
+            if !after(end, handed, &mut lines)? || end {
+                break;
+            }
+            handed += before - lines.raw.positions.len() as u64;
+        }
+        Ok(())
+    }
+
+    /// Calls `f` with consecutive runs of the particles, each with the index of its first, in file order; stops at
+    /// the first error, from the file or from `f`.
+    pub fn for_each_chunk(
+        &self,
+        f: &mut dyn FnMut(u64, &RawParticles) -> Result<(), GeometryError>,
+    ) -> Result<(), GeometryError> {
+        self.pass(&mut |end, first, lines| {
+            let raw = &mut lines.raw;
+            if raw.positions.len() >= STREAM_CHUNK_PARTICLES || (end && !raw.positions.is_empty()) {
+                f(first, raw)?;
+                raw.positions.clear();
+                raw.smoothing.clear();
+                raw.masses.clear();
+                raw.values.clear();
+            }
+            Ok(true)
+        })
+    }
 }
 
 #[cfg(test)]
@@ -238,5 +367,66 @@ mod tests {
         let e = parse(b"0 0 0\n0 0 \xff\n", Path::new("p.xyz")).unwrap_err().to_string();
         assert_eq!(e, "p.xyz line 2: not text (invalid UTF-8)");
         assert_eq!(parse_str("# nothing\n").unwrap(), RawParticles::default());
+    }
+
+    fn stream_file(name: &str, text: &[u8]) -> std::path::PathBuf {
+        let path = std::env::temp_dir().join(format!("voxstream-text-stream-{}-{name}", std::process::id()));
+        std::fs::write(&path, text).unwrap();
+        path
+    }
+
+    #[test]
+    fn a_text_stream_reads_what_parse_reads_in_chunks() {
+        let mut text = String::from("# made by a test\r\nX, Y, Z, hsml, Temperature, mass\r\n\r\n");
+        for i in 0..150_000 {
+            text.push_str(&format!(
+                "{}, {}, {}, 0.5, {}, 2 # particle {i}\r\n",
+                i % 97,
+                i % 89,
+                i % 83,
+                i as f64 * 0.5
+            ));
+        }
+        let path = stream_file("points.csv", text.as_bytes());
+        let stream = TextPointStream::open(&path).unwrap();
+        assert_eq!(stream.columns(), [true, true, true]);
+        assert_eq!(stream.value_name(), "Temperature");
+        let mut all = RawParticles { value_name: "Temperature".into(), ..RawParticles::default() };
+        let mut runs = 0;
+        stream
+            .for_each_chunk(&mut |first, run| {
+                assert_eq!(first, all.positions.len() as u64);
+                runs += 1;
+                all.positions.extend(&run.positions);
+                all.smoothing.extend(&run.smoothing);
+                all.masses.extend(&run.masses);
+                all.values.extend(&run.values);
+                Ok(())
+            })
+            .unwrap();
+        assert_eq!(runs, 3, "150,000 particles in runs of 65,536");
+        assert_eq!(all, parse(text.as_bytes(), &path).unwrap());
+        std::fs::remove_file(&path).ok();
+    }
+
+    #[test]
+    fn a_text_stream_names_what_it_cannot_read() {
+        let failure = |name: &str, text: &[u8]| {
+            let path = stream_file(name, text);
+            let error = TextPointStream::open(&path)
+                .and_then(|stream| stream.for_each_chunk(&mut |_, _| Ok(())))
+                .unwrap_err()
+                .to_string();
+            std::fs::remove_file(&path).ok();
+            error
+        };
+        let bad = failure("bad.xyz", b"0 0 0\n1 1 1\n1 x 1\n");
+        assert!(bad.ends_with("bad.xyz line 3: column 2: 'x' is not a number"), "{bad}");
+        let long = failure("long.txt", &vec![b'1'; (STREAM_LINE_BYTES + 10) as usize]);
+        assert!(long.contains("line 1: a line longer than 1048576 bytes"), "{long}");
+        let empty = failure("empty.xyz", b"# nothing\n\n");
+        assert!(empty.contains("the file holds no particles"), "{empty}");
+        let compressed = failure("points.xyz.gz", b"0 0 0\n");
+        assert!(compressed.contains("decompress it to read it out of core"), "{compressed}");
     }
 }
