@@ -80,6 +80,72 @@ impl Default for ParticleTreeSettings {
     }
 }
 
+/// What the voxel values 0 and 1 stand for, and the densities found at the particles when opening: the scale both
+/// particle producers (in memory and out of core) quantise their fields with.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct FieldScale {
+    /// Largest density at a particle, unit-cube units.
+    pub(crate) max_density: f64,
+    /// Median density at the probed particles, unit-cube units.
+    pub(crate) typical_density: f64,
+    /// The field values the voxel values 0 and 1 stand for (unit-cube units for the density).
+    pub(crate) lower: f64,
+    pub(crate) upper: f64,
+    pub(crate) attribute: bool,
+}
+
+impl FieldScale {
+    /// The density scale from the largest and the median density probed (unit-cube units; 0: none found): 16-bit
+    /// voxels cannot span the density range of clustered particles (10⁸ between a cluster's core and its halo is
+    /// common), so the top of the scale is at most [`DENSITY_RANGE`] times the median, and denser voxels saturate.
+    pub(crate) fn of_densities(max_density: f64, typical_density: f64, attribute: bool) -> FieldScale {
+        let max_density = if max_density > 0.0 { max_density } else { 1.0 };
+        let upper = max_density.min(DENSITY_RANGE * typical_density.max(f64::MIN_POSITIVE));
+        FieldScale { max_density, typical_density, lower: 0.0, upper, attribute }
+    }
+
+    /// The attribute's scale: its range at the particles, which includes 0 (where no particle reaches).
+    pub(crate) fn set_attribute_range(&mut self, lower: f64, upper: f64) {
+        self.lower = lower;
+        self.upper = if upper > lower { upper } else { lower + 1.0 };
+    }
+
+    /// `[0, ρ_top]` in file mass per file volume, or the attribute's range.
+    pub(crate) fn value_range(&self, fit: &UnitCubeFit) -> [f64; 2] {
+        if self.attribute {
+            [self.lower, self.upper]
+        } else {
+            [0.0, self.upper / fit.size.powi(3)]
+        }
+    }
+
+    /// The median density in file mass per file volume.
+    pub(crate) fn typical_density(&self, fit: &UnitCubeFit) -> f64 {
+        self.typical_density / fit.size.powi(3)
+    }
+
+    /// The voxel value (0 to 1) where no particle reaches.
+    pub(crate) fn empty_value(&self) -> f32 {
+        quantize((-self.lower / (self.upper - self.lower)) as f32) as f32 / 65535.0
+    }
+
+    /// A brick from the field summed at its voxels (`reached`: whether any kernel reached it), as `produce` returns it.
+    pub(crate) fn brick(&self, reached: bool, field: &[f64], voxels: &mut [u16], is_finest: bool) -> Produced {
+        if !reached {
+            let content = match self.empty_value() {
+                0.0 => NodeContent::Empty,
+                value => NodeContent::Constant(value),
+            };
+            return Produced { content, is_terminal: true };
+        }
+        let scale = 1.0 / (self.upper - self.lower);
+        for (voxel, value) in voxels.iter_mut().zip(field) {
+            *voxel = quantize(((value - self.lower) * scale).clamp(0.0, 1.0) as f32);
+        }
+        Produced { content: NodeContent::Brick, is_terminal: is_finest }
+    }
+}
+
 /// The particle producer (N = 2).
 #[derive(Clone, Debug)]
 pub struct ParticleProducer {
@@ -90,15 +156,8 @@ pub struct ParticleProducer {
     /// Attribute mode: what each particle adds, times its kernel, `mⱼ/ρⱼ·Aⱼ` (index order). Density mode: `None`,
     /// the masses.
     attribute_weights: Option<Vec<f64>>,
-    /// Largest density at a particle, unit-cube units.
-    max_density: f64,
-    /// Median density at the probed particles, unit-cube units.
-    typical_density: f64,
     total_mass: f64,
-    /// The field values the voxel values 0 and 1 stand for (unit-cube units for the density).
-    lower: f64,
-    upper: f64,
-    attribute: bool,
+    scale: FieldScale,
 }
 
 impl ParticleProducer {
@@ -154,12 +213,8 @@ impl ParticleProducer {
             fit,
             index,
             attribute_weights: None,
-            max_density: 1.0,
-            typical_density: 1.0,
             total_mass,
-            lower: 0.0,
-            upper: 1.0,
-            attribute: settings.attribute,
+            scale: FieldScale::of_densities(1.0, 1.0, settings.attribute),
         };
         // The largest density is where the kernels are narrowest (the densest particles): exactly at every particle
         // of the two narrowest classes, and at one in 64 of the others (the attribute needs every particle's).
@@ -172,15 +227,11 @@ impl ParticleProducer {
         let max_density = densities.iter().copied().fold(0.0, f64::max);
         let mut probed_densities: Vec<f64> = densities.iter().copied().filter(|&d| d > 0.0).collect();
         let middle = probed_densities.len() / 2;
-        producer.typical_density = match probed_densities.is_empty() {
+        let typical_density = match probed_densities.is_empty() {
             true => max_density,
             false => *probed_densities.select_nth_unstable_by(middle, f64::total_cmp).1,
         };
-        producer.max_density = if max_density > 0.0 { max_density } else { 1.0 };
-        // 16-bit voxels cannot span the density range of clustered particles (10⁸ between a cluster's core and its
-        // halo is common): the top of the scale is at most DENSITY_RANGE times the median, and denser voxels
-        // saturate there.
-        producer.upper = producer.max_density.min(DENSITY_RANGE * producer.typical_density.max(f64::MIN_POSITIVE));
+        producer.scale = FieldScale::of_densities(max_density, typical_density, settings.attribute);
         if settings.attribute {
             let values = particles.values().0;
             // Every particle's kernel is positive at its own centre, so ρⱼ > 0.
@@ -198,8 +249,7 @@ impl ParticleProducer {
                 .collect();
             let lower = at_particles.iter().copied().fold(0.0, f64::min);
             let upper = at_particles.iter().copied().fold(0.0, f64::max);
-            producer.lower = lower;
-            producer.upper = if upper > lower { upper } else { lower + 1.0 };
+            producer.scale.set_attribute_range(lower, upper);
         }
         Ok(producer)
     }
@@ -213,22 +263,13 @@ impl ParticleProducer {
     /// density or [`DENSITY_RANGE`] times the median, whichever is lower (denser voxels saturate); or the attribute's
     /// interpolated range (including 0, its value where no particle reaches).
     pub fn value_range(&self) -> [f64; 2] {
-        if self.attribute {
-            [self.lower, self.upper]
-        } else {
-            [0.0, self.upper / self.fit.size.powi(3)]
-        }
-    }
-
-    /// The voxel value (0 to 1) where no particle reaches.
-    fn empty_value(&self) -> f32 {
-        quantize((-self.lower / (self.upper - self.lower)) as f32) as f32 / 65535.0
+        self.scale.value_range(&self.fit)
     }
 
     /// The median density at the particles (probed as for the peak), in file mass per file volume: where a default
     /// transfer function should put its ramp, the peak being often orders of magnitude above it.
     pub fn typical_density(&self) -> f64 {
-        self.typical_density / self.fit.size.powi(3)
+        self.scale.typical_density(&self.fit)
     }
 
     /// How far beyond the particles' bounds (unit-cube units) the finest level's density reaches: the largest support.
@@ -243,12 +284,12 @@ impl ParticleProducer {
 
     /// Largest density found at a particle, unit-cube units.
     pub fn max_density(&self) -> f64 {
-        self.max_density
+        self.scale.max_density
     }
 
     /// The density the voxel value 1 stands for, unit-cube units (density mode).
     pub fn density_scale(&self) -> f64 {
-        self.upper
+        self.scale.upper
     }
 
     /// The density at unit point `p` with kernels no narrower than `min_support` (0: the particles' own).
@@ -322,7 +363,7 @@ impl Producer for ParticleProducer {
         let voxel = size / f64::from(self.shape.brick_size);
         match self.index.may_reach(DVec3::from(lower), size, MIN_SUPPORT_VOXELS * voxel, voxel) {
             true => None,
-            false => Some(self.empty_value()),
+            false => Some(self.scale.empty_value()),
         }
     }
 
@@ -335,18 +376,7 @@ impl Producer for ParticleProducer {
         let first = voxel_centre(&self.shape, &key, 0, 0, 0);
         let mut density = vec![0.0f64; b * b * b];
         let reached = self.index.splat(|i| self.weight(i), first, voxel, b, min_support, &mut density);
-        if !reached {
-            let content = match self.empty_value() {
-                0.0 => NodeContent::Empty,
-                value => NodeContent::Constant(value),
-            };
-            return Ok(Produced { content, is_terminal: true });
-        }
-        let scale = 1.0 / (self.upper - self.lower);
-        for (voxel, value) in voxels.iter_mut().zip(&density) {
-            *voxel = quantize(((value - self.lower) * scale).clamp(0.0, 1.0) as f32);
-        }
-        Ok(Produced { content: NodeContent::Brick, is_terminal: key.level >= self.shape.max_level })
+        Ok(self.scale.brick(reached, &density, voxels, key.level >= self.shape.max_level))
     }
 }
 

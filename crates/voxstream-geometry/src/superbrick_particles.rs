@@ -50,7 +50,7 @@ use std::sync::{Arc, Mutex};
 use glam::DVec3;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
-use voxstream_core::{quantize, NodeContent, NodeKey, ProduceError, Produced, Producer, TreeShape};
+use voxstream_core::{NodeKey, ProduceError, Produced, Producer, TreeShape};
 use voxstream_procedural::brick_fill::voxel_centre;
 
 use crate::error::GeometryError;
@@ -59,7 +59,7 @@ use crate::formats::xyz::TextPointStream;
 use crate::mesh_distance::UnitCubeFit;
 use crate::particle_index::{class_of, oracle_cells, GridCounts, ParticleGrid, ParticleIndex, MAX_CLASSES};
 use crate::particle_producer::{
-    DENSITY_RANGE, MAX_SUPPORT_OVER_MEDIAN, MIN_SUPPORT_VOXELS, SMOOTHING_NEIGHBOURS, SMOOTHING_SCALE_RANGE,
+    FieldScale, MAX_SUPPORT_OVER_MEDIAN, MIN_SUPPORT_VOXELS, SMOOTHING_NEIGHBOURS, SMOOTHING_SCALE_RANGE,
 };
 use crate::particles::{check_particles, ParticleSet, RawParticles};
 use crate::ParticleTreeSettings;
@@ -222,12 +222,7 @@ pub struct SuperbrickParticleProducer {
     loaded_signal: std::sync::Condvar,
     budget_particles: u64,
     total_mass: f64,
-    max_density: f64,
-    typical_density: f64,
-    /// The field values the voxel values 0 and 1 stand for (unit-cube units for the density).
-    lower: f64,
-    upper: f64,
-    attribute: bool,
+    scale: FieldScale,
 }
 
 /// Where a superbrick's kernels reach: its particles' bounds and their largest support (unit-cube units).
@@ -513,11 +508,7 @@ impl SuperbrickParticleProducer {
             loaded_signal: std::sync::Condvar::new(),
             budget_particles,
             total_mass,
-            max_density: 1.0,
-            typical_density: 1.0,
-            lower: 0.0,
-            upper: 1.0,
-            attribute: settings.attribute,
+            scale: FieldScale::of_densities(1.0, 1.0, settings.attribute),
         };
 
         // Smoothing lengths where the file has none: per superbrick, over it and its neighbours' nearby particles.
@@ -671,9 +662,8 @@ impl SuperbrickParticleProducer {
             .enumerate()
             .filter_map(|(class, grid)| Some((class_support(class), grid?.finish())))
             .collect();
-        producer.max_density = if max_density > 0.0 { max_density } else { 1.0 };
-        producer.typical_density = densities.median().unwrap_or(producer.max_density);
-        producer.upper = producer.max_density.min(DENSITY_RANGE * producer.typical_density.max(f64::MIN_POSITIVE));
+        let typical_density = densities.median().unwrap_or(max_density);
+        producer.scale = FieldScale::of_densities(max_density, typical_density, settings.attribute);
         if settings.attribute {
             // The interpolant's range at every particle, as in memory: one more pass with the weights.
             let (mut lower, mut upper) = (0.0f64, 0.0f64);
@@ -692,8 +682,7 @@ impl SuperbrickParticleProducer {
                 lower = fields.iter().copied().fold(lower, f64::min);
                 upper = fields.iter().copied().fold(upper, f64::max);
             }
-            producer.lower = lower;
-            producer.upper = if upper > lower { upper } else { lower + 1.0 };
+            producer.scale.set_attribute_range(lower, upper);
         }
 
         // Coarse levels, bottom-up: each from the aggregates of the one below.
@@ -732,13 +721,19 @@ impl SuperbrickParticleProducer {
             .collect())
     }
 
-    /// The particles of the superbricks around `bin` (not `bin` itself) within `reach` of its box.
-    fn neighbourhood(&self, bin: usize, reach: f64) -> std::io::Result<Vec<Record>> {
+    /// Superbrick `bin`'s box (unit-cube units).
+    fn superbrick_box(&self, bin: usize) -> (DVec3, DVec3) {
         let s = self.per_axis;
         let ijk = [bin as u64 % s, bin as u64 / s % s, bin as u64 / s / s];
         let width = 1.0 / s as f64;
-        let lower = DVec3::from(ijk.map(|c| c as f64 * width)) - DVec3::splat(reach);
-        let upper = lower + DVec3::splat(width + 2.0 * reach);
+        let lower = DVec3::from(ijk.map(|c| c as f64 * width));
+        (lower, lower + DVec3::splat(width))
+    }
+
+    /// The particles of the superbricks around `bin` (not `bin` itself) within `reach` of its box.
+    fn neighbourhood(&self, bin: usize, reach: f64) -> std::io::Result<Vec<Record>> {
+        let (lower, upper) = self.superbrick_box(bin);
+        let (lower, upper) = (lower - DVec3::splat(reach), upper + DVec3::splat(reach));
         let mut records = Vec::new();
         for other in self.bins_overlapping(lower, upper) {
             if other == bin {
@@ -755,11 +750,7 @@ impl SuperbrickParticleProducer {
     /// The particles of the other superbricks whose kernels reach superbrick `bin`'s box (as far as each particle's
     /// own support: a few wide kernels do not bring in their superbricks' narrow ones).
     fn kernels_reaching(&self, bin: usize) -> std::io::Result<Vec<Record>> {
-        let s = self.per_axis;
-        let ijk = [bin as u64 % s, bin as u64 / s % s, bin as u64 / s / s];
-        let width = 1.0 / s as f64;
-        let lower = DVec3::from(ijk.map(|c| c as f64 * width));
-        let upper = lower + DVec3::splat(width);
+        let (lower, upper) = self.superbrick_box(bin);
         let reach = DVec3::splat(self.max_support);
         let mut records = Vec::new();
         for other in self.bins_overlapping(lower - reach, upper + reach) {
@@ -850,21 +841,12 @@ impl SuperbrickParticleProducer {
     /// `[0, ρ_top]` in file mass per file volume, or the attribute's interpolated range (as
     /// [`crate::ParticleProducer::value_range`]).
     pub fn value_range(&self) -> [f64; 2] {
-        if self.attribute {
-            [self.lower, self.upper]
-        } else {
-            [0.0, self.upper / self.fit.size.powi(3)]
-        }
-    }
-
-    /// The voxel value (0 to 1) where no particle reaches.
-    fn empty_value(&self) -> f32 {
-        quantize((-self.lower / (self.upper - self.lower)) as f32) as f32 / 65535.0
+        self.scale.value_range(&self.fit)
     }
 
     /// The median density at the probed particles, file mass per file volume.
     pub fn typical_density(&self) -> f64 {
-        self.typical_density / self.fit.size.powi(3)
+        self.scale.typical_density(&self.fit)
     }
 
     /// How far beyond the particles' bounds (unit-cube units) the finest level's density reaches.
@@ -879,12 +861,12 @@ impl SuperbrickParticleProducer {
 
     /// Largest density found at a particle, unit-cube units.
     pub fn max_density(&self) -> f64 {
-        self.max_density
+        self.scale.max_density
     }
 
     /// The density the voxel value 1 stands for, unit-cube units.
     pub fn density_scale(&self) -> f64 {
-        self.upper
+        self.scale.upper
     }
 
     /// What was built and what the cache did.
@@ -951,7 +933,7 @@ impl Producer for SuperbrickParticleProducer {
         if reaches {
             None
         } else {
-            Some(self.empty_value())
+            Some(self.scale.empty_value())
         }
     }
 
@@ -980,18 +962,7 @@ impl Producer for SuperbrickParticleProducer {
                 reached |= index.splat(|i| f64::from(index.masses[i]), first, voxel, b, min_support, &mut density);
             }
         }
-        if !reached {
-            let content = match self.empty_value() {
-                0.0 => NodeContent::Empty,
-                value => NodeContent::Constant(value),
-            };
-            return Ok(Produced { content, is_terminal: true });
-        }
-        let scale = 1.0 / (self.upper - self.lower);
-        for (voxel, value) in voxels.iter_mut().zip(&density) {
-            *voxel = quantize(((value - self.lower) * scale).clamp(0.0, 1.0) as f32);
-        }
-        Ok(Produced { content: NodeContent::Brick, is_terminal: key.level >= self.shape.max_level })
+        Ok(self.scale.brick(reached, &density, voxels, key.level >= self.shape.max_level))
     }
 }
 
@@ -1028,6 +999,7 @@ pub fn open_out_of_core(
 mod tests {
     use super::*;
     use crate::{ParticleProducer, RawParticles};
+    use voxstream_core::NodeContent;
 
     /// A ball with a denser core, in file units around (10, 20, 30) with radius 5.
     fn cloud(count: usize, seed: u64) -> Vec<[f64; 3]> {

@@ -221,22 +221,14 @@ pub fn open(path: &Path, args: &GeometryOptions) -> Result<GeometrySource> {
             } else {
                 Vec::new()
             };
-            let field = if args.attribute {
-                format!("{} {:.4e} to {:.4e}", particles.values().1, value_range[0], value_range[1])
-            } else {
-                format!("density 0 to {:.4e} (mass per file unit³)", value_range[1])
-            };
+            let (field, transfer_function) =
+                particle_field(args.attribute, particles.values().1, value_range, producer.typical_density())?;
             let description = format!(
                 "{shown}: {} particles, {}³ virtual voxels, grid built in {:.1} s; {field}",
                 particles.len(),
                 producer.shape().virtual_resolution(),
                 started.elapsed().as_secs_f64(),
             );
-            let transfer_function = if args.attribute {
-                attribute_transfer_function(value_range)?
-            } else {
-                particle_transfer_function(producer.typical_density(), value_range[1])?
-            };
             let (fit, margin) = (producer.fit(), producer.margin());
             Ok(GeometrySource {
                 index_bytes: producer.heap_bytes(),
@@ -329,11 +321,8 @@ fn open_streamed(path: &Path, args: &GeometryOptions, memory: u64, started: Inst
     let fit = producer.fit();
     let margin = producer.margin();
     let bounds = producer.bounds();
-    let field = if args.attribute {
-        format!("{value_name} {:.4e} to {:.4e}", value_range[0], value_range[1])
-    } else {
-        format!("density 0 to {:.4e} (mass per file unit³)", value_range[1])
-    };
+    let (field, transfer_function) =
+        particle_field(args.attribute, &value_name, value_range, producer.typical_density())?;
     let description = format!(
         "{shown}: {} particles read out of core ({}³ superbricks in a {} MiB spill file, {} MiB for particles), {}³ \
          virtual voxels, binned in {:.1} s; {field}",
@@ -344,11 +333,6 @@ fn open_streamed(path: &Path, args: &GeometryOptions, memory: u64, started: Inst
         producer.shape().virtual_resolution(),
         started.elapsed().as_secs_f64(),
     );
-    let transfer_function = if args.attribute {
-        attribute_transfer_function(value_range)?
-    } else {
-        particle_transfer_function(producer.typical_density(), value_range[1])?
-    };
     Ok(GeometrySource {
         index_bytes: producer.heap_bytes(),
         placement: placement(fit),
@@ -359,6 +343,27 @@ fn open_streamed(path: &Path, args: &GeometryOptions, memory: u64, started: Inst
         default_surfaces: Vec::new(),
         bounds,
         description,
+    })
+}
+
+/// What a particle file shows (its attribute `value_name`, or its density) over `value_range`: the words for the
+/// description, and the default transfer function.
+fn particle_field(
+    attribute: bool,
+    value_name: &str,
+    value_range: [f64; 2],
+    typical_density: f64,
+) -> Result<(String, TransferFunction)> {
+    Ok(if attribute {
+        (
+            format!("{value_name} {:.4e} to {:.4e}", value_range[0], value_range[1]),
+            attribute_transfer_function(value_range)?,
+        )
+    } else {
+        (
+            format!("density 0 to {:.4e} (mass per file unit³)", value_range[1]),
+            particle_transfer_function(typical_density, value_range[1])?,
+        )
     })
 }
 
