@@ -5,11 +5,51 @@
 //! brick (slot `s` occupies voxels `[s·B³, (s+1)·B³)`, x fastest), which the CPU reads with perfect locality and a GPU
 //! binds as one storage buffer (or copies slot by slot into a 3D atlas).
 //!
-//! Voxels are `u16`, the value normalised to `[0, 1]` (`value = voxel / 65535`).
+//! Voxels are `u16`, the value normalised to `[0, 1]` (`value = voxel / 65535`), or `u8` for sources of 8-bit
+//! samples ([`crate::voxel_format`]).
 
 use crate::key::{TreeShape, BLOCK_CELLS};
 use crate::lru::{Allocation, LruSlots};
 use crate::node::{BrickSlot, NodeId};
+use crate::voxel_format::{PoolVoxels, VoxelFormat};
+
+/// The pool's voxels, owned.
+#[derive(Debug, Clone)]
+enum StoredVoxels {
+    Wide(Vec<u16>),
+    Narrow(Vec<u8>),
+}
+
+impl StoredVoxels {
+    fn len(&self) -> usize {
+        match self {
+            StoredVoxels::Wide(v) => v.len(),
+            StoredVoxels::Narrow(v) => v.len(),
+        }
+    }
+
+    /// Writes a brick of 16-bit voxels at `start` (appending when `start` is the end), narrowed if the pool is.
+    fn write(&mut self, start: usize, voxels: &[u16], format: VoxelFormat) {
+        match (self, format) {
+            (StoredVoxels::Wide(pool), _) => {
+                if start >= pool.len() {
+                    pool.extend_from_slice(voxels);
+                } else {
+                    pool[start..start + voxels.len()].copy_from_slice(voxels);
+                }
+            }
+            (StoredVoxels::Narrow(pool), VoxelFormat::Narrow { scale, offset }) => {
+                if start >= pool.len() {
+                    pool.resize(start + voxels.len(), 0);
+                }
+                for (out, &v) in pool[start..start + voxels.len()].iter_mut().zip(voxels) {
+                    *out = VoxelFormat::narrow(scale, offset, v);
+                }
+            }
+            (StoredVoxels::Narrow(_), VoxelFormat::Wide) => unreachable!("a narrow pool has a narrow format"),
+        }
+    }
+}
 
 /// Bytes of the per-slot records (the owning node, the brick's value range, its blocks' ranges and its blending
 /// caps), counted in the budget.
@@ -36,7 +76,8 @@ pub fn dequantize(voxel: u16) -> f32 {
 #[derive(Debug, Clone)]
 pub struct BrickPool {
     voxels_per_brick: usize,
-    voxels: Vec<u16>,
+    voxels: StoredVoxels,
+    format: VoxelFormat,
     owners: Vec<u32>,
     /// Per slot, `[min, max]` of its voxels: renderers skip bricks the transfer function makes invisible.
     ranges: Vec<[u16; 2]>,
@@ -48,12 +89,21 @@ pub struct BrickPool {
 }
 
 impl BrickPool {
-    /// An empty pool of at most `capacity` bricks. Memory grows with use.
+    /// An empty pool of at most `capacity` bricks of 16-bit voxels. Memory grows with use.
     pub fn new(shape: &TreeShape, capacity: u32) -> BrickPool {
+        BrickPool::with_format(shape, capacity, VoxelFormat::Wide)
+    }
+
+    /// An empty pool of at most `capacity` bricks stored as `format` says. Memory grows with use.
+    pub fn with_format(shape: &TreeShape, capacity: u32, format: VoxelFormat) -> BrickPool {
         let voxels_per_brick = shape.voxels_per_brick();
         BrickPool {
             voxels_per_brick,
-            voxels: Vec::new(),
+            voxels: match format {
+                VoxelFormat::Wide => StoredVoxels::Wide(Vec::new()),
+                VoxelFormat::Narrow { .. } => StoredVoxels::Narrow(Vec::new()),
+            },
+            format,
             owners: Vec::new(),
             ranges: Vec::new(),
             block_ranges: Vec::new(),
@@ -64,8 +114,16 @@ impl BrickPool {
 
     /// All voxels, brick after brick: the array renderers read.
     #[inline]
-    pub fn voxels(&self) -> &[u16] {
-        &self.voxels
+    pub fn voxels(&self) -> PoolVoxels<'_> {
+        match &self.voxels {
+            StoredVoxels::Wide(v) => PoolVoxels::Wide(v),
+            StoredVoxels::Narrow(v) => PoolVoxels::Narrow(v),
+        }
+    }
+
+    /// How the voxels are stored.
+    pub fn format(&self) -> VoxelFormat {
+        self.format
     }
 
     /// Voxels per brick, borders included.
@@ -86,9 +144,9 @@ impl BrickPool {
     }
 
     /// The voxels of one brick.
-    pub fn brick(&self, slot: BrickSlot) -> &[u16] {
+    pub fn brick(&self, slot: BrickSlot) -> PoolVoxels<'_> {
         let start = slot.0 as usize * self.voxels_per_brick;
-        &self.voxels[start..start + self.voxels_per_brick]
+        self.voxels().slice(start..start + self.voxels_per_brick)
     }
 
     /// The node that owns `slot`.
@@ -146,19 +204,29 @@ impl BrickPool {
         let (allocation, yielded) = self.lru.allocate_avoiding(frame, |slot| keep(NodeId(owners[slot as usize])))?;
         let slot = allocation.slot() as usize;
         let start = slot * self.voxels_per_brick;
-        let range = voxels.iter().fold([u16::MAX, 0], |[lo, hi], &v| [lo.min(v), hi.max(v)]);
         let blocks = self.shape.blocks_per_brick();
-        if start >= self.voxels.len() {
-            self.voxels.extend_from_slice(voxels);
+        let format = self.format;
+        let fresh = start >= self.voxels.len();
+        self.voxels.write(start, voxels, format);
+        if fresh {
             self.owners.push(owner.0);
-            self.ranges.push(range);
+            self.ranges.push([0, 0]);
             self.block_ranges.resize(self.block_ranges.len() + blocks, [0, 0]);
-            block_ranges(&self.shape, voxels, &mut self.block_ranges[slot * blocks..]);
+        }
+        // Ranges of what is stored (for 8-bit voxels, the bytes' values, which differ from the 16-bit voxels' by
+        // up to half a step), so that skipping by them stays exact.
+        let block_out = &mut self.block_ranges[slot * blocks..(slot + 1) * blocks];
+        let range = match &self.voxels {
+            StoredVoxels::Wide(pool) => brick_ranges(&self.shape, &pool[start..start + voxels.len()], block_out),
+            StoredVoxels::Narrow(pool) => brick_ranges(&self.shape, &pool[start..start + voxels.len()], block_out),
+        };
+        self.ranges[slot] = format.wide_bounds(range);
+        for range in block_out.iter_mut() {
+            *range = format.wide_bounds(*range);
+        }
+        if fresh {
             return Some((BrickSlot(slot as u32), None, yielded));
         }
-        self.voxels[start..start + self.voxels_per_brick].copy_from_slice(voxels);
-        self.ranges[slot] = range;
-        block_ranges(&self.shape, voxels, &mut self.block_ranges[slot * blocks..(slot + 1) * blocks]);
         let previous = std::mem::replace(&mut self.owners[slot], owner.0);
         let evicted = match allocation {
             Allocation::Recycled(_) => Some(NodeId(previous)),
@@ -199,7 +267,10 @@ impl BrickPool {
 /// Writes `[min, max]` of each occupancy block of `voxels` (one brick) into `out`: block `(i, j, k)` covers the cells
 /// `i·E .. min((i+1)·E, B−1)` per axis, hence the voxels `i·E ..= min((i+1)·E, B−1)`, so every trilinear sample
 /// taken in one of its cells lies within its range.
-fn block_ranges(shape: &TreeShape, voxels: &[u16], out: &mut [[u16; 2]]) {
+///
+/// Returns the whole brick's `[min, max]`. Both in stored units.
+fn brick_ranges<V: Copy + Into<u16>>(shape: &TreeShape, voxels: &[V], out: &mut [[u16; 2]]) -> [u16; 2] {
+    let range = voxels.iter().fold([u16::MAX, 0], |[lo, hi], &v| [lo.min(v.into()), hi.max(v.into())]);
     let b = shape.stored_brick_size() as usize;
     let blocks = shape.blocks_per_axis();
     let span = |i: usize| i * BLOCK_CELLS..=((i + 1) * BLOCK_CELLS).min(b - 1);
@@ -210,12 +281,13 @@ fn block_ranges(shape: &TreeShape, voxels: &[u16], out: &mut [[u16; 2]]) {
             for j in span(bj) {
                 let row = &voxels[(k * b + j) * b..(k * b + j) * b + b];
                 for &v in &row[span(bi)] {
-                    lo_hi = [lo_hi[0].min(v), lo_hi[1].max(v)];
+                    lo_hi = [lo_hi[0].min(v.into()), lo_hi[1].max(v.into())];
                 }
             }
         }
         *range = lo_hi;
     }
+    range
 }
 
 #[cfg(test)]
@@ -243,7 +315,7 @@ mod tests {
         let (_, evicted) = pool.insert(NodeId(4), &bricks, 2).unwrap();
         assert_eq!(evicted, Some(NodeId(3)));
         assert_eq!(pool.owner(slot), NodeId(4));
-        assert_eq!(pool.brick(slot)[0], 7);
+        assert_eq!(pool.brick(slot).stored(0), 7.0);
     }
 
     #[test]
@@ -263,5 +335,40 @@ mod tests {
         assert_eq!(ranges[1], [5, 100]);
         assert_eq!(ranges[7], [100, 900]);
         assert_eq!(ranges[2], [100, 100]);
+    }
+
+    #[test]
+    fn a_narrow_pool_keeps_bytes_and_bounds_their_values() {
+        let shape = TreeShape::new(2, 8, 4).unwrap();
+        let format = VoxelFormat::for_bytes([10.0, 40.0]).unwrap();
+        let VoxelFormat::Narrow { scale, offset } = format else { unreachable!() };
+        let mut pool = BrickPool::with_format(&shape, 4, format);
+        // What a store producer writes for the bytes 10..=40: their normalised values quantised to 16 bits.
+        let bytes: Vec<u8> = (0..shape.voxels_per_brick()).map(|i| 10 + (i * 7 % 31) as u8).collect();
+        let wide: Vec<u16> = bytes.iter().map(|&v| quantize((v as f32 - 10.0) / 30.0)).collect();
+        let (slot, _) = pool.insert(NodeId(1), &wide, 1).unwrap();
+        let PoolVoxels::Narrow(stored) = pool.brick(slot) else { panic!("a narrow pool stores bytes") };
+        assert_eq!(stored, &bytes[..]);
+        assert_eq!(pool.voxels().len(), shape.voxels_per_brick());
+        // The ranges (16-bit units) bound every value the bytes stand for, as renderers compute it.
+        let [lo, hi] = pool.ranges()[slot.0 as usize];
+        for &v in &bytes {
+            let value = v as f32 * scale + offset;
+            assert!(dequantize(lo) <= value && value <= dequantize(hi), "{v}: {value} outside [{lo}, {hi}]");
+        }
+        let b = shape.stored_brick_size() as usize;
+        for (block, &[lo, hi]) in pool.block_ranges()[..shape.blocks_per_brick()].iter().enumerate() {
+            let blocks = shape.blocks_per_axis();
+            let (bi, bj, bk) = (block % blocks, block / blocks % blocks, block / (blocks * blocks));
+            let span = |i: usize| i * BLOCK_CELLS..=((i + 1) * BLOCK_CELLS).min(b - 1);
+            for k in span(bk) {
+                for j in span(bj) {
+                    for i in span(bi) {
+                        let value = bytes[(k * b + j) * b + i] as f32 * scale + offset;
+                        assert!(dequantize(lo) <= value && value <= dequantize(hi));
+                    }
+                }
+            }
+        }
     }
 }

@@ -12,11 +12,13 @@ use crate::key::TreeShape;
 use crate::lru::LRU_BYTES_PER_SLOT;
 use crate::node::Node;
 use crate::node_pool::TILE_RECORD_BYTES;
+use crate::voxel_format::VoxelFormat;
 
 /// Share of the budget given to the node pool (the rest holds bricks).
 pub const NODE_POOL_SHARE: f64 = 1.0 / 16.0;
 
-/// Bytes of one voxel in the brick pool (`u16`, values normalised to `[0, 1]`).
+/// Bytes of one voxel as producers write it (`u16`, values normalised to `[0, 1]`); the pool may keep 8 bits
+/// ([`VoxelFormat`]).
 pub const VOXEL_BYTES: usize = 2;
 
 /// Capacities of both pools, derived from a byte budget.
@@ -37,14 +39,21 @@ pub struct PoolCapacities {
 }
 
 impl PoolCapacities {
-    /// Plans capacities so that `tiles·bytes_per_tile + bricks·bytes_per_brick ≤ budget_bytes`.
+    /// Plans capacities so that `tiles·bytes_per_tile + bricks·bytes_per_brick ≤ budget_bytes`, for 16-bit voxels.
     pub fn plan(shape: &TreeShape, budget_bytes: u64) -> Result<PoolCapacities, CoreError> {
+        PoolCapacities::plan_for(shape, VoxelFormat::Wide, budget_bytes)
+    }
+
+    /// [`PoolCapacities::plan`] for a pool that stores voxels as `format` says (8-bit voxels: about twice the
+    /// bricks).
+    pub fn plan_for(shape: &TreeShape, format: VoxelFormat, budget_bytes: u64) -> Result<PoolCapacities, CoreError> {
         let bytes_per_tile = (shape.nodes_per_tile() as usize * std::mem::size_of::<Node>()
             + TILE_RECORD_BYTES
             + LRU_BYTES_PER_SLOT
             + 1) as u64;
         let bytes_per_brick =
-            (shape.voxels_per_brick() * VOXEL_BYTES + brick_record_bytes(shape) + LRU_BYTES_PER_SLOT + 1) as u64;
+            (shape.voxels_per_brick() * format.voxel_bytes() + brick_record_bytes(shape) + LRU_BYTES_PER_SLOT + 1)
+                as u64;
         // The smallest useful cache: the root tile plus a few tiles, a parent brick and all its children.
         let min_tiles = 4u64;
         let min_bricks = 2 * shape.nodes_per_tile() as u64;

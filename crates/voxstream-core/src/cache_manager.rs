@@ -50,6 +50,7 @@ use crate::producer::{NodeContent, Produced, Producer};
 use crate::request_queue::RequestQueue;
 use crate::restriction::{self, reach, Reach};
 use crate::tree_view::TreeView;
+use crate::voxel_format::VoxelFormat;
 
 /// Deferred requests passed to [`Producer::prefetch`] per frame.
 pub const PREFETCH_LIMIT: usize = 1024;
@@ -138,9 +139,13 @@ pub struct CacheManager<P: Producer> {
 }
 
 /// Pools of `capacities` holding only the root, and the feedback buffer sized for them.
-fn empty_pools(shape: &TreeShape, capacities: &PoolCapacities) -> (NodePool, BrickPool, FeedbackBuffer) {
+fn empty_pools(
+    shape: &TreeShape,
+    capacities: &PoolCapacities,
+    format: VoxelFormat,
+) -> (NodePool, BrickPool, FeedbackBuffer) {
     let node_pool = NodePool::new(*shape, capacities.tiles);
-    let brick_pool = BrickPool::new(shape, capacities.bricks);
+    let brick_pool = BrickPool::with_format(shape, capacities.bricks, format);
     let feedback = FeedbackBuffer::new(node_pool.tiles_allocated(), 0);
     (node_pool, brick_pool, feedback)
 }
@@ -149,8 +154,9 @@ impl<P: Producer> CacheManager<P> {
     /// A cache for `producer` within `budget_bytes`. Only the root exists; its data is requested by the first rays.
     pub fn new(producer: P, budget_bytes: u64) -> Result<CacheManager<P>, CoreError> {
         let shape = producer.shape();
-        let capacities = PoolCapacities::plan(&shape, budget_bytes)?;
-        let (node_pool, brick_pool, feedback) = empty_pools(&shape, &capacities);
+        let format = producer.voxel_format();
+        let capacities = PoolCapacities::plan_for(&shape, format, budget_bytes)?;
+        let (node_pool, brick_pool, feedback) = empty_pools(&shape, &capacities, format);
         Ok(CacheManager {
             producer,
             shape,
@@ -169,8 +175,9 @@ impl<P: Producer> CacheManager<P> {
     /// is produced again as rays ask for it), level blending keeps its setting, failed nodes are forgotten. A budget
     /// too small for the tree leaves the cache as it was and says so.
     pub fn set_budget(&mut self, budget_bytes: u64) -> Result<(), CoreError> {
-        let capacities = PoolCapacities::plan(&self.shape, budget_bytes)?;
-        (self.node_pool, self.brick_pool, self.feedback) = empty_pools(&self.shape, &capacities);
+        let format = self.brick_pool.format();
+        let capacities = PoolCapacities::plan_for(&self.shape, format, budget_bytes)?;
+        (self.node_pool, self.brick_pool, self.feedback) = empty_pools(&self.shape, &capacities, format);
         self.capacities = capacities;
         self.frame = 1;
         self.failed.clear();
@@ -257,6 +264,7 @@ impl<P: Producer> CacheManager<P> {
             shape: self.shape,
             nodes: self.node_pool.nodes(),
             voxels: self.brick_pool.voxels(),
+            voxel_format: self.brick_pool.format(),
             brick_ranges: self.brick_pool.ranges(),
             block_ranges: self.brick_pool.block_ranges(),
             brick_blends: self.blending.as_ref().map_or(&[], LevelBlending::caps),

@@ -54,6 +54,7 @@ pub mod producer;
 pub mod request_queue;
 pub mod restriction;
 pub mod tree_view;
+pub mod voxel_format;
 
 pub use brick_pool::{dequantize, quantize, BrickPool, VOXEL_MAX};
 pub use budget::PoolCapacities;
@@ -67,3 +68,4 @@ pub use node_pool::NodePool;
 pub use producer::{NodeContent, Produced, Producer};
 pub use request_queue::{QueuedRequest, RequestQueue};
 pub use tree_view::{PoolCapacity, TreeView};
+pub use voxel_format::{Dequantize, PoolVoxels, Voxel, VoxelFormat};

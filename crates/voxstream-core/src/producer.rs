@@ -7,6 +7,7 @@
 
 use crate::error::ProduceError;
 use crate::key::{NodeKey, TreeShape};
+use crate::voxel_format::VoxelFormat;
 
 /// What a node turned out to hold.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -43,6 +44,13 @@ pub trait Producer: Send + Sync {
     /// Produces the node `key`. For [`NodeContent::Brick`], `voxels` (length `(M+2)³`, x fastest) receives the
     /// brick with its border: voxel `(i, j, k)` of the array is centred at `lower + (i − 1 + ½, …)·voxel_size`.
     fn produce(&self, key: NodeKey, voxels: &mut [u16]) -> Result<Produced, ProduceError>;
+
+    /// How the brick pool may store this producer's voxels: [`VoxelFormat::Narrow`] when every voxel it writes
+    /// is the 16-bit quantisation of `byte · scale + offset` for some byte (see [`crate::voxel_format`]). The
+    /// default, [`VoxelFormat::Wide`], keeps 16 bits.
+    fn voxel_format(&self) -> VoxelFormat {
+        VoxelFormat::Wide
+    }
 
     /// Normalised bounds of every value the tree can hold in `key`'s box at `key`'s level and every finer one,
     /// including the trilinear values near its faces (which read the neighbours' voxels), or `None` if unknown.

@@ -9,6 +9,7 @@ use voxstream_layout::{BrickBlend, TreeHeader};
 use crate::brick_pool::dequantize;
 use crate::key::{TreeShape, BLOCK_CELLS};
 use crate::node::{BrickSlot, Node, NodeId, TileId};
+use crate::voxel_format::{PoolVoxels, VoxelFormat};
 
 /// Flat, immutable view of the node pool and the brick pool.
 #[derive(Clone, Copy, Debug)]
@@ -18,7 +19,9 @@ pub struct TreeView<'a> {
     /// The node pool, tile after tile; node 0 is the root.
     pub nodes: &'a [Node],
     /// The brick pool, brick after brick, `(M+2)³` voxels each.
-    pub voxels: &'a [u16],
+    pub voxels: PoolVoxels<'a>,
+    /// How `voxels` stand for values.
+    pub voxel_format: VoxelFormat,
     /// `[min, max]` voxel of each brick slot (border included).
     pub brick_ranges: &'a [[u16; 2]],
     /// `[min, max]` voxel of each occupancy block, [`TreeShape::blocks_per_brick`] per slot.
@@ -75,10 +78,10 @@ impl<'a> TreeView<'a> {
 
     /// The voxels of one brick.
     #[inline]
-    pub fn brick(&self, slot: BrickSlot) -> &'a [u16] {
+    pub fn brick(&self, slot: BrickSlot) -> PoolVoxels<'a> {
         let per_brick = self.shape.voxels_per_brick();
         let start = slot.0 as usize * per_brick;
-        &self.voxels[start..start + per_brick]
+        self.voxels.slice(start..start + per_brick)
     }
 
     /// `[min, max]` of a brick's voxels, normalised to `[0, 1]`; for a brick with children whose producer knows it,
@@ -98,9 +101,9 @@ impl<'a> TreeView<'a> {
 
     /// Value of voxel `(i, j, k)` (border included, so indices run over `0..M+2`) of a brick.
     #[inline]
-    pub fn voxel(&self, brick: &[u16], i: usize, j: usize, k: usize) -> f32 {
+    pub fn voxel(&self, brick: PoolVoxels<'_>, i: usize, j: usize, k: usize) -> f32 {
         let b = self.shape.stored_brick_size() as usize;
-        dequantize(brick[(k * b + j) * b + i])
+        self.voxel_format.dequantize().value(brick.stored((k * b + j) * b + i))
     }
 }
 
@@ -118,7 +121,8 @@ mod tests {
         let view = TreeView {
             shape,
             nodes: &nodes,
-            voxels: &voxels,
+            voxels: PoolVoxels::Wide(&voxels),
+            voxel_format: VoxelFormat::Wide,
             brick_ranges: &ranges,
             block_ranges: &blocks,
             brick_blends: &[],

@@ -11,7 +11,7 @@
 //! manager would remove it. The buffer and the atlas are allocated at the pools' capacity, which the memory budget
 //! fixed, and never grow past it; a new budget (`Session::set_pool_budget`) allocates them again at the new one.
 
-use voxstream_core::{Node, TreeView};
+use voxstream_core::{Node, PoolVoxels, TreeView};
 
 use crate::brick_filtering::BrickFiltering;
 use crate::error::GpuError;
@@ -54,7 +54,10 @@ pub struct GpuPools {
     /// Brick slots along x, y and z of the atlas.
     pub atlas: [u32; 3],
     node_shadow: Vec<Node>,
+    /// What the atlas holds, as the CPU pool stores it: 16-bit voxels, or 8-bit ones (widened to 16 bits on
+    /// upload: the atlas stays 16-bit, see `voxstream_core::voxel_format`).
     voxel_shadow: Vec<u16>,
+    byte_shadow: Vec<u8>,
     node_capacity: usize,
     voxel_capacity: usize,
     nodes_per_tile: usize,
@@ -105,7 +108,8 @@ impl GpuPools {
             atlas,
             // Empty shadows: what is resident is uploaded on the first update, the rest as the pools grow.
             node_shadow: Vec::with_capacity(node_count),
-            voxel_shadow: Vec::with_capacity(brick_count * voxels_per_brick),
+            voxel_shadow: Vec::new(),
+            byte_shadow: Vec::new(),
             node_capacity: node_count,
             voxel_capacity: brick_count * voxels_per_brick,
             nodes_per_tile,
@@ -145,14 +149,24 @@ impl GpuPools {
         // Bricks, slot by slot: each one box of the atlas.
         let per_brick = self.voxels_per_brick;
         let resident = view.voxels.len() - view.voxels.len() % per_brick;
-        if self.voxel_shadow.len() > resident {
-            self.voxel_shadow.truncate(resident);
-        }
+        let runs = match view.voxels {
+            PoolVoxels::Wide(voxels) => changed_runs(&voxels[..resident], &mut self.voxel_shadow, per_brick),
+            PoolVoxels::Narrow(voxels) => changed_runs(&voxels[..resident], &mut self.byte_shadow, per_brick),
+        };
         let b = view.shape.stored_brick_size();
         let [ax, ay, _] = self.atlas;
-        for (from, to) in changed_runs(&view.voxels[..resident], &mut self.voxel_shadow, per_brick) {
+        let mut widened = Vec::new();
+        for (from, to) in runs {
             for slot in from as u32..to as u32 {
-                let voxels = &self.voxel_shadow[slot as usize * per_brick..][..per_brick];
+                let start = slot as usize * per_brick;
+                let voxels = match view.voxels {
+                    PoolVoxels::Wide(_) => &self.voxel_shadow[start..][..per_brick],
+                    PoolVoxels::Narrow(_) => {
+                        widened.clear();
+                        widened.extend((start..start + per_brick).map(|i| view.voxels.wide(i, view.voxel_format)));
+                        &widened[..]
+                    }
+                };
                 let origin = [slot % ax, (slot / ax) % ay, slot / (ax * ay)].map(|c| c * b);
                 queue.write_texture(
                     wgpu::TexelCopyTextureInfo {

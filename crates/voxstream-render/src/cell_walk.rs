@@ -6,14 +6,14 @@
 
 use std::ops::ControlFlow;
 
-use voxstream_core::BLOCK_CELLS;
+use voxstream_core::{Dequantize, PoolVoxels, Voxel, BLOCK_CELLS, VOXEL_MAX};
 
 use crate::integrand::BrickSpan;
 
 /// One cell along a ray.
 #[derive(Clone, Copy, Debug)]
 pub struct CellVisit<'v> {
-    /// Corner values as stored (integers in `[0, 65535]`), x fastest: `v000, v100, v010, v110, v001, …`.
+    /// Corner values in 16-bit units (`[0, 65535]`; the stored integers of 16-bit voxels), x fastest: `v000, v100, v010, v110, v001, …`.
     pub corners: [f32; 8],
     /// Where the ray enters and leaves the cell (clipped to the span).
     pub t_in: f64,
@@ -25,7 +25,9 @@ pub struct CellVisit<'v> {
     offset: [f64; 3],
     rate_f64: [f64; 3],
     /// The brick, its stored voxels per axis, and the cell's coordinates in it (for gradients wider than the cell).
-    voxels: &'v [u16],
+    voxels: PoolVoxels<'v>,
+    /// Stored units to 16-bit units (`wide = stored · scale + offset`; 1 and 0 for 16-bit voxels).
+    to_wide: (f32, f32),
     stored: usize,
     cell: [usize; 3],
 }
@@ -44,7 +46,7 @@ impl CellVisit<'_> {
     #[inline]
     pub fn central_gradient(&self, p: [f32; 3]) -> [f32; 3] {
         let b = self.stored;
-        let at = |x: usize, y: usize, z: usize| self.voxels[(z * b + y) * b + x] as f32;
+        let at = |x: usize, y: usize, z: usize| self.voxels.stored((z * b + y) * b + x) * self.to_wide.0;
         let [fx, fy, fz] = p.map(|v| v.clamp(0.0, 1.0));
         let mut g = [0.0f32; 3];
         for corner in 0..8 {
@@ -61,6 +63,22 @@ impl CellVisit<'_> {
         }
         g
     }
+}
+
+/// The eight corners of the cell whose first voxel is `base` (x fastest: `v000, v100, v010, v110, v001, …`).
+#[inline(always)]
+fn cell_corners<V: Voxel>(voxels: &[V], base: usize, row: usize, slab: usize) -> [f32; 8] {
+    let v = &voxels[base..base + slab + row + 2];
+    [
+        v[0].stored(),
+        v[1].stored(),
+        v[row].stored(),
+        v[row + 1].stored(),
+        v[slab].stored(),
+        v[slab + 1].stored(),
+        v[slab + row].stored(),
+        v[slab + row + 1].stored(),
+    ]
 }
 
 /// Cells visited (or blocks skipped) by one span at most (a ray crosses at most `3·B` cells of a `B³` lattice; the
@@ -127,6 +145,14 @@ pub fn walk_cells<V: CellVisitor>(span: &BrickSpan<'_>, visitor: &mut V) -> (Con
     });
     let Lattice { mut cell, mut next } = Lattice::at(span, &inverse_rate, span.from, None);
     let rate = span.rate.map(|r| r as f32);
+    // Corners in 16-bit units, what visitors compare: 8-bit voxels scaled (`Dequantize` times 65535).
+    let to_wide = match span.voxels {
+        PoolVoxels::Wide(_) => (1.0, 0.0),
+        PoolVoxels::Narrow(_) => {
+            let Dequantize { scale, offset } = span.dequantize;
+            (scale * VOXEL_MAX as f32, offset * VOXEL_MAX as f32)
+        }
+    };
     let mut t = span.from;
     let mut visited = 0u64;
     // The block last checked, as one integer (cells are in [0, B−2], so their block coordinates fit 16 bits each).
@@ -176,17 +202,10 @@ pub fn walk_cells<V: CellVisitor>(span: &BrickSpan<'_>, visitor: &mut V) -> (Con
         let t_out = next[axis].min(span.to).max(t);
         let base = ((cell[2] as usize * b + cell[1] as usize) * b) + cell[0] as usize;
         let (row, slab) = (b, b * b);
-        let v = &span.voxels[base..base + slab + row + 2];
-        let corners = [
-            v[0] as f32,
-            v[1] as f32,
-            v[row] as f32,
-            v[row + 1] as f32,
-            v[slab] as f32,
-            v[slab + 1] as f32,
-            v[slab + row] as f32,
-            v[slab + row + 1] as f32,
-        ];
+        let corners = match span.voxels {
+            PoolVoxels::Wide(v) => cell_corners(v, base, row, slab),
+            PoolVoxels::Narrow(v) => cell_corners(v, base, row, slab).map(|c| c * to_wide.0 + to_wide.1),
+        };
         let offset = std::array::from_fn(|a| span.origin[a] - cell[a] as f64);
         visited += 1;
         let visit = CellVisit {
@@ -197,6 +216,7 @@ pub fn walk_cells<V: CellVisitor>(span: &BrickSpan<'_>, visitor: &mut V) -> (Con
             offset,
             rate_f64: span.rate,
             voxels: span.voxels,
+            to_wide,
             stored: b,
             cell: cell.map(|c| c as usize),
         };
@@ -219,6 +239,7 @@ pub fn walk_cells<V: CellVisitor>(span: &BrickSpan<'_>, visitor: &mut V) -> (Con
 #[cfg(test)]
 mod tests {
     use super::*;
+    use voxstream_core::VoxelFormat;
 
     /// Records cells; skips blocks whose lower bound is in `skip` (`u16::MAX..=u16::MAX`: none here).
     struct Recorder<F: FnMut(&CellVisit<'_>)> {
@@ -241,7 +262,8 @@ mod tests {
         let b = 6;
         let voxels: Vec<u16> = (0..b * b * b).map(|i| i as u16).collect();
         let span = BrickSpan {
-            voxels: &voxels,
+            voxels: PoolVoxels::Wide(&voxels),
+            dequantize: VoxelFormat::Wide.dequantize(),
             stored: b,
             origin: [0.6, 1.2, 4.9],
             rate: [1.3, 0.7, -0.9],
@@ -279,7 +301,8 @@ mod tests {
             (0..b * b * b).map(|i| (3 * (i % b) + 5 * (i / b % b) + 7 * (i / (b * b)) + 100) as u16).collect();
         for origin in [[0.3, 2.6, 1.1], [4.7, 4.2, 0.1]] {
             let span = BrickSpan {
-                voxels: &voxels,
+                voxels: PoolVoxels::Wide(&voxels),
+                dequantize: VoxelFormat::Wide.dequantize(),
                 stored: b,
                 origin,
                 rate: [0.0, 0.0, 0.0],
@@ -308,7 +331,8 @@ mod tests {
         let blocks = 5;
         let block_ranges: Vec<[u16; 2]> = (0..blocks * blocks * blocks).map(|i| [(i % 5) as u16; 2]).collect();
         let span = BrickSpan {
-            voxels: &voxels,
+            voxels: PoolVoxels::Wide(&voxels),
+            dequantize: VoxelFormat::Wide.dequantize(),
             stored: b,
             origin: [0.5, 3.5, 3.5],
             rate: [1.0, 0.0, 0.0],

@@ -15,6 +15,8 @@
 
 use std::ops::ControlFlow;
 
+use voxstream_core::{Dequantize, PoolVoxels};
+
 use crate::step_table::StepLength;
 
 /// One sample of the field along a ray.
@@ -35,7 +37,9 @@ pub struct Sample {
 #[derive(Clone, Copy, Debug)]
 pub struct BrickSpan<'v> {
     /// The brick's voxels, `B³`, x fastest.
-    pub voxels: &'v [u16],
+    pub voxels: PoolVoxels<'v>,
+    /// How its stored voxels map to values.
+    pub dequantize: Dequantize,
     /// Stored voxels per axis, `B = M + 2`.
     pub stored: usize,
     /// Continuous voxel index at `t = 0`.

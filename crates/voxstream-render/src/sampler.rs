@@ -4,7 +4,7 @@
 //! one-voxel border copied from the neighbours), so a position `u ∈ [0, 1]` of the node maps to the continuous index
 //! `u·M + ½`, and trilinear filtering never reads outside the brick (GigaVoxels [P09] §4).
 
-use voxstream_core::{BLOCK_CELLS, VOXEL_MAX};
+use voxstream_core::{Dequantize, Voxel, BLOCK_CELLS};
 
 /// The cell of a brick that trilinear filtering reads for a continuous voxel index (clamped to the brick).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -52,28 +52,28 @@ impl Cell {
 
     /// The trilinear value in the cell (of a brick with `b` voxels per axis).
     #[inline(always)]
-    pub fn value(&self, brick: &[u16], b: usize) -> f32 {
+    pub fn value<V: Voxel>(&self, brick: &[V], b: usize, dq: Dequantize) -> f32 {
         let (row, slab) = (b, b * b);
         let f = self.fraction;
         let corners = &brick[self.base..self.base + slab + row + 2];
         // Interpolate the stored integers and normalise once.
-        let v = |o: usize| corners[o] as f32;
+        let v = |o: usize| corners[o].stored();
         let c00 = v(0) + (v(1) - v(0)) * f[0];
         let c10 = v(row) + (v(row + 1) - v(row)) * f[0];
         let c01 = v(slab) + (v(slab + 1) - v(slab)) * f[0];
         let c11 = v(slab + row) + (v(slab + row + 1) - v(slab + row)) * f[0];
         let c0 = c00 + (c10 - c00) * f[1];
         let c1 = c01 + (c11 - c01) * f[1];
-        dequantize_scale(c0 + (c1 - c0) * f[2])
+        dq.value(c0 + (c1 - c0) * f[2])
     }
 
     /// Value and analytic gradient (value per voxel) of the trilinear field in the cell: one read of the 8 corners.
     #[inline(always)]
-    pub fn value_and_gradient(&self, brick: &[u16], b: usize) -> (f32, [f32; 3]) {
+    pub fn value_and_gradient<V: Voxel>(&self, brick: &[V], b: usize, dq: Dequantize) -> (f32, [f32; 3]) {
         let (row, slab) = (b, b * b);
         let f = self.fraction;
         let corners = &brick[self.base..self.base + slab + row + 2];
-        let v = |o: usize| corners[o] as f32;
+        let v = |o: usize| corners[o].stored();
         let (v000, v100, v010, v110) = (v(0), v(1), v(row), v(row + 1));
         let (v001, v101, v011, v111) = (v(slab), v(slab + 1), v(slab + row), v(slab + row + 1));
         let lerp = |a: f32, b: f32, t: f32| a + (b - a) * t;
@@ -87,7 +87,7 @@ impl Cell {
         let gz = c1 - c0;
         let gy = lerp(c10 - c00, c11 - c01, f[2]);
         let gx = lerp(lerp(v100 - v000, v110 - v010, f[1]), lerp(v101 - v001, v111 - v011, f[1]), f[2]);
-        (dequantize_scale(value), [gx, gy, gz].map(dequantize_scale))
+        (dq.value(value), [gx, gy, gz].map(|g| dq.slope(g)))
     }
 }
 
@@ -100,28 +100,36 @@ pub const LANES: usize = 8;
 /// interpolation) so that the compiler turns all but the corner reads into SIMD instructions of the width the CPU
 /// offers (see [`crate::InstructionSet`]). Seed 002 §4 (Knoll et al.) traces packets of rays for the same reason.
 #[inline(always)]
-pub fn values_along(brick: &[u16], b: usize, start: [f32; 3], delta: [f32; 3], k: f32) -> [f32; LANES] {
-    let (corners, fractions) = corners_along(brick, b, start, delta, k);
-    interpolate(&corners, &fractions)
-}
-
-/// [`values_along`] with the analytic gradients of [`Cell::value_and_gradient`], bit for bit.
-#[inline(always)]
-pub fn values_and_gradients_along(
-    brick: &[u16],
+pub fn values_along<V: Voxel>(
+    brick: &[V],
     b: usize,
     start: [f32; 3],
     delta: [f32; 3],
     k: f32,
+    dq: Dequantize,
+) -> [f32; LANES] {
+    let (corners, fractions) = corners_along(brick, b, start, delta, k);
+    interpolate(&corners, &fractions, dq)
+}
+
+/// [`values_along`] with the analytic gradients of [`Cell::value_and_gradient`], bit for bit.
+#[inline(always)]
+pub fn values_and_gradients_along<V: Voxel>(
+    brick: &[V],
+    b: usize,
+    start: [f32; 3],
+    delta: [f32; 3],
+    k: f32,
+    dq: Dequantize,
 ) -> ([f32; LANES], [[f32; 3]; LANES]) {
     let (corners, fractions) = corners_along(brick, b, start, delta, k);
-    interpolate_with_gradients(&corners, &fractions)
+    interpolate_with_gradients(&corners, &fractions, dq)
 }
 
 /// Trilinear values from the corners and cell fractions of `LANES` points, lane by lane: [`Cell::value`]'s
 /// arithmetic.
 #[inline(always)]
-fn interpolate(corners: &[[f32; LANES]; 8], [fx, fy, fz]: &[[f32; LANES]; 3]) -> [f32; LANES] {
+fn interpolate(corners: &[[f32; LANES]; 8], [fx, fy, fz]: &[[f32; LANES]; 3], dq: Dequantize) -> [f32; LANES] {
     let mut out = [0f32; LANES];
     for j in 0..LANES {
         let v = |corner: usize| corners[corner][j];
@@ -131,7 +139,7 @@ fn interpolate(corners: &[[f32; LANES]; 8], [fx, fy, fz]: &[[f32; LANES]; 3]) ->
         let c11 = v(6) + (v(7) - v(6)) * fx[j];
         let c0 = c00 + (c10 - c00) * fy[j];
         let c1 = c01 + (c11 - c01) * fy[j];
-        out[j] = dequantize_scale(c0 + (c1 - c0) * fz[j]);
+        out[j] = dq.value(c0 + (c1 - c0) * fz[j]);
     }
     out
 }
@@ -141,6 +149,7 @@ fn interpolate(corners: &[[f32; LANES]; 8], [fx, fy, fz]: &[[f32; LANES]; 3]) ->
 fn interpolate_with_gradients(
     corners: &[[f32; LANES]; 8],
     [fx, fy, fz]: &[[f32; LANES]; 3],
+    dq: Dequantize,
 ) -> ([f32; LANES], [[f32; 3]; LANES]) {
     let mut values = [0f32; LANES];
     let mut gradients = [[0f32; 3]; LANES];
@@ -155,11 +164,11 @@ fn interpolate_with_gradients(
         let c11 = lerp(v011, v111, fx[j]);
         let c0 = lerp(c00, c10, fy[j]);
         let c1 = lerp(c01, c11, fy[j]);
-        values[j] = dequantize_scale(lerp(c0, c1, fz[j]));
+        values[j] = dq.value(lerp(c0, c1, fz[j]));
         let gz = c1 - c0;
         let gy = lerp(c10 - c00, c11 - c01, fz[j]);
         let gx = lerp(lerp(v100 - v000, v110 - v010, fy[j]), lerp(v101 - v001, v111 - v011, fy[j]), fz[j]);
-        gradients[j] = [gx, gy, gz].map(dequantize_scale);
+        gradients[j] = [gx, gy, gz].map(|g| dq.slope(g));
     }
     (values, gradients)
 }
@@ -168,8 +177,8 @@ fn interpolate_with_gradients(
 /// `LANES` points `start + (k + j)·delta`, located like [`Cell::locate`].
 #[inline(always)]
 #[allow(clippy::type_complexity)]
-fn corners_along(
-    brick: &[u16],
+fn corners_along<V: Voxel>(
+    brick: &[V],
     b: usize,
     start: [f32; 3],
     delta: [f32; 3],
@@ -197,7 +206,7 @@ fn corners_along(
         let at = base[j] as usize;
         let cell = &brick[at..at + slab + row + 2];
         for (corner, &offset) in offsets.iter().enumerate() {
-            corners[corner][j] = cell[offset] as f32;
+            corners[corner][j] = cell[offset].stored();
         }
     }
     (corners, fraction)
@@ -210,36 +219,38 @@ fn corners_along(
 /// along one ray. Every lane reads inside its brick whatever its position (positions are clamped), so unused lanes
 /// are harmless; `bases[j] + b³ ≤ voxels.len()` is checked per lane.
 #[inline(always)]
-pub fn values_across(
-    voxels: &[u16],
+pub fn values_across<V: Voxel>(
+    voxels: &[V],
     b: usize,
     bases: &[u32; LANES],
     start: &[[f32; LANES]; 3],
     delta: &[[f32; LANES]; 3],
     k: &[f32; LANES],
+    dq: Dequantize,
 ) -> [f32; LANES] {
     let (corners, fractions) = corners_across(voxels, b, bases, start, delta, k);
-    interpolate(&corners, &fractions)
+    interpolate(&corners, &fractions, dq)
 }
 
 /// [`values_across`] with the analytic gradients of [`Cell::value_and_gradient`], bit for bit.
 #[inline(always)]
-pub fn values_and_gradients_across(
-    voxels: &[u16],
+pub fn values_and_gradients_across<V: Voxel>(
+    voxels: &[V],
     b: usize,
     bases: &[u32; LANES],
     start: &[[f32; LANES]; 3],
     delta: &[[f32; LANES]; 3],
     k: &[f32; LANES],
+    dq: Dequantize,
 ) -> ([f32; LANES], [[f32; 3]; LANES]) {
     let (corners, fractions) = corners_across(voxels, b, bases, start, delta, k);
-    interpolate_with_gradients(&corners, &fractions)
+    interpolate_with_gradients(&corners, &fractions, dq)
 }
 
 /// The corners and cell fractions of [`values_across`]'s points.
 #[inline(always)]
-fn corners_across(
-    voxels: &[u16],
+fn corners_across<V: Voxel>(
+    voxels: &[V],
     b: usize,
     bases: &[u32; LANES],
     start: &[[f32; LANES]; 3],
@@ -269,46 +280,42 @@ fn corners_across(
         let at = bases[j] as usize + index[j] as usize;
         let cell = &voxels[at..at + slab + row + 2];
         for (corner, &offset) in offsets.iter().enumerate() {
-            corners[corner][j] = cell[offset] as f32;
+            corners[corner][j] = cell[offset].stored();
         }
     }
     (corners, fraction)
 }
 
-/// A value interpolated from stored voxels, normalised like [`voxstream_core::dequantize`].
-#[inline(always)]
-fn dequantize_scale(stored: f32) -> f32 {
-    stored * (1.0 / VOXEL_MAX as f32)
-}
-
 /// Samples a brick at continuous voxel index `x` (each axis clamped to `[0, B−1]`, `B = M + 2`).
 #[inline(always)]
-pub fn trilinear(brick: &[u16], b: usize, x: [f32; 3]) -> f32 {
-    Cell::locate(b, x).value(brick, b)
+pub fn trilinear<V: Voxel>(brick: &[V], b: usize, x: [f32; 3], dq: Dequantize) -> f32 {
+    Cell::locate(b, x).value(brick, b, dq)
 }
 
 /// Value and analytic gradient (value per voxel) of the trilinear field at `x`: one read of the 8 corners.
 #[inline(always)]
-pub fn trilinear_with_gradient(brick: &[u16], b: usize, x: [f32; 3]) -> (f32, [f32; 3]) {
-    Cell::locate(b, x).value_and_gradient(brick, b)
+pub fn trilinear_with_gradient<V: Voxel>(brick: &[V], b: usize, x: [f32; 3], dq: Dequantize) -> (f32, [f32; 3]) {
+    Cell::locate(b, x).value_and_gradient(brick, b, dq)
 }
 
 /// Central-difference gradient of the trilinear field at `x`, in value per voxel.
 #[inline]
-pub fn gradient(brick: &[u16], b: usize, x: [f32; 3]) -> [f32; 3] {
+pub fn gradient<V: Voxel>(brick: &[V], b: usize, x: [f32; 3], dq: Dequantize) -> [f32; 3] {
     std::array::from_fn(|a| {
         let mut lo = x;
         let mut hi = x;
         lo[a] -= 1.0;
         hi[a] += 1.0;
-        (trilinear(brick, b, hi) - trilinear(brick, b, lo)) * 0.5
+        (trilinear(brick, b, hi, dq) - trilinear(brick, b, lo, dq)) * 0.5
     })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use voxstream_core::quantize;
+    use voxstream_core::{quantize, VoxelFormat};
+
+    const DQ: Dequantize = Dequantize { scale: 1.0 / 65535.0, offset: 0.0 };
 
     /// A brick holding the linear ramp `value = x / (b − 1)`.
     fn ramp(b: usize) -> Vec<u16> {
@@ -320,11 +327,11 @@ mod tests {
         let b = 6;
         let brick = ramp(b);
         for x in [0.0f32, 0.3, 2.5, 4.99, 5.0] {
-            let v = trilinear(&brick, b, [x, 2.2, 3.7]);
+            let v = trilinear(&brick, b, [x, 2.2, 3.7], DQ);
             assert!((v - x / 5.0).abs() < 1e-4, "at {x}: {v}");
         }
         // Outside: clamped to the border.
-        assert!((trilinear(&brick, b, [-3.0, 0.0, 0.0])).abs() < 1e-4);
+        assert!((trilinear(&brick, b, [-3.0, 0.0, 0.0], DQ)).abs() < 1e-4);
     }
 
     #[test]
@@ -332,13 +339,13 @@ mod tests {
         let b = 6;
         let brick: Vec<u16> = (0..b * b * b).map(|i| quantize(((i * 7919) % 101) as f32 / 100.0)).collect();
         let x = [2.3f32, 1.6, 3.2];
-        let (value, g) = trilinear_with_gradient(&brick, b, x);
-        assert!((value - trilinear(&brick, b, x)).abs() < 1e-6);
+        let (value, g) = trilinear_with_gradient(&brick, b, x, DQ);
+        assert!((value - trilinear(&brick, b, x, DQ)).abs() < 1e-6);
         for a in 0..3 {
             let (mut lo, mut hi) = (x, x);
             lo[a] -= 0.01;
             hi[a] += 0.01;
-            let numeric = (trilinear(&brick, b, hi) - trilinear(&brick, b, lo)) / 0.02;
+            let numeric = (trilinear(&brick, b, hi, DQ) - trilinear(&brick, b, lo, DQ)) / 0.02;
             assert!((numeric - g[a]).abs() < 1e-3, "axis {a}: {numeric} vs {}", g[a]);
         }
     }
@@ -359,13 +366,13 @@ mod tests {
             }
         }
         for k in [[0f32; LANES], std::array::from_fn(|j| (j * j) as f32), [40.0; LANES]] {
-            let values = values_across(&pool, b, &bases, &start, &delta, &k);
-            let (with_gradients, gradients) = values_and_gradients_across(&pool, b, &bases, &start, &delta, &k);
+            let values = values_across(&pool, b, &bases, &start, &delta, &k, DQ);
+            let (with_gradients, gradients) = values_and_gradients_across(&pool, b, &bases, &start, &delta, &k, DQ);
             for j in 0..LANES {
                 let x: [f32; 3] = std::array::from_fn(|a| start[a][j] + k[j] * delta[a][j]);
                 let brick = &pool[bases[j] as usize..bases[j] as usize + per_brick];
-                assert_eq!(values[j].to_bits(), trilinear(brick, b, x).to_bits(), "lane {j} at {x:?}");
-                let (value, gradient) = trilinear_with_gradient(brick, b, x);
+                assert_eq!(values[j].to_bits(), trilinear(brick, b, x, DQ).to_bits(), "lane {j} at {x:?}");
+                let (value, gradient) = trilinear_with_gradient(brick, b, x, DQ);
                 assert_eq!(with_gradients[j].to_bits(), value.to_bits(), "lane {j} at {x:?}");
                 assert_eq!(gradients[j].map(f32::to_bits), gradient.map(f32::to_bits), "lane {j} at {x:?}");
             }
@@ -382,13 +389,13 @@ mod tests {
             ([8.9, 0.01, 3.3], [-1.1, 0.6, 0.7]),
         ] {
             for k in [0.0f32, 3.0, 17.0] {
-                let values = values_along(&brick, b, start, delta, k);
-                let (with_gradient, gradients) = values_and_gradients_along(&brick, b, start, delta, k);
+                let values = values_along(&brick, b, start, delta, k, DQ);
+                let (with_gradient, gradients) = values_and_gradients_along(&brick, b, start, delta, k, DQ);
                 for (j, value) in values.iter().enumerate() {
                     let kj = k + j as f32;
                     let x = [start[0] + kj * delta[0], start[1] + kj * delta[1], start[2] + kj * delta[2]];
-                    assert_eq!(value.to_bits(), trilinear(&brick, b, x).to_bits(), "lane {j} at {x:?}");
-                    let (single, gradient) = trilinear_with_gradient(&brick, b, x);
+                    assert_eq!(value.to_bits(), trilinear(&brick, b, x, DQ).to_bits(), "lane {j} at {x:?}");
+                    let (single, gradient) = trilinear_with_gradient(&brick, b, x, DQ);
                     assert_eq!(with_gradient[j].to_bits(), single.to_bits(), "lane {j} at {x:?}");
                     assert_eq!(gradients[j].map(f32::to_bits), gradient.map(f32::to_bits), "lane {j} at {x:?}");
                 }
@@ -399,7 +406,29 @@ mod tests {
     #[test]
     fn gradient_of_a_ramp_points_along_x() {
         let b = 6;
-        let g = gradient(&ramp(b), b, [2.5, 2.5, 2.5]);
+        let g = gradient(&ramp(b), b, [2.5, 2.5, 2.5], DQ);
         assert!((g[0] - 0.2).abs() < 1e-3 && g[1].abs() < 1e-4 && g[2].abs() < 1e-4);
+    }
+
+    #[test]
+    fn narrow_bricks_sample_the_values_of_their_wide_twins() {
+        // A u8 volume of range [12, 200]: the same brick as bytes (8-bit pool) and as quantised values (16-bit).
+        let b = 8;
+        let Some(VoxelFormat::Narrow { scale, offset }) = VoxelFormat::for_bytes([12.0, 200.0]) else {
+            panic!("a byte range")
+        };
+        let narrow = Dequantize { scale, offset };
+        let bytes: Vec<u8> = (0..b * b * b).map(|i| (12 + (i * 37) % 189) as u8).collect();
+        let wide: Vec<u16> = bytes.iter().map(|&v| quantize((v as f32 - 12.0) / 188.0)).collect();
+        for x in [[0.3f32, 1.7, 2.2], [5.5, 0.0, 6.99], [3.25, 3.5, 3.75], [-1.0, 9.0, 4.4]] {
+            let (v8, g8) = trilinear_with_gradient(&bytes, b, x, narrow);
+            let (v16, g16) = trilinear_with_gradient(&wide, b, x, DQ);
+            // Each 16-bit voxel is within half a step of its byte's value; interpolation keeps that bound.
+            assert!((v8 - v16).abs() <= 0.5 / 65535.0 + 1e-6, "at {x:?}: {v8} vs {v16}");
+            for a in 0..3 {
+                assert!((g8[a] - g16[a]).abs() <= 2.0 / 65535.0 + 1e-6, "at {x:?}, axis {a}: {g8:?} vs {g16:?}");
+            }
+            assert_eq!(values_along(&bytes, b, x, [0.25, -0.5, 0.125], 0.0, narrow)[0].to_bits(), v8.to_bits());
+        }
     }
 }

@@ -32,7 +32,8 @@ use std::ops::ControlFlow;
 
 use glam::DVec3;
 use voxstream_core::{
-    BrickBlend, BrickSlot, FeedbackBuffer, Node, NodeData, NodeId, Request, RequestKind, TreeView, BLOCK_CELLS,
+    BrickBlend, BrickSlot, Dequantize, FeedbackBuffer, Node, NodeData, NodeId, PoolVoxels, Request, RequestKind,
+    TreeView, Voxel, BLOCK_CELLS,
 };
 
 use crate::integrand::{BrickSpan, Integrand, Sample};
@@ -143,7 +144,7 @@ enum SegmentData {
 /// for sample `k` of the segment.
 #[derive(Clone, Copy)]
 struct BrickLine<'v> {
-    voxels: &'v [u16],
+    voxels: PoolVoxels<'v>,
     slot: BrickSlot,
     start: [f32; 3],
     delta: [f32; 3],
@@ -164,6 +165,8 @@ impl BrickLine<'_> {
 /// Walks rays through one frame's tree view, writing feedback and handing samples to an integrand.
 pub struct Traversal<'a> {
     view: TreeView<'a>,
+    /// How the pool's stored voxels map to values ([`voxstream_core::VoxelFormat`]).
+    dequantize: Dequantize,
     feedback: &'a FeedbackBuffer,
     step_factor: f64,
     lod_bias: f64,
@@ -200,6 +203,7 @@ impl<'a> Traversal<'a> {
         }
         Traversal {
             view,
+            dequantize: view.voxel_format.dequantize(),
             feedback,
             step_factor: settings.step_factor,
             lod_bias: settings.lod_bias,
@@ -328,11 +332,15 @@ impl<'a> Traversal<'a> {
             }
             // Until the first lane reaches the end of its run, no lane needs a check: samples only.
             let mut taken = 0u64;
+            let dq = self.dequantize;
             for _ in 0..burst {
-                let (values, gradients) = if GRADIENT {
-                    values_and_gradients_across(self.view.voxels, b, &bases, &start, &delta, &kf)
-                } else {
-                    (values_across(self.view.voxels, b, &bases, &start, &delta, &kf), [[0.0; 3]; LANES])
+                let (values, gradients) = match self.view.voxels {
+                    PoolVoxels::Wide(voxels) => {
+                        samples_across::<_, GRADIENT>(voxels, b, &bases, &start, &delta, &kf, dq)
+                    }
+                    PoolVoxels::Narrow(voxels) => {
+                        samples_across::<_, GRADIENT>(voxels, b, &bases, &start, &delta, &kf, dq)
+                    }
                 };
                 for (j, slot) in lanes.iter_mut().enumerate() {
                     let Some(lane) = slot else { continue };
@@ -756,10 +764,43 @@ impl<'a> Traversal<'a> {
         fine: &BrickLine<'_>,
         coarse: &BrickLine<'_>,
         blend: Blend,
+        run: (f64, f64, u32, u32),
+        integrand: &mut I,
+    ) -> RunFlow {
+        // Both bricks are in the one pool, so both are of its format.
+        match (fine.voxels, coarse.voxels) {
+            (PoolVoxels::Wide(f), PoolVoxels::Wide(c)) => self
+                .sample_run_in::<_, I, GRADIENT, COARSE, BLEND_GRADIENTS>(
+                    (f, fine),
+                    (c, coarse),
+                    blend,
+                    run,
+                    integrand,
+                ),
+            (PoolVoxels::Narrow(f), PoolVoxels::Narrow(c)) => self
+                .sample_run_in::<_, I, GRADIENT, COARSE, BLEND_GRADIENTS>(
+                    (f, fine),
+                    (c, coarse),
+                    blend,
+                    run,
+                    integrand,
+                ),
+            _ => unreachable!("the bricks of one pool have one voxel format"),
+        }
+    }
+
+    /// [`Traversal::sample_run`] for the pool's voxel type.
+    #[inline(always)]
+    fn sample_run_in<V: Voxel, I: Integrand, const GRADIENT: bool, const COARSE: bool, const BLEND_GRADIENTS: bool>(
+        &self,
+        (fine_voxels, fine): (&[V], &BrickLine<'_>),
+        (coarse_voxels, coarse): (&[V], &BrickLine<'_>),
+        blend: Blend,
         (first, dt, k, end): (f64, f64, u32, u32),
         integrand: &mut I,
     ) -> RunFlow {
         let b = self.stored;
+        let dq = self.dequantize;
         let (weight, gradient_weight) = (blend.value, blend.gradient.unwrap_or(WeightRamp::FINE));
         // A coarse gradient per coarse voxel, in fine voxels.
         let coarse_scale = 1.0 / self.n as f32;
@@ -776,20 +817,20 @@ impl<'a> Traversal<'a> {
         if self.sample_batches {
             while s + LANES as u32 <= end {
                 let (mut values, mut gradients) = if GRADIENT {
-                    values_and_gradients_along(fine.voxels, b, fine.start, fine.delta, kf)
+                    values_and_gradients_along(fine_voxels, b, fine.start, fine.delta, kf, dq)
                 } else {
-                    (values_along(fine.voxels, b, fine.start, fine.delta, kf), [[0.0; 3]; LANES])
+                    (values_along(fine_voxels, b, fine.start, fine.delta, kf, dq), [[0.0; 3]; LANES])
                 };
                 if BLEND_GRADIENTS {
                     let (coarse_values, coarse_gradients) =
-                        values_and_gradients_along(coarse.voxels, b, coarse.start, coarse.delta, kf);
+                        values_and_gradients_along(coarse_voxels, b, coarse.start, coarse.delta, kf, dq);
                     for j in 0..LANES {
                         let x = kf + j as f32;
                         values[j] = coarse_values[j] + (values[j] - coarse_values[j]) * weight.at(x);
                         gradients[j] = blend_gradient(gradients[j], coarse_gradients[j], gradient_weight.at(x));
                     }
                 } else if COARSE {
-                    let coarse_values = values_along(coarse.voxels, b, coarse.start, coarse.delta, kf);
+                    let coarse_values = values_along(coarse_voxels, b, coarse.start, coarse.delta, kf, dq);
                     for (j, (value, coarse_value)) in values.iter_mut().zip(coarse_values).enumerate() {
                         *value = coarse_value + (*value - coarse_value) * weight.at(kf + j as f32);
                     }
@@ -806,15 +847,18 @@ impl<'a> Traversal<'a> {
         }
         for s in s..end {
             let cell = Cell::locate(b, fine.at(kf));
-            let (mut value, mut gradient) =
-                if GRADIENT { cell.value_and_gradient(fine.voxels, b) } else { (cell.value(fine.voxels, b), [0.0; 3]) };
+            let (mut value, mut gradient) = if GRADIENT {
+                cell.value_and_gradient(fine_voxels, b, dq)
+            } else {
+                (cell.value(fine_voxels, b, dq), [0.0; 3])
+            };
             if BLEND_GRADIENTS {
                 let (coarse_value, coarse_gradient) =
-                    Cell::locate(b, coarse.at(kf)).value_and_gradient(coarse.voxels, b);
+                    Cell::locate(b, coarse.at(kf)).value_and_gradient(coarse_voxels, b, dq);
                 value = coarse_value + (value - coarse_value) * weight.at(kf);
                 gradient = blend_gradient(gradient, coarse_gradient, gradient_weight.at(kf));
             } else if COARSE {
-                let coarse_value = Cell::locate(b, coarse.at(kf)).value(coarse.voxels, b);
+                let coarse_value = Cell::locate(b, coarse.at(kf)).value(coarse_voxels, b, dq);
                 value = coarse_value + (value - coarse_value) * weight.at(kf);
             }
             let sample = Sample { t: first + s as f64 * dt, value, gradient };
@@ -854,6 +898,7 @@ impl<'a> Traversal<'a> {
         let blocks = self.view.shape.blocks_per_brick();
         BrickSpan {
             voxels: self.view.brick(node.slot),
+            dequantize: self.dequantize,
             stored: self.stored,
             origin: std::array::from_fn(|a| (o[a] * s - node.ijk[a] as f64) * m + 0.5),
             rate: std::array::from_fn(|a| d[a] * s * m),
@@ -1000,6 +1045,24 @@ impl<'a> Traversal<'a> {
             },
         };
         (data, deepest as u32, last.ijk)
+    }
+}
+
+/// One sample on each lane's line ([`values_across`]), with gradients when `GRADIENT`.
+#[inline(always)]
+fn samples_across<V: Voxel, const GRADIENT: bool>(
+    voxels: &[V],
+    b: usize,
+    bases: &[u32; LANES],
+    start: &[[f32; LANES]; 3],
+    delta: &[[f32; LANES]; 3],
+    k: &[f32; LANES],
+    dq: Dequantize,
+) -> ([f32; LANES], [[f32; 3]; LANES]) {
+    if GRADIENT {
+        values_and_gradients_across(voxels, b, bases, start, delta, k, dq)
+    } else {
+        (values_across(voxels, b, bases, start, delta, k, dq), [[0.0; 3]; LANES])
     }
 }
 

@@ -9,11 +9,12 @@
 use std::path::Path;
 use std::sync::Arc;
 
-use voxstream_core::{quantize, NodeContent, NodeKey, ProduceError, Produced, Producer, TreeShape};
+use voxstream_core::{quantize, NodeContent, NodeKey, ProduceError, Produced, Producer, TreeShape, VoxelFormat};
 
 use crate::error::StoreError;
 use crate::layout::PyramidLayout;
 use crate::store_reader::StoreReader;
+use crate::volume::DType;
 
 /// Where a [`StoreProducer`] reads samples: the store on disk, or the same pyramid held in RAM.
 pub trait BrickSource: Send + Sync {
@@ -27,6 +28,12 @@ pub trait BrickSource: Send + Sync {
     fn brick_range(&self, level: usize, ijk: [u64; 3]) -> Option<[f32; 2]>;
     /// Samples `[lower, lower + size)` (x, y, z) of `level`, x fastest.
     fn read_region(&self, level: usize, lower: [u64; 3], size: [u64; 3]) -> Result<Vec<f32>, StoreError>;
+
+    /// Whether every sample of every level is an integer in `[0, 255]` (a `u8` volume), so that the brick pool may
+    /// keep 8 bits per voxel ([`VoxelFormat`]). The default says no.
+    fn samples_are_bytes(&self) -> bool {
+        false
+    }
 
     /// Starts reading these bricks `(level, ijk)` into a cache in the background; the default does nothing.
     fn prefetch(self: &Arc<Self>, bricks: Vec<(usize, [u64; 3])>) {
@@ -50,6 +57,9 @@ impl BrickSource for StoreReader {
     fn read_region(&self, level: usize, lower: [u64; 3], size: [u64; 3]) -> Result<Vec<f32>, StoreError> {
         StoreReader::read_region(self, level, lower, size)
     }
+    fn samples_are_bytes(&self) -> bool {
+        self.info().dtype == DType::U8
+    }
     fn prefetch(self: &Arc<Self>, bricks: Vec<(usize, [u64; 3])>) {
         StoreReader::prefetch(self, bricks);
     }
@@ -61,6 +71,7 @@ pub struct InMemoryVolume {
     path: std::path::PathBuf,
     layout: PyramidLayout,
     value_range: [f64; 2],
+    samples_are_bytes: bool,
     levels: Vec<Vec<f32>>,
     ranges: Vec<Vec<[f32; 2]>>,
 }
@@ -88,6 +99,7 @@ impl InMemoryVolume {
             path: reader.path().to_path_buf(),
             layout,
             value_range: reader.attributes().value_range,
+            samples_are_bytes: reader.samples_are_bytes(),
             levels,
             ranges,
         })
@@ -103,6 +115,9 @@ impl BrickSource for InMemoryVolume {
     }
     fn value_range(&self) -> [f64; 2] {
         self.value_range
+    }
+    fn samples_are_bytes(&self) -> bool {
+        self.samples_are_bytes
     }
     fn brick_range(&self, level: usize, ijk: [u64; 3]) -> Option<[f32; 2]> {
         let b = self.layout.bricks(level);
@@ -131,6 +146,7 @@ pub struct StoreProducer<S: BrickSource = StoreReader> {
     shape: TreeShape,
     lower: f32,
     inverse_span: f32,
+    voxel_format: VoxelFormat,
 }
 
 impl<S: BrickSource> Clone for StoreProducer<S> {
@@ -140,6 +156,7 @@ impl<S: BrickSource> Clone for StoreProducer<S> {
             shape: self.shape,
             lower: self.lower,
             inverse_span: self.inverse_span,
+            voxel_format: self.voxel_format,
         }
     }
 }
@@ -152,12 +169,35 @@ impl<S: BrickSource> StoreProducer<S> {
             .map_err(|e| StoreError::store(reader.path(), e.to_string()))?;
         let [lower, upper] = reader.value_range();
         let span = (upper - lower) as f32;
+        // 8-bit voxels where the samples are bytes and the normalisation maps them exactly (issue "a ray caster
+        // faster than VTK's": native bricks).
+        let voxel_format = if reader.samples_are_bytes() {
+            VoxelFormat::for_bytes([lower, upper]).unwrap_or(VoxelFormat::Wide)
+        } else {
+            VoxelFormat::Wide
+        };
         Ok(StoreProducer {
             reader,
             shape,
             lower: lower as f32,
             inverse_span: if span > 0.0 { 1.0 / span } else { 0.0 },
+            voxel_format,
         })
+    }
+
+    /// The same producer with bricks kept as `format` says: `Some(VoxelFormat::Wide)` keeps 16 bits for any source
+    /// (what `--brick-bits 16` asks for); `None`, or a narrow format, keeps what [`StoreProducer::new`] chose (8
+    /// bits only where that is exact).
+    pub fn with_voxel_format(mut self, format: Option<VoxelFormat>) -> StoreProducer<S> {
+        if format == Some(VoxelFormat::Wide) {
+            self.voxel_format = VoxelFormat::Wide;
+        }
+        self
+    }
+
+    /// How the brick pool keeps this producer's voxels.
+    pub fn voxel_format(&self) -> VoxelFormat {
+        self.voxel_format
     }
 
     /// The source.
@@ -177,6 +217,10 @@ impl<S: BrickSource> StoreProducer<S> {
 impl<S: BrickSource> Producer for StoreProducer<S> {
     fn shape(&self) -> TreeShape {
         self.shape
+    }
+
+    fn voxel_format(&self) -> VoxelFormat {
+        self.voxel_format
     }
 
     fn oracle(&self, key: NodeKey) -> Option<f32> {

@@ -270,6 +270,10 @@ pub struct RenderArgs {
     /// --budget-mb for the volume itself).
     #[arg(long)]
     pub in_memory: bool,
+    /// Stores only: how the brick pool keeps voxels: auto (8 bits for 8-bit volumes, half the memory; 16 bits
+    /// otherwise) or 16 (always 16 bits, as before 8-bit bricks).
+    #[arg(long, value_enum, default_value_t = BrickBits::Auto)]
+    pub brick_bits: BrickBits,
     /// Level-of-detail bias (positive = finer than one voxel per pixel).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub lod_bias: f64,
@@ -309,6 +313,16 @@ pub enum GpuFilter {
     Hardware,
     /// Trilinear filtering in the shader from eight texel loads: the CPU's arithmetic.
     Exact,
+}
+
+/// How the brick pool keeps a store's voxels (`voxstream_core::VoxelFormat`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum BrickBits {
+    /// 8 bits for 8-bit volumes (half the memory), 16 bits otherwise.
+    Auto,
+    /// Always 16 bits.
+    #[value(name = "16")]
+    Sixteen,
 }
 
 /// On or off.

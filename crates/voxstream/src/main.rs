@@ -99,6 +99,7 @@ fn unreachable_default() -> RenderArgs {
         stats: None,
         step: 0.5,
         in_memory: false,
+        brick_bits: voxstream::cli::BrickBits::Auto,
         lod_bias: 0.0,
         colour_by_level: false,
         quiet: false,

@@ -5,7 +5,7 @@ use std::path::Path;
 use std::sync::Arc;
 
 use anyhow::{bail, Context, Result};
-use voxstream_core::Producer;
+use voxstream_core::{Producer, VoxelFormat};
 use voxstream_engine::{FrameRenderer, LoopLimits, MemoryBudget, Mode, Session, MAX_BUDGET_MB};
 use voxstream_geometry::formats::is_geometry_file_name;
 use voxstream_render::{
@@ -15,7 +15,7 @@ use voxstream_store::{InMemoryVolume, StoreProducer, StoreReader};
 
 use crate::backend::open_renderer;
 use crate::camera_path::{generated_path, parse_generated_path, read_camera_file, read_camera_path};
-use crate::cli::{NormalsArg, RenderArgs, ShadingArg, Switch};
+use crate::cli::{BrickBits, NormalsArg, RenderArgs, ShadingArg, Switch};
 use crate::exit_status::IncompleteImage;
 use crate::geometry_source;
 use crate::iso_flags;
@@ -165,12 +165,18 @@ pub fn open_source(args: &RenderArgs, budget: &MemoryBudget, user: impl SourceUs
     let reader = Arc::new(StoreReader::open_with_cache(path, cache_bytes)?);
     let attributes = reader.attributes().clone();
     let transfer_function = default_store_transfer_function(attributes.typical_range())?;
+    let format = match args.brick_bits {
+        BrickBits::Auto => None,
+        BrickBits::Sixteen => Some(VoxelFormat::Wide),
+    };
     if args.in_memory {
         let volume = Arc::new(InMemoryVolume::load(&reader)?);
-        let source = store_source(args, &reader, StoreProducer::new(volume)?, 0, transfer_function);
+        let producer = StoreProducer::new(volume)?.with_voxel_format(format);
+        let source = store_source(args, &reader, producer, 0, transfer_function);
         return user.use_source(args, source, budget);
     }
-    let source = store_source(args, &reader, StoreProducer::new(reader.clone())?, cache_bytes, transfer_function);
+    let producer = StoreProducer::new(reader.clone())?.with_voxel_format(format);
+    let source = store_source(args, &reader, producer, cache_bytes, transfer_function);
     user.use_source(args, source, budget)
 }
 
