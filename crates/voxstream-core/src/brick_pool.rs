@@ -11,7 +11,7 @@
 use crate::key::{TreeShape, BLOCK_CELLS};
 use crate::lru::{Allocation, LruSlots};
 use crate::node::{BrickSlot, NodeId};
-use crate::voxel_format::{PoolVoxels, VoxelFormat};
+use crate::voxel_format::{Narrowing, PoolVoxels, VoxelFormat};
 
 /// The pool's voxels, owned.
 #[derive(Debug, Clone)]
@@ -42,8 +42,9 @@ impl StoredVoxels {
                 if start >= pool.len() {
                     pool.resize(start + voxels.len(), 0);
                 }
+                let narrowing = Narrowing::new(scale, offset);
                 for (out, &v) in pool[start..start + voxels.len()].iter_mut().zip(voxels) {
-                    *out = VoxelFormat::narrow(scale, offset, v);
+                    *out = narrowing.byte(v);
                 }
             }
             (StoredVoxels::Narrow(_), VoxelFormat::Wide) => unreachable!("a narrow pool has a narrow format"),

@@ -81,8 +81,29 @@ impl VoxelFormat {
     /// The byte a 16-bit voxel stands for (the nearest; exact for the values [`VoxelFormat::for_bytes`] admits).
     #[inline]
     pub fn narrow(scale: f32, offset: f32, voxel: u16) -> u8 {
-        let value = voxel as f32 * (1.0 / VOXEL_MAX as f32);
-        ((value - offset) / scale).round().clamp(0.0, 255.0) as u8
+        Narrowing::new(scale, offset).byte(voxel)
+    }
+}
+
+/// [`VoxelFormat::narrow`] with its constants computed once (a multiply and an add per voxel): a byte step spans at
+/// least 257 16-bit steps, so the rounding error of the constants (a few parts in 10⁷ of a byte) never changes the
+/// nearest byte.
+#[derive(Clone, Copy, Debug)]
+pub struct Narrowing {
+    per_voxel: f32,
+    at_zero: f32,
+}
+
+impl Narrowing {
+    /// The narrowing of [`VoxelFormat::Narrow`]`{ scale, offset }`.
+    pub fn new(scale: f32, offset: f32) -> Narrowing {
+        Narrowing { per_voxel: 1.0 / (VOXEL_MAX as f32 * scale), at_zero: -offset / scale }
+    }
+
+    /// The byte nearest to what `voxel` stands for.
+    #[inline(always)]
+    pub fn byte(self, voxel: u16) -> u8 {
+        (voxel as f32 * self.per_voxel + self.at_zero).round().clamp(0.0, 255.0) as u8
     }
 }
 
@@ -125,6 +146,10 @@ impl Dequantize {
 pub trait Voxel: Copy + Send + Sync + 'static {
     /// The stored integer as `f32` (exact).
     fn stored(self) -> f32;
+
+    /// The normalised value of an interpolated stored value ([`Dequantize::value`]; for 16-bit voxels, whose
+    /// offset is 0, without the addition: the same bits as dividing by 65535).
+    fn value(stored: f32, dq: Dequantize) -> f32;
 }
 
 impl Voxel for u16 {
@@ -132,12 +157,22 @@ impl Voxel for u16 {
     fn stored(self) -> f32 {
         self as f32
     }
+
+    #[inline(always)]
+    fn value(stored: f32, dq: Dequantize) -> f32 {
+        stored * dq.scale
+    }
 }
 
 impl Voxel for u8 {
     #[inline(always)]
     fn stored(self) -> f32 {
         self as f32
+    }
+
+    #[inline(always)]
+    fn value(stored: f32, dq: Dequantize) -> f32 {
+        dq.value(stored)
     }
 }
 

@@ -64,7 +64,7 @@ impl Cell {
         let c11 = v(slab + row) + (v(slab + row + 1) - v(slab + row)) * f[0];
         let c0 = c00 + (c10 - c00) * f[1];
         let c1 = c01 + (c11 - c01) * f[1];
-        dq.value(c0 + (c1 - c0) * f[2])
+        V::value(c0 + (c1 - c0) * f[2], dq)
     }
 
     /// Value and analytic gradient (value per voxel) of the trilinear field in the cell: one read of the 8 corners.
@@ -87,7 +87,7 @@ impl Cell {
         let gz = c1 - c0;
         let gy = lerp(c10 - c00, c11 - c01, f[2]);
         let gx = lerp(lerp(v100 - v000, v110 - v010, f[1]), lerp(v101 - v001, v111 - v011, f[1]), f[2]);
-        (dq.value(value), [gx, gy, gz].map(|g| dq.slope(g)))
+        (V::value(value, dq), [gx, gy, gz].map(|g| dq.slope(g)))
     }
 }
 
@@ -109,7 +109,7 @@ pub fn values_along<V: Voxel>(
     dq: Dequantize,
 ) -> [f32; LANES] {
     let (corners, fractions) = corners_along(brick, b, start, delta, k);
-    interpolate(&corners, &fractions, dq)
+    interpolate::<V>(&corners, &fractions, dq)
 }
 
 /// [`values_along`] with the analytic gradients of [`Cell::value_and_gradient`], bit for bit.
@@ -123,13 +123,17 @@ pub fn values_and_gradients_along<V: Voxel>(
     dq: Dequantize,
 ) -> ([f32; LANES], [[f32; 3]; LANES]) {
     let (corners, fractions) = corners_along(brick, b, start, delta, k);
-    interpolate_with_gradients(&corners, &fractions, dq)
+    interpolate_with_gradients::<V>(&corners, &fractions, dq)
 }
 
 /// Trilinear values from the corners and cell fractions of `LANES` points, lane by lane: [`Cell::value`]'s
 /// arithmetic.
 #[inline(always)]
-fn interpolate(corners: &[[f32; LANES]; 8], [fx, fy, fz]: &[[f32; LANES]; 3], dq: Dequantize) -> [f32; LANES] {
+fn interpolate<V: Voxel>(
+    corners: &[[f32; LANES]; 8],
+    [fx, fy, fz]: &[[f32; LANES]; 3],
+    dq: Dequantize,
+) -> [f32; LANES] {
     let mut out = [0f32; LANES];
     for j in 0..LANES {
         let v = |corner: usize| corners[corner][j];
@@ -139,14 +143,14 @@ fn interpolate(corners: &[[f32; LANES]; 8], [fx, fy, fz]: &[[f32; LANES]; 3], dq
         let c11 = v(6) + (v(7) - v(6)) * fx[j];
         let c0 = c00 + (c10 - c00) * fy[j];
         let c1 = c01 + (c11 - c01) * fy[j];
-        out[j] = dq.value(c0 + (c1 - c0) * fz[j]);
+        out[j] = V::value(c0 + (c1 - c0) * fz[j], dq);
     }
     out
 }
 
 /// [`interpolate`] with the analytic gradients: [`Cell::value_and_gradient`]'s arithmetic.
 #[inline(always)]
-fn interpolate_with_gradients(
+fn interpolate_with_gradients<V: Voxel>(
     corners: &[[f32; LANES]; 8],
     [fx, fy, fz]: &[[f32; LANES]; 3],
     dq: Dequantize,
@@ -164,7 +168,7 @@ fn interpolate_with_gradients(
         let c11 = lerp(v011, v111, fx[j]);
         let c0 = lerp(c00, c10, fy[j]);
         let c1 = lerp(c01, c11, fy[j]);
-        values[j] = dq.value(lerp(c0, c1, fz[j]));
+        values[j] = V::value(lerp(c0, c1, fz[j]), dq);
         let gz = c1 - c0;
         let gy = lerp(c10 - c00, c11 - c01, fz[j]);
         let gx = lerp(lerp(v100 - v000, v110 - v010, fy[j]), lerp(v101 - v001, v111 - v011, fy[j]), fz[j]);
@@ -229,7 +233,7 @@ pub fn values_across<V: Voxel>(
     dq: Dequantize,
 ) -> [f32; LANES] {
     let (corners, fractions) = corners_across(voxels, b, bases, start, delta, k);
-    interpolate(&corners, &fractions, dq)
+    interpolate::<V>(&corners, &fractions, dq)
 }
 
 /// [`values_across`] with the analytic gradients of [`Cell::value_and_gradient`], bit for bit.
@@ -244,7 +248,7 @@ pub fn values_and_gradients_across<V: Voxel>(
     dq: Dequantize,
 ) -> ([f32; LANES], [[f32; 3]; LANES]) {
     let (corners, fractions) = corners_across(voxels, b, bases, start, delta, k);
-    interpolate_with_gradients(&corners, &fractions, dq)
+    interpolate_with_gradients::<V>(&corners, &fractions, dq)
 }
 
 /// The corners and cell fractions of [`values_across`]'s points.

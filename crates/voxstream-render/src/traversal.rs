@@ -295,6 +295,28 @@ impl<'a> Traversal<'a> {
     #[inline(always)]
     pub fn trace_stream<I: Integrand, const GRADIENT: bool>(
         &self,
+        next_ray: impl FnMut() -> Option<(usize, Ray, I)>,
+        finish: impl FnMut(usize, &I, bool),
+        stats: &mut RayStats,
+        requests: &mut Vec<Request>,
+        paths: &mut [DescentPath; LANES],
+    ) {
+        // One loop per voxel width, chosen once.
+        match self.view.voxels {
+            PoolVoxels::Wide(voxels) => {
+                self.trace_stream_in::<_, _, GRADIENT>(voxels, next_ray, finish, stats, requests, paths)
+            }
+            PoolVoxels::Narrow(voxels) => {
+                self.trace_stream_in::<_, _, GRADIENT>(voxels, next_ray, finish, stats, requests, paths)
+            }
+        }
+    }
+
+    /// [`Traversal::trace_stream`] over the pool's voxels.
+    #[inline(always)]
+    fn trace_stream_in<V: Voxel, I: Integrand, const GRADIENT: bool>(
+        &self,
+        voxels: &[V],
         mut next_ray: impl FnMut() -> Option<(usize, Ray, I)>,
         mut finish: impl FnMut(usize, &I, bool),
         stats: &mut RayStats,
@@ -334,14 +356,7 @@ impl<'a> Traversal<'a> {
             let mut taken = 0u64;
             let dq = self.dequantize;
             for _ in 0..burst {
-                let (values, gradients) = match self.view.voxels {
-                    PoolVoxels::Wide(voxels) => {
-                        samples_across::<_, GRADIENT>(voxels, b, &bases, &start, &delta, &kf, dq)
-                    }
-                    PoolVoxels::Narrow(voxels) => {
-                        samples_across::<_, GRADIENT>(voxels, b, &bases, &start, &delta, &kf, dq)
-                    }
-                };
+                let (values, gradients) = samples_across::<_, GRADIENT>(voxels, b, &bases, &start, &delta, &kf, dq);
                 for (j, slot) in lanes.iter_mut().enumerate() {
                     let Some(lane) = slot else { continue };
                     let Some(run) = &mut lane.run else { continue };
