@@ -364,6 +364,8 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
                 settings.pixel_stride = GATHER_STRIDE;
             }
         }
+        // Set once the loop must end after the pass that traces every pending pixel.
+        let mut final_pass = false;
         loop {
             if mode == Mode::Converged {
                 // Converged frames never blend: no transitions to track between their passes.
@@ -386,6 +388,9 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
             )?;
             result.render_ms += render_start.elapsed().as_secs_f64() * 1e3;
             let options = match mode {
+                // The last pass of a frame whose view the pools cannot hold: its image is final, so nothing is
+                // produced for it (usage is still recorded).
+                Mode::Converged if final_pass => ServeOptions { limit: Some(0), prefetch_new_children: false },
                 Mode::Converged => {
                     ServeOptions { limit: None, prefetch_new_children: self.limits.prefetch_new_children }
                 }
@@ -422,7 +427,16 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
                 settings.pixel_stride /= 2;
                 continue;
             }
-            if mode == Mode::Interactive || report.pending == 0 || stalled || result.passes >= self.limits.max_passes {
+            let out_of_passes = result.passes >= self.limits.max_passes;
+            if settings.pixel_stride > 1 && (stalled || out_of_passes) {
+                // The pools cannot hold what the view needs (or the passes ran out) while only some pixels were
+                // traced: one more pass traces every pixel still pending with what is resident (coarser data
+                // standing in), so that no pixel is left untraced.
+                settings.pixel_stride = 1;
+                final_pass = true;
+                continue;
+            }
+            if mode == Mode::Interactive || report.pending == 0 || stalled || out_of_passes || final_pass {
                 break;
             }
         }
@@ -539,6 +553,27 @@ mod tests {
         let reference = cpu.render(&camera, Mode::Converged).unwrap();
         assert_eq!(frame.image.pixels, reference.image.pixels);
         assert!(reference.image.pixels.iter().any(|&p| p != reference.image.pixels[0]), "the ball is visible");
+    }
+
+    #[test]
+    fn a_view_larger_than_the_budget_still_traces_every_pixel() {
+        // The smallest budget the tree accepts cannot hold the ball's finest bricks at this size: the converged
+        // frame stalls with coarser data standing in, and must still have traced every pixel (its sparse
+        // gathering passes trace one pixel in 4×4 until the pools can serve no more).
+        let (tf, mut settings, camera) = parts();
+        (settings.width, settings.height) = (64, 64);
+        settings.background = [0.2, 0.3, 0.4];
+        let minimum = match voxstream_core::PoolCapacities::plan(&Ball.shape(), 0) {
+            Err(voxstream_core::CoreError::BudgetTooSmall { minimum_bytes, .. }) => minimum_bytes,
+            other => panic!("a zero budget must be too small: {other:?}"),
+        };
+        let mut session = Session::new(Ball, &tf, settings, 2 * minimum, LoopLimits::default()).unwrap();
+        let frame = session.render(&camera, Mode::Converged).unwrap();
+        assert!(!frame.is_converged() && frame.pending > 0, "the budget is too small for the view");
+        assert!(frame.rays >= 64 * 64, "{} rays for {} pixels", frame.rays, 64 * 64);
+        // An untraced pixel keeps the image's initial value; a traced one holds at least the background.
+        let untraced = frame.image.pixels.iter().filter(|p| **p == [0.0; 4]).count();
+        assert_eq!(untraced, 0, "{untraced} pixels were never traced");
     }
 
     #[test]
