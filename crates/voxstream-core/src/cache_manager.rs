@@ -315,7 +315,9 @@ impl<P: Producer> CacheManager<P> {
             .collect();
         report.pending = work.len();
         let take = limit.unwrap_or(work.len()).min(work.len());
-        if take < work.len() {
+        // (A bound of 0 serves nothing and fetches nothing ahead: the last pass of a converged frame the pools cannot
+        // hold, after which nothing is rendered.)
+        if take < work.len() && limit != Some(0) {
             // Let the producer fetch the deferred bricks in the background while the next frame renders.
             let deferred: Vec<NodeKey> = work[take..]
                 .iter()

@@ -45,7 +45,8 @@ pub const CONVERGED_REQUESTS_PER_RAY: u32 = 64;
 pub struct LoopLimits {
     /// Requests served per frame in interactive mode.
     pub requests_per_frame: usize,
-    /// Passes after which a converged frame gives up (reported as not converged).
+    /// Passes after which a converged frame gives up (reported as not converged; one more traces every pixel the
+    /// sparse passes left untraced, if any).
     pub max_passes: u32,
     /// Converged mode only: when a node is subdivided, also produce its new children's bricks in the same pass,
     /// into free brick slots (never evicting). Fewer passes, the same image.
@@ -422,21 +423,23 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
                 break;
             }
             let stalled = report.pending > 0 && report.served == 0;
-            if settings.pixel_stride > 1 && report.pending == 0 && report.requests == 0 && !stalled {
-                // The sparse rays need nothing more: trace more of the pixels still pending (4×4, 2×2, all).
+            if settings.pixel_stride > 1 && report.pending == 0 && !final_pass {
+                // The sparse rays need nothing more (nothing was asked for, or only what cannot be had: bricks that
+                // failed to load): trace more of the pixels still pending (4×4, 2×2, all).
                 settings.pixel_stride /= 2;
                 continue;
             }
             let out_of_passes = result.passes >= self.limits.max_passes;
-            if settings.pixel_stride > 1 && (stalled || out_of_passes) {
-                // The pools cannot hold what the view needs (or the passes ran out) while only some pixels were
-                // traced: one more pass traces every pixel still pending with what is resident (coarser data
-                // standing in), so that no pixel is left untraced.
+            let stop = mode == Mode::Interactive || report.pending == 0 || stalled || out_of_passes || final_pass;
+            if stop && mode == Mode::Converged && settings.pixel_stride > 1 {
+                // The frame would end while only some pixels were traced (the pools cannot hold what the view
+                // needs, bricks failed to load, or the passes ran out): one more pass traces every pixel still
+                // pending with what is resident (coarser data standing in), so that no pixel is left untraced.
                 settings.pixel_stride = 1;
                 final_pass = true;
                 continue;
             }
-            if mode == Mode::Interactive || report.pending == 0 || stalled || out_of_passes || final_pass {
+            if stop {
                 break;
             }
         }
@@ -572,6 +575,34 @@ mod tests {
         assert!(!frame.is_converged() && frame.pending > 0, "the budget is too small for the view");
         assert!(frame.rays >= 64 * 64, "{} rays for {} pixels", frame.rays, 64 * 64);
         // An untraced pixel keeps the image's initial value; a traced one holds at least the background.
+        let untraced = frame.image.pixels.iter().filter(|p| **p == [0.0; 4]).count();
+        assert_eq!(untraced, 0, "{untraced} pixels were never traced");
+    }
+
+    /// The ball, whose finest bricks cannot be read.
+    struct BallWithoutItsFinestLevel;
+    impl Producer for BallWithoutItsFinestLevel {
+        fn shape(&self) -> TreeShape {
+            Ball.shape()
+        }
+        fn produce(&self, key: NodeKey, voxels: &mut [u16]) -> std::result::Result<Produced, ProduceError> {
+            if key.level == self.shape().max_level {
+                return Err(ProduceError { level: key.level, ijk: key.ijk, message: "unreadable".into() });
+            }
+            Ball.produce(key, voxels)
+        }
+    }
+
+    #[test]
+    fn a_view_whose_bricks_fail_to_load_still_traces_every_pixel() {
+        let (tf, mut settings, camera) = parts();
+        (settings.width, settings.height) = (64, 64);
+        settings.background = [0.2, 0.3, 0.4];
+        let mut session =
+            Session::new(BallWithoutItsFinestLevel, &tf, settings, 16 << 20, LoopLimits::default()).unwrap();
+        let frame = session.render(&camera, Mode::Converged).unwrap();
+        assert!(!frame.failures.is_empty(), "the finest bricks fail");
+        assert!(frame.rays >= 64 * 64, "{} rays for {} pixels", frame.rays, 64 * 64);
         let untraced = frame.image.pixels.iter().filter(|p| **p == [0.0; 4]).count();
         assert_eq!(untraced, 0, "{untraced} pixels were never traced");
     }

@@ -58,7 +58,8 @@ impl BrickSource for StoreReader {
         StoreReader::read_region(self, level, lower, size)
     }
     fn samples_are_bytes(&self) -> bool {
-        self.info().dtype == DType::U8
+        // Levels a foreign store lacks are averaged here (fractions): not bytes.
+        self.info().dtype == DType::U8 && !self.has_synthesized_levels()
     }
     fn prefetch(self: &Arc<Self>, bricks: Vec<(usize, [u64; 3])>) {
         StoreReader::prefetch(self, bricks);

@@ -365,6 +365,12 @@ impl StoreReader {
         Ok(brick)
     }
 
+    /// Whether some level is averaged from the finer one when read (a foreign store that lacks it), so that its
+    /// samples may be fractions even for an integer sample type.
+    pub fn has_synthesized_levels(&self) -> bool {
+        self.levels.iter().any(|level| matches!(level, LevelSource::Synthesized))
+    }
+
     /// Native stores: a brick read from disk must agree with its min/max, else it is a failure, never empty space.
     /// A brick whose min/max says it holds data needs its shard file (zarrs would read a missing one as zeros); at
     /// level 0 the samples' range must equal the recorded one exactly (it was computed from these very samples), at

@@ -271,7 +271,7 @@ pub struct RenderArgs {
     #[arg(long)]
     pub in_memory: bool,
     /// Stores only: how the brick pool keeps voxels: auto (8 bits for 8-bit volumes, half the memory; 16 bits
-    /// otherwise) or 16 (always 16 bits, as before 8-bit bricks).
+    /// otherwise, and with --backend gpu, whose atlas is 16-bit) or 16 (always 16 bits, as before 8-bit bricks).
     #[arg(long, value_enum, default_value_t = BrickBits::Auto)]
     pub brick_bits: BrickBits,
     /// Level-of-detail bias (positive = finer than one voxel per pixel).
