@@ -129,17 +129,6 @@ impl Dequantize {
     pub fn slope(self, stored: f32) -> f32 {
         stored * self.scale
     }
-
-    /// An interpolated stored value in 16-bit units (`value · 65535`), what isosurface cells compare: the identity for
-    /// 16-bit voxels.
-    #[inline(always)]
-    pub fn to_wide(self, stored: f32) -> f32 {
-        if self.offset == 0.0 && self.scale == 1.0 / VOXEL_MAX as f32 {
-            stored
-        } else {
-            self.value(stored) * VOXEL_MAX as f32
-        }
-    }
 }
 
 /// A stored voxel: `u16` or `u8`.
@@ -218,7 +207,7 @@ impl<'a> PoolVoxels<'a> {
     }
 
     /// Voxel `index` as a 16-bit voxel (`quantize` of its value; the identity for 16-bit voxels): what a consumer
-    /// that only reads 16-bit voxels (the GPU's atlas, the viewer's histogram) reads.
+    /// that only reads 16-bit voxels (the GPU's atlas) reads.
     #[inline]
     pub fn wide(&self, index: usize, format: VoxelFormat) -> u16 {
         match (*self, format) {
@@ -227,14 +216,6 @@ impl<'a> PoolVoxels<'a> {
                 crate::brick_pool::quantize(v[index] as f32 * scale + offset)
             }
             (PoolVoxels::Narrow(v), VoxelFormat::Wide) => v[index] as u16 * 257,
-        }
-    }
-
-    /// The pool as 16-bit voxels (a copy for 8-bit pools), for consumers that only read those.
-    pub fn to_wide(&self, format: VoxelFormat) -> std::borrow::Cow<'a, [u16]> {
-        match *self {
-            PoolVoxels::Wide(v) => std::borrow::Cow::Borrowed(v),
-            PoolVoxels::Narrow(v) => std::borrow::Cow::Owned((0..v.len()).map(|i| self.wide(i, format)).collect()),
         }
     }
 }
@@ -292,11 +273,10 @@ mod tests {
     }
 
     #[test]
-    fn wide_dequantisation_is_division_by_65535() {
+    fn wide_dequantisation_keeps_the_16_bit_arithmetic() {
         let d = VoxelFormat::Wide.dequantize();
         for stored in [0.0f32, 1.0, 257.5, 40000.25, 65535.0] {
             assert_eq!(d.value(stored).to_bits(), (stored * (1.0 / 65535.0)).to_bits());
-            assert_eq!(d.to_wide(stored), stored);
         }
     }
 }
