@@ -6,6 +6,17 @@
 
 use voxstream_core::{Dequantize, Voxel, BLOCK_CELLS};
 
+/// `⌊c⌋` capped at `last`, as an integer and as a float, for `c ∈ [0, 2²³)` (coordinates and table positions after
+/// clamping): `floor` and `min`, then the integer read off the mantissa of `2²³ + ⌊c⌋`. The same integer as
+/// `(c as u32).min(last)`, through float operations only, so it vectorises: Rust's saturating float→int conversion
+/// is about five scalar instructions per lane (range and NaN fix-ups) before AVX-512.
+#[inline(always)]
+pub fn floor_index(c: f32, last: u32) -> (u32, f32) {
+    const TWO_POW_23: f32 = 8_388_608.0;
+    let f = c.floor().min(last as f32);
+    ((f + TWO_POW_23).to_bits() - TWO_POW_23.to_bits(), f)
+}
+
 /// The cell of a brick that trilinear filtering reads for a continuous voxel index (clamped to the brick).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Cell {
@@ -26,12 +37,11 @@ impl Cell {
         let mut ijk = [0usize; 3];
         let mut fraction = [0f32; 3];
         for a in 0..3 {
-            // `max`/`min` rather than `clamp`: NaN goes to 0. `u32` conversions are one instruction each way
-            // (`usize` ones are not), and a brick edge is far below 2³².
+            // `max`/`min` rather than `clamp`: NaN goes to 0.
             let c = x[a].max(0.0).min(max);
-            let i = (c as u32).min(last_cell);
+            let (i, floor) = floor_index(c, last_cell);
             ijk[a] = i as usize;
-            fraction[a] = c - i as f32;
+            fraction[a] = c - floor;
         }
         Cell { base: (ijk[2] * b + ijk[1]) * b + ijk[0], fraction, ijk }
     }
@@ -198,9 +208,9 @@ fn corners_along<V: Voxel>(
         let mut ijk = [0u32; 3];
         for a in 0..3 {
             let c = (start[a] + kj * delta[a]).max(0.0).min(max);
-            let i = (c as u32).min(last_cell);
+            let (i, floor) = floor_index(c, last_cell);
             ijk[a] = i;
-            fraction[a][j] = c - i as f32;
+            fraction[a][j] = c - floor;
         }
         base[j] = (ijk[2] * b as u32 + ijk[1]) * b as u32 + ijk[0];
     }
@@ -270,11 +280,9 @@ fn corners_across<V: Voxel>(
         let mut ijk = [0u32; 3];
         for a in 0..3 {
             let c = (start[a][j] + k[j] * delta[a][j]).max(0.0).min(max);
-            // Through `i32`: one SIMD instruction for all lanes before AVX-512 (`c` is in `[0, b−1]`, so the
-            // same integer as a `u32` conversion).
-            let i = (c as i32 as u32).min(last_cell);
+            let (i, floor) = floor_index(c, last_cell);
             ijk[a] = i;
-            fraction[a][j] = c - i as i32 as f32;
+            fraction[a][j] = c - floor;
         }
         index[j] = (ijk[2] * b as u32 + ijk[1]) * b as u32 + ijk[0];
     }
@@ -320,6 +328,20 @@ mod tests {
     use voxstream_core::{quantize, VoxelFormat};
 
     const DQ: Dequantize = Dequantize { scale: 1.0 / 65535.0, offset: 0.0 };
+
+    #[test]
+    fn floor_index_is_the_saturating_conversion_capped() {
+        // Every float from 0 up to past the cap in a 34-voxel brick, and around the largest table position.
+        for (top, last) in [(40.0f32, 32u32), (4100.0, 4094)] {
+            let mut c = 0.0f32;
+            while c <= top {
+                let (i, floor) = floor_index(c, last);
+                assert_eq!(i, (c as u32).min(last), "{c}");
+                assert_eq!(floor.to_bits(), ((c as u32).min(last) as f32).to_bits(), "{c}");
+                c = if c < 1.0 { c + 1.0 / 4096.0 } else { f32::from_bits(c.to_bits() + 97) };
+            }
+        }
+    }
 
     /// A brick holding the linear ramp `value = x / (b − 1)`.
     fn ramp(b: usize) -> Vec<u16> {

@@ -12,6 +12,7 @@ use std::sync::OnceLock;
 
 use glam::Vec4;
 
+use crate::sampler::floor_index;
 use crate::transfer_function::{LutEntry, LUT_SIZE};
 
 /// Steps per octave of the ladder.
@@ -69,9 +70,9 @@ impl StepTable {
     #[inline(always)]
     pub fn lookup(&self, value: f32) -> Vec4 {
         let x = (value * (LUT_SIZE - 1) as f32).max(0.0).min((LUT_SIZE - 1) as f32);
-        // `u32` conversions: one instruction each way, and the index provably in the table (no bounds check).
-        let i = (x as u32).min(LUT_SIZE as u32 - 2);
-        let f = x - i as f32;
+        // Float operations only (see `floor_index`), and the index provably in the table (no bounds check).
+        let (i, floor) = floor_index(x, LUT_SIZE as u32 - 2);
+        let f = x - floor;
         let i = i as usize;
         let (a, b) = (self.entries[i], self.entries[i + 1]);
         a + (b - a) * f
