@@ -10,6 +10,7 @@
 use serde::Deserialize;
 
 use crate::error::RenderError;
+use crate::sampler::floor_index;
 use crate::step_table::{StepLength, StepTable, StepTables};
 
 /// A parsed, validated transfer function.
@@ -211,10 +212,10 @@ impl TransferLut {
         // `lookup` reads entries ⌊x⌋ and ⌊x⌋+1, the latter with weight x − ⌊x⌋. A constant range is sampled exactly
         // (interpolating equal values returns them); otherwise allow samples a rounding error outside the range.
         let slack = if lower == upper { 0.0 } else { 1e-3 };
-        // `u32` conversions: one instruction each.
-        let first = (self.entry_position(lower) - slack).max(0.0) as u32 as usize;
-        let last = (((self.entry_position(upper) + slack).ceil() as u32) as usize).min(LUT_SIZE - 1);
-        let (a, b) = (first, last);
+        // Float operations only (see `floor_index`); NaN goes to the whole table (conservative).
+        let (a, _) = floor_index((self.entry_position(lower) - slack).max(0.0), LUT_SIZE as u32 - 1);
+        let (b, _) = floor_index((self.entry_position(upper) + slack).ceil(), LUT_SIZE as u32 - 1);
+        let (a, b) = (a as usize, b as usize);
         self.visible_before[b + 1] > self.visible_before[a]
     }
 
@@ -229,8 +230,9 @@ impl TransferLut {
     /// (a superset, widened by its slack) always overlap these.
     #[inline(always)]
     pub fn is_visible_throughout(&self, lower: f32, upper: f32) -> bool {
-        let first = self.entry_position(lower) as u32 as usize;
-        let last = ((self.entry_position(upper).ceil() as u32) as usize).min(LUT_SIZE - 1);
+        let (first, _) = floor_index(self.entry_position(lower).max(0.0), LUT_SIZE as u32 - 1);
+        let (last, _) = floor_index(self.entry_position(upper).ceil().max(0.0), LUT_SIZE as u32 - 1);
+        let (first, last) = (first as usize, last as usize);
         first <= last && (self.visible_before[last + 1] - self.visible_before[first]) as usize == last + 1 - first
     }
 }

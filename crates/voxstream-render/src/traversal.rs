@@ -733,7 +733,14 @@ impl<'a> Traversal<'a> {
         }
         let contributes = integrand.can_contribute(lo, hi);
         let boundary = if contributes { (exit - first) / dt } else { (exit - 1e-3 * dt - first) / dt }.ceil();
-        let past = if boundary > k as f64 { (boundary as u64).min(count as u64) as u32 } else { k + 1 };
+        // `boundary` is a whole number; below 2⁵², it is the mantissa of `2⁵² + boundary` (float operations only,
+        // like `floor_index`: a saturating conversion is several instructions).
+        const TWO_POW_52: f64 = 4_503_599_627_370_496.0;
+        let past = if boundary > k as f64 {
+            ((boundary.min(count as f64) + TWO_POW_52).to_bits() - TWO_POW_52.to_bits()) as u32
+        } else {
+            k + 1
+        };
         (contributes, past)
     }
 
