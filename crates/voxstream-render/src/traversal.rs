@@ -516,7 +516,8 @@ impl<'a> Traversal<'a> {
             walk.requests_left = sink.remaining;
             walk.requested |= sink.pushed;
             let node_size = 1.0 / self.scale[box_level as usize];
-            let lower = DVec3::new(box_ijk[0] as f64, box_ijk[1] as f64, box_ijk[2] as f64) * node_size;
+            // Node coordinates are below 2⁶³: through `i64`, one instruction each (a `u64` conversion is several).
+            let lower = DVec3::from_array(box_ijk.map(|v| v as i64 as f64)) * node_size;
             let t_exit = exit_distance(origin, walk.inverse_direction, lower, node_size).min(walk.t_leave);
             // Never stall on a boundary: move at least a sliver of the node, and more than the rounding of p.
             let t_exit = t_exit.max(t + (node_size * 1e-7 + 8e-16 * p.abs().max_element()) / speed + 8e-16 * t);
@@ -624,7 +625,7 @@ impl<'a> Traversal<'a> {
         let s = self.scale[fine.level as usize];
         let p = ray.origin + ray.direction * t;
         let (pa, ijk) = (p.to_array(), fine.ijk);
-        blend.at(std::array::from_fn(|a| (pa[a] * s - ijk[a] as f64) as f32))
+        blend.at(std::array::from_fn(|a| (pa[a] * s - ijk[a] as i64 as f64) as f32))
     }
 
     /// Samples `count` points `first + k·dt` inside the bricks of one segment, skipping the runs that lie in
@@ -898,7 +899,7 @@ impl<'a> Traversal<'a> {
         let s = self.scale[node.level as usize];
         let m = self.brick_size;
         let (o, d) = (ray.origin.to_array(), ray.direction.to_array());
-        let origin: [f64; 3] = std::array::from_fn(|a| (o[a] * s - node.ijk[a] as f64) * m + 0.5);
+        let origin: [f64; 3] = std::array::from_fn(|a| (o[a] * s - node.ijk[a] as i64 as f64) * m + 0.5);
         let rate: [f64; 3] = std::array::from_fn(|a| d[a] * s * m);
         BrickLine {
             voxels: self.view.brick(node.slot),
@@ -922,7 +923,7 @@ impl<'a> Traversal<'a> {
             voxels: self.view.brick(node.slot),
             dequantize: self.dequantize,
             stored: self.stored,
-            origin: std::array::from_fn(|a| (o[a] * s - node.ijk[a] as f64) * m + 0.5),
+            origin: std::array::from_fn(|a| (o[a] * s - node.ijk[a] as i64 as f64) * m + 0.5),
             rate: std::array::from_fn(|a| d[a] * s * m),
             from,
             to,
