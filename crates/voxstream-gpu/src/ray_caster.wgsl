@@ -872,6 +872,12 @@ fn march(state: ptr<function, RayState>) {
             segments += 1u;
             (*state).descents += 1u;
             let p = (*state).origin + (*state).direction * t;
+            // The node a hair ahead of t (`Traversal::next_march`'s probe): on a face the last segment ended at,
+            // the node the ray enters, not the one it leaves (one descent fewer per such face).
+            let finest_node = frame.anchor_scale / level_scale(tree.max_level);
+            let ahead = (finest_node * 1e-5 + 2e-7 * max(max(abs(p.x), abs(p.y)), abs(p.z)))
+                / ((*state).speed * frame.anchor_scale) + 2e-7 * t;
+            let probe = (*state).origin + (*state).direction * (t + ahead);
             // The cone's footprint voxel and the level to descend to (`Traversal::footprint_at`).
             let footprint_voxel = clamp(footprint(t) * frame.bias_scale, level_voxel(tree.max_level), level_voxel(0u));
             var target_level = 0u;
@@ -926,7 +932,7 @@ fn march(state: ptr<function, RayState>) {
                     break;
                 }
                 mark_tile(tile);
-                let local = max((p - current.corner) / current.size * f32(n), vec3<f32>(0.0));
+                let local = max((probe - current.corner) / current.size * f32(n), vec3<f32>(0.0));
                 let offset = min(vec3<u32>(local), vec3<u32>(n - 1u));
                 let child_index = (offset.z * n + offset.y) * n + offset.x;
                 let child_id = tile * tree.nodes_per_tile + child_index;

@@ -191,6 +191,8 @@ pub struct Traversal<'a> {
     level_voxel: [f64; MAX_TABLE_LEVELS],
     /// `log2 N` when `N` is a power of two.
     n_shift: Option<u32>,
+    /// Edge of the finest level's nodes (unit cube).
+    finest_node: f64,
 }
 
 impl<'a> Traversal<'a> {
@@ -223,6 +225,7 @@ impl<'a> Traversal<'a> {
             bias_scale: (-settings.lod_bias * (shape.n as f64).ln()).exp(),
             level_voxel: scale.map(|s| 1.0 / (s * shape.brick_size as f64)),
             n_shift: shape.n.is_power_of_two().then(|| shape.n.trailing_zeros()),
+            finest_node: 1.0 / scale[(shape.max_level as usize).min(MAX_TABLE_LEVELS - 1)],
         }
     }
 
@@ -512,7 +515,13 @@ impl<'a> Traversal<'a> {
             let p = origin + direction * t;
             let (footprint_voxel, target_level) = self.footprint_at(t, ray.spread, &mut walk.level_hint);
             let mut sink = RequestSink { requests, remaining: walk.requests_left, pushed: false };
-            let (data, box_level, box_ijk) = self.descend(p, target_level, path, &mut sink, integrand);
+            // Find the node a hair ahead of `t` (well above the rounding of p, far below any node): where the last
+            // segment ended on a node's face, the node the ray enters, not the one it leaves. (Looked up at `p`,
+            // a face the ray leaves through towards lower coordinates rounds into the node left behind, and the
+            // ray would take one more descent for an empty sliver: about a fifth of all descents on the MNI head.)
+            let ahead = (self.finest_node * 1e-7 + 8e-16 * p.abs().max_element()) / speed + 8e-16 * t;
+            let probe = origin + direction * (t + ahead);
+            let (data, box_level, box_ijk) = self.descend(probe, target_level, path, &mut sink, integrand);
             walk.requests_left = sink.remaining;
             walk.requested |= sink.pushed;
             let node_size = 1.0 / self.scale[box_level as usize];
