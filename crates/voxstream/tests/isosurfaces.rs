@@ -1,4 +1,4 @@
-//! Exact isosurfaces (issue 11) on whole frames: hit distances against closed forms, culling that changes no bit,
+//! Exact isosurfaces (issue 11) on whole frames: hit distances against closed forms, culling that changes no bit, one descent per node crossed,
 //! surfaces that stay closed where the level of detail changes, and images independent of the thread count.
 
 mod common;
@@ -361,4 +361,33 @@ fn a_stores_subtree_ranges_bound_every_value_below_them() {
     println!("{checked} bricks checked, {tight} subtree ranges narrower than the data's range");
     assert!(checked > 100, "only {checked} bricks checked");
     assert!(tight > 10, "the ranges bound nothing: only {tight} are narrower than the data's");
+}
+
+#[test]
+fn a_ray_takes_one_descent_per_node_whichever_way_it_crosses_their_faces() {
+    // At the finest level (bias +8) a ray along x crosses the 16 nodes of level 4 on its line: 16 segments, one
+    // descent each, in either direction. A face crossed towards lower coordinates must not round back into the
+    // node just left (that cost an empty sliver segment, and a descent, per face). No culling and no crossing (a
+    // ramp from 0.2 to 0.3, a surface at 0.9), so that every node on the line is a segment.
+    let settings = RenderSettings { lod_bias: 8.0, skip_empty_space: false, ..settings_for(vec![surface(0.9)]) };
+    let mut session = session(Field { density: |p: DVec3| 0.2 + 0.1 * p.x }, settings);
+    let (y, z) = (0.53, 0.47);
+    let camera = Camera { eye: [1.6, y, z], target: [0.0, y, z], up: [0.0, 0.0, 1.0], fov: 10.0 };
+    let result = session.render(&camera, Mode::Converged).expect("render");
+    assert!(result.is_converged(), "not converged after {} passes", result.passes);
+    let settings = session.settings().clone();
+    let surfaces = SurfaceSettings::new(&settings, |v| v);
+    let view = session.cache().view();
+    let traversal = Traversal::new(view, session.cache().feedback(), &settings);
+    let spread = camera.frame(SIZE, SIZE).expect("camera").pixel_spread;
+    let mut path = DescentPath::new(view);
+    for (origin, direction) in [(DVec3::new(1.6, y, z), DVec3::NEG_X), (DVec3::new(-0.6, y, z), DVec3::X)] {
+        let (mut stats, mut requests) = (RayStats::default(), Vec::new());
+        let ray = Ray { origin, direction, spread, start: 0.0 };
+        let mut integrand = Isosurfaces::new(&surfaces, direction);
+        traversal.trace(&ray, &mut integrand, &mut stats, &mut requests, &mut path);
+        assert!(requests.is_empty(), "the line's nodes are resident");
+        assert_eq!(integrand.first_hit(), None);
+        assert_eq!(stats.descents, 16, "direction {direction}: {} descents for 16 nodes", stats.descents);
+    }
 }
