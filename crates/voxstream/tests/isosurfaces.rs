@@ -1,5 +1,6 @@
-//! Exact isosurfaces (issue 11) on whole frames: hit distances against closed forms, culling that changes no bit, one descent per node crossed,
-//! surfaces that stay closed where the level of detail changes, and images independent of the thread count.
+//! Exact isosurfaces (issue 11) on whole frames: hit distances against closed forms, culling that changes no bit,
+//! surfaces that stay closed where the level of detail changes, images independent of the thread count, and one
+//! descent per node crossed.
 
 mod common;
 
