@@ -868,13 +868,14 @@ fn march(state: ptr<function, RayState>) {
         var segments = 0u;
         var running = true;
         let n = tree.n;
+        // Edge of the finest level's nodes, anchor units (for the descent's look-ahead below).
+        let finest_node = frame.anchor_scale / level_scale(tree.max_level);
         while running && t < t_leave && segments < frame.max_segments {
             segments += 1u;
             (*state).descents += 1u;
             let p = (*state).origin + (*state).direction * t;
             // The node a hair ahead of t (`Traversal::next_march`'s probe): on a face the last segment ended at,
             // the node the ray enters, not the one it leaves (one descent fewer per such face).
-            let finest_node = frame.anchor_scale / level_scale(tree.max_level);
             let ahead = (finest_node * 1e-5 + 2e-7 * max(max(abs(p.x), abs(p.y)), abs(p.z)))
                 / ((*state).speed * frame.anchor_scale) + 2e-7 * t;
             let probe = (*state).origin + (*state).direction * (t + ahead);
