@@ -308,6 +308,12 @@ fn level_voxel(d: u32) -> f32 {
     return 1.0 / (level_scale(d) * f32(tree.brick_size));
 }
 
+// `Traversal`'s `sliver`: a distance along the ray of 1e-5 of a node of edge `node_size` (anchor units), plus more
+// than the rounding of the point `p` at `t` (f32: coarser than the CPU's 1e-7).
+fn sliver(node_size: f32, p: vec3<f32>, t: f32, speed: f32) -> f32 {
+    return (node_size * 1e-5 + 2e-7 * max(max(abs(p.x), abs(p.y)), abs(p.z))) / (speed * frame.anchor_scale) + 2e-7 * t;
+}
+
 // Slab test against [lower, upper]: (t_enter, t_exit), t_enter > t_exit when missed.
 fn intersect_box(origin: vec3<f32>, direction: vec3<f32>, lower: vec3<f32>, upper: vec3<f32>) -> vec2<f32> {
     var t0 = -3.0e38;
@@ -876,9 +882,7 @@ fn march(state: ptr<function, RayState>) {
             let p = (*state).origin + (*state).direction * t;
             // The node a hair ahead of t (`Traversal::next_march`'s probe): on a face the last segment ended at,
             // the node the ray enters, not the one it leaves (one descent fewer per such face).
-            let ahead = (finest_node * 1e-5 + 2e-7 * max(max(abs(p.x), abs(p.y)), abs(p.z)))
-                / ((*state).speed * frame.anchor_scale) + 2e-7 * t;
-            let probe = (*state).origin + (*state).direction * (t + ahead);
+            let probe = (*state).origin + (*state).direction * (t + sliver(finest_node, p, t, (*state).speed));
             // The cone's footprint voxel and the level to descend to (`Traversal::footprint_at`).
             let footprint_voxel = clamp(footprint(t) * frame.bias_scale, level_voxel(tree.max_level), level_voxel(0u));
             var target_level = 0u;
@@ -959,8 +963,7 @@ fn march(state: ptr<function, RayState>) {
                 }
             }
             // Never stall on a boundary: move at least a sliver of the node (f32: coarser than the CPU's sliver).
-            t_exit = max(t_exit, t + (node_size * 1e-5 + 2e-7 * max(max(abs(p.x), abs(p.y)), abs(p.z)))
-                / ((*state).speed * frame.anchor_scale) + 2e-7 * t);
+            t_exit = max(t_exit, t + sliver(node_size, p, t, (*state).speed));
             let t_start = t;
             t = t_exit;
 

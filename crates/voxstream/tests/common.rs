@@ -1,6 +1,9 @@
 //! Helpers shared by the integration tests (included with `mod common;`).
 #![allow(dead_code)]
 
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
 use glam::DVec3;
 use voxstream::scenes::{builtin, SceneProducer};
 use voxstream_engine::{LoopLimits, Mode, Session};
@@ -72,4 +75,22 @@ pub fn random_camera(min_distance: f64) -> impl proptest::strategy::Strategy<Val
             Camera { eye, target: [tx, ty, tz], up: [0.0, 1.0, 0.0], fov: 40.0 }
         },
     )
+}
+
+/// Runs the `voxstream` binary with `args` in `dir`.
+pub fn voxstream(args: &[&str], dir: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_voxstream")).args(args).current_dir(dir).output().expect("run voxstream")
+}
+
+/// An empty scratch folder for test `name` of the test file `file`, unique to this process.
+pub fn scratch(file: &str, name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("voxstream-{file}-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("scratch folder");
+    dir
+}
+
+/// A command's standard error, as text.
+pub fn stderr(output: &Output) -> String {
+    String::from_utf8_lossy(&output.stderr).into_owned()
 }

@@ -2,22 +2,14 @@
 //! voxel in the brick pool, half the 16-bit pool's memory, and renders the same image within a stated tolerance
 //! (each byte's value differs from its 16-bit quantisation by at most half a 16-bit step).
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
-fn voxstream(args: &[&str], dir: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_voxstream")).args(args).current_dir(dir).output().expect("run voxstream")
-}
+use std::path::Path;
 
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("voxstream-native-bricks-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+use common::{stderr, voxstream};
 
-fn stderr(output: &Output) -> String {
-    String::from_utf8_lossy(&output.stderr).into_owned()
+fn scratch(name: &str) -> std::path::PathBuf {
+    common::scratch("native-bricks", name)
 }
 
 /// A 72×64×56 u8 NRRD: a textured ball in a box of `air` (0, or above 0 so that the value range starts there).
