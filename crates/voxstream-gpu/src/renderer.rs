@@ -230,6 +230,12 @@ impl GpuRenderer {
         progressive: &mut ProgressiveImage,
     ) -> Result<(RayStats, usize), RenderError> {
         settings.validate()?;
+        if settings.surfaces_in_volume {
+            return Err(RenderError::Backend(
+                "isosurfaces inside a volume (--iso with --tf) are drawn by the CPU renderer only: use --backend cpu"
+                    .into(),
+            ));
+        }
         let (width, height) = (settings.width, settings.height);
         if progressive.image.width != width || progressive.image.height != height {
             return Err(RenderError::InvalidSetting("progressive image size differs from the settings".into()));

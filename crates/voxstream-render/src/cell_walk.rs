@@ -40,6 +40,13 @@ impl CellVisit<'_> {
         std::array::from_fn(|a| (self.offset[a] + self.t_in * self.rate_f64[a]) as f32)
     }
 
+    /// The ray's position in the cell (cell-local) at distance `t`, from `t` alone: the same bits for the same `t`
+    /// whatever the cell's entry was computed from.
+    #[inline(always)]
+    pub fn at(&self, t: f64) -> [f32; 3] {
+        std::array::from_fn(|a| (self.offset[a] + t * self.rate_f64[a]) as f32)
+    }
+
     /// The gradient at cell-local `p` from central differences at the cell's eight corners, interpolated
     /// trilinearly (smoother than the cell's own analytic gradient, which jumps between cells; Knoll et al. §3). At
     /// the brick's outer voxels the differences are one-sided.
@@ -272,6 +279,7 @@ mod tests {
             block_ranges: &[],
             blocks: 1,
             cull_blocks: false,
+            step: 1.0,
         };
         let mut last_out = 0.0;
         let mut cells = Vec::new();
@@ -311,6 +319,7 @@ mod tests {
                 block_ranges: &[],
                 blocks: 1,
                 cull_blocks: false,
+                step: 1.0,
             };
             let mut gradients = Vec::new();
             let record = |c: &CellVisit<'_>| gradients.push(c.central_gradient(c.start()));
@@ -341,6 +350,7 @@ mod tests {
             block_ranges: &block_ranges,
             blocks,
             cull_blocks: true,
+            step: 1.0,
         };
         let mut seen = Vec::new();
         let record = |c: &CellVisit<'_>| seen.push((c.corners[0] as u16, c.t_in));

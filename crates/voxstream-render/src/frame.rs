@@ -163,7 +163,7 @@ pub fn render_pass(
             .collect()
     } else {
         let surfaces = SurfaceSettings::new(settings, |value| lut.normalise(value));
-        let caster = SurfaceCaster::new(view, feedback, &surfaces, settings);
+        let caster = SurfaceCaster::new(view, feedback, &surfaces, lut, settings);
         (0..tiles_x * tiles_y)
             .into_par_iter()
             .map(|tile| render_tile(&caster, &frame, settings, tile % tiles_x, tile / tiles_x, feedback, pending))

@@ -57,12 +57,21 @@ pub struct BrickSpan<'v> {
     pub blocks: usize,
     /// Whether blocks the integrand cannot use may be skipped (off only to test that skipping is exact).
     pub cull_blocks: bool,
+    /// The step (world units of `t`) the volume renderer samples this segment at: the cone's footprint or the
+    /// brick's voxel, whichever is larger, times the step factor (for integrands that also sample a volume,
+    /// [`crate::surfaces_in_volume`]).
+    pub step: f64,
 }
 
 /// Consumes the samples of one ray.
 pub trait Integrand {
     /// Whether brick segments come whole ([`Integrand::span`]) instead of as samples ([`Integrand::sample`]).
     const TAKES_SPANS: bool = false;
+
+    /// Whether a descent may stop at a subtree none of whose values can contribute and skip it as one segment,
+    /// never loading deeper (Knoll et al.'s min/max culling; span integrands only). An integrand that also samples
+    /// a volume keeps it off: its samples are placed by the step of each finer node, which skipping would shift.
+    const CULLS_SUBTREES: bool = Self::TAKES_SPANS;
 
     /// Whether some normalised value in `[lower, upper]` can change the result. The traversal skips bricks and
     /// occupancy blocks whose values all lie in a range that cannot, so this must be conservative: skipping must not
@@ -95,6 +104,14 @@ pub trait Integrand {
     #[inline(always)]
     fn set_level(&mut self, level: u32) {
         let _ = level;
+    }
+
+    /// A brick segment over `[from, to)` skipped because nothing in its bricks can contribute (only when
+    /// [`Integrand::TAKES_SPANS`]), with the volume renderer's `step` there ([`BrickSpan::step`]): for integrands
+    /// that keep sample positions along the ray, so that skipping moves none of them.
+    #[inline(always)]
+    fn skip_span(&mut self, from: f64, to: f64, step: f64) {
+        let _ = (from, to, step);
     }
 
     /// A whole brick segment (only when [`Integrand::TAKES_SPANS`]); adds the work done (cells examined) to `work`.

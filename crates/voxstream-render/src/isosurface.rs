@@ -254,9 +254,33 @@ impl<'a> Isosurfaces<'a> {
         ControlFlow::Continue(())
     }
 
+    /// Composites something other than a surface at the ray's current depth (premultiplied `color`, opacity
+    /// `alpha`): the volume around the surfaces ([`crate::surfaces_in_volume`]).
+    #[inline(always)]
+    pub(crate) fn absorb(&mut self, color: Vec3, alpha: f32) -> ControlFlow<()> {
+        self.color += self.transmittance * color;
+        self.transmittance *= 1.0 - alpha;
+        if self.transmittance <= self.settings.stop_below {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    }
+
     /// One trilinear cell: seams at its entry, then its exact crossings in order.
     #[inline(always)]
     fn cell(&mut self, c: &CellVisit<'_>) -> ControlFlow<()> {
+        self.cell_with(c, |_, _| ControlFlow::Continue(()))
+    }
+
+    /// [`Isosurfaces::cell`], calling `before(self, t)` before each crossing at `t` and at the cell's exit
+    /// (`t = t_out`), so that what lies between crossings is composited in depth order.
+    #[inline(always)]
+    pub(crate) fn cell_with(
+        &mut self,
+        c: &CellVisit<'_>,
+        mut before: impl FnMut(&mut Self, f64) -> ControlFlow<()>,
+    ) -> ControlFlow<()> {
         let s = self.settings;
         let (mut lo, mut hi) = (c.corners[0], c.corners[0]);
         for &v in &c.corners[1..] {
@@ -272,7 +296,7 @@ impl<'a> Isosurfaces<'a> {
             }
         }
         if straddle == 0 && self.known && above == self.inside {
-            return ControlFlow::Continue(());
+            return before(self, c.t_out);
         }
         let scale = s.lighting.gradient_scale;
         let start = c.start();
@@ -283,7 +307,8 @@ impl<'a> Isosurfaces<'a> {
             Vec3::from(g) * scale
         };
         if straddle == 0 {
-            return self.enter(above, c.t_in, || gradient_at(0.0));
+            self.enter(above, c.t_in, || gradient_at(0.0))?;
+            return before(self, c.t_out);
         }
         let cubic = CellCubic::new(&c.corners, start, c.rate);
         let f0 = cubic.at(0.0);
@@ -315,10 +340,12 @@ impl<'a> Isosurfaces<'a> {
             }
         }
         for &(u, i) in &crossings[..count] {
+            let t = c.t_in + u as f64;
+            before(self, t)?;
             self.inside ^= 1 << i;
-            self.hit(i as usize, c.t_in + u as f64, gradient_at(u))?;
+            self.hit(i as usize, t, gradient_at(u))?;
         }
-        ControlFlow::Continue(())
+        before(self, c.t_out)
     }
 }
 

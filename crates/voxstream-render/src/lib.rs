@@ -14,7 +14,8 @@
 //! - [`Traversal`]: one ray through the tree (descent, cone LOD, skipping, samples), handing samples to an
 //!   [`Integrand`]; [`emission_absorption`] is the volume-rendering integrand, with tables pre-corrected for the
 //!   step ([`step_table`]); [`isosurface`] is the exact first-hit integrand (Knoll et al.), which takes whole brick
-//!   segments and intersects each trilinear cell ([`cell_walk`], [`cell_intersection`]).
+//!   segments and intersects each trilinear cell ([`cell_walk`], [`cell_intersection`]); [`surfaces_in_volume`]
+//!   draws those surfaces inside the volume rendering.
 //! - [`render_frame`]: rayon over 16×16 image tiles, one ray per pixel: [`RayCaster`] for volumes,
 //!   [`surface_caster::SurfaceCaster`] when the settings name isosurfaces.
 //!
@@ -42,6 +43,7 @@ pub mod sampler;
 pub mod settings;
 pub mod step_table;
 pub mod surface_caster;
+pub mod surfaces_in_volume;
 pub mod transfer_function;
 pub mod traversal;
 

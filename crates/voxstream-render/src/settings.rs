@@ -109,6 +109,9 @@ pub struct RenderSettings {
     pub shadows: bool,
     /// Isosurfaces: where normals come from.
     pub surface_normals: SurfaceNormals,
+    /// Isosurfaces: draw the transfer function's volume around them too, composited in depth order (an
+    /// isosurface inside a volume rendering, [`crate::surfaces_in_volume`]); `false`: the surfaces alone.
+    pub surfaces_in_volume: bool,
     /// A pass traces only the pending pixels whose coordinates are both multiples of this (1: all of them); the
     /// others stay pending. The frame loop uses 4, then 2, for the passes of a converged frame that only gather
     /// requests.
@@ -184,6 +187,7 @@ impl Default for RenderSettings {
             surfaces: Vec::new(),
             shadows: false,
             surface_normals: SurfaceNormals::Cell,
+            surfaces_in_volume: false,
             pixel_stride: 1,
             steps_ignore_stand_ins: false,
             focus: None,
@@ -219,6 +223,9 @@ impl RenderSettings {
         }
         if !(1..=16).contains(&self.pixel_stride) {
             return bad(format!("pixel stride must be in 1..=16, got {}", self.pixel_stride));
+        }
+        if self.surfaces_in_volume && self.surfaces.is_empty() {
+            return bad("a volume around isosurfaces needs at least one isosurface".into());
         }
         if self.surfaces.len() > MAX_SURFACES {
             return bad(format!("at most {MAX_SURFACES} isosurfaces, got {}", self.surfaces.len()));

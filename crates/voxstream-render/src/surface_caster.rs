@@ -1,4 +1,5 @@
-//! The isosurface ray: the tree [`Traversal`] with the [`Isosurfaces`] integrand, and optional hard shadows.
+//! The isosurface ray: the tree [`Traversal`] with the [`Isosurfaces`] integrand (or [`SurfacesInVolume`], the
+//! surfaces inside the transfer function's volume), and optional hard shadows.
 //!
 //! Shadows follow Knoll et al. (seed 002 §5): from the first crossing, a ray towards the light through the same
 //! tree with the same exact intersection, at a coarser level of detail (its cone twice as wide as the primary ray's
@@ -11,6 +12,8 @@ use voxstream_core::{FeedbackBuffer, Request, TreeView};
 use crate::frame::PixelTracer;
 use crate::isosurface::{Isosurfaces, SurfaceSettings};
 use crate::settings::RenderSettings;
+use crate::surfaces_in_volume::{SurfacesInVolume, VolumeAroundSurfaces};
+use crate::transfer_function::TransferLut;
 use crate::traversal::{DescentPath, Ray, RayStats, Traversal};
 
 /// How much wider a shadow ray's cone is than the primary ray's at the surface.
@@ -26,14 +29,18 @@ pub struct SurfaceCaster<'a> {
     shadow_direction: Option<DVec3>,
     /// World length of the finest voxel (the least shadow offset).
     finest_voxel: f64,
+    /// The volume drawn around the surfaces, if any ([`RenderSettings::surfaces_in_volume`]).
+    volume: Option<VolumeAroundSurfaces<'a>>,
 }
 
 impl<'a> SurfaceCaster<'a> {
-    /// Prepares a surface caster for one frame.
+    /// Prepares a surface caster for one frame; with [`RenderSettings::surfaces_in_volume`], `lut`'s volume is drawn
+    /// around the surfaces.
     pub fn new(
         view: TreeView<'a>,
         feedback: &'a FeedbackBuffer,
         surfaces: &'a SurfaceSettings,
+        lut: &'a TransferLut,
         settings: &RenderSettings,
     ) -> SurfaceCaster<'a> {
         let scale = DVec3::from(settings.placement.scale);
@@ -47,6 +54,7 @@ impl<'a> SurfaceCaster<'a> {
             surfaces,
             shadow_direction,
             finest_voxel: settings.placement.mean_scale() * shape.voxel_size(shape.max_level),
+            volume: settings.surfaces_in_volume.then(|| VolumeAroundSurfaces::new(lut, settings)),
         }
     }
 }
@@ -66,26 +74,53 @@ impl PixelTracer for SurfaceCaster<'_> {
         requests: &mut Vec<Request>,
         path: &mut DescentPath,
     ) -> ([f32; 3], f32) {
-        let mut surfaces = Isosurfaces::new(self.surfaces, direction);
-        self.traversal.trace(&Ray { origin, direction, spread, start: 0.0 }, &mut surfaces, stats, requests, path);
-        if let (Some(toward_light), Some(t_hit)) = (self.shadow_direction, surfaces.first_hit()) {
-            let point = origin + direction * t_hit;
-            // Start the shadow ray `back` before its origin so that its cone at the surface is SHADOW_CONE times the
-            // primary one's, then skip SHADOW_OFFSET footprints.
-            let back = t_hit * SHADOW_CONE;
-            let footprint = (t_hit * spread * SHADOW_CONE).max(self.finest_voxel);
-            let shadow = Ray {
-                origin: point - toward_light * back,
-                direction: toward_light,
-                spread,
-                start: back + SHADOW_OFFSET * footprint,
-            };
-            let mut blocker = Isosurfaces::occlusion(self.surfaces);
-            self.traversal.trace(&shadow, &mut blocker, stats, requests, path);
-            if blocker.first_hit().is_some() {
-                surfaces.shadow_first_hit();
+        let ray = Ray { origin, direction, spread, start: 0.0 };
+        match self.volume {
+            None => {
+                let mut surfaces = Isosurfaces::new(self.surfaces, direction);
+                self.traversal.trace(&ray, &mut surfaces, stats, requests, path);
+                self.shadow(&ray, &mut surfaces, stats, requests, path);
+                surfaces.result()
+            }
+            Some(volume) => {
+                let mut both = SurfacesInVolume::new(self.surfaces, volume, direction);
+                self.traversal.trace(&ray, &mut both, stats, requests, path);
+                self.shadow(&ray, both.surfaces(), stats, requests, path);
+                both.result()
             }
         }
-        surfaces.result()
+    }
+}
+
+impl SurfaceCaster<'_> {
+    /// With shadows on, a ray from the first crossing towards the light; a blocked light leaves the crossing its
+    /// ambient term.
+    #[inline(always)]
+    fn shadow(
+        &self,
+        primary: &Ray,
+        surfaces: &mut Isosurfaces<'_>,
+        stats: &mut RayStats,
+        requests: &mut Vec<Request>,
+        path: &mut DescentPath,
+    ) {
+        let (Some(toward_light), Some(t_hit)) = (self.shadow_direction, surfaces.first_hit()) else { return };
+        let Ray { origin, direction, spread, .. } = *primary;
+        let point = origin + direction * t_hit;
+        // Start the shadow ray `back` before its origin so that its cone at the surface is SHADOW_CONE times the
+        // primary one's, then skip SHADOW_OFFSET footprints.
+        let back = t_hit * SHADOW_CONE;
+        let footprint = (t_hit * spread * SHADOW_CONE).max(self.finest_voxel);
+        let shadow = Ray {
+            origin: point - toward_light * back,
+            direction: toward_light,
+            spread,
+            start: back + SHADOW_OFFSET * footprint,
+        };
+        let mut blocker = Isosurfaces::occlusion(self.surfaces);
+        self.traversal.trace(&shadow, &mut blocker, stats, requests, path);
+        if blocker.first_hit().is_some() {
+            surfaces.shadow_first_hit();
+        }
     }
 }

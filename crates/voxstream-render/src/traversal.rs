@@ -555,10 +555,13 @@ impl<'a> Traversal<'a> {
                         let [lo, hi] = self.view.brick_range(fine.slot);
                         !integrand.can_contribute(lo, hi)
                     };
+                    // The step the bricks' branch below would take (for integrands that sample a volume too).
+                    let step = self.level_voxel[fine.level as usize].max(footprint_voxel) * self.step_factor / speed;
                     if skip {
+                        integrand.skip_span(t, t_exit, step);
                         ControlFlow::Continue(())
                     } else {
-                        integrand.span(&self.brick_span(ray, &fine, t, t_exit), &mut stats.samples)
+                        integrand.span(&self.brick_span(ray, &fine, t, t_exit, step), &mut stats.samples)
                     }
                 }
                 SegmentData::Bricks { fine, coarse, blend_level, stand_in } => {
@@ -922,7 +925,7 @@ impl<'a> Traversal<'a> {
 
     /// The brick of `node` along the ray over `[from, to)`, for integrands that take spans.
     #[inline(always)]
-    fn brick_span(&self, ray: &Ray, node: &BrickRef, from: f64, to: f64) -> BrickSpan<'a> {
+    fn brick_span(&self, ray: &Ray, node: &BrickRef, from: f64, to: f64, step: f64) -> BrickSpan<'a> {
         let s = self.scale[node.level as usize];
         let m = self.brick_size;
         let (o, d) = (ray.origin.to_array(), ray.direction.to_array());
@@ -938,6 +941,7 @@ impl<'a> Traversal<'a> {
             block_ranges: &self.view.block_ranges[node.slot.0 as usize * blocks..(node.slot.0 as usize + 1) * blocks],
             blocks: self.view.shape.blocks_per_axis(),
             cull_blocks: self.skip_empty_space,
+            step,
         }
     }
 
@@ -1010,9 +1014,9 @@ impl<'a> Traversal<'a> {
                 break;
             }
             // A subtree whose values cannot matter is one segment, skipped whole and never loaded deeper (Knoll et
-            // al.'s min/max culling). Only for span integrands: the sampled ones place their samples by the step
-            // of each finer node, which skipping here would shift.
-            if I::TAKES_SPANS && self.skip_empty_space {
+            // al.'s min/max culling). Only for span integrands that place no samples: the sampled ones place their
+            // samples by the step of each finer node, which skipping here would shift.
+            if I::TAKES_SPANS && I::CULLS_SUBTREES && self.skip_empty_space {
                 if let Some(slot) = node.brick() {
                     let [lo, hi] = self.view.brick_range(slot);
                     if !integrand.can_contribute(lo, hi) {

@@ -67,7 +67,7 @@ pub struct PreparedView {
     pub settings: RenderSettings,
     /// `--camera` with `--eye/--target/--up/--fov` over it, or the source's camera.
     pub camera: Camera,
-    /// Whether isosurfaces are drawn instead of the volume.
+    /// Whether isosurfaces are drawn (instead of the volume, or inside it with `--tf`).
     pub drawing_surfaces: bool,
 }
 
@@ -355,6 +355,8 @@ pub fn prepare_view<P>(args: &RenderArgs, source: &Source<P>) -> Result<Prepared
             NormalsArg::Cell => SurfaceNormals::Cell,
             NormalsArg::Central => SurfaceNormals::CentralDifferences,
         },
+        // --iso with --tf: the surfaces inside the volume.
+        surfaces_in_volume: drawing_surfaces && args.tf.is_some(),
         light_direction: args.light.or(source.light),
         background: args.background.map(|c| c as f32),
         step_factor: args.step,
@@ -391,6 +393,7 @@ fn blending(args: &RenderArgs) -> bool {
 
 fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &MemoryBudget) -> Result<()> {
     let PreparedView { transfer_function, settings, camera: view, drawing_surfaces } = prepare_view(args, &source)?;
+    let surfaces_in_volume = settings.surfaces_in_volume;
     let cameras = match &args.path {
         Some(path) => match path.to_str().filter(|_| !path.exists()).and_then(parse_generated_path) {
             Some(generated) => {
@@ -438,7 +441,7 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
     let repeats = if sequence || args.mode == Mode::Converged { 1 } else { args.frames };
     let progress = RenderProgress::new(cameras.len() as u64 * u64::from(repeats), args.quiet);
     let mismatch = transfer_function_mismatch(&transfer_function, source.typical_range, source.value_range);
-    if let Some(warning) = mismatch.filter(|_| !drawing_surfaces) {
+    if let Some(warning) = mismatch.filter(|_| !drawing_surfaces || surfaces_in_volume) {
         progress.warn(&warning);
     }
     // --popping: popping and seams against the converged images, rendered afterwards.
