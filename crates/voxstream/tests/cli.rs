@@ -152,6 +152,8 @@ fn assert_fails(args: &[&str], needle: &str) {
     let dir = scratch("errors");
     std::fs::write(dir.join("bad.json"), r#"{"points": [[0.5, 1,1,1,1], [0.2, 0,0,0,0]]}"#).unwrap();
     std::fs::write(dir.join("broken.json"), "{ not json").unwrap();
+    std::fs::write(dir.join("fog.json"), r#"{"points": [[0, 0.2,0.4,0.8,0], [0.3, 0.2,0.4,0.8,0.5], [1, 0.2,0.4,0.8,0]]}"#)
+        .unwrap();
     let output = run(args, &dir);
     let text = stderr(&output);
     assert!(!output.status.success(), "{args:?} succeeded");
@@ -181,6 +183,11 @@ fn bad_input_is_one_clear_line() {
     // bench --iso: checked before anything is measured.
     assert_fails(&["bench", "--iso", "2"], "outside the built-in scenes' values");
     assert_fails(&["bench", "--shadows"], "add --iso");
+    // Surfaces inside a volume: the CPU renderer's.
+    assert_fails(
+        &["render", "shell", "--iso", "0.5", "--tf", "fog.json", "--backend", "gpu", "--out", "x.png"],
+        "cpu renderer only",
+    );
     // --gpu-filter without the GPU renderer.
     assert_fails(&["render", "--gpu-filter", "hardware", "--out", "x.png"], "add --backend gpu");
     assert_fails(&["bench", "--gpu-filter", "exact"], "add --backend gpu");
@@ -227,4 +234,21 @@ fn bad_flags_keep_clap_s_valid_values_suggestions_and_usage() {
         "Usage: voxstream render",
     );
     assert_usage_error(&["--frobnicate"], "error: unexpected argument '--frobnicate' found", "Usage: voxstream");
+}
+
+#[test]
+fn iso_with_tf_draws_the_surfaces_inside_the_volume() {
+    let dir = scratch("surfaces-in-volume");
+    std::fs::write(dir.join("fog.json"), r#"{"points": [[0, 0.2,0.4,0.8,0], [0.3, 0.2,0.4,0.8,0.5], [1, 0.2,0.4,0.8,0]]}"#)
+        .unwrap();
+    let size = ["--width", "96", "--height", "96"];
+    let mut images = Vec::new();
+    for (name, what) in [("surface", vec!["--iso", "0.5"]), ("both", vec!["--iso", "0.5", "--tf", "fog.json"])] {
+        let out = format!("{name}.png");
+        let args = [&["render", "shell"][..], &size, &what, &["--out", &out]].concat();
+        let output = run(&args, &dir);
+        assert!(output.status.success(), "{args:?}: {}", stderr(&output));
+        images.push(std::fs::read(dir.join(&out)).expect("image written"));
+    }
+    assert!(images[0] != images[1], "the volume around the surface changed nothing");
 }
