@@ -152,8 +152,11 @@ fn assert_fails(args: &[&str], needle: &str) {
     let dir = scratch("errors");
     std::fs::write(dir.join("bad.json"), r#"{"points": [[0.5, 1,1,1,1], [0.2, 0,0,0,0]]}"#).unwrap();
     std::fs::write(dir.join("broken.json"), "{ not json").unwrap();
-    std::fs::write(dir.join("fog.json"), r#"{"points": [[0, 0.2,0.4,0.8,0], [0.3, 0.2,0.4,0.8,0.5], [1, 0.2,0.4,0.8,0]]}"#)
-        .unwrap();
+    std::fs::write(
+        dir.join("fog.json"),
+        r#"{"points": [[0, 0.2,0.4,0.8,0], [0.3, 0.2,0.4,0.8,0.5], [1, 0.2,0.4,0.8,0]]}"#,
+    )
+    .unwrap();
     let output = run(args, &dir);
     let text = stderr(&output);
     assert!(!output.status.success(), "{args:?} succeeded");
@@ -239,8 +242,11 @@ fn bad_flags_keep_clap_s_valid_values_suggestions_and_usage() {
 #[test]
 fn iso_with_tf_draws_the_surfaces_inside_the_volume() {
     let dir = scratch("surfaces-in-volume");
-    std::fs::write(dir.join("fog.json"), r#"{"points": [[0, 0.2,0.4,0.8,0], [0.3, 0.2,0.4,0.8,0.5], [1, 0.2,0.4,0.8,0]]}"#)
-        .unwrap();
+    std::fs::write(
+        dir.join("fog.json"),
+        r#"{"points": [[0, 0.2,0.4,0.8,0], [0.3, 0.2,0.4,0.8,0.5], [1, 0.2,0.4,0.8,0]]}"#,
+    )
+    .unwrap();
     let size = ["--width", "96", "--height", "96"];
     let mut images = Vec::new();
     for (name, what) in [("surface", vec!["--iso", "0.5"]), ("both", vec!["--iso", "0.5", "--tf", "fog.json"])] {
