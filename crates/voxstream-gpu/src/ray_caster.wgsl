@@ -8,7 +8,8 @@
 // - exact isosurfaces in the pipeline compiled with ISOSURFACES (`Isosurfaces`, Knoll et al., seed 002): whole brick
 //   segments walked cell by cell (`walk_cells`), each cell's cubic solved for its crossings (`iso_cell`), subtrees,
 //   bricks, blocks and cells culled by their value ranges, several translucent surfaces, hard shadows from a second
-//   `march` towards the light (`SurfaceCaster`).
+//   `march` towards the light (`SurfaceCaster`); with RAY_FRAME_SURFACES_IN_VOLUME the transfer function's volume
+//   around them too (`SurfacesInVolume`: its samples composited between the crossings, `fog_until`).
 //
 // The records (Node, TreeHeader, RayFrame, SurfaceRecord, TransferTableEntry, FeedbackCounters, RayCounters,
 // RequestRecord) come from crates/voxstream-layout/src/layout.wgsl, which is prepended to this file.
@@ -91,6 +92,12 @@ struct RayState {
     first_hit: f32,
     first_lit: vec3<f32>,
     any_hit: bool,
+    // Surfaces inside a volume (`RAY_FRAME_SURFACES_IN_VOLUME`, `SurfacesInVolume`): the distance up to which the
+    // volume is accounted for when the current segment began, its first sample's centre, and the index of its
+    // next sample (sample k at fog_first + k·step).
+    fog_covered: f32,
+    fog_first: f32,
+    fog_next: u32,
 }
 
 fn level_colour(level: u32) -> vec3<f32> {
@@ -477,6 +484,81 @@ fn iso_enter(state: ptr<function, RayState>, entry: u32, t: f32, gradient: vec3<
     return iso_enter_changed(state, iso_changes(state, entry), t, gradient);
 }
 
+// Whether this ray draws the volume around its surfaces (never a shadow ray).
+fn fog_on(state: ptr<function, RayState>) -> bool {
+    return (frame.flags & RAY_FRAME_SURFACES_IN_VOLUME) != 0u && !(*state).any_hit;
+}
+
+// The volume's step for a segment where the volume renderer wants steps of `desired` at most: the ladder of
+// `StepLength`, kept while it still is the rung for the desired step (as the volume renderer's segments); the
+// segment's samples start where the last one's step ended (`VolumeSamples::begin`).
+fn fog_begin(state: ptr<function, RayState>, desired: f32) {
+    if !((*state).has_step && (*state).step <= desired && desired < (*state).step * RUNG_RATIO) {
+        let index = clamp(ceil(-4.0 * log2(desired)), -512.0, 511.0);
+        (*state).step = exp2(-index / 4.0);
+        (*state).has_step = true;
+    }
+    (*state).fog_first = (*state).fog_covered + 0.5 * (*state).step;
+    (*state).fog_next = 0u;
+}
+
+// Passes over the samples whose centres lie before t (where nothing is visible): the next sample is the first at
+// or after t, as if they had been taken one by one (`VolumeSamples::pass_until`).
+fn fog_pass(state: ptr<function, RayState>, t: f32) {
+    let dt = (*state).step;
+    let first = (*state).fog_first;
+    if first + f32((*state).fog_next) * dt >= t {
+        return;
+    }
+    var k = max(u32(clamp(ceil((t - first) / dt), 0.0, 16777216.0)), (*state).fog_next);
+    while k > (*state).fog_next && first + f32(k - 1u) * dt >= t {
+        k -= 1u;
+    }
+    while first + f32(k) * dt < t {
+        k += 1u;
+    }
+    (*state).fog_next = k;
+}
+
+// Ends the segment at t: every sample whose centre lies before it is accounted for (`VolumeSamples::end`).
+fn fog_end(state: ptr<function, RayState>, t: f32) {
+    fog_pass(state, t);
+    (*state).fog_covered += f32((*state).fog_next) * (*state).step;
+    (*state).fog_next = 0u;
+}
+
+// The trilinear interpolant of a cell's corners (x fastest) at cell-local p.
+fn cell_value(v: array<f32, 8>, p: vec3<f32>) -> f32 {
+    let front = mix(mix(v[0], v[1], p.x), mix(v[2], v[3], p.x), p.y);
+    let back = mix(mix(v[4], v[5], p.x), mix(v[6], v[7], p.x), p.y);
+    return mix(front, back, p.z);
+}
+
+// Composites the volume's samples in the cell `cell` (corners `v`, stored units) whose centres lie before `limit`;
+// the cell's brick has the ray at x0 + (t − t_from)·rate (`VolumeSamples::take_until`). Returns false once the
+// ray is done.
+fn fog_until(state: ptr<function, RayState>, v: array<f32, 8>, x0: vec3<f32>, t_from: f32, rate: vec3<f32>,
+    cell: vec3<i32>, t_in: f32, limit: f32) -> bool {
+    if !fog_on(state) {
+        return true;
+    }
+    // Samples before the cell lie in blocks the walk passed over.
+    fog_pass(state, t_in);
+    let dt = (*state).step;
+    var centre = (*state).fog_first + f32((*state).fog_next) * dt;
+    for (var guard = 0u; centre < limit && guard < 16777216u; guard++) {
+        let p = x0 + (centre - t_from) * rate - vec3<f32>(cell);
+        let value = cell_value(v, p) * (1.0 / 65535.0);
+        let gradient = cell_gradient(v, p) * (1.0 / 65535.0);
+        (*state).fog_next += 1u;
+        centre = (*state).fog_first + f32((*state).fog_next) * dt;
+        if !composite(state, value, gradient, 0u) {
+            return false;
+        }
+    }
+    return true;
+}
+
 // The cubic f(u) = c.x + u·(c.y + u·(c.z + u·c.w)) of the trilinear interpolant of `v` along start + u·rate
 // (cell-local coordinates): `CellCubic::new`.
 fn cell_cubic(v: array<f32, 8>, start: vec3<f32>, rate: vec3<f32>) -> vec4<f32> {
@@ -596,7 +678,10 @@ fn surface_gradient(v: array<f32, 8>, origin: vec3<u32>, cell: vec3<i32>, p: vec
 // crossings in ray order (`Isosurfaces::cell`, `CellCubic::crossings`). `start` is the ray's cell-local position
 // at t_in, `rate` its cell-local units per world unit.
 fn iso_cell(state: ptr<function, RayState>, v: array<f32, 8>, t_in: f32, span_length: f32, start: vec3<f32>,
-    rate: vec3<f32>, origin: vec3<u32>, cell: vec3<i32>) -> bool {
+    rate: vec3<f32>, origin: vec3<u32>, cell: vec3<i32>, x0: vec3<f32>, t_from: f32) -> bool {
+    // With the volume around the surfaces, its samples before each crossing are composited first, and the rest of
+    // the cell's after the last (`Isosurfaces::cell_with`).
+    let t_out = t_in + span_length;
     var lo = v[0];
     var hi = v[0];
     for (var k = 1u; k < 8u; k++) {
@@ -614,14 +699,14 @@ fn iso_cell(state: ptr<function, RayState>, v: array<f32, 8>, t_in: f32, span_le
         }
     }
     if straddle == 0u && (*state).known && above == (*state).inside {
-        return true;
+        return fog_until(state, v, x0, t_from, rate, cell, t_in, t_out);
     }
     if straddle == 0u {
         let changed = iso_changes(state, above);
-        if changed == 0u {
-            return true;
+        if changed != 0u && !iso_enter_changed(state, changed, t_in, surface_gradient(v, origin, cell, start)) {
+            return false;
         }
-        return iso_enter_changed(state, changed, t_in, surface_gradient(v, origin, cell, start));
+        return fog_until(state, v, x0, t_from, rate, cell, t_in, t_out);
     }
     let c = cell_cubic(v, start, rate);
     let f0 = cubic_at(c, 0.0);
@@ -702,13 +787,16 @@ fn iso_cell(state: ptr<function, RayState>, v: array<f32, 8>, t_in: f32, span_le
     }
     for (var k = 0u; k < count; k++) {
         let i = cross_i[k];
-        (*state).inside ^= 1u << i;
         let u = cross_u[k];
+        if !fog_until(state, v, x0, t_from, rate, cell, t_in, t_in + u) {
+            return false;
+        }
+        (*state).inside ^= 1u << i;
         if !iso_hit(state, i, t_in + u, surface_gradient(v, origin, cell, start + u * rate)) {
             return false;
         }
     }
-    return true;
+    return fog_until(state, v, x0, t_from, rate, cell, t_in, t_out);
 }
 
 // Hits at t for the surfaces in `changed`, in order.
@@ -760,7 +848,7 @@ fn walk_cells(state: ptr<function, RayState>, entry: PathNode, t_from: f32, t_to
             if any(block != checked) {
                 checked = block;
                 let range = block_range(slot, vec3<u32>(block));
-                if !iso_can_contribute(state, range.x, range.y) {
+                if !iso_can_contribute(state, range.x, range.y) && !(fog_on(state) && visible_in(range.x, range.y)) {
                     // Leave the block: the nearest of its exit planes.
                     var exit_u = 3.0e38;
                     var exit_axis = 0u;
@@ -807,7 +895,7 @@ fn walk_cells(state: ptr<function, RayState>, entry: PathNode, t_from: f32, t_to
         }
         (*state).samples += 1u;
         let start = x0 + u * rate - vec3<f32>(cell);
-        if !iso_cell(state, v, t_from + u, u_out - u, start, rate, origin, cell) {
+        if !iso_cell(state, v, t_from + u, u_out - u, start, rate, origin, cell, x0, t_from) {
             return false;
         }
         if next[axis] >= span_length {
@@ -867,6 +955,9 @@ fn march(state: ptr<function, RayState>) {
         var t = max(hit.x, (*state).start);
         let t_leave = hit.y;
         var covered = t;
+        (*state).fog_covered = t;
+        (*state).fog_first = t;
+        (*state).fog_next = 0u;
         let root = Node(nodes[0].child_word, nodes[0].data_word);
         if has_brick(root) {
             mark_brick(root.data_word - 1u);
@@ -925,7 +1016,7 @@ fn march(state: ptr<function, RayState>) {
                 }
                 // Isosurfaces: a subtree whose values cannot change the ray's state is one segment, skipped whole
                 // and never loaded deeper (Knoll et al.'s min/max culling; the CPU's span integrands).
-                if surfaces_on && skip_empty && has_brick(node) {
+                if surfaces_on && skip_empty && has_brick(node) && !fog_on(state) {
                     let range = brick_range(node.data_word - 1u);
                     if !iso_can_contribute(state, range.x, range.y) {
                         break;
@@ -976,6 +1067,14 @@ fn march(state: ptr<function, RayState>) {
                     let value = bitcast<f32>(current.node.data_word);
                     if surfaces_on {
                         running = iso_enter(state, iso_inside_of(value * 65535.0), segment_start, vec3<f32>(0.0));
+                        if running && fog_on(state) {
+                            // The volume over the distance not yet accounted for (`SurfacesInVolume::constant`).
+                            let fog_from = max((*state).fog_covered, segment_start);
+                            (*state).fog_covered = max((*state).fog_covered, t_exit);
+                            if fog_from < t_exit {
+                                running = composite_constant(state, fog_from, t_exit, value, current.level);
+                            }
+                        }
                     } else {
                         running = composite_constant(state, segment_start, t_exit, value, current.level);
                     }
@@ -1005,13 +1104,24 @@ fn march(state: ptr<function, RayState>) {
                 // The whole segment at the fine brick's level, cell by cell: no level blending (the crossings of
                 // the state close the seams where the level changes).
                 covered = max(covered, t_exit);
+                let fog = fog_on(state);
+                if fog {
+                    // The step the volume renderer takes in this segment (`BrickSpan::step`).
+                    fog_begin(state, max(level_voxel(fine.level), footprint_voxel) * frame.step_factor / (*state).speed);
+                }
                 if skip_empty {
                     let range = brick_range(fine.node.data_word - 1u);
-                    if !iso_can_contribute(state, range.x, range.y) {
+                    if !iso_can_contribute(state, range.x, range.y) && !(fog && visible_in(range.x, range.y)) {
+                        if fog {
+                            fog_end(state, t_exit);
+                        }
                         continue;
                     }
                 }
                 running = walk_cells(state, fine, t_start, t_exit);
+                if running && fog {
+                    fog_end(state, t_exit);
+                }
                 continue;
             }
             let is_final = fine.level == current.level

@@ -13,7 +13,7 @@ use voxstream_engine::FrameRenderer;
 use voxstream_layout::{
     BrickBlend, FeedbackCounters, RayCounters, RayFrame, RequestRecord, SurfaceRecord, TransferTableEntry,
     RAY_FRAME_BLENDING, RAY_FRAME_CENTRAL_NORMALS, RAY_FRAME_COLOUR_BY_LEVEL, RAY_FRAME_PHONG, RAY_FRAME_SHADOWS,
-    RAY_FRAME_SKIP_EMPTY_SPACE, RAY_FRAME_STEPS_IGNORE_STAND_INS,
+    RAY_FRAME_SKIP_EMPTY_SPACE, RAY_FRAME_STEPS_IGNORE_STAND_INS, RAY_FRAME_SURFACES_IN_VOLUME,
 };
 use voxstream_render::transfer_function::LUT_SIZE;
 use voxstream_render::{
@@ -230,12 +230,6 @@ impl GpuRenderer {
         progressive: &mut ProgressiveImage,
     ) -> Result<(RayStats, usize), RenderError> {
         settings.validate()?;
-        if settings.surfaces_in_volume {
-            return Err(RenderError::Backend(
-                "isosurfaces inside a volume (--iso with --tf) are drawn by the CPU renderer only: use --backend cpu"
-                    .into(),
-            ));
-        }
         let (width, height) = (settings.width, settings.height);
         if progressive.image.width != width || progressive.image.height != height {
             return Err(RenderError::InvalidSetting("progressive image size differs from the settings".into()));
@@ -574,6 +568,9 @@ fn ray_frame(
     }
     if settings.surface_normals == SurfaceNormals::CentralDifferences {
         flags |= RAY_FRAME_CENTRAL_NORMALS;
+    }
+    if settings.surfaces_in_volume {
+        flags |= RAY_FRAME_SURFACES_IN_VOLUME;
     }
     // As `SurfaceCaster`: shadows from a fixed light, with Phong shading.
     if settings.shadows && settings.shading == Shading::Phong && light != [0.0; 3] {

@@ -97,6 +97,7 @@ const RAY_FRAME_SKIP_EMPTY_SPACE: u32 = 8u;
 const RAY_FRAME_CENTRAL_NORMALS: u32 = 16u;
 const RAY_FRAME_SHADOWS: u32 = 32u;
 const RAY_FRAME_BLENDING: u32 = 64u;
+const RAY_FRAME_SURFACES_IN_VOLUME: u32 = 128u;
 
 struct RayFrame {
     width: u32,

@@ -53,6 +53,7 @@ pub use node::{BrickSlot, Node, NodeData, NodeId, TileId, CHILD_MASK, CONSTANT_B
 pub use ray_frame::{
     RayFrame, SurfaceRecord, RAY_FRAME_BLENDING, RAY_FRAME_BYTES, RAY_FRAME_CENTRAL_NORMALS, RAY_FRAME_COLOUR_BY_LEVEL,
     RAY_FRAME_PHONG, RAY_FRAME_SHADOWS, RAY_FRAME_SKIP_EMPTY_SPACE, RAY_FRAME_STEPS_IGNORE_STAND_INS,
+    RAY_FRAME_SURFACES_IN_VOLUME,
 };
 pub use transfer_table::{TransferTableEntry, TransferTableHeader, TABLE_HOLDS_EXTINCTION, TABLE_HOLDS_STEP_OPACITY};
 pub use tree_header::TreeHeader;

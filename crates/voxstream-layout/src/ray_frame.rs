@@ -53,6 +53,9 @@ pub const RAY_FRAME_SHADOWS: u32 = 32;
 /// [`RayFrame::flags`]: Thiele et al.'s level blending: each brick's [`BrickBlend`](crate::BrickBlend) caps its
 /// weight against its parent, and a brick still fading in is drawn instead of its descendants.
 pub const RAY_FRAME_BLENDING: u32 = 64;
+/// [`RayFrame::flags`]: isosurfaces are drawn inside the transfer function's volume, composited in depth order
+/// (`RenderSettings::surfaces_in_volume`).
+pub const RAY_FRAME_SURFACES_IN_VOLUME: u32 = 128;
 
 /// The frame's ray parameters, as a GPU reads them (see the module docs for the offsets).
 #[repr(C)]

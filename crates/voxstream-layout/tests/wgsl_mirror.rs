@@ -207,6 +207,7 @@ fn every_constant_matches_its_rust_twin() {
         ("RAY_FRAME_CENTRAL_NORMALS", RAY_FRAME_CENTRAL_NORMALS),
         ("RAY_FRAME_SHADOWS", RAY_FRAME_SHADOWS),
         ("RAY_FRAME_BLENDING", RAY_FRAME_BLENDING),
+        ("RAY_FRAME_SURFACES_IN_VOLUME", RAY_FRAME_SURFACES_IN_VOLUME),
     ]
     .into_iter()
     .map(|(name, value)| (name.to_string(), value))

@@ -22,6 +22,8 @@
 //! One difference from the volume renderer: samples come from the brick at the cone's level without blending it
 //! with its parent (quadrilinear filtering), as the surfaces are; with no surface crossed the image is the volume
 //! rendering's to within that filtering (tested).
+//!
+//! The GPU renderer's isosurface pipeline mirrors it (`RAY_FRAME_SURFACES_IN_VOLUME`); this is its reference.
 
 use std::ops::ControlFlow;
 

@@ -197,7 +197,7 @@ pub struct RenderArgs {
     pub tf: Option<PathBuf>,
     /// Draw isosurfaces of these data values instead of the volume (exact ray-cell intersection, Knoll et al.):
     /// one value or several, comma-separated (e.g. --iso 70 or --iso 40,110). With --tf, the surfaces are drawn
-    /// inside that volume rendering (CPU backend).
+    /// inside that volume rendering.
     #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_name = "V1,V2,...")]
     pub iso: Vec<f64>,
     /// Isosurface colours, one r,g,b in [0,1] (linear) per value, separated by ';' (e.g. "0.9,0.75,0.65;1,1,1") or

@@ -4,7 +4,7 @@
 use anyhow::{bail, Result};
 use voxstream_render::{IsoSurface, MAX_SURFACES};
 
-use crate::cli::{Backend, NormalsArg, RenderArgs};
+use crate::cli::{NormalsArg, RenderArgs};
 
 /// Colours of the surfaces when `--iso-color` is not given, in order (linear RGB).
 pub const PALETTE: [[f32; 3]; MAX_SURFACES] = [
@@ -32,12 +32,6 @@ pub fn surfaces(args: &RenderArgs, value_range: [f64; 2]) -> Result<Vec<IsoSurfa
     }
     if args.iso.len() > MAX_SURFACES {
         bail!("--iso names {} values; at most {MAX_SURFACES} surfaces are drawn at once", args.iso.len());
-    }
-    if args.tf.is_some() && args.backend == Backend::Gpu {
-        bail!(
-            "--iso with --tf (surfaces inside a volume) is drawn by the CPU renderer only: drop --backend gpu, or \
-             draw the surfaces alone (without --tf)"
-        );
     }
     let [lower, upper] = value_range;
     for &value in &args.iso {
@@ -122,7 +116,6 @@ mod tests {
         assert!(error(&["--iso", "1,2", "--iso-opacity", "1"]).contains("1 opacities for 2 isovalues"));
         assert!(error(&["--iso", "1", "--iso-opacity", "0"]).contains("not in (0, 1]"));
         assert!(error(&["--iso", "1", "--shadows"]).contains("--light"));
-        assert!(error(&["--iso", "1", "--tf", "x.json", "--backend", "gpu"]).contains("CPU renderer only"));
         assert_eq!(surfaces(&args(&["--iso", "1", "--tf", "x.json"]), [0.0, 255.0]).unwrap().len(), 1);
         assert!(error(&["--shadows"]).contains("add --iso"));
         assert!(error(&["--normals", "central"]).contains("add --iso"));

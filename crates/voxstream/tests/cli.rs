@@ -152,11 +152,6 @@ fn assert_fails(args: &[&str], needle: &str) {
     let dir = scratch("errors");
     std::fs::write(dir.join("bad.json"), r#"{"points": [[0.5, 1,1,1,1], [0.2, 0,0,0,0]]}"#).unwrap();
     std::fs::write(dir.join("broken.json"), "{ not json").unwrap();
-    std::fs::write(
-        dir.join("fog.json"),
-        r#"{"points": [[0, 0.2,0.4,0.8,0], [0.3, 0.2,0.4,0.8,0.5], [1, 0.2,0.4,0.8,0]]}"#,
-    )
-    .unwrap();
     let output = run(args, &dir);
     let text = stderr(&output);
     assert!(!output.status.success(), "{args:?} succeeded");
@@ -186,11 +181,6 @@ fn bad_input_is_one_clear_line() {
     // bench --iso: checked before anything is measured.
     assert_fails(&["bench", "--iso", "2"], "outside the built-in scenes' values");
     assert_fails(&["bench", "--shadows"], "add --iso");
-    // Surfaces inside a volume: the CPU renderer's.
-    assert_fails(
-        &["render", "shell", "--iso", "0.5", "--tf", "fog.json", "--backend", "gpu", "--out", "x.png"],
-        "cpu renderer only",
-    );
     // --gpu-filter without the GPU renderer.
     assert_fails(&["render", "--gpu-filter", "hardware", "--out", "x.png"], "add --backend gpu");
     assert_fails(&["bench", "--gpu-filter", "exact"], "add --backend gpu");

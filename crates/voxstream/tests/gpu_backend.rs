@@ -393,6 +393,33 @@ fn isosurfaces_match_the_cpu_image() {
 }
 
 #[test]
+fn surfaces_inside_a_volume_match_the_cpu_image() {
+    use voxstream_render::IsoSurface;
+    // The scene's transfer function drawn around its isosurfaces, composited in depth order on both sides
+    // (`SurfacesInVolume`): the volume's samples between crossings, the same steps, constant nodes integrated whole.
+    let nested = vec![
+        IsoSurface { value: 0.5, color: [0.55, 0.7, 0.95], opacity: 0.4 },
+        IsoSurface { value: 0.9, color: [0.95, 0.8, 0.6], opacity: 1.0 },
+    ];
+    let inside = |s: &mut RenderSettings| s.surfaces_in_volume = true;
+    let (with_volume, _) = compare_isosurfaces("iso-in-volume-shell", "shell", nested.clone(), None, inside);
+    let (alone, _) = compare_isosurfaces("iso-alone-shell", "shell", nested, None, |_| {});
+    let changed = with_volume.pixels.iter().zip(&alone.pixels).filter(|(a, b)| a != b).count();
+    assert!(changed > (SIZE * SIZE / 8) as usize, "the volume changed only {changed} GPU pixels");
+    let opaque = vec![IsoSurface { value: 0.5, color: [0.9, 0.75, 0.65], opacity: 1.0 }];
+    compare_isosurfaces("iso-in-volume-hypertexture", "hypertexture", opaque.clone(), None, inside);
+    // With shadows (the shadow rays see the surfaces only) and without culling.
+    compare_isosurfaces("iso-in-volume-hypertexture-shadows", "hypertexture", opaque.clone(), None, |s| {
+        s.surfaces_in_volume = true;
+        s.shadows = true;
+    });
+    compare_isosurfaces("iso-in-volume-hypertexture-unculled", "hypertexture", opaque, None, |s| {
+        s.surfaces_in_volume = true;
+        s.skip_empty_space = false;
+    });
+}
+
+#[test]
 fn isosurface_shadows_match_the_cpu_image() {
     use voxstream_render::IsoSurface;
     let surfaces = vec![IsoSurface { value: 0.5, color: [0.9, 0.75, 0.65], opacity: 1.0 }];
