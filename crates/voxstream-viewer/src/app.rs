@@ -470,6 +470,8 @@ impl ViewerApp {
                 changed |= ui.add(egui::Slider::new(&mut surface.value, lo..=hi).text("isovalue")).changed();
                 changed |= ui.color_edit_button_rgb(&mut surface.color).changed();
             });
+            // The transfer function's volume around the surface, composited in depth order (`render --iso --tf`).
+            ui.checkbox(&mut self.settings.surfaces_in_volume, "inside the volume");
         }
         if changed {
             self.set_isosurface(on.then_some(surface));
@@ -486,6 +488,7 @@ impl ViewerApp {
             }
             None => {
                 self.settings.surfaces.clear();
+                self.settings.surfaces_in_volume = false;
                 self.settings.shading = self.config.settings.shading;
             }
         }
@@ -719,6 +722,10 @@ impl ViewerApp {
             ScriptCommand::Iso(value) => {
                 self.set_isosurface(value.map(|value| IsoSurface { value, color: [0.9, 0.8, 0.7], opacity: 1.0 }))
             }
+            ScriptCommand::IsoInVolume(_) if self.settings.surfaces.is_empty() => {
+                failure = Some("`iso-volume` draws the volume around an isosurface: give `iso VALUE` first".into())
+            }
+            ScriptCommand::IsoInVolume(on) => self.settings.surfaces_in_volume = on,
             ScriptCommand::Budget(mib) if mib > max_budget_mib() => {
                 failure =
                     Some(format!("a budget of {mib} MiB is more than this machine's memory ({} MiB)", max_budget_mib()))

@@ -40,7 +40,7 @@ pub const DEFAULT_WAIT_FINAL: Duration = Duration::from_secs(120);
 /// The commands, with what each takes.
 const COMMANDS: &str = "wait-final [SECONDS], wait SECONDS, screenshot PNG, window-screenshot PNG, orbit YAW PITCH, pan RIGHT UP, zoom FACTOR, \
                         fly FORWARD RIGHT UP, reset, tf-point VALUE R G B OPACITY, tf-delete INDEX, load-tf FILE, \
-                        save-tf FILE, save-camera FILE, shading phong|none, lod-bias BIAS, overlay on|off, levels on|off, iso VALUE|off, \
+                        save-tf FILE, save-camera FILE, shading phong|none, lod-bias BIAS, overlay on|off, levels on|off, iso VALUE|off, iso-volume on|off, \
                         budget MIB, quit";
 
 /// One scripted action.
@@ -82,6 +82,8 @@ pub enum ScriptCommand {
     Levels(bool),
     /// An isosurface at this value instead of the volume, or the volume again.
     Iso(Option<f64>),
+    /// With an isosurface: the volume drawn around it too (`render --iso … --tf …`), or the surface alone.
+    IsoInVolume(bool),
     /// The pools' budget, MiB (as the window's budget field).
     Budget(u64),
     /// Save the whole window (image, panels, status line) as it is drawn.
@@ -208,6 +210,7 @@ fn parse_line(line: &str) -> Result<ScriptCommand, String> {
             ["off"] => ScriptCommand::Iso(None),
             _ => ScriptCommand::Iso(Some(numbers(1).map_err(|_| "`iso` takes a data value or `off`".to_string())?[0])),
         },
+        "iso-volume" => ScriptCommand::IsoInVolume(switch("on", "off")?),
         "budget" => match rest.as_slice() {
             [w] => match w.parse::<u64>() {
                 Ok(mib) if (1..=MAX_BUDGET_MIB).contains(&mib) => ScriptCommand::Budget(mib),
@@ -281,7 +284,7 @@ mod properties {
         /// Lines of known words with arbitrary arguments, likewise.
         #[test]
         fn command_words_with_any_arguments(lines in proptest::collection::vec(
-            ("(wait-final|wait|screenshot|orbit|pan|zoom|fly|reset|tf-point|tf-delete|load-tf|save-tf|save-camera|shading|lod-bias|overlay|levels|iso|quit)",
+            ("(wait-final|wait|screenshot|orbit|pan|zoom|fly|reset|tf-point|tf-delete|load-tf|save-tf|save-camera|shading|lod-bias|overlay|levels|iso|iso-volume|quit)",
              proptest::collection::vec("[-+0-9.eEnaifNA ]{0,8}|on|off|phong|none|x.png", 0..6)), 0..12)) {
             let text: String = lines.iter().map(|(verb, args)| format!("{verb} {}\n", args.join(" "))).collect();
             if let Err(error) = Script::parse(&text, "s") {

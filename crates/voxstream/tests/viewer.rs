@@ -130,7 +130,8 @@ fn a_scripted_session_rotates_edits_and_saves_what_render_reproduces() {
          orbit 40 10\nwait-final 600\nscreenshot b.png\nsave-camera b.json\n\
          tf-point 1500 1 0.1 0.1 0.4\nwait-final 600\nscreenshot c.png\nsave-tf tf-c.json\n\
          levels on\nwait-final 600\nscreenshot levels.png\nlevels off\n\
-         iso 1500\nwait-final 600\nscreenshot d.png\nquit\n",
+         iso 1500\nwait-final 600\nscreenshot d.png\n\
+         iso-volume on\nwait-final 600\nscreenshot d-volume.png\nquit\n",
     )
     .unwrap();
     let viewer = env!("CARGO_BIN_EXE_voxstream");
@@ -174,6 +175,18 @@ fn a_scripted_session_rotates_edits_and_saves_what_render_reproduces() {
         render_balls(&dir, &["--camera", "b.json", "--iso", "1500", "--iso-color", "0.9,0.8,0.7"], "render-d.png");
     assert_eq!(rendered_iso, pixels(&dir.join("d.png")), "the viewer's isosurface and render's differ");
     assert!(mean_difference(&c, &pixels(&dir.join("d.png"))) > 1.0, "the isosurface replaced the volume");
+    // And inside the volume: `render --iso … --tf …`.
+    let rendered_inside = render_balls(
+        &dir,
+        &["--camera", "b.json", "--iso", "1500", "--iso-color", "0.9,0.8,0.7", "--tf", "tf-c.json"],
+        "render-d-volume.png",
+    );
+    let inside = pixels(&dir.join("d-volume.png"));
+    assert_eq!(rendered_inside, inside, "the viewer's surface inside the volume and render's differ");
+    assert!(
+        mean_difference(&pixels(&dir.join("d.png")), &inside) > 1.0,
+        "the volume around the surface changed nothing"
+    );
     // Refined by blended interactive frames instead of converged passes: the same final image.
     std::fs::write(dir.join("blended.txt"), "orbit 40 10\nwait-final 600\nscreenshot e.png\nquit\n").unwrap();
     let out = under_xvfb(
