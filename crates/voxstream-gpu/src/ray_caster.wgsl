@@ -252,6 +252,10 @@ fn shade(state: ptr<function, RayState>, color: vec3<f32>, alpha: f32, gradient:
     return color * (frame.ambient + frame.diffuse * diffuse) + vec3<f32>(frame.specular * specular * alpha);
 }
 
+// The level passed for samples that `RAY_FRAME_COLOUR_BY_LEVEL` leaves untinted (the volume around isosurfaces:
+// colour by level is volume rendering's, as on the CPU).
+const NO_LEVEL: u32 = 0xffffffffu;
+
 // Composites one sample; returns false once the ray is opaque enough to stop.
 fn composite(state: ptr<function, RayState>, value: f32, gradient: vec3<f32>, level: u32) -> bool {
     let entry = step_lookup(value, (*state).step);
@@ -259,7 +263,7 @@ fn composite(state: ptr<function, RayState>, value: f32, gradient: vec3<f32>, le
         return true;
     }
     var premultiplied = entry.xyz;
-    if (frame.flags & RAY_FRAME_COLOUR_BY_LEVEL) != 0u {
+    if (frame.flags & RAY_FRAME_COLOUR_BY_LEVEL) != 0u && level != NO_LEVEL {
         premultiplied = level_colour(level) * entry.w;
     }
     if (frame.flags & RAY_FRAME_PHONG) != 0u {
@@ -282,7 +286,7 @@ fn composite_constant(state: ptr<function, RayState>, start: f32, end: f32, valu
     }
     let alpha = opacity(entry.w * (end - start));
     var color = entry.xyz;
-    if (frame.flags & RAY_FRAME_COLOUR_BY_LEVEL) != 0u {
+    if (frame.flags & RAY_FRAME_COLOUR_BY_LEVEL) != 0u && level != NO_LEVEL {
         color = level_colour(level);
     }
     (*state).color += (*state).transmittance * alpha * color;
@@ -493,13 +497,39 @@ fn fog_on(state: ptr<function, RayState>) -> bool {
 // `StepLength`, kept while it still is the rung for the desired step (as the volume renderer's segments); the
 // segment's samples start where the last one's step ended (`VolumeSamples::begin`).
 fn fog_begin(state: ptr<function, RayState>, desired: f32) {
+    choose_step(state, desired);
+    (*state).fog_first = (*state).fog_covered + 0.5 * (*state).step;
+    (*state).fog_next = 0u;
+}
+
+// The step for a segment that wants `desired` at most: the rung of the ladder of `StepLength`, kept while it still
+// is the rung for the desired step (`StepLength::keep_or_at_most`).
+fn choose_step(state: ptr<function, RayState>, desired: f32) {
     if !((*state).has_step && (*state).step <= desired && desired < (*state).step * RUNG_RATIO) {
         let index = clamp(ceil(-4.0 * log2(desired)), -512.0, 511.0);
         (*state).step = exp2(-index / 4.0);
         (*state).has_step = true;
     }
-    (*state).fog_first = (*state).fog_covered + 0.5 * (*state).step;
-    (*state).fog_next = 0u;
+}
+
+// The samples whose centres lie before the segment's start t_start (where the step shrank, the first one or two),
+// taken from the segment's brick as the volume renderer does (`VolumeSamples::take_before`). Returns false once
+// the ray is done.
+fn fog_before(state: ptr<function, RayState>, entry: PathNode, t_start: f32) -> bool {
+    let slot = entry.node.data_word - 1u;
+    let gradients = (frame.flags & RAY_FRAME_PHONG) != 0u;
+    for (var guard = 0u; guard < 64u; guard++) {
+        let centre = (*state).fog_first + f32((*state).fog_next) * (*state).step;
+        if centre >= t_start {
+            break;
+        }
+        (*state).fog_next += 1u;
+        let s = sample_at(slot, brick_coordinates(state, entry, centre), gradients);
+        if !composite(state, s.x, s.yzw, NO_LEVEL) {
+            return false;
+        }
+    }
+    return true;
 }
 
 // Passes over the samples whose centres lie before t (where nothing is visible): the next sample is the first at
@@ -511,10 +541,10 @@ fn fog_pass(state: ptr<function, RayState>, t: f32) {
         return;
     }
     var k = max(u32(clamp(ceil((t - first) / dt), 0.0, 16777216.0)), (*state).fog_next);
-    while k > (*state).fog_next && first + f32(k - 1u) * dt >= t {
+    for (var guard = 0u; guard < 4u && k > (*state).fog_next && first + f32(k - 1u) * dt >= t; guard++) {
         k -= 1u;
     }
-    while first + f32(k) * dt < t {
+    for (var guard = 0u; guard < 4u && first + f32(k) * dt < t; guard++) {
         k += 1u;
     }
     (*state).fog_next = k;
@@ -552,7 +582,7 @@ fn fog_until(state: ptr<function, RayState>, v: array<f32, 8>, x0: vec3<f32>, t_
         let gradient = cell_gradient(v, p) * (1.0 / 65535.0);
         (*state).fog_next += 1u;
         centre = (*state).fog_first + f32((*state).fog_next) * dt;
-        if !composite(state, value, gradient, 0u) {
+        if !composite(state, value, gradient, NO_LEVEL) {
             return false;
         }
     }
@@ -678,10 +708,9 @@ fn surface_gradient(v: array<f32, 8>, origin: vec3<u32>, cell: vec3<i32>, p: vec
 // crossings in ray order (`Isosurfaces::cell`, `CellCubic::crossings`). `start` is the ray's cell-local position
 // at t_in, `rate` its cell-local units per world unit.
 fn iso_cell(state: ptr<function, RayState>, v: array<f32, 8>, t_in: f32, span_length: f32, start: vec3<f32>,
-    rate: vec3<f32>, origin: vec3<u32>, cell: vec3<i32>, x0: vec3<f32>, t_from: f32) -> bool {
+    rate: vec3<f32>, origin: vec3<u32>, cell: vec3<i32>, x0: vec3<f32>, t_from: f32, t_out: f32) -> bool {
     // With the volume around the surfaces, its samples before each crossing are composited first, and the rest of
-    // the cell's after the last (`Isosurfaces::cell_with`).
-    let t_out = t_in + span_length;
+    // the cell's, up to t_out (the next cell's t_in, the same f32), after the last (`Isosurfaces::cell_with`).
     var lo = v[0];
     var hi = v[0];
     for (var k = 1u; k < 8u; k++) {
@@ -895,7 +924,7 @@ fn walk_cells(state: ptr<function, RayState>, entry: PathNode, t_from: f32, t_to
         }
         (*state).samples += 1u;
         let start = x0 + u * rate - vec3<f32>(cell);
-        if !iso_cell(state, v, t_from + u, u_out - u, start, rate, origin, cell, x0, t_from) {
+        if !iso_cell(state, v, t_from + u, u_out - u, start, rate, origin, cell, x0, t_from, t_from + u_out) {
             return false;
         }
         if next[axis] >= span_length {
@@ -1069,10 +1098,11 @@ fn march(state: ptr<function, RayState>) {
                         running = iso_enter(state, iso_inside_of(value * 65535.0), segment_start, vec3<f32>(0.0));
                         if running && fog_on(state) {
                             // The volume over the distance not yet accounted for (`SurfacesInVolume::constant`).
-                            let fog_from = max((*state).fog_covered, segment_start);
+                            // From the end of the last sample's step, a little before or after the node's entry.
+                            let fog_from = (*state).fog_covered;
                             (*state).fog_covered = max((*state).fog_covered, t_exit);
                             if fog_from < t_exit {
-                                running = composite_constant(state, fog_from, t_exit, value, current.level);
+                                running = composite_constant(state, fog_from, t_exit, value, NO_LEVEL);
                             }
                         }
                     } else {
@@ -1100,6 +1130,15 @@ fn march(state: ptr<function, RayState>) {
                 coarse = fading_parent;
                 has_coarse = fading.level >= 1u;
             }
+            let is_final = fine.level == current.level
+                && (current.level >= target_level || (current.node.child_word & NODE_TERMINAL_BIT) != 0u);
+            let stand_in = !is_final;
+            // The level whose voxel sets the step (`Traversal::sampled_level`): the fine brick's, or with
+            // RAY_FRAME_STEPS_IGNORE_STAND_INS, for a stand-in, the level it stands in for.
+            var sampled_level = fine.level;
+            if stand_in && (frame.flags & RAY_FRAME_STEPS_IGNORE_STAND_INS) != 0u {
+                sampled_level = min(fine.level + frame.stand_in_levels, tree.max_level);
+            }
             if surfaces_on {
                 // The whole segment at the fine brick's level, cell by cell: no level blending (the crossings of
                 // the state close the seams where the level changes).
@@ -1107,7 +1146,7 @@ fn march(state: ptr<function, RayState>) {
                 let fog = fog_on(state);
                 if fog {
                     // The step the volume renderer takes in this segment (`BrickSpan::step`).
-                    fog_begin(state, max(level_voxel(fine.level), footprint_voxel) * frame.step_factor / (*state).speed);
+                    fog_begin(state, max(level_voxel(sampled_level), footprint_voxel) * frame.step_factor / (*state).speed);
                 }
                 if skip_empty {
                     let range = brick_range(fine.node.data_word - 1u);
@@ -1118,28 +1157,20 @@ fn march(state: ptr<function, RayState>) {
                         continue;
                     }
                 }
-                running = walk_cells(state, fine, t_start, t_exit);
+                // The samples before the segment's start come before its first cell's seam crossing.
+                running = !fog || fog_before(state, fine, t_start);
+                if running {
+                    running = walk_cells(state, fine, t_start, t_exit);
+                }
                 if running && fog {
                     fog_end(state, t_exit);
                 }
                 continue;
             }
-            let is_final = fine.level == current.level
-                && (current.level >= target_level || (current.node.child_word & NODE_TERMINAL_BIT) != 0u);
-            let stand_in = !is_final;
 
             // The step: the footprint voxel, or the sampled level's voxel where only coarser data exists, rounded
             // down to the ladder of `StepLength` (kept while it still is the rung for the desired step).
-            var sampled_level = fine.level;
-            if stand_in && (frame.flags & RAY_FRAME_STEPS_IGNORE_STAND_INS) != 0u {
-                sampled_level = min(fine.level + frame.stand_in_levels, tree.max_level);
-            }
-            let desired = max(level_voxel(sampled_level), footprint_voxel) * frame.step_factor / (*state).speed;
-            if !((*state).has_step && (*state).step <= desired && desired < (*state).step * RUNG_RATIO) {
-                let index = clamp(ceil(-4.0 * log2(desired)), -512.0, 511.0);
-                (*state).step = exp2(-index / 4.0);
-                (*state).has_step = true;
-            }
+            choose_step(state, max(level_voxel(sampled_level), footprint_voxel) * frame.step_factor / (*state).speed);
             let dt = (*state).step;
             let first = covered + 0.5 * dt;
             var count = 0u;

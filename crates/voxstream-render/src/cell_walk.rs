@@ -88,6 +88,24 @@ fn cell_corners<V: Voxel>(voxels: &[V], base: usize, row: usize, slab: usize) ->
     ]
 }
 
+/// The corners (16-bit units) of the cell of `span`'s brick that holds stored-index coordinates `x` (clamped to
+/// the brick), and `x` in that cell's local coordinates: for points of the ray just outside the span, which the
+/// volume renderer samples from the same brick.
+pub(crate) fn corners_at(span: &BrickSpan<'_>, x: [f64; 3]) -> ([f32; 8], [f32; 3]) {
+    let b = span.stored;
+    let last_cell = (b - 2) as f64;
+    let cell = x.map(|v| v.floor().clamp(0.0, last_cell));
+    let base = ((cell[2] as usize * b + cell[1] as usize) * b) + cell[0] as usize;
+    let corners = match span.voxels {
+        PoolVoxels::Wide(v) => cell_corners(v, base, b, b * b),
+        PoolVoxels::Narrow(v) => {
+            let Dequantize { scale, offset } = span.dequantize;
+            cell_corners(v, base, b, b * b).map(|c| c * (scale * VOXEL_MAX as f32) + offset * VOXEL_MAX as f32)
+        }
+    };
+    (corners, std::array::from_fn(|a| (x[a] - cell[a]) as f32))
+}
+
 /// Cells visited (or blocks skipped) by one span at most (a ray crosses at most `3·B` cells of a `B³` lattice; the
 /// cap only guards against a numerical stall).
 fn max_cells(stored: usize) -> usize {

@@ -133,13 +133,10 @@ impl Integrand for EmissionAbsorption<'_> {
 
     #[inline]
     fn constant(&mut self, from: f64, to: f64, value: f32) -> ControlFlow<()> {
-        let entry = self.lut.lookup(value);
-        if entry.sigma <= 0.0 {
+        let Some((color, alpha)) = constant_emission(self.lut, value, to - from) else {
             return ControlFlow::Continue(());
-        }
-        // One `exp` per constant node, not per sample: α = 1 − exp(−σ·length), colour unshaded.
-        let alpha = -(-(entry.sigma as f64) * (to - from)).exp_m1() as f32;
-        self.color += self.transmittance * alpha * self.tint.unwrap_or(Vec3::from(entry.color));
+        };
+        self.color += self.transmittance * alpha * self.tint.unwrap_or(color);
         self.transmittance *= 1.0 - alpha;
         if self.transmittance <= self.stop_below {
             ControlFlow::Break(())
@@ -147,6 +144,15 @@ impl Integrand for EmissionAbsorption<'_> {
             ControlFlow::Continue(())
         }
     }
+}
+
+/// What a constant `value` over `length` world units adds: its colour (unshaded, not premultiplied) and opacity
+/// `α = 1 − exp(−σ·length)`, one `exp` per constant node rather than one per sample; `None` where it is
+/// transparent.
+#[inline]
+pub(crate) fn constant_emission(lut: &TransferLut, value: f32, length: f64) -> Option<(Vec3, f32)> {
+    let entry = lut.lookup(value);
+    (entry.sigma > 0.0).then(|| (Vec3::from(entry.color), -(-(entry.sigma as f64) * length).exp_m1() as f32))
 }
 
 #[cfg(test)]

@@ -40,6 +40,16 @@ impl StepLength {
         StepLength { index, world: (-(index as f64) / STEPS_PER_OCTAVE as f64).exp2() }
     }
 
+    /// The rung for `desired` as a ray's segments choose it: `current` while it still is the rung
+    /// [`StepLength::at_most`] returns for `desired` (no logarithm), else that rung.
+    #[inline]
+    pub fn keep_or_at_most(current: Option<StepLength>, desired: f64) -> StepLength {
+        match current {
+            Some(current) if current.is_at_most(desired) => current,
+            _ => StepLength::at_most(desired),
+        }
+    }
+
     /// Whether this rung is what [`StepLength::at_most`] returns for `desired` (cheap: no logarithm).
     #[inline]
     pub fn is_at_most(&self, desired: f64) -> bool {

@@ -31,10 +31,11 @@ use glam::{DVec3, Vec3};
 use voxstream_core::VOXEL_MAX;
 
 use crate::cell_intersection::cell_gradient;
-use crate::cell_walk::{walk_cells, CellVisit, CellVisitor};
+use crate::cell_walk::{corners_at, walk_cells, CellVisit, CellVisitor};
+use crate::emission_absorption::constant_emission;
 use crate::integrand::{BrickSpan, Integrand, Sample};
 use crate::isosurface::{Isosurfaces, SurfaceSettings};
-use crate::lighting::LightingSettings;
+use crate::lighting::{LightingSettings, RayLight};
 use crate::settings::RenderSettings;
 use crate::step_table::{StepLength, StepTable};
 use crate::transfer_function::TransferLut;
@@ -68,14 +69,11 @@ struct VolumeSamples<'a> {
 }
 
 impl VolumeSamples<'_> {
-    /// Starts a segment that the volume renderer samples with steps of `desired` at most (the same ladder and the
-    /// same hysteresis: the current step stays while it is not longer than wanted).
+    /// Starts a segment that the volume renderer samples with steps of `desired` at most (the rung it would use:
+    /// [`StepLength::keep_or_at_most`]).
     #[inline]
     fn begin(&mut self, desired: f64, from: f64) {
-        let step = match self.step {
-            Some(current) if current.is_at_most(desired) => current,
-            _ => StepLength::at_most(desired),
-        };
+        let step = StepLength::keep_or_at_most(self.step, desired);
         if self.step != Some(step) {
             self.step = Some(step);
             self.table = Some(self.volume.lut.step_table(step));
@@ -116,6 +114,50 @@ impl VolumeSamples<'_> {
         self.next = k;
     }
 
+    /// Takes the samples whose centres lie before the segment `span` (where the step shrank, the first one or two
+    /// fall before its start: the volume renderer takes them from the segment's brick, and so does this).
+    #[inline]
+    fn take_before(&mut self, ray: &mut Isosurfaces<'_>, span: &BrickSpan<'_>) -> ControlFlow<()> {
+        let (Some(step), Some(table)) = (self.step, self.table) else { return ControlFlow::Continue(()) };
+        let dt = step.world;
+        let light = ray.light().copied();
+        loop {
+            let centre = self.first + self.next as f64 * dt;
+            if centre >= span.from {
+                return ControlFlow::Continue(());
+            }
+            let (corners, p) = corners_at(span, std::array::from_fn(|a| span.origin[a] + centre * span.rate[a]));
+            self.next += 1;
+            self.composite(ray, table, light.as_ref(), &corners, p)?;
+        }
+    }
+
+    /// Composites the sample of value `trilinear(corners, p)` (16-bit units) into `ray`.
+    #[inline(always)]
+    fn composite(
+        &self,
+        ray: &mut Isosurfaces<'_>,
+        table: &StepTable,
+        light: Option<&RayLight>,
+        corners: &[f32; 8],
+        p: [f32; 3],
+    ) -> ControlFlow<()> {
+        let entry = table.lookup(trilinear(corners, p) * (1.0 / VOXEL_MAX as f32));
+        if entry.w <= 0.0 {
+            return ControlFlow::Continue(());
+        }
+        let premultiplied = entry.truncate();
+        let color = match light {
+            Some(light) => {
+                // Per voxel of the brick in normalised values, as the volume renderer's samples.
+                let g = Vec3::from(cell_gradient(corners, p)) * (1.0 / VOXEL_MAX as f32);
+                light.shade(premultiplied, entry.w, g * self.volume.gradient_scale)
+            }
+            None => premultiplied,
+        };
+        ray.absorb(color, entry.w)
+    }
+
     /// Takes the samples of cell `c` whose centres lie before `limit`, compositing them into `ray`.
     #[inline(always)]
     fn take_until(&mut self, ray: &mut Isosurfaces<'_>, c: &CellVisit<'_>, limit: f64) -> ControlFlow<()> {
@@ -131,23 +173,9 @@ impl VolumeSamples<'_> {
         while centre < limit {
             // From the sample's distance alone, so that its value does not depend on how the cell was reached.
             let p = c.at(centre);
-            let value = trilinear(&c.corners, p) * (1.0 / VOXEL_MAX as f32);
-            let entry = table.lookup(value);
             self.next += 1;
             centre = self.first + self.next as f64 * dt;
-            if entry.w <= 0.0 {
-                continue;
-            }
-            let premultiplied = entry.truncate();
-            let color = match &light {
-                Some(light) => {
-                    // Per voxel of the brick in normalised values, as the volume renderer's samples.
-                    let g = Vec3::from(cell_gradient(&c.corners, p)) * (1.0 / VOXEL_MAX as f32);
-                    light.shade(premultiplied, entry.w, g * self.volume.gradient_scale)
-                }
-                None => premultiplied,
-            };
-            ray.absorb(color, entry.w)?;
+            self.composite(ray, table, light.as_ref(), &c.corners, p)?;
         }
         ControlFlow::Continue(())
     }
@@ -230,17 +258,17 @@ impl Integrand for SurfacesInVolume<'_> {
     }
 
     fn constant(&mut self, from: f64, to: f64, value: f32) -> ControlFlow<()> {
-        // A crossing at the node's entry first, then the volume over the distance not yet accounted for.
+        // A crossing at the node's entry first, then the volume over the distance not yet accounted for: from the
+        // end of the last sample's step, which may lie a little before or after the node's entry (as the volume
+        // renderer integrates it).
         self.surfaces.constant(from, to, value)?;
-        let from = self.volume.covered.max(from);
-        self.volume.covered = self.volume.covered.max(to);
-        let entry = self.volume.volume.lut.lookup(value);
-        if entry.sigma <= 0.0 || from >= to {
-            return ControlFlow::Continue(());
+        let covered = self.volume.covered;
+        let from = if covered == f64::NEG_INFINITY { from } else { covered };
+        self.volume.covered = covered.max(to);
+        match constant_emission(self.volume.volume.lut, value, to - from) {
+            Some((color, alpha)) if from < to => self.surfaces.absorb(alpha * color, alpha),
+            _ => ControlFlow::Continue(()),
         }
-        // One `exp` per constant node, as the volume renderer: α = 1 − exp(−σ·length), colour unshaded.
-        let alpha = -(-(entry.sigma as f64) * (to - from)).exp_m1() as f32;
-        self.surfaces.absorb(alpha * Vec3::from(entry.color), alpha)
     }
 
     #[inline]
@@ -253,6 +281,8 @@ impl Integrand for SurfacesInVolume<'_> {
     #[inline(always)]
     fn span(&mut self, span: &BrickSpan<'_>, work: &mut u64) -> ControlFlow<()> {
         self.volume.begin(span.step, span.from);
+        // Before the first cell's seam crossing at `from`.
+        self.volume.take_before(&mut self.surfaces, span)?;
         let (flow, cells) = walk_cells(span, self);
         *work += cells;
         flow?;

@@ -547,7 +547,7 @@ impl<'a> Traversal<'a> {
                         ControlFlow::Continue(())
                     }
                 }
-                SegmentData::Bricks { fine, .. } if I::TAKES_SPANS => {
+                SegmentData::Bricks { fine, stand_in, .. } if I::TAKES_SPANS => {
                     // The whole segment at the fine brick's level: no level blending (the integrand closes the
                     // seams where the level changes).
                     walk.covered = walk.covered.max(t_exit);
@@ -556,7 +556,9 @@ impl<'a> Traversal<'a> {
                         !integrand.can_contribute(lo, hi)
                     };
                     // The step the bricks' branch below would take (for integrands that sample a volume too).
-                    let step = self.level_voxel[fine.level as usize].max(footprint_voxel) * self.step_factor / speed;
+                    let step = self.level_voxel[self.sampled_level(&fine, stand_in) as usize].max(footprint_voxel)
+                        * self.step_factor
+                        / speed;
                     if skip {
                         integrand.skip_span(t, t_exit, step);
                         ControlFlow::Continue(())
@@ -571,19 +573,11 @@ impl<'a> Traversal<'a> {
                     // With `steps_ignore_stand_ins`, a stand-in is stepped as the data it stands in for will be, down
                     // to `stand_in_levels` levels below it (a bound on the extra samples where the wanted data is
                     // still far from resident, e.g. during a fast zoom).
-                    let sampled_level = if stand_in && self.steps_ignore_stand_ins {
-                        (fine.level + self.stand_in_levels).min(self.view.shape.max_level)
-                    } else {
-                        fine.level
-                    };
-                    let sampled_voxel = self.level_voxel[sampled_level as usize];
+                    let sampled_voxel = self.level_voxel[self.sampled_level(&fine, stand_in) as usize];
                     integrand.set_level(fine.level);
                     let blend = coarse.and(self.view.brick_blends.get(fine.slot.0 as usize)).filter(|b| !b.is_full());
                     let desired_step = sampled_voxel.max(footprint_voxel) * self.step_factor / speed;
-                    let segment_step = match walk.step {
-                        Some(current) if current.is_at_most(desired_step) => current,
-                        _ => StepLength::at_most(desired_step),
-                    };
+                    let segment_step = StepLength::keep_or_at_most(walk.step, desired_step);
                     if walk.step != Some(segment_step) {
                         walk.step = Some(segment_step);
                         integrand.set_step(segment_step);
@@ -628,6 +622,17 @@ impl<'a> Traversal<'a> {
             }
         }
         None
+    }
+
+    /// The level whose voxel sets the step in the bricks of `fine`: its own, or with `steps_ignore_stand_ins`, for a
+    /// stand-in, the level it stands in for (at most `stand_in_levels` below it).
+    #[inline]
+    fn sampled_level(&self, fine: &BrickRef, stand_in: bool) -> u32 {
+        if stand_in && self.steps_ignore_stand_ins {
+            (fine.level + self.stand_in_levels).min(self.view.shape.max_level)
+        } else {
+            fine.level
+        }
     }
 
     /// The blending cap of `fine` (interpolated between its corners) where the ray is at `t`.
