@@ -16,8 +16,9 @@
 //! feedback records, the frame's [`RayFrame`](voxstream_layout::RayFrame)) through their WGSL mirror
 //! `layout.wgsl`, which is prepended to it.
 //!
-//! Both integrands of the CPU renderer run on the GPU: emission–absorption and Knoll et al.'s exact isosurfaces
-//! (with culling, translucent nested surfaces and shadows), and Thiele et al.'s level blending of interactive frames.
+//! The CPU renderer's integrands run on the GPU: emission–absorption, Knoll et al.'s exact isosurfaces (with
+//! culling, translucent nested surfaces and shadows) and those surfaces inside the volume rendering, and Thiele et
+//! al.'s level blending of interactive frames.
 //! Not yet on the GPU (listed in `docs/ARCHITECTURE.md`): request compaction and focus weighting.
 //! Positions are f32 in an anchor frame near the eye, so deep zooms keep the CPU's precision (see
 //! `voxstream_layout::ray_frame`).

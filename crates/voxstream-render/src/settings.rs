@@ -103,7 +103,8 @@ pub struct RenderSettings {
     pub ray_packets: bool,
     /// Instructions the ray loop uses (detected at run time by default; the image is the same either way).
     pub instruction_set: InstructionSet,
-    /// Isosurfaces to draw instead of the volume (Knoll et al.); empty = volume rendering.
+    /// Isosurfaces to draw instead of the volume, or inside it with [`RenderSettings::surfaces_in_volume`] (Knoll
+    /// et al.); empty = volume rendering.
     pub surfaces: Vec<IsoSurface>,
     /// Isosurfaces: hard shadows from the fixed light ([`RenderSettings::light_direction`], with Phong shading).
     pub shadows: bool,

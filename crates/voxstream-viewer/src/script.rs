@@ -20,6 +20,7 @@
 //! overlay on              # mark the pixels still missing data
 //! levels on              # colour the volume by the tree level each sample's data came from
 //! iso 1500                # an exact isosurface at this data value instead of the volume (`iso off`: the volume)
+//! iso-volume on           # with the isosurface: the volume drawn around it too (`off`: the surface alone)
 //! wait 0.5                # seconds
 //! quit                    # close the window
 //! ```
