@@ -214,13 +214,7 @@ impl<'a> Isosurfaces<'a> {
                 self.first_lit = self.transmittance * (shaded - light.ambient(color));
             }
         }
-        self.color += self.transmittance * shaded;
-        self.transmittance *= 1.0 - opacity;
-        if self.transmittance <= self.settings.stop_below {
-            ControlFlow::Break(())
-        } else {
-            ControlFlow::Continue(())
-        }
+        self.absorb(shaded, opacity)
     }
 
     /// The surfaces a stored value is inside of.
@@ -254,8 +248,8 @@ impl<'a> Isosurfaces<'a> {
         ControlFlow::Continue(())
     }
 
-    /// Composites something other than a surface at the ray's current depth (premultiplied `color`, opacity
-    /// `alpha`): the volume around the surfaces ([`crate::surfaces_in_volume`]).
+    /// Composites premultiplied `color` of opacity `alpha` at the ray's current depth: a crossing, or the volume
+    /// around the surfaces ([`crate::surfaces_in_volume`]).
     #[inline(always)]
     pub(crate) fn absorb(&mut self, color: Vec3, alpha: f32) -> ControlFlow<()> {
         self.color += self.transmittance * color;

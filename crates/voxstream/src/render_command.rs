@@ -483,7 +483,8 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
             if repeat + 1 == repeats || (!sequence && result.is_final()) {
                 let out = if sequence { numbered_path(&args.out, index) } else { args.out.clone() };
                 write_png(&result.image, &out)?;
-                if let Some(warning) = empty_image(&result.image, drawing_surfaces) {
+                let volume = !drawing_surfaces || surfaces_in_volume;
+                if let Some(warning) = empty_image(&result.image, drawing_surfaces, volume) {
                     if empty_images == 0 {
                         progress.warn(&format!("{}: {warning}", out.display()));
                     }

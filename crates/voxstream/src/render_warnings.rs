@@ -28,11 +28,15 @@ pub fn transfer_function_mismatch(tf: &TransferFunction, typical: [f64; 2], full
     ))
 }
 
-/// A warning when no pixel of `image` is covered (`surfaces`: the image draws isosurfaces, not a volume).
-pub fn empty_image(image: &Image, surfaces: bool) -> Option<String> {
+/// A warning when no pixel of `image` is covered (`surfaces`: the image draws isosurfaces; `volume`: it draws the
+/// transfer function's volume, alone or around the surfaces).
+pub fn empty_image(image: &Image, surfaces: bool, volume: bool) -> Option<String> {
     let covered = image.pixels.iter().any(|p| p[3] >= EMPTY_COVERAGE);
     (!covered).then(|| {
-        if surfaces {
+        if surfaces && volume {
+            "the image is empty: neither the isosurfaces nor the volume around them shows from this camera (compare \
+             --iso and --tf's values with `voxstream info`'s value range, or check --eye and --target)"
+        } else if surfaces {
             "the image is empty: no ray crosses the isosurfaces from this camera (compare --iso with `voxstream \
              info`'s value range, or check --eye and --target)"
         } else {
@@ -73,9 +77,10 @@ mod tests {
     #[test]
     fn empty_images_are_flagged() {
         let mut image = Image::new(4, 4);
-        assert!(empty_image(&image, false).unwrap().contains("transfer function"));
-        assert!(empty_image(&image, true).unwrap().contains("--iso"));
+        assert!(empty_image(&image, false, true).unwrap().contains("transfer function"));
+        assert!(empty_image(&image, true, false).unwrap().contains("--iso with"));
+        assert!(empty_image(&image, true, true).unwrap().contains("--iso and --tf"));
         image.pixels[5][3] = 0.01;
-        assert!(empty_image(&image, false).is_none());
+        assert!(empty_image(&image, false, true).is_none());
     }
 }

@@ -40,6 +40,11 @@ fn frame<P: Producer>(producer: P, tf: &TransferFunction, settings: RenderSettin
     (result.image, result.samples)
 }
 
+/// The largest difference of one channel (colour or opacity) of one pixel between two images.
+fn worst_channel_difference(a: &Image, b: &Image) -> f32 {
+    a.pixels.iter().zip(&b.pixels).flat_map(|(p, q)| (0..4).map(|c| (p[c] - q[c]).abs())).fold(0.0, f32::max)
+}
+
 const SURFACE_COLOR: [f32; 3] = [0.9, 0.75, 0.65];
 const FOG_COLOR: [f64; 3] = [0.2, 0.4, 0.8];
 
@@ -189,12 +194,7 @@ fn with_no_surface_crossed_the_volume_is_the_volume_renderings() {
         s.surfaces.truncate(1);
         s.surfaces[0].value = 2.0;
     });
-    let worst = volume
-        .pixels
-        .iter()
-        .zip(&inside.pixels)
-        .flat_map(|(a, b)| (0..4).map(|c| (a[c] - b[c]).abs()))
-        .fold(0.0f32, f32::max);
+    let worst = worst_channel_difference(&volume, &inside);
     println!("no surface crossed, finest level: worst channel difference {worst:.2e}");
     assert!(worst < 1e-5, "worst channel difference {worst}");
 }
@@ -250,12 +250,7 @@ fn the_volume_is_sampled_where_the_volume_renderer_samples_it() {
     let (inside, _) = frame(Ramp, &tf, RenderSettings { surfaces, surfaces_in_volume: true, ..settings }, &camera);
     let seen = volume.pixels.iter().filter(|p| p[3] > 0.2).count();
     assert!(seen > (SIZE * SIZE / 2) as usize, "only {seen} pixels show the volume");
-    let worst = volume
-        .pixels
-        .iter()
-        .zip(&inside.pixels)
-        .flat_map(|(a, b)| (0..4).map(|c| (a[c] - b[c]).abs()))
-        .fold(0.0f32, f32::max);
+    let worst = worst_channel_difference(&volume, &inside);
     println!("the ramp, no surface crossed: worst channel difference {worst:.2e}");
     assert!(worst < 1e-5, "worst channel difference {worst}");
 }
