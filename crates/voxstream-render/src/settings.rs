@@ -101,10 +101,6 @@ pub struct RenderSettings {
     /// Trace [`crate::sampler::LANES`] rays side by side, their samples taken together (the same bits as one ray
     /// at a time, which stays as the reference; off only to test that). Volume rendering only.
     pub ray_packets: bool,
-    /// Answer "can this occupancy block contribute" from bits computed once per brick and pass, walking the blocks
-    /// along a ray with a DDA ([`crate::block_visibility`]); the same bits as testing each block's range, which
-    /// stays as the reference (off only to test that). Volume rendering only.
-    pub block_visibility_bits: bool,
     /// Instructions the ray loop uses (detected at run time by default; the image is the same either way).
     pub instruction_set: InstructionSet,
     /// Isosurfaces to draw instead of the volume, or inside it with [`RenderSettings::surfaces_in_volume`] (Knoll
@@ -189,7 +185,6 @@ impl Default for RenderSettings {
             instruction_set: InstructionSet::Detect,
             sample_batches: true,
             ray_packets: true,
-            block_visibility_bits: true,
             surfaces: Vec::new(),
             shadows: false,
             surface_normals: SurfaceNormals::Cell,

@@ -36,7 +36,6 @@ use voxstream_core::{
     TreeView, Voxel, BLOCK_CELLS,
 };
 
-use crate::block_visibility::BrickBlocks;
 use crate::integrand::{BrickSpan, Integrand, Sample};
 use crate::sampler::{
     values_across, values_along, values_and_gradients_across, values_and_gradients_along, Cell, LANES,
@@ -194,8 +193,6 @@ pub struct Traversal<'a> {
     n_shift: Option<u32>,
     /// Edge of the finest level's nodes (unit cube).
     finest_node: f64,
-    /// Occupancy blocks per brick axis.
-    blocks_per_axis: usize,
 }
 
 impl<'a> Traversal<'a> {
@@ -229,7 +226,6 @@ impl<'a> Traversal<'a> {
             level_voxel: scale.map(|s| 1.0 / (s * shape.brick_size as f64)),
             n_shift: shape.n.is_power_of_two().then(|| shape.n.trailing_zeros()),
             finest_node: 1.0 / scale[(shape.max_level as usize).min(MAX_TABLE_LEVELS - 1)],
-            blocks_per_axis: shape.blocks_per_axis(),
         }
     }
 
@@ -732,49 +728,27 @@ impl<'a> Traversal<'a> {
     /// can (samples up to the blocks' exit need no check; one past it would be harmless, it is sampled),
     /// `(false, next)` when it cannot (every sample before `next`, the exit less a margin above f32 rounding, is in
     /// these blocks). Always past `k`.
-    ///
-    /// With the integrand's [`BlockVisibility`](crate::BlockVisibility) bits (one brick, not blended), the blocks
-    /// after the first one along the ray are walked too, by a 3-D DDA that reads their bits, as long as they answer
-    /// as the first did: through every such block when they cannot contribute, and until the run reaches sample
-    /// `reach` when they can. Each block's exit is computed as [`block_exit`] computes it, so a run ends where
-    /// checking the blocks one by one would end it.
     #[inline(always)]
     fn check_blocks<I: Integrand>(
         &self,
         fine: &BrickLine<'_>,
         coarse: Option<&BrickLine<'_>>,
         (first, dt, count): (f64, f64, u32),
-        (k, reach): (u32, u32),
+        k: u32,
         integrand: &I,
     ) -> (bool, u32) {
-        let blocks = self.blocks_per_axis;
+        let blocks = self.view.shape.blocks_per_axis();
         let fine_cell = Cell::locate(self.stored, fine.at(k as f32));
-        let (contributes, exit) = match (coarse, integrand.block_visibility()) {
-            (None, Some(visibility)) => {
-                let bits = visibility.of_brick(&self.view, fine.slot, |lo, hi| integrand.can_contribute(lo, hi));
-                let end = first + count as f64 * dt;
-                let reach = first + reach as f64 * dt;
-                block_chain(
-                    fine,
-                    bits,
-                    blocks,
-                    fine_cell.block_ijk(),
-                    |visible| if visible { reach.min(end) } else { end },
-                )
-            }
-            _ => {
-                let [mut lo, mut hi] = self.view.block_range(fine.slot, fine_cell.block(blocks));
-                let mut exit = block_exit(fine, fine_cell.block_ijk());
-                if let Some(line) = coarse {
-                    let coarse_cell = Cell::locate(self.stored, line.at(k as f32));
-                    let [clo, chi] = self.view.block_range(line.slot, coarse_cell.block(blocks));
-                    lo = lo.min(clo);
-                    hi = hi.max(chi);
-                    exit = exit.min(block_exit(line, coarse_cell.block_ijk()));
-                }
-                (integrand.can_contribute(lo, hi), exit)
-            }
-        };
+        let [mut lo, mut hi] = self.view.block_range(fine.slot, fine_cell.block(blocks));
+        let mut exit = block_exit(fine, fine_cell.block_ijk());
+        if let Some(line) = coarse {
+            let coarse_cell = Cell::locate(self.stored, line.at(k as f32));
+            let [clo, chi] = self.view.block_range(line.slot, coarse_cell.block(blocks));
+            lo = lo.min(clo);
+            hi = hi.max(chi);
+            exit = exit.min(block_exit(line, coarse_cell.block_ijk()));
+        }
+        let contributes = integrand.can_contribute(lo, hi);
         let boundary = if contributes { (exit - first) / dt } else { (exit - 1e-3 * dt - first) / dt }.ceil();
         // `boundary` is a whole number; below 2⁵², it is the mantissa of `2⁵² + boundary` (float operations only,
         // like `floor_index`: a saturating conversion is several instructions).
@@ -802,15 +776,14 @@ impl<'a> Traversal<'a> {
     ) -> Option<(u32, u32, Option<u32>)> {
         let count = segment.2;
         while k < count {
-            let reach = k.saturating_add(long_run);
-            let (contributes, past) = self.check_blocks(fine, coarse, segment, (k, reach), integrand);
+            let (contributes, past) = self.check_blocks(fine, coarse, segment, k, integrand);
             if !contributes {
                 k = past;
                 continue;
             }
             let mut end = past;
             while end < count && end - k < long_run {
-                let (contributes, past) = self.check_blocks(fine, coarse, segment, (end, reach), integrand);
+                let (contributes, past) = self.check_blocks(fine, coarse, segment, end, integrand);
                 if !contributes {
                     return Some((k, end, Some(past)));
                 }
@@ -1284,61 +1257,6 @@ fn block_exit(line: &BrickLine<'_>, ijk: [usize; 3]) -> f64 {
         exit = exit.min((edge - line.origin[a]) * line.inverse_rate[a]);
     }
     exit
-}
-
-/// From the occupancy block at `ijk` (block coordinates, `blocks` per axis) on along a brick line, the blocks whose
-/// bits answer as this one's does, walked by a 3-D DDA (one block to the next through the face it exits by): returns
-/// that answer and the `t` at which the line leaves the last of them, stopping at the first block that answers
-/// otherwise, at the brick's side, or once an exit passes `until(answer)`. Each exit is the one [`block_exit`] gives
-/// for its block.
-#[inline(always)]
-fn block_chain(
-    line: &BrickLine<'_>,
-    bits: BrickBlocks<'_>,
-    blocks: usize,
-    mut ijk: [usize; 3],
-    until: impl Fn(bool) -> f64,
-) -> (bool, f64) {
-    let index = |ijk: [usize; 3]| (ijk[2] * blocks + ijk[1]) * blocks + ijk[0];
-    let answer = bits.contributes(index(ijk));
-    let until = until(answer);
-    loop {
-        let mut exit = f64::INFINITY;
-        let mut axis = None;
-        for (a, &block) in ijk.iter().enumerate() {
-            let rate = line.rate[a];
-            let edge = if rate > 0.0 {
-                ((block + 1) * BLOCK_CELLS) as f64
-            } else if rate < 0.0 {
-                (block * BLOCK_CELLS) as f64
-            } else {
-                continue;
-            };
-            let at = (edge - line.origin[a]) * line.inverse_rate[a];
-            if at < exit {
-                exit = at;
-                axis = Some(a);
-            }
-        }
-        let Some(a) = axis else { return (answer, exit) };
-        if exit >= until {
-            return (answer, exit);
-        }
-        if line.rate[a] > 0.0 {
-            if ijk[a] + 1 >= blocks {
-                return (answer, exit);
-            }
-            ijk[a] += 1;
-        } else {
-            if ijk[a] == 0 {
-                return (answer, exit);
-            }
-            ijk[a] -= 1;
-        }
-        if bits.contributes(index(ijk)) != answer {
-            return (answer, exit);
-        }
-    }
 }
 
 /// A distance along the ray (moving at `speed` volume units per unit of `t`) of `1e-7` of a node of edge

@@ -110,30 +110,3 @@ fn rays_traced_side_by_side_equal_rays_traced_one_by_one() {
         }
     }
 }
-
-#[test]
-fn block_bits_equal_testing_each_block_range() {
-    // The bits and the DDA along the blocks against the range test of each block: the shell (16³ bricks, hidden
-    // blocks), the hypertexture shaded (level-blended segments keep the range test, so its rays mix both) and
-    // unshaded, rays side by side and one by one.
-    for (scene, unshaded) in [("shell", true), ("hypertexture", false), ("hypertexture", true)] {
-        for packets in [true, false] {
-            let render_bits = |bits: bool| {
-                render_with(scene, 2, |s| {
-                    s.block_visibility_bits = bits;
-                    s.ray_packets = packets;
-                    if unshaded {
-                        s.shading = Shading::None;
-                    }
-                })
-            };
-            let ((bits, samples_bits), (ranges, samples_ranges)) = (render_bits(true), render_bits(false));
-            let case = format!("{scene} (unshaded {unshaded}, packets {packets})");
-            assert_eq!(samples_bits, samples_ranges, "{case}: the sample counts differ");
-            let covered = ranges.pixels.iter().filter(|p| p[3] > 0.01).count();
-            assert!(covered > (SIZE * SIZE / 10) as usize, "{case}: only {covered} pixels show anything");
-            let differing = bits.pixels.iter().zip(&ranges.pixels).filter(|(a, b)| a != b).count();
-            assert_eq!(differing, 0, "{case}: {differing} pixels differ with block bits");
-        }
-    }
-}
