@@ -111,15 +111,20 @@ impl Integrand for EmissionAbsorption<'_> {
     fn sample(&mut self, sample: Sample) -> ControlFlow<()> {
         let Some(table) = self.table else { return ControlFlow::Continue(()) };
         let entry = table.lookup(sample.value);
-        if entry.w <= 0.0 {
-            return ControlFlow::Continue(());
-        }
         let premultiplied = match self.tint {
             None => entry.truncate(),
             Some(tint) => tint * entry.w,
         };
+        // A transparent sample (`w = 0`: its premultiplied colour is 0 too) adds `T·0` and multiplies `T` by 1,
+        // which changes no bit: unshaded, it is composited like any other (a data-dependent branch per sample
+        // costs more than the arithmetic); shaded, it is passed over before the lighting.
         let color = match &self.light {
-            Some(light) => light.shade(premultiplied, entry.w, Vec3::from(sample.gradient) * self.gradient_scale),
+            Some(light) => {
+                if entry.w <= 0.0 {
+                    return ControlFlow::Continue(());
+                }
+                light.shade(premultiplied, entry.w, Vec3::from(sample.gradient) * self.gradient_scale)
+            }
             None => premultiplied,
         };
         self.color += self.transmittance * color;
