@@ -188,4 +188,48 @@ mod tests {
         // σ(0.6) = −ln(1 − 0.18) per unit; seven steps of 0.2973 units: α = 1 − 0.82^2.08 ≈ 0.338.
         assert!((alpha_a - 0.338).abs() < 2e-3, "seven steps: {alpha_a}");
     }
+
+    #[test]
+    fn transparent_samples_change_no_bit() {
+        // Invisible below 0.4 (a ramp of colour that opacity 0 must hide), visible above; unshaded and coloured by
+        // level, both of which composite transparent samples rather than branch on them.
+        let tf = TransferFunction::new(
+            vec![
+                [0.0, 1.0, 0.7, 0.2, 0.0],
+                [0.4, 0.9, 0.8, 0.1, 0.0],
+                [0.5, 0.3, 0.6, 0.9, 0.4],
+                [1.0, 1.0, 1.0, 1.0, 0.9],
+            ],
+            Some(1.0),
+        )
+        .expect("valid function");
+        let lut = TransferLut::new(&tf, 0.0, 1.0, 1.0);
+        for colour_by_level in [false, true] {
+            let settings = EmissionAbsorptionSettings::new(&RenderSettings {
+                opacity_cutoff: 1.0,
+                colour_by_level,
+                ..Default::default()
+            });
+            let step = StepLength::at_most(0.3);
+            let mut visible_only = EmissionAbsorption::new(&lut, &settings, DVec3::Z);
+            let mut with_transparent = EmissionAbsorption::new(&lut, &settings, DVec3::Z);
+            for ray in [&mut visible_only, &mut with_transparent] {
+                ray.set_step(step);
+                ray.set_level(2);
+            }
+            for k in 0..40 {
+                let visible = 0.45 + 0.013 * k as f32;
+                let _ = visible_only.sample(Sample { t: k as f64, value: visible, gradient: [0.0; 3] });
+                let _ = with_transparent.sample(Sample { t: k as f64, value: visible, gradient: [0.0; 3] });
+                // Values whose table entries (and the one after, which the lookup interpolates) have opacity 0.
+                for hidden in [0.0, 0.1 + 0.007 * k as f32, 0.38, f32::NAN, -3.0] {
+                    let _ = with_transparent.sample(Sample { t: k as f64, value: hidden, gradient: [1.0, 0.0, 0.0] });
+                }
+            }
+            let ((a, alpha_a), (b, alpha_b)) = (visible_only.result(), with_transparent.result());
+            assert!(alpha_a > 0.5, "the visible samples accumulate: {alpha_a}");
+            assert_eq!(alpha_a.to_bits(), alpha_b.to_bits(), "colour by level {colour_by_level}");
+            assert_eq!(a.map(f32::to_bits), b.map(f32::to_bits), "colour by level {colour_by_level}");
+        }
+    }
 }
