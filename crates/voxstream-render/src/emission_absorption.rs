@@ -9,6 +9,7 @@ use std::ops::ControlFlow;
 
 use glam::{DVec3, Vec3};
 
+use crate::block_visibility::BlockVisibility;
 use crate::integrand::{Integrand, Sample};
 use crate::lighting::{LightingSettings, RayLight};
 use crate::settings::RenderSettings;
@@ -50,6 +51,9 @@ pub struct EmissionAbsorption<'a> {
     /// Premultiplied colour so far.
     color: Vec3,
     transmittance: f32,
+    /// The bits of [`Integrand::can_contribute`] per occupancy block, when the caller made them for this ray's
+    /// transfer function and tree view ([`EmissionAbsorption::with_block_visibility`]).
+    block_visibility: Option<&'a BlockVisibility>,
 }
 
 impl<'a> EmissionAbsorption<'a> {
@@ -70,7 +74,16 @@ impl<'a> EmissionAbsorption<'a> {
             tint: None,
             color: Vec3::ZERO,
             transmittance: 1.0,
+            block_visibility: None,
         }
+    }
+
+    /// The same ray, reading occupancy blocks' visibility from `visibility`, which must have been made for the
+    /// transfer function `lut` of this ray and the tree view it is traced through.
+    #[inline(always)]
+    pub fn with_block_visibility(mut self, visibility: &'a BlockVisibility) -> EmissionAbsorption<'a> {
+        self.block_visibility = Some(visibility);
+        self
     }
 
     /// Premultiplied `[r, g, b]` and opacity.
@@ -88,6 +101,11 @@ impl Integrand for EmissionAbsorption<'_> {
     #[inline(always)]
     fn contributes_throughout(&self, lower: f32, upper: f32) -> bool {
         self.lut.is_visible_throughout(lower, upper)
+    }
+
+    #[inline(always)]
+    fn block_visibility(&self) -> Option<&BlockVisibility> {
+        self.block_visibility
     }
 
     #[inline]

@@ -17,6 +17,7 @@ use std::ops::ControlFlow;
 
 use voxstream_core::{Dequantize, PoolVoxels};
 
+use crate::block_visibility::BlockVisibility;
 use crate::step_table::StepLength;
 
 /// One sample of the field along a ray.
@@ -85,6 +86,15 @@ pub trait Integrand {
     fn contributes_throughout(&self, lower: f32, upper: f32) -> bool {
         let _ = (lower, upper);
         false
+    }
+
+    /// The bits of [`Integrand::can_contribute`] for every occupancy block, computed once per brick and pass
+    /// ([`BlockVisibility`]), when this integrand has them: the traversal then reads a bit per block instead of
+    /// testing its range. They must have been made for this integrand's configuration and the traversal's tree view
+    /// (`None`, the default, is always correct).
+    #[inline(always)]
+    fn block_visibility(&self) -> Option<&BlockVisibility> {
+        None
     }
 
     /// Whether [`Sample::gradient`] is needed (it costs a few operations per sample).

@@ -26,6 +26,7 @@
 //! assert!(lut.lookup(1.0).sigma > lut.lookup(0.5).sigma);
 //! ```
 
+pub mod block_visibility;
 pub mod camera;
 pub mod cell_intersection;
 pub mod cell_walk;
@@ -47,6 +48,7 @@ pub mod surfaces_in_volume;
 pub mod transfer_function;
 pub mod traversal;
 
+pub use block_visibility::BlockVisibility;
 pub use camera::{Camera, CameraFrame};
 pub use error::RenderError;
 pub use frame::{

@@ -6,6 +6,7 @@
 use glam::DVec3;
 use voxstream_core::{FeedbackBuffer, Request, TreeView};
 
+use crate::block_visibility::BlockVisibility;
 use crate::emission_absorption::{EmissionAbsorption, EmissionAbsorptionSettings};
 use crate::frame::{trace_one_by_one, PixelTracer};
 use crate::sampler::LANES;
@@ -22,6 +23,9 @@ pub struct RayCaster<'a> {
     ray_packets: bool,
     /// Whether samples need gradients (Phong shading).
     shaded: bool,
+    /// Which occupancy blocks the transfer function can see, per brick of this pass's view
+    /// ([`RenderSettings::block_visibility_bits`]).
+    block_visibility: Option<BlockVisibility>,
 }
 
 impl<'a> RayCaster<'a> {
@@ -38,6 +42,19 @@ impl<'a> RayCaster<'a> {
             integrand: EmissionAbsorptionSettings::new(settings),
             ray_packets: settings.ray_packets,
             shaded: settings.shading == Shading::Phong,
+            block_visibility: settings.block_visibility_bits.then(|| BlockVisibility::new(&view)),
+        }
+    }
+}
+
+impl RayCaster<'_> {
+    /// A ray's integrand, with this pass's block bits when they are on.
+    #[inline(always)]
+    fn ray_integrand(&self, direction: DVec3) -> EmissionAbsorption<'_> {
+        let integrand = EmissionAbsorption::new(self.lut, &self.integrand, direction);
+        match &self.block_visibility {
+            Some(visibility) => integrand.with_block_visibility(visibility),
+            None => integrand,
         }
     }
 }
@@ -57,7 +74,7 @@ impl PixelTracer for RayCaster<'_> {
         requests: &mut Vec<Request>,
         path: &mut DescentPath,
     ) -> ([f32; 3], f32) {
-        let mut integrand = EmissionAbsorption::new(self.lut, &self.integrand, direction);
+        let mut integrand = self.ray_integrand(direction);
         self.traversal.trace(&Ray { origin, direction, spread, start: 0.0 }, &mut integrand, stats, requests, path);
         integrand.result()
     }
@@ -78,7 +95,7 @@ impl PixelTracer for RayCaster<'_> {
         }
         let next_ray = || {
             let (id, direction) = rays.next()?;
-            let integrand = EmissionAbsorption::new(self.lut, &self.integrand, direction);
+            let integrand = self.ray_integrand(direction);
             Some((id, Ray { origin, direction, spread, start: 0.0 }, integrand))
         };
         let finish = |id, integrand: &EmissionAbsorption<'_>, requested| {

@@ -101,6 +101,11 @@ pub struct RenderSettings {
     /// Trace [`crate::sampler::LANES`] rays side by side, their samples taken together (the same bits as one ray
     /// at a time, which stays as the reference; off only to test that). Volume rendering only.
     pub ray_packets: bool,
+    /// Find the samples in occupancy blocks that can contribute from bits computed once per brick and pass, eight
+    /// samples at a time ([`crate::block_visibility`]), instead of testing each block's range as the ray enters it;
+    /// the same image as the range tests, which stay as the reference (off only to test that). Volume rendering
+    /// only.
+    pub block_visibility_bits: bool,
     /// Instructions the ray loop uses (detected at run time by default; the image is the same either way).
     pub instruction_set: InstructionSet,
     /// Isosurfaces to draw instead of the volume, or inside it with [`RenderSettings::surfaces_in_volume`] (Knoll
@@ -185,6 +190,7 @@ impl Default for RenderSettings {
             instruction_set: InstructionSet::Detect,
             sample_batches: true,
             ray_packets: true,
+            block_visibility_bits: true,
             surfaces: Vec::new(),
             shadows: false,
             surface_normals: SurfaceNormals::Cell,

@@ -36,9 +36,10 @@ use voxstream_core::{
     TreeView, Voxel, BLOCK_CELLS,
 };
 
+use crate::block_visibility::BrickBlocks;
 use crate::integrand::{BrickSpan, Integrand, Sample};
 use crate::sampler::{
-    values_across, values_along, values_and_gradients_across, values_and_gradients_along, Cell, LANES,
+    floor_index, values_across, values_along, values_and_gradients_across, values_and_gradients_along, Cell, LANES,
 };
 use crate::settings::RenderSettings;
 use crate::step_table::StepLength;
@@ -193,6 +194,8 @@ pub struct Traversal<'a> {
     n_shift: Option<u32>,
     /// Edge of the finest level's nodes (unit cube).
     finest_node: f64,
+    /// Occupancy blocks per brick axis.
+    blocks_per_axis: usize,
 }
 
 impl<'a> Traversal<'a> {
@@ -226,6 +229,7 @@ impl<'a> Traversal<'a> {
             level_voxel: scale.map(|s| 1.0 / (s * shape.brick_size as f64)),
             n_shift: shape.n.is_power_of_two().then(|| shape.n.trailing_zeros()),
             finest_node: 1.0 / scale[(shape.max_level as usize).min(MAX_TABLE_LEVELS - 1)],
+            blocks_per_axis: shape.blocks_per_axis(),
         }
     }
 
@@ -418,7 +422,7 @@ impl<'a> Traversal<'a> {
                     // The next run of the segment, if any.
                     let k = run.resume.unwrap_or(run.end);
                     let segment = (run.first, run.dt, run.count);
-                    match self.next_run(&run.line, None, segment, k, LONG_RUN, &lane.integrand) {
+                    match self.run_from(&run.line, None, segment, k, LONG_RUN, &lane.integrand) {
                         Some((from, to, resume)) => (run.k, run.end, run.resume) = (from, to, resume),
                         None => lane.run = None,
                     }
@@ -462,7 +466,7 @@ impl<'a> Traversal<'a> {
         }
         let line = self.brick_line(ray, &fine, first, dt);
         let (k, end, resume) = if check_blocks {
-            self.next_run(&line, None, (first, dt, count), 0, LONG_RUN, integrand)?
+            self.run_from(&line, None, (first, dt, count), 0, LONG_RUN, integrand)?
         } else {
             (0, count, None)
         };
@@ -679,7 +683,7 @@ impl<'a> Traversal<'a> {
         while k < count {
             // The next run of samples in blocks that can contribute, and where the one after it may start.
             let (run_start, run_end, resume) = if check_blocks {
-                match self.next_run(&fine_line, coarse_brick_line, (first, dt, count), k, 0, integrand) {
+                match self.run_from(&fine_line, coarse_brick_line, (first, dt, count), k, 0, integrand) {
                     Some(run) => run,
                     None => break,
                 }
@@ -759,6 +763,86 @@ impl<'a> Traversal<'a> {
             k + 1
         };
         (contributes, past)
+    }
+
+    /// The next run of samples at or after `k` of a segment whose blocks can contribute, as `(start, end, resume)`
+    /// (see [`Traversal::next_run`]): from the integrand's block bits when it has them and the segment samples one
+    /// brick ([`Traversal::visible_run`]: runs as long as the blocks allow, `long_run` does not apply), else from the
+    /// blocks' ranges.
+    #[inline(always)]
+    fn run_from<I: Integrand>(
+        &self,
+        fine: &BrickLine<'_>,
+        coarse: Option<&BrickLine<'_>>,
+        segment: (f64, f64, u32),
+        k: u32,
+        long_run: u32,
+        integrand: &I,
+    ) -> Option<(u32, u32, Option<u32>)> {
+        match (coarse, integrand.block_visibility()) {
+            (None, Some(visibility)) => {
+                let bits = visibility.of_brick(&self.view, fine.slot, |lo, hi| integrand.can_contribute(lo, hi));
+                self.visible_run(fine, bits, segment.2, k).map(|(start, end)| (start, end, None))
+            }
+            _ => self.next_run(fine, coarse, segment, k, long_run, integrand),
+        }
+    }
+
+    /// The first run `start..end` of samples at or after `k` (of `count`) of a brick line whose cells lie in blocks
+    /// whose bits say they can contribute: every sample of the run does, the one at `end` (if any) does not. Eight
+    /// samples at a time ([`Traversal::visible_mask`]). `None` when no sample is left that can.
+    #[inline(always)]
+    fn visible_run(&self, line: &BrickLine<'_>, bits: BrickBlocks<'_>, count: u32, mut k: u32) -> Option<(u32, u32)> {
+        let start = loop {
+            if k >= count {
+                return None;
+            }
+            let mask = self.visible_mask(line, bits, k, count);
+            if mask != 0 {
+                break k + mask.trailing_zeros();
+            }
+            k += LANES as u32;
+        };
+        // Samples past `count` read as "cannot", so the run ends at `count` at the latest.
+        let mut k = start;
+        loop {
+            let cannot = !self.visible_mask(line, bits, k, count) & ((1 << LANES) - 1);
+            if cannot != 0 {
+                return Some((start, k + cannot.trailing_zeros()));
+            }
+            k += LANES as u32;
+        }
+    }
+
+    /// Bit `j` set when sample `k + j` (`j < LANES`, `k + j < count`) of a brick line lies in a cell whose block can
+    /// contribute. The cells are located as [`Cell::locate`] and the samplers locate them (the position
+    /// `start + k·delta` in `f32`, clamped to the brick), so a sample's bit is the bit of the block it reads.
+    #[inline(always)]
+    fn visible_mask(&self, line: &BrickLine<'_>, bits: BrickBlocks<'_>, k: u32, count: u32) -> u32 {
+        let b = self.stored;
+        let max = (b - 1) as f32;
+        let last_cell = b as u32 - 2;
+        let blocks = self.blocks_per_axis as u32;
+        let kf = k as f32;
+        let mut block = [0u32; LANES];
+        for (j, block) in block.iter_mut().enumerate() {
+            // `k + j` as a float: exact below 2²⁴, the same bits as the samplers' counters.
+            let kj = kf + j as f32;
+            let mut index = 0;
+            for a in (0..3).rev() {
+                let c = (line.start[a] + kj * line.delta[a]).max(0.0).min(max);
+                let (i, _) = floor_index(c, last_cell);
+                index = index * blocks + i / BLOCK_CELLS as u32;
+            }
+            *block = index;
+        }
+        let mut mask = 0;
+        for (j, &block) in block.iter().enumerate() {
+            if k + (j as u32) < count && bits.contributes(block as usize) {
+                mask |= 1 << j;
+            }
+        }
+        mask
     }
 
     /// The next run of samples at or after `k` whose blocks can contribute, as `(start, end, resume)`: one run
