@@ -78,11 +78,11 @@ impl<'a> EmissionAbsorption<'a> {
         }
     }
 
-    /// The same ray, reading occupancy blocks' visibility from `visibility`, which must have been made for the
-    /// transfer function `lut` of this ray and the tree view it is traced through.
+    /// The same ray, reading occupancy blocks' visibility from `visibility` when given, which must have been made
+    /// for the transfer function `lut` of this ray and the tree view it is traced through.
     #[inline(always)]
-    pub fn with_block_visibility(mut self, visibility: &'a BlockVisibility) -> EmissionAbsorption<'a> {
-        self.block_visibility = Some(visibility);
+    pub fn with_block_visibility(mut self, visibility: Option<&'a BlockVisibility>) -> EmissionAbsorption<'a> {
+        self.block_visibility = visibility;
         self
     }
 

@@ -271,6 +271,44 @@ struct TileLoop<'t, T> {
     paths: &'t mut [DescentPath; LANES],
 }
 
+/// The rays of a tile's pixels traced this pass (pending, on the pass's stride), row by row, as `(index in the
+/// tile, direction in volume space with t still in world units)`. An iterator of its own rather than adapters and
+/// closures, so that its `next` is inlined into the tile loop (and compiled for its instruction set).
+struct TileRays<'t> {
+    frame: &'t CameraFrame,
+    columns: std::ops::Range<u32>,
+    rows: std::ops::Range<u32>,
+    x: u32,
+    y: u32,
+    index: usize,
+    width: u32,
+    height: u32,
+    scale: glam::DVec3,
+    pending: &'t [bool],
+    stride: u32,
+}
+
+impl Iterator for TileRays<'_> {
+    type Item = (usize, glam::DVec3);
+
+    #[inline(always)]
+    fn next(&mut self) -> Option<(usize, glam::DVec3)> {
+        while self.y < self.rows.end && !self.columns.is_empty() {
+            let (x, y, index) = (self.x, self.y, self.index);
+            self.index += 1;
+            self.x += 1;
+            if self.x == self.columns.end {
+                self.x = self.columns.start;
+                self.y += 1;
+            }
+            if self.pending[(y * self.width + x) as usize] && x % self.stride == 0 && y % self.stride == 0 {
+                return Some((index, self.frame.direction(x, y, self.width, self.height) / self.scale));
+            }
+        }
+        None
+    }
+}
+
 impl<T: PixelTracer> pulp::WithSimd for TileLoop<'_, T> {
     type Output = ();
 
@@ -297,12 +335,19 @@ impl<T: PixelTracer> pulp::WithSimd for TileLoop<'_, T> {
         // Pixels not traced this pass keep their value and their pending flag.
         result.pixels.resize(count, None);
         result.pending.resize(count, false);
-        let traced = rows
-            .flat_map(|y| columns.clone().map(move |x| (x, y)))
-            .enumerate()
-            .filter(|&(_, (x, y))| pending[(y * width + x) as usize] && x % stride == 0 && y % stride == 0);
-        // In volume space, with t still measured in world units.
-        let rays = traced.map(|(index, (x, y))| (index, frame.direction(x, y, width, height) / scale));
+        let rays = TileRays {
+            frame,
+            x: columns.start,
+            y: rows.start,
+            columns,
+            rows,
+            index: 0,
+            width,
+            height,
+            scale,
+            pending,
+            stride,
+        };
         let (pixels, flags) = (&mut result.pixels, &mut result.pending);
         caster.trace_rays(
             origin,

@@ -61,4 +61,4 @@ pub use isosurface::{IsoSurface, SurfaceNormals, SurfaceParameters, SurfaceSetti
 pub use ray_caster::RayCaster;
 pub use settings::{level_colour, PhongCoefficients, RenderSettings, Shading, VolumePlacement};
 pub use transfer_function::{TransferFunction, TransferLut};
-pub use traversal::{DescentPath, Ray, RayStats, Traversal};
+pub use traversal::{DescentPath, Ray, RaySource, RayStats, Traversal};

@@ -12,7 +12,7 @@ use crate::frame::{trace_one_by_one, PixelTracer};
 use crate::sampler::LANES;
 use crate::settings::{RenderSettings, Shading};
 use crate::transfer_function::TransferLut;
-use crate::traversal::{DescentPath, Ray, RayStats, Traversal};
+use crate::traversal::{DescentPath, Ray, RaySource, RayStats, Traversal};
 
 /// Traces emission–absorption rays against one frame's tree view, writing feedback.
 pub struct RayCaster<'a> {
@@ -51,11 +51,25 @@ impl RayCaster<'_> {
     /// A ray's integrand, with this pass's block bits when they are on.
     #[inline(always)]
     fn ray_integrand(&self, direction: DVec3) -> EmissionAbsorption<'_> {
-        let integrand = EmissionAbsorption::new(self.lut, &self.integrand, direction);
-        match &self.block_visibility {
-            Some(visibility) => integrand.with_block_visibility(visibility),
-            None => integrand,
-        }
+        EmissionAbsorption::new(self.lut, &self.integrand, direction)
+            .with_block_visibility(self.block_visibility.as_ref())
+    }
+}
+
+/// The pixels' rays of one tile, each with its emission–absorption integrand.
+struct PixelRays<'c, 'a, R> {
+    caster: &'c RayCaster<'a>,
+    rays: R,
+    origin: DVec3,
+    spread: f64,
+}
+
+impl<'c, R: Iterator<Item = (usize, DVec3)>> RaySource<EmissionAbsorption<'c>> for PixelRays<'c, '_, R> {
+    #[inline(always)]
+    fn next_ray(&mut self) -> Option<(usize, Ray, EmissionAbsorption<'c>)> {
+        let (id, direction) = self.rays.next()?;
+        let ray = Ray { origin: self.origin, direction, spread: self.spread, start: 0.0 };
+        Some((id, ray, self.caster.ray_integrand(direction)))
     }
 }
 
@@ -83,7 +97,7 @@ impl PixelTracer for RayCaster<'_> {
     fn trace_rays(
         &self,
         origin: DVec3,
-        mut rays: impl Iterator<Item = (usize, DVec3)>,
+        rays: impl Iterator<Item = (usize, DVec3)>,
         spread: f64,
         stats: &mut RayStats,
         requests: &mut Vec<Request>,
@@ -93,11 +107,7 @@ impl PixelTracer for RayCaster<'_> {
         if !self.ray_packets {
             return trace_one_by_one(self, origin, rays, spread, stats, requests, &mut paths[0], emit);
         }
-        let next_ray = || {
-            let (id, direction) = rays.next()?;
-            let integrand = self.ray_integrand(direction);
-            Some((id, Ray { origin, direction, spread, start: 0.0 }, integrand))
-        };
+        let next_ray = PixelRays { caster: self, rays, origin, spread };
         let finish = |id, integrand: &EmissionAbsorption<'_>, requested| {
             let (color, alpha) = integrand.result();
             emit(id, color, alpha, requested);

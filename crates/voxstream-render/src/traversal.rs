@@ -163,6 +163,14 @@ impl BrickLine<'_> {
     }
 }
 
+/// The rays [`Traversal::trace_stream`] traces, each with its integrand. A trait rather than a closure so that an
+/// implementation can be inlined into the tile loop, and compiled for its instruction set, whatever its size (a
+/// closure's inlining is up to the compiler).
+pub trait RaySource<I> {
+    /// The next ray: its id, the ray and its integrand; `None` once they have run out.
+    fn next_ray(&mut self) -> Option<(usize, Ray, I)>;
+}
+
 /// Walks rays through one frame's tree view, writing feedback and handing samples to an integrand.
 pub struct Traversal<'a> {
     view: TreeView<'a>,
@@ -288,7 +296,7 @@ impl<'a> Traversal<'a> {
         }
     }
 
-    /// Traces the rays `next_ray` hands out, [`LANES`] side by side (Knoll et al.'s packets, seed 002 §4, as a
+    /// Traces the rays `next_ray` hands out ([`RaySource`]), [`LANES`] side by side (Knoll et al.'s packets, seed 002 §4, as a
     /// stream): each lane walks its own ray exactly as [`Traversal::trace`] does (same descents, segments, steps,
     /// skipped blocks and samples, so the same bits), but the samples of all lanes are taken together, one per lane
     /// per step, by [`values_across`], each lane in its own brick. A lane whose ray ends takes the next ray at
@@ -302,7 +310,7 @@ impl<'a> Traversal<'a> {
     #[inline(always)]
     pub fn trace_stream<I: Integrand, const GRADIENT: bool>(
         &self,
-        next_ray: impl FnMut() -> Option<(usize, Ray, I)>,
+        next_ray: impl RaySource<I>,
         finish: impl FnMut(usize, &I, bool),
         stats: &mut RayStats,
         requests: &mut Vec<Request>,
@@ -324,7 +332,7 @@ impl<'a> Traversal<'a> {
     fn trace_stream_in<V: Voxel, I: Integrand, const GRADIENT: bool>(
         &self,
         voxels: &[V],
-        mut next_ray: impl FnMut() -> Option<(usize, Ray, I)>,
+        mut next_ray: impl RaySource<I>,
         mut finish: impl FnMut(usize, &I, bool),
         stats: &mut RayStats,
         requests: &mut Vec<Request>,
@@ -398,7 +406,7 @@ impl<'a> Traversal<'a> {
         requests: &mut Vec<Request>,
     ) -> Option<&'l LaneRun<'a>>
     where
-        N: FnMut() -> Option<(usize, Ray, I)>,
+        N: RaySource<I>,
         F: FnMut(usize, &I, bool),
     {
         loop {
@@ -406,7 +414,7 @@ impl<'a> Traversal<'a> {
                 if *sources.exhausted {
                     return None;
                 }
-                let Some((id, ray, integrand)) = (sources.next_ray)() else {
+                let Some((id, ray, integrand)) = sources.next_ray.next_ray() else {
                     *sources.exhausted = true;
                     return None;
                 };
@@ -793,24 +801,26 @@ impl<'a> Traversal<'a> {
     /// samples at a time ([`Traversal::visible_mask`]). `None` when no sample is left that can.
     #[inline(always)]
     fn visible_run(&self, line: &BrickLine<'_>, bits: BrickBlocks<'_>, count: u32, mut k: u32) -> Option<(u32, u32)> {
-        let start = loop {
+        const ALL: u32 = (1 << LANES) - 1;
+        let (start, mut cannot) = loop {
             if k >= count {
                 return None;
             }
             let mask = self.visible_mask(line, bits, k, count);
             if mask != 0 {
-                break k + mask.trailing_zeros();
+                let offset = mask.trailing_zeros();
+                // The samples of this eight from the start on that cannot contribute (or lie past `count`).
+                break (k + offset, !mask & ALL & (ALL << offset));
             }
             k += LANES as u32;
         };
         // Samples past `count` read as "cannot", so the run ends at `count` at the latest.
-        let mut k = start;
         loop {
-            let cannot = !self.visible_mask(line, bits, k, count) & ((1 << LANES) - 1);
             if cannot != 0 {
                 return Some((start, k + cannot.trailing_zeros()));
             }
             k += LANES as u32;
+            cannot = !self.visible_mask(line, bits, k, count) & ALL;
         }
     }
 
