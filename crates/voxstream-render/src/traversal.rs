@@ -48,10 +48,11 @@ use crate::step_table::StepLength;
 const MAX_TABLE_LEVELS: usize = 64;
 /// A ray may not cross more segments than this (guards against any numerical stall).
 const MAX_SEGMENTS: u32 = 1 << 20;
-/// In a lane of [`Traversal::trace_stream`], a run of samples is extended through the following blocks that can
-/// contribute until it is this long, so that the lanes' runs (the shortest of which ends a burst) are long. One ray
-/// alone extends none: checking blocks ahead costs more than it saves where rays turn opaque within a few samples
-/// (the sponge: about 2 samples per ray).
+/// In a lane of [`Traversal::trace_stream`] whose runs come from the blocks' range tests (integrands without block
+/// bits), a run of samples is extended through the following blocks that can contribute until it is this long, so
+/// that the lanes' runs (the shortest of which ends a burst) are long. One ray alone extends none: checking blocks
+/// ahead costs more than it saves where rays turn opaque within a few samples (the sponge: about 2 samples per ray).
+/// Runs read from block bits are as long as the blocks allow ([`Traversal::visible_run`]).
 const LONG_RUN: u32 = 4 * LANES as u32;
 
 /// Counters of one ray batch.
@@ -296,10 +297,10 @@ impl<'a> Traversal<'a> {
         }
     }
 
-    /// Traces the rays `next_ray` hands out ([`RaySource`]), [`LANES`] side by side (Knoll et al.'s packets, seed 002 §4, as a
-    /// stream): each lane walks its own ray exactly as [`Traversal::trace`] does (same descents, segments, steps,
-    /// skipped blocks and samples, so the same bits), but the samples of all lanes are taken together, one per lane
-    /// per step, by [`values_across`], each lane in its own brick. A lane whose ray ends takes the next ray at
+    /// Traces the rays `next_ray` hands out ([`RaySource`]), [`LANES`] side by side (Knoll et al.'s packets, seed
+    /// 002 §4, as a stream): each lane walks its own ray exactly as [`Traversal::trace`] does (same descents,
+    /// segments, steps, skipped blocks and samples, so the same bits), but the samples of all lanes are taken
+    /// together, one per lane per step, by [`values_across`], each lane in its own brick. A lane whose ray ends takes the next ray at
     /// once, so the lanes stay full until the rays run out; rays therefore finish out of order, and `finish` gets
     /// each one's id, integrand and whether it made requests. Segments that blend levels or need gradients are
     /// marched by their lane alone ([`Traversal::march_bricks`]); span integrands ([`Integrand::TAKES_SPANS`]) take
