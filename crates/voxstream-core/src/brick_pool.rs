@@ -28,27 +28,62 @@ impl StoredVoxels {
         }
     }
 
-    /// Writes a brick of 16-bit voxels at `start` (appending when `start` is the end), narrowed if the pool is.
-    fn write(&mut self, start: usize, voxels: &[u16], format: VoxelFormat) {
-        match (self, format) {
-            (StoredVoxels::Wide(pool), _) => {
-                if start >= pool.len() {
-                    pool.extend_from_slice(voxels);
-                } else {
-                    pool[start..start + voxels.len()].copy_from_slice(voxels);
-                }
-            }
-            (StoredVoxels::Narrow(pool), VoxelFormat::Narrow { scale, offset }) => {
-                if start >= pool.len() {
-                    pool.resize(start + voxels.len(), 0);
-                }
+    /// The voxels of one brick in `format`: kept as they are, or narrowed to bytes.
+    fn of_brick(voxels: &[u16], format: VoxelFormat) -> StoredVoxels {
+        match format {
+            VoxelFormat::Wide => StoredVoxels::Wide(voxels.to_vec()),
+            VoxelFormat::Narrow { scale, offset } => {
                 let narrowing = Narrowing::new(scale, offset);
-                for (out, &v) in pool[start..start + voxels.len()].iter_mut().zip(voxels) {
-                    *out = narrowing.byte(v);
-                }
+                StoredVoxels::Narrow(voxels.iter().map(|&v| narrowing.byte(v)).collect())
             }
-            (StoredVoxels::Narrow(_), VoxelFormat::Wide) => unreachable!("a narrow pool has a narrow format"),
         }
+    }
+
+    /// Copies one brick of the same format in at `start` (appending when `start` is the end).
+    fn write(&mut self, start: usize, brick: &StoredVoxels) {
+        fn put<T: Copy>(pool: &mut Vec<T>, start: usize, brick: &[T]) {
+            if start >= pool.len() {
+                pool.extend_from_slice(brick);
+            } else {
+                pool[start..start + brick.len()].copy_from_slice(brick);
+            }
+        }
+        match (self, brick) {
+            (StoredVoxels::Wide(pool), StoredVoxels::Wide(brick)) => put(pool, start, brick),
+            (StoredVoxels::Narrow(pool), StoredVoxels::Narrow(brick)) => put(pool, start, brick),
+            _ => unreachable!("a prepared brick has its pool's format"),
+        }
+    }
+}
+
+/// A brick ready for the pool: its voxels in the pool's format, and the value ranges renderers skip by, computed from
+/// the stored voxels. Preparing is the per-voxel work of an insert, so production workers do it in parallel
+/// ([`PreparedBrick::new`]) and the insert, which runs on one thread, only copies.
+#[derive(Debug, Clone)]
+pub struct PreparedBrick {
+    voxels: StoredVoxels,
+    /// `[min, max]` of the brick, in 16-bit units.
+    range: [u16; 2],
+    /// `[min, max]` of each occupancy block, in 16-bit units.
+    block_ranges: Vec<[u16; 2]>,
+}
+
+impl PreparedBrick {
+    /// Prepares one brick of 16-bit voxels (`shape.voxels_per_brick()` of them) for a pool of `format`.
+    pub fn new(shape: &TreeShape, format: VoxelFormat, voxels: &[u16]) -> PreparedBrick {
+        assert_eq!(voxels.len(), shape.voxels_per_brick(), "a brick has the shape's voxels");
+        let stored = StoredVoxels::of_brick(voxels, format);
+        let mut block_ranges = vec![[0u16; 2]; shape.blocks_per_brick()];
+        // Ranges of what is stored (for 8-bit voxels, the bytes' values, which differ from the 16-bit voxels' by up
+        // to half a step), so that skipping by them stays exact.
+        let range = match &stored {
+            StoredVoxels::Wide(brick) => brick_ranges(shape, brick, &mut block_ranges),
+            StoredVoxels::Narrow(brick) => brick_ranges(shape, brick, &mut block_ranges),
+        };
+        for range in &mut block_ranges {
+            *range = format.wide_bounds(*range);
+        }
+        PreparedBrick { voxels: stored, range: format.wide_bounds(range), block_ranges }
     }
 }
 
@@ -63,8 +98,12 @@ pub const VOXEL_MAX: u16 = u16::MAX;
 
 /// Quantises a value in `[0, 1]` to a voxel (clamped).
 #[inline]
+#[allow(clippy::manual_clamp)] // `clamp` keeps NaN; `max` then `min` turn it into 0, as the cast does.
 pub fn quantize(value: f32) -> u16 {
-    (value.clamp(0.0, 1.0) * VOXEL_MAX as f32 + 0.5) as u16
+    // `(value.clamp(0.0, 1.0) · 65535 + 0.5) as u16` (NaN to 0), written so that it vectorises: the integer part,
+    // below 2²³, converted by adding 2²³ and taking the float's low mantissa bits.
+    let rounded = (value.max(0.0).min(1.0) * VOXEL_MAX as f32 + 0.5).floor();
+    (rounded + 8_388_608.0).to_bits() as u16
 }
 
 /// The value a voxel stands for.
@@ -188,46 +227,41 @@ impl BrickPool {
     /// Stores `voxels` for `owner`. Returns the slot and, if a slot was recycled, the node that owned it (the caller
     /// must clear that node's brick pointer). `None` when every brick was used during `frame`.
     pub fn insert(&mut self, owner: NodeId, voxels: &[u16], frame: u32) -> Option<(BrickSlot, Option<NodeId>)> {
-        self.insert_avoiding(owner, voxels, frame, |_| false).map(|(slot, evicted, _)| (slot, evicted))
+        let brick = self.prepare(voxels);
+        self.insert_avoiding(owner, &brick, frame, |_| false).map(|(slot, evicted, _)| (slot, evicted))
     }
 
-    /// As [`BrickPool::insert`], but a brick to evict is one whose owner `keep` lets go, if one of the oldest
-    /// [`crate::lru::RECYCLE_SCAN`] is; else the oldest all the same, and the third value is `true`.
+    /// `voxels` prepared for this pool ([`PreparedBrick::new`] with its shape and format).
+    pub fn prepare(&self, voxels: &[u16]) -> PreparedBrick {
+        PreparedBrick::new(&self.shape, self.format, voxels)
+    }
+
+    /// As [`BrickPool::insert`] for a prepared brick, where a brick to evict is one whose owner `keep` lets go, if
+    /// one of the oldest [`crate::lru::RECYCLE_SCAN`] is; else the oldest all the same, and the third value is
+    /// `true`.
     pub fn insert_avoiding(
         &mut self,
         owner: NodeId,
-        voxels: &[u16],
+        brick: &PreparedBrick,
         frame: u32,
         mut keep: impl FnMut(NodeId) -> bool,
     ) -> Option<(BrickSlot, Option<NodeId>, bool)> {
-        debug_assert_eq!(voxels.len(), self.voxels_per_brick);
+        assert_eq!(brick.voxels.len(), self.voxels_per_brick, "a prepared brick has the pool's shape");
         let owners = &self.owners;
         let (allocation, yielded) = self.lru.allocate_avoiding(frame, |slot| keep(NodeId(owners[slot as usize])))?;
         let slot = allocation.slot() as usize;
         let start = slot * self.voxels_per_brick;
         let blocks = self.shape.blocks_per_brick();
-        let format = self.format;
         let fresh = start >= self.voxels.len();
-        self.voxels.write(start, voxels, format);
+        self.voxels.write(start, &brick.voxels);
         if fresh {
             self.owners.push(owner.0);
-            self.ranges.push([0, 0]);
-            self.block_ranges.resize(self.block_ranges.len() + blocks, [0, 0]);
-        }
-        // Ranges of what is stored (for 8-bit voxels, the bytes' values, which differ from the 16-bit voxels' by
-        // up to half a step), so that skipping by them stays exact.
-        let block_out = &mut self.block_ranges[slot * blocks..(slot + 1) * blocks];
-        let range = match &self.voxels {
-            StoredVoxels::Wide(pool) => brick_ranges(&self.shape, &pool[start..start + voxels.len()], block_out),
-            StoredVoxels::Narrow(pool) => brick_ranges(&self.shape, &pool[start..start + voxels.len()], block_out),
-        };
-        self.ranges[slot] = format.wide_bounds(range);
-        for range in block_out.iter_mut() {
-            *range = format.wide_bounds(*range);
-        }
-        if fresh {
+            self.ranges.push(brick.range);
+            self.block_ranges.extend_from_slice(&brick.block_ranges);
             return Some((BrickSlot(slot as u32), None, yielded));
         }
+        self.ranges[slot] = brick.range;
+        self.block_ranges[slot * blocks..(slot + 1) * blocks].copy_from_slice(&brick.block_ranges);
         let previous = std::mem::replace(&mut self.owners[slot], owner.0);
         let evicted = match allocation {
             Allocation::Recycled(_) => Some(NodeId(previous)),
@@ -249,12 +283,12 @@ impl BrickPool {
         self.capacity() - self.len()
     }
 
-    /// Stores `voxels` for `owner` in a free slot, never evicting: `None` when [`BrickPool::free_slots`] is 0.
-    pub fn insert_if_free(&mut self, owner: NodeId, voxels: &[u16], frame: u32) -> Option<BrickSlot> {
+    /// Stores `brick` for `owner` in a free slot, never evicting: `None` when [`BrickPool::free_slots`] is 0.
+    pub fn insert_if_free(&mut self, owner: NodeId, brick: &PreparedBrick, frame: u32) -> Option<BrickSlot> {
         if self.free_slots() == 0 {
             return None;
         }
-        let (slot, evicted) = self.insert(owner, voxels, frame)?;
+        let (slot, evicted, _) = self.insert_avoiding(owner, brick, frame, |_| false)?;
         debug_assert!(evicted.is_none(), "a free slot was available, nothing may be evicted");
         Some(slot)
     }
@@ -269,26 +303,49 @@ impl BrickPool {
 /// `i·E .. min((i+1)·E, B−1)` per axis, hence the voxels `i·E ..= min((i+1)·E, B−1)`, so every trilinear sample
 /// taken in one of its cells lies within its range.
 ///
-/// Returns the whole brick's `[min, max]`. Both in stored units.
-fn brick_ranges<V: Copy + Into<u16>>(shape: &TreeShape, voxels: &[V], out: &mut [[u16; 2]]) -> [u16; 2] {
-    let range = voxels.iter().fold([u16::MAX, 0], |[lo, hi], &v| [lo.min(v.into()), hi.max(v.into())]);
+/// Returns the whole brick's `[min, max]` (the blocks cover every voxel). Both in stored units.
+///
+/// Separable, so that the work on each voxel vectorises: whole rows are reduced element by element over each block's
+/// slices (z), then over its rows (y), and only the short rows left are reduced along x.
+fn brick_ranges<V: Copy + Ord + Into<u16>>(shape: &TreeShape, voxels: &[V], out: &mut [[u16; 2]]) -> [u16; 2] {
     let b = shape.stored_brick_size() as usize;
     let blocks = shape.blocks_per_axis();
     let span = |i: usize| i * BLOCK_CELLS..=((i + 1) * BLOCK_CELLS).min(b - 1);
-    for (index, range) in out.iter_mut().take(blocks * blocks * blocks).enumerate() {
-        let (bi, bj, bk) = (index % blocks, index / blocks % blocks, index / (blocks * blocks));
-        let mut lo_hi = [u16::MAX, 0];
-        for k in span(bk) {
-            for j in span(bj) {
-                let row = &voxels[(k * b + j) * b..(k * b + j) * b + b];
-                for &v in &row[span(bi)] {
-                    lo_hi = [lo_hi[0].min(v.into()), lo_hi[1].max(v.into())];
-                }
+    let min_into = |acc: &mut [V], row: &[V]| acc.iter_mut().zip(row).for_each(|(a, &v)| *a = (*a).min(v));
+    let max_into = |acc: &mut [V], row: &[V]| acc.iter_mut().zip(row).for_each(|(a, &v)| *a = (*a).max(v));
+    let slice = b * b;
+    let (mut slab_lo, mut slab_hi) = (voxels[..slice].to_vec(), voxels[..slice].to_vec());
+    let (mut rows_lo, mut rows_hi) = (voxels[..b].to_vec(), voxels[..b].to_vec());
+    let mut whole = [u16::MAX, 0];
+    for bk in 0..blocks {
+        // The block layer's slices reduced to one, element by element.
+        let layer = span(bk);
+        let first = &voxels[layer.start() * slice..(layer.start() + 1) * slice];
+        slab_lo.copy_from_slice(first);
+        slab_hi.copy_from_slice(first);
+        for k in layer.skip(1) {
+            min_into(&mut slab_lo, &voxels[k * slice..(k + 1) * slice]);
+            max_into(&mut slab_hi, &voxels[k * slice..(k + 1) * slice]);
+        }
+        for bj in 0..blocks {
+            // Then the block row's rows of that slice.
+            let rows = span(bj);
+            rows_lo.copy_from_slice(&slab_lo[rows.start() * b..(rows.start() + 1) * b]);
+            rows_hi.copy_from_slice(&slab_hi[rows.start() * b..(rows.start() + 1) * b]);
+            for j in rows.skip(1) {
+                min_into(&mut rows_lo, &slab_lo[j * b..(j + 1) * b]);
+                max_into(&mut rows_hi, &slab_hi[j * b..(j + 1) * b]);
+            }
+            // Then each block's stretch of the row left.
+            for bi in 0..blocks {
+                let lo = rows_lo[span(bi)].iter().copied().min().map_or(u16::MAX, Into::into);
+                let hi = rows_hi[span(bi)].iter().copied().max().map_or(0, Into::into);
+                out[(bk * blocks + bj) * blocks + bi] = [lo, hi];
+                whole = [whole[0].min(lo), whole[1].max(hi)];
             }
         }
-        *range = lo_hi;
     }
-    range
+    whole
 }
 
 #[cfg(test)]
@@ -303,6 +360,72 @@ mod tests {
         }
         assert_eq!(quantize(-1.0), 0);
         assert_eq!(quantize(2.0), VOXEL_MAX);
+    }
+
+    #[test]
+    fn quantize_equals_the_saturating_cast() {
+        let reference = |v: f32| (v.clamp(0.0, 1.0) * VOXEL_MAX as f32 + 0.5) as u16;
+        // Every float bit pattern on a stride that is prime to 2³², and the edges.
+        let mut bits = 0u32;
+        for _ in 0..(1u32 << 22) {
+            let v = f32::from_bits(bits);
+            assert_eq!(quantize(v), reference(v), "{v:e} ({bits:#x})");
+            bits = bits.wrapping_add(1021);
+        }
+        for v in [0.0, -0.0, 1.0, f32::MIN_POSITIVE, 0.5 / 65535.0, 1.0 - 0.5 / 65535.0, f32::INFINITY, f32::NAN] {
+            assert_eq!(quantize(v), reference(v), "{v:e}");
+            assert_eq!(quantize(-v), reference(-v), "{:e}", -v);
+        }
+        for voxel in 0..=VOXEL_MAX {
+            let v = dequantize(voxel);
+            assert_eq!(quantize(v), reference(v));
+            assert_eq!(quantize(v + 0.5 / 65535.0), reference(v + 0.5 / 65535.0));
+        }
+    }
+
+    /// The ranges as first written: every block's voxels visited one by one.
+    fn brick_ranges_one_by_one(shape: &TreeShape, voxels: &[u16]) -> ([u16; 2], Vec<[u16; 2]>) {
+        let whole = voxels.iter().fold([u16::MAX, 0], |[lo, hi], &v| [lo.min(v), hi.max(v)]);
+        let b = shape.stored_brick_size() as usize;
+        let blocks = shape.blocks_per_axis();
+        let span = |i: usize| i * BLOCK_CELLS..=((i + 1) * BLOCK_CELLS).min(b - 1);
+        let mut out = vec![[u16::MAX, 0]; shape.blocks_per_brick()];
+        for (index, range) in out.iter_mut().enumerate() {
+            let (bi, bj, bk) = (index % blocks, index / blocks % blocks, index / (blocks * blocks));
+            for k in span(bk) {
+                for j in span(bj) {
+                    for &v in &voxels[(k * b + j) * b..][span(bi)] {
+                        *range = [range[0].min(v), range[1].max(v)];
+                    }
+                }
+            }
+        }
+        (whole, out)
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn separable_ranges_equal_the_ranges_voxel_by_voxel(
+            brick_size in proptest::sample::select(vec![4u32, 7, 8, 14, 16, 30, 32]),
+            seed in 0u64..1_000_000,
+            spread in 1u32..65_536,
+        ) {
+            let shape = TreeShape::new(2, brick_size, 3).unwrap();
+            let mut state = seed | 1;
+            let voxels: Vec<u16> = (0..shape.voxels_per_brick())
+                .map(|_| {
+                    state ^= state << 13;
+                    state ^= state >> 7;
+                    state ^= state << 17;
+                    (state % spread as u64) as u16 + 17
+                })
+                .collect();
+            let mut blocks = vec![[0u16; 2]; shape.blocks_per_brick()];
+            let whole = brick_ranges(&shape, &voxels, &mut blocks);
+            let (whole_reference, blocks_reference) = brick_ranges_one_by_one(&shape, &voxels);
+            proptest::prop_assert_eq!(whole, whole_reference);
+            proptest::prop_assert_eq!(blocks, blocks_reference);
+        }
     }
 
     #[test]

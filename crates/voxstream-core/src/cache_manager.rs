@@ -38,7 +38,7 @@ use std::collections::HashSet;
 
 use rayon::prelude::*;
 
-use crate::brick_pool::{dequantize, BrickPool, VOXEL_MAX};
+use crate::brick_pool::{dequantize, BrickPool, PreparedBrick, VOXEL_MAX};
 use crate::budget::PoolCapacities;
 use crate::error::{CoreError, ProduceError};
 use crate::feedback::{FeedbackBuffer, Request, RequestKind};
@@ -402,7 +402,7 @@ impl<P: Producer> CacheManager<P> {
             // Under the restriction, what is premature already is not produced at all.
             let premature: Vec<bool> = batch.iter().map(|item| self.is_premature(item.request, item.key)).collect();
             let producer = &self.producer;
-            let shape = self.shape;
+            let (shape, format) = (self.shape, self.brick_pool.format());
             let results: Vec<WorkResult> = in_space_order(
                 batch,
                 |item| item.key,
@@ -411,7 +411,9 @@ impl<P: Producer> CacheManager<P> {
                     let item = &batch[index];
                     match item.request.kind {
                         _ if premature[index] => WorkResult::Premature,
-                        RequestKind::Produce => WorkResult::Produced(produce_analysed(producer, item.key, &shape)),
+                        RequestKind::Produce => {
+                            WorkResult::Produced(produce_analysed(producer, item.key, &shape, format))
+                        }
                         RequestKind::Subdivide => WorkResult::Children(
                             (0..shape.nodes_per_tile()).map(|c| producer.oracle(item.key.child(c, shape.n))).collect(),
                         ),
@@ -617,16 +619,16 @@ impl<P: Producer> CacheManager<P> {
             let (batch, rest) = remaining.split_at(room);
             remaining = rest;
             let producer = &self.producer;
-            let shape = self.shape;
+            let (shape, format) = (self.shape, self.brick_pool.format());
             let results: Vec<Result<AnalysedBrick, ProduceError>> = in_space_order(
                 batch,
                 |&(_, key)| key,
                 &shape,
-                |index| produce_analysed(producer, batch[index].1, &shape),
+                |index| produce_analysed(producer, batch[index].1, &shape, format),
             );
             for (&(node_id, _), result) in batch.iter().zip(results) {
                 let Ok(brick) = result else { continue };
-                let is_brick = brick.content == NodeContent::Brick;
+                let is_brick = matches!(brick.content, AnalysedContent::Brick(_));
                 if self.apply_produced(node_id, brick, Eviction::Forbidden, report) && is_brick {
                     report.bricks_prefetched += 1;
                 }
@@ -641,9 +643,8 @@ impl<P: Producer> CacheManager<P> {
         eviction: Eviction,
         report: &mut ServeReport,
     ) -> bool {
-        match brick.content {
-            NodeContent::Empty | NodeContent::Constant(_) => {
-                let value = if let NodeContent::Constant(v) = brick.content { v } else { 0.0 };
+        match &brick.content {
+            &AnalysedContent::Constant(value) => {
                 // A constant node never has children: free any subtree it still has.
                 if let Some(child) = self.node_pool.node(node_id).child_tile() {
                     self.free_subtree(child);
@@ -652,12 +653,12 @@ impl<P: Producer> CacheManager<P> {
                 report.constant_nodes += 1;
                 true
             }
-            NodeContent::Brick => {
+            AnalysedContent::Brick(prepared) => {
                 let inserted = match eviction {
                     Eviction::Allowed => {
                         let (pool, restricted) = (&self.node_pool, self.restricted);
                         let keep = |owner: NodeId| restricted && evicting_breaks_restriction(pool, owner);
-                        self.brick_pool.insert_avoiding(node_id, &brick.voxels, self.frame, keep).map(
+                        self.brick_pool.insert_avoiding(node_id, prepared, self.frame, keep).map(
                             |(slot, evicted, yielded)| {
                                 report.restriction_yielded += usize::from(yielded);
                                 (slot, evicted)
@@ -665,7 +666,7 @@ impl<P: Producer> CacheManager<P> {
                         )
                     }
                     Eviction::Forbidden => {
-                        self.brick_pool.insert_if_free(node_id, &brick.voxels, self.frame).map(|slot| (slot, None))
+                        self.brick_pool.insert_if_free(node_id, prepared, self.frame).map(|slot| (slot, None))
                     }
                 };
                 let Some((slot, evicted)) = inserted else {
@@ -862,6 +863,14 @@ enum Eviction {
     Forbidden,
 }
 
+/// What a produced node holds, ready to apply.
+enum AnalysedContent {
+    /// One value throughout (0 for an empty node).
+    Constant(f32),
+    /// Voxels, prepared for the pool on the worker that produced them.
+    Brick(PreparedBrick),
+}
+
 enum WorkResult {
     Produced(Result<AnalysedBrick, ProduceError>),
     Children(Vec<Option<f32>>),
@@ -870,9 +879,8 @@ enum WorkResult {
 }
 
 struct AnalysedBrick {
-    content: NodeContent,
+    content: AnalysedContent,
     is_terminal: bool,
-    voxels: Vec<u16>,
     /// The producer's bounds of the whole subtree (stored units, rounded outwards), for a brick with children.
     subtree_range: Option<[u16; 2]>,
 }
@@ -921,11 +929,16 @@ fn morton_code(ijk: [u64; 3]) -> u64 {
 }
 
 /// Asks `producer` for the brick of `key`, then analyses it.
-fn produce_analysed<P: Producer>(producer: &P, key: NodeKey, shape: &TreeShape) -> Result<AnalysedBrick, ProduceError> {
+fn produce_analysed<P: Producer>(
+    producer: &P,
+    key: NodeKey,
+    shape: &TreeShape,
+    format: VoxelFormat,
+) -> Result<AnalysedBrick, ProduceError> {
     let mut voxels = vec![0u16; shape.voxels_per_brick()];
     let produced = producer.produce(key, &mut voxels)?;
-    let mut analysed = analyse(produced, voxels, key, shape);
-    if analysed.content == NodeContent::Brick && !analysed.is_terminal {
+    let mut analysed = analyse(produced, &voxels, key, shape, format);
+    if matches!(analysed.content, AnalysedContent::Brick(_)) && !analysed.is_terminal {
         analysed.subtree_range = producer.subtree_range(key).map(|[lo, hi]| {
             let stored = |v: f32| (v.clamp(0.0, 1.0) * VOXEL_MAX as f32) as f64;
             [stored(lo).floor() as u16, stored(hi).ceil() as u16]
@@ -936,20 +949,19 @@ fn produce_analysed<P: Producer>(producer: &P, key: NodeKey, shape: &TreeShape) 
 
 /// Brick analysis before upload ([R08] §4): a terminal brick of equal voxels is a constant node. A non-terminal one
 /// stays a brick: equal voxels at a coarse level (an average) say nothing of the finer levels, and a constant node
-/// is never subdivided; only the producer may declare a whole subtree constant.
-fn analyse(produced: Produced, voxels: Vec<u16>, key: NodeKey, shape: &TreeShape) -> AnalysedBrick {
+/// is never subdivided; only the producer may declare a whole subtree constant. A brick is prepared for a pool of
+/// `format` here, on the producing thread.
+fn analyse(produced: Produced, voxels: &[u16], key: NodeKey, shape: &TreeShape, format: VoxelFormat) -> AnalysedBrick {
     let is_terminal = produced.is_terminal || key.level >= shape.max_level;
     let content = match produced.content {
         NodeContent::Brick if is_terminal && voxels.iter().all(|&v| v == voxels[0]) => {
-            if voxels[0] == 0 {
-                NodeContent::Empty
-            } else {
-                NodeContent::Constant(dequantize(voxels[0]))
-            }
+            AnalysedContent::Constant(dequantize(voxels[0]))
         }
-        other => other,
+        NodeContent::Brick => AnalysedContent::Brick(PreparedBrick::new(shape, format, voxels)),
+        NodeContent::Empty => AnalysedContent::Constant(0.0),
+        NodeContent::Constant(value) => AnalysedContent::Constant(value),
     };
-    AnalysedBrick { content, is_terminal, voxels, subtree_range: None }
+    AnalysedBrick { content, is_terminal, subtree_range: None }
 }
 
 #[cfg(test)]

@@ -56,7 +56,7 @@ pub mod restriction;
 pub mod tree_view;
 pub mod voxel_format;
 
-pub use brick_pool::{dequantize, quantize, BrickPool, VOXEL_MAX};
+pub use brick_pool::{dequantize, quantize, BrickPool, PreparedBrick, VOXEL_MAX};
 pub use budget::PoolCapacities;
 pub use cache_manager::{CacheManager, Residency, ServeOptions, ServeReport};
 pub use error::{CoreError, ProduceError};

@@ -159,14 +159,24 @@ pub fn render_pass(
         let caster = RayCaster::new(view, feedback, lut, settings);
         (0..tiles_x * tiles_y)
             .into_par_iter()
-            .map(|tile| render_tile(&caster, &frame, settings, tile % tiles_x, tile / tiles_x, feedback, pending))
+            .map_init(
+                || descent_paths(&caster),
+                |paths, tile| {
+                    render_tile(&caster, &frame, settings, tile % tiles_x, tile / tiles_x, feedback, pending, paths)
+                },
+            )
             .collect()
     } else {
         let surfaces = SurfaceSettings::new(settings, |value| lut.normalise(value));
         let caster = SurfaceCaster::new(view, feedback, &surfaces, lut, settings);
         (0..tiles_x * tiles_y)
             .into_par_iter()
-            .map(|tile| render_tile(&caster, &frame, settings, tile % tiles_x, tile / tiles_x, feedback, pending))
+            .map_init(
+                || descent_paths(&caster),
+                |paths, tile| {
+                    render_tile(&caster, &frame, settings, tile % tiles_x, tile / tiles_x, feedback, pending, paths)
+                },
+            )
             .collect()
     };
     let mut stats = RayStats::default();
@@ -198,6 +208,13 @@ struct TileResult {
     raw_requests: usize,
 }
 
+/// The lanes' descent paths, made once per worker's share of a pass's tiles rather than once per tile (each is a few
+/// KiB, and every ray resets its own).
+fn descent_paths<T: PixelTracer>(caster: &T) -> Box<[DescentPath; LANES]> {
+    Box::new(std::array::from_fn(|_| DescentPath::new(caster.view())))
+}
+
+#[allow(clippy::too_many_arguments)]
 fn render_tile<T: PixelTracer>(
     caster: &T,
     frame: &CameraFrame,
@@ -206,6 +223,7 @@ fn render_tile<T: PixelTracer>(
     tile_y: u32,
     feedback: &FeedbackBuffer,
     pending: &[bool],
+    paths: &mut [DescentPath; LANES],
 ) -> TileResult {
     let (width, height) = (settings.width, settings.height);
     let x0 = tile_x * IMAGE_TILE;
@@ -223,7 +241,6 @@ fn render_tile<T: PixelTracer>(
         raw_requests: 0,
     };
     let mut requests: Vec<Request> = Vec::new();
-    let mut paths: [DescentPath; LANES] = std::array::from_fn(|_| DescentPath::new(caster.view()));
     // The loop and what it inlines (the whole traversal) are compiled for each instruction set; one is picked here.
     settings.instruction_set.arch().dispatch(TileLoop {
         caster,
@@ -238,7 +255,7 @@ fn render_tile<T: PixelTracer>(
         stride: settings.pixel_stride.max(1),
         result: &mut result,
         requests: &mut requests,
-        paths: &mut paths,
+        paths,
     });
     // Neighbouring rays miss the same nodes: merge them here so the frame's request list stays small.
     result.raw_requests = requests.len();

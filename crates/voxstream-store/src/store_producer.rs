@@ -206,6 +206,7 @@ impl<S: BrickSource> StoreProducer<S> {
         &self.reader
     }
 
+    #[inline]
     fn normalise(&self, value: f32) -> f32 {
         (value - self.lower) * self.inverse_span
     }
@@ -285,18 +286,21 @@ impl<S: BrickSource> Producer for StoreProducer<S> {
             message: e.to_string(),
         })?;
         let (sx, sy) = (size[0] as usize, size[1] as usize);
-        let mut index = 0;
-        for k in 0..b {
-            let z = (start[2] + k as i64).clamp(lower[2] as i64, upper[2] as i64 - 1) as usize - lower[2] as usize;
-            for j in 0..b {
-                let y = (start[1] + j as i64).clamp(lower[1] as i64, upper[1] as i64 - 1) as usize - lower[1] as usize;
-                let row = (z * sy + y) * sx;
-                for i in 0..b {
-                    let x =
-                        (start[0] + i as i64).clamp(lower[0] as i64, upper[0] as i64 - 1) as usize - lower[0] as usize;
-                    voxels[index] = quantize(self.normalise(samples[row + x]));
-                    index += 1;
-                }
+        // Where each voxel of a row comes from in the region (the border clamped to the level): one stretch of the
+        // region's row unless the brick touches the level's x bounds.
+        let clamped = |a: usize, i: usize| {
+            (start[a] + i as i64).clamp(lower[a] as i64, upper[a] as i64 - 1) as usize - lower[a] as usize
+        };
+        let xs: Vec<usize> = (0..b).map(|i| clamped(0, i)).collect();
+        let stretch = xs.windows(2).all(|w| w[1] == w[0] + 1);
+        let convert = |sample: f32| quantize(self.normalise(sample));
+        for (index, out) in voxels.chunks_exact_mut(b).take(b * b).enumerate() {
+            let (k, j) = (index / b, index % b);
+            let row = &samples[(clamped(2, k) * sy + clamped(1, j)) * sx..][..sx];
+            if stretch {
+                out.iter_mut().zip(&row[xs[0]..xs[0] + b]).for_each(|(voxel, &sample)| *voxel = convert(sample));
+            } else {
+                out.iter_mut().zip(&xs).for_each(|(voxel, &x)| *voxel = convert(row[x]));
             }
         }
         Ok(Produced { content: NodeContent::Brick, is_terminal })
