@@ -80,6 +80,10 @@ pub struct ServeReport {
     pub requests: usize,
     /// Valid requests (still needing work) before the per-frame bound: 0 means the frame was complete.
     pub pending: usize,
+    /// The largest level deficit among the valid requests (0 when there were none). At most 1, with every request
+    /// served and the children of new tiles produced ([`ServeOptions::prefetch_new_children`]), means each ray that
+    /// asked now finds the levels it wanted along the path it took.
+    pub largest_deficit: u8,
     /// Requests served (some work done).
     pub served: usize,
     /// Requests left for a later frame (over the per-frame bound, or the pools were full of this frame's data).
@@ -89,6 +93,9 @@ pub struct ServeReport {
     /// Of `bricks_produced`, those stored for children of new tiles that no ray asked for yet
     /// ([`ServeOptions::prefetch_new_children`]).
     pub bricks_prefetched: usize,
+    /// Children of new tiles left missing by [`ServeOptions::prefetch_new_children`] (no free slot, or their
+    /// production failed).
+    pub children_left_missing: usize,
     /// Nodes that turned out constant (oracle or brick analysis).
     pub constant_nodes: usize,
     /// Tiles created.
@@ -291,6 +298,18 @@ impl<P: Producer> CacheManager<P> {
         }
     }
 
+    /// Produces the root now if it is missing, as a frame without rays whose one request is the root: every view of
+    /// the volume needs it, so a cold frame's first pass need not be traced only to find it missing. `None` when
+    /// the root is not missing.
+    pub fn serve_root(&mut self, options: ServeOptions) -> Option<ServeReport> {
+        if self.node_pool.node(NodeId::ROOT).data() != NodeData::Missing {
+            return None;
+        }
+        self.begin_frame();
+        self.feedback.push_requests(&[Request { node: NodeId::ROOT, kind: RequestKind::Produce, deficit: 1 }]);
+        Some(self.end_frame(options))
+    }
+
     /// Ends the frame: refreshes what the rays used, then serves their requests as `options` say.
     pub fn end_frame(&mut self, options: ServeOptions) -> ServeReport {
         let limit = options.limit;
@@ -314,6 +333,7 @@ impl<P: Producer> CacheManager<P> {
             .filter(|&(request, key)| self.still_wanted(request, key))
             .collect();
         report.pending = work.len();
+        report.largest_deficit = work.iter().map(|(request, _)| request.deficit).max().unwrap_or(0);
         let take = limit.unwrap_or(work.len()).min(work.len());
         // (A bound of 0 serves nothing and fetches nothing ahead: the last pass of a converged frame the pools cannot
         // hold, after which nothing is rendered.)
@@ -614,6 +634,7 @@ impl<P: Producer> CacheManager<P> {
             // Produce no more than the free slots can take: constant children need no slot, so recount each time.
             let room = (self.brick_pool.free_slots() as usize).min(batch_size).min(remaining.len());
             if room == 0 {
+                report.children_left_missing += remaining.len();
                 break;
             }
             let (batch, rest) = remaining.split_at(room);
@@ -627,9 +648,14 @@ impl<P: Producer> CacheManager<P> {
                 |index| produce_analysed(producer, batch[index].1, &shape, format),
             );
             for (&(node_id, _), result) in batch.iter().zip(results) {
-                let Ok(brick) = result else { continue };
+                let Ok(brick) = result else {
+                    report.children_left_missing += 1;
+                    continue;
+                };
                 let is_brick = matches!(brick.content, AnalysedContent::Brick(_));
-                if self.apply_produced(node_id, brick, Eviction::Forbidden, report) && is_brick {
+                if !self.apply_produced(node_id, brick, Eviction::Forbidden, report) {
+                    report.children_left_missing += 1;
+                } else if is_brick {
                     report.bricks_prefetched += 1;
                 }
             }
@@ -1041,6 +1067,58 @@ mod tests {
         assert_eq!(child_fades[..5], [0.0, 0.25, 0.5, 0.75, 1.0]);
         assert!(!cache.is_blending(), "all in: the view carries no caps");
         assert!(cache.view().brick_blends.is_empty());
+    }
+
+    #[test]
+    fn the_root_is_served_without_rays_once_and_reports_say_what_the_rays_lacked() {
+        let mut cache = CacheManager::new(Ramp, 16 << 20).unwrap();
+        let report = cache.serve_root(ServeOptions::ALL).expect("a cold cache lacks its root");
+        assert_eq!((report.requests, report.served, report.bricks_produced), (1, 1, 1));
+        assert!(cache.node_pool().node(NodeId::ROOT).brick().is_some());
+        assert!(cache.serve_root(ServeOptions::ALL).is_none(), "the root is there");
+        assert_eq!(cache.check_invariants(), Ok(()));
+
+        // The largest deficit among the frame's requests, and children a tile's subdivision left missing.
+        cache.begin_frame();
+        cache.feedback().push_requests(&[
+            Request { node: NodeId::ROOT, kind: RequestKind::Subdivide, deficit: 1 },
+            Request { node: NodeId::ROOT, kind: RequestKind::Subdivide, deficit: 3 },
+        ]);
+        let report = cache.end_frame(ServeOptions { limit: None, prefetch_new_children: true });
+        assert_eq!((report.largest_deficit, report.children_left_missing), (3, 0));
+        // Ramp's oracle knows the first child constant; the other seven are produced with the tile.
+        assert_eq!(report.bricks_prefetched, 7);
+        let child = root_children(&cache)[1];
+        let quiet = request(&mut cache, child, RequestKind::Subdivide, false);
+        assert_eq!(quiet.largest_deficit, 1);
+        cache.begin_frame();
+        let idle = cache.end_frame(ServeOptions::ALL);
+        assert_eq!((idle.pending, idle.largest_deficit), (0, 0));
+    }
+
+    #[test]
+    fn children_without_room_are_reported_left_missing() {
+        // The smallest budget the planner accepts: a few tiles of children fill its brick pool.
+        let mut cache = (1..100_000u64).find_map(|step| CacheManager::new(Ramp, step * 64).ok()).unwrap();
+        request(&mut cache, NodeId::ROOT, RequestKind::Produce, false);
+        let mut parents = vec![NodeId::ROOT];
+        let mut subdivided = 0;
+        loop {
+            let parent = parents[subdivided];
+            subdivided += 1;
+            let free = cache.brick_pool().free_slots() as usize;
+            let report = request(&mut cache, parent, RequestKind::Subdivide, true);
+            // Seven children to produce (Ramp's oracle knows the first of each tile constant).
+            assert_eq!(report.bricks_prefetched + report.children_left_missing, 7);
+            assert_eq!(report.bricks_prefetched, free.min(7));
+            if report.children_left_missing > 0 {
+                assert_eq!(cache.brick_pool().free_slots(), 0, "children are left missing only without room");
+                break;
+            }
+            let tile = cache.node_pool().node(parent).child_tile().unwrap();
+            parents.extend((1..8).map(|child| NodeId::new(tile, child, 8)));
+        }
+        assert!(subdivided > 1, "the pool holds the root's children");
     }
 
     /// A brick everywhere but at the level-1 node (1, 0, 0), whose production fails.

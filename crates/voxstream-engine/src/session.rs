@@ -17,7 +17,7 @@
 use std::ops::ControlFlow;
 use std::time::Instant;
 
-use voxstream_core::{CacheManager, ProduceError, Producer, Residency, ServeOptions, DEFAULT_FADE_FRAMES};
+use voxstream_core::{CacheManager, ProduceError, Producer, Residency, ServeOptions, ServeReport, DEFAULT_FADE_FRAMES};
 use voxstream_render::{Camera, Image, ProgressiveImage, RenderSettings, TransferFunction, TransferLut};
 
 use crate::error::EngineError;
@@ -53,9 +53,10 @@ pub struct LoopLimits {
     pub prefetch_new_children: bool,
     /// Converged mode only: the passes that only gather requests trace one pixel in [`GATHER_STRIDE`]² (their
     /// neighbours ask for the same nodes, and subdividing produces whole tiles), until such a pass asks for
-    /// nothing; then one in half that stride squared, and so on down to every pixel still pending. Each ray's final value is traced with all it needs
-    /// resident, so the image is the same; the early passes cost a quarter. A frame after one that needed no data
-    /// starts with every pixel.
+    /// nothing, or until its requests, once served, leave those rays nothing more to ask; then one in half that
+    /// stride squared, and so on down to every pixel still pending. Each ray's final value is traced with all it
+    /// needs resident, so the image is the same; the early passes cost a quarter. The root is produced before the
+    /// first pass. A frame after one that needed no data starts with every pixel.
     pub gather_sparsely: bool,
     /// Interactive mode only: Thiele et al.'s level blending ([`voxstream_core::level_blending`]) with a fade-in of
     /// this many frames; `None` turns it off. Converged frames never blend (their image is exact either way).
@@ -125,6 +126,20 @@ pub struct FrameResult {
     /// Per pixel, row by row: whether its ray missed data in the last pass (coarser data stood in, or, in a
     /// converged frame that gave up, nothing better could be loaded).
     pub missing: Vec<bool>,
+}
+
+impl FrameResult {
+    /// Counts what serving one pass's requests did.
+    fn add_report(&mut self, report: &ServeReport) {
+        self.requests += report.requests as u64;
+        self.bricks_produced += report.bricks_produced as u64;
+        self.bricks_prefetched += report.bricks_prefetched as u64;
+        self.forced_steps += report.forced as u64;
+        self.restriction_yielded += report.restriction_yielded as u64;
+        self.pending = report.pending;
+        self.served += report.served as u64;
+        self.failures.extend(report.failures.iter().cloned());
+    }
 }
 
 impl FrameResult {
@@ -365,6 +380,12 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
                 settings.pixel_stride = GATHER_STRIDE;
             }
         }
+        if mode == Mode::Converged && settings.pixel_stride > 1 {
+            let options = ServeOptions { limit: None, prefetch_new_children: self.limits.prefetch_new_children };
+            if let Some(report) = self.cache.serve_root(options) {
+                result.add_report(&report);
+            }
+        }
         // Set once the loop must end after the pass that traces every pending pixel.
         let mut final_pass = false;
         loop {
@@ -404,14 +425,15 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
             result.passes += 1;
             result.rays += stats.rays;
             result.samples += stats.samples;
-            result.requests += report.requests as u64;
-            result.bricks_produced += report.bricks_produced as u64;
-            result.bricks_prefetched += report.bricks_prefetched as u64;
-            result.forced_steps += report.forced as u64;
-            result.restriction_yielded += report.restriction_yielded as u64;
-            result.pending = report.pending;
-            result.served += report.served as u64;
-            result.failures.extend(report.failures);
+            // Whether the sparse rays will need nothing more once this pass's requests are served: each asked for
+            // at most one level more than it found, everything was served and the new tiles' children produced.
+            // Then the next pass need not trace the same sparse rays again only to find that out.
+            let sparse_rays_served = report.pending == 0
+                || (options.prefetch_new_children
+                    && report.largest_deficit <= 1
+                    && report.deferred == 0
+                    && report.children_left_missing == 0);
+            result.add_report(&report);
             let flow = observe(&PassProgress {
                 pass: result.passes,
                 pixels_pending: progressive.pending_count(),
@@ -423,9 +445,9 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
                 break;
             }
             let stalled = report.pending > 0 && report.served == 0;
-            if settings.pixel_stride > 1 && report.pending == 0 && !final_pass {
-                // The sparse rays need nothing more (nothing was asked for, or only what cannot be had: bricks that
-                // failed to load): trace more of the pixels still pending (4×4, 2×2, all).
+            if settings.pixel_stride > 1 && sparse_rays_served && !final_pass {
+                // The sparse rays need nothing more (nothing was asked for, only what cannot be had: bricks that
+                // failed to load, or what was just served): trace more of the pixels still pending (4×4, 2×2, all).
                 settings.pixel_stride /= 2;
                 continue;
             }
