@@ -55,6 +55,9 @@ const MAX_SEGMENTS: u32 = 1 << 20;
 /// Runs read from block bits are as long as the blocks allow ([`Traversal::visible_run`]).
 const LONG_RUN: u32 = 4 * LANES as u32;
 
+/// Steps of a burst sampled across the lanes before the lanes' integrands take them.
+const BURST_CHUNK: usize = 16;
+
 /// Counters of one ray batch.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RayStats {
@@ -349,6 +352,9 @@ impl<'a> Traversal<'a> {
         let mut start = [[0f32; LANES]; 3];
         let mut delta = [[0f32; LANES]; 3];
         let mut kf = [0f32; LANES];
+        // One chunk of a burst's samples, step by step, lane by lane.
+        let mut chunk_values = [[0f32; LANES]; BURST_CHUNK];
+        let mut chunk_gradients = [[[0f32; 3]; LANES]; BURST_CHUNK];
         loop {
             // Every lane gets samples to take: the rest of its run, the next run of its segment, the next segment
             // of its ray, or a new ray.
@@ -369,25 +375,40 @@ impl<'a> Traversal<'a> {
             if burst == u32::MAX {
                 return;
             }
-            // Until the first lane reaches the end of its run, no lane needs a check: samples only.
+            // Until the first lane reaches the end of its run, no lane needs a check: samples only. They are taken
+            // across the lanes a chunk of steps at a time, then each lane's integrand takes its own in one loop (its
+            // state stays in registers, and no step asks every lane whether it is busy).
             let mut taken = 0u64;
             let dq = self.dequantize;
-            for _ in 0..burst {
-                let (values, gradients) = samples_across::<_, GRADIENT>(voxels, b, &bases, &start, &delta, &kf, dq);
+            let mut left = burst;
+            while left > 0 {
+                let steps = left.min(BURST_CHUNK as u32) as usize;
+                left -= steps as u32;
+                for step in 0..steps {
+                    let (values, gradients) = samples_across::<_, GRADIENT>(voxels, b, &bases, &start, &delta, &kf, dq);
+                    chunk_values[step] = values;
+                    if GRADIENT {
+                        chunk_gradients[step] = gradients;
+                    }
+                    for k in &mut kf {
+                        *k += 1.0;
+                    }
+                }
                 for (j, slot) in lanes.iter_mut().enumerate() {
                     let Some(lane) = slot else { continue };
                     let Some(run) = &mut lane.run else { continue };
-                    let sample =
-                        Sample { t: run.first + run.k as f64 * run.dt, value: values[j], gradient: gradients[j] };
-                    run.k += 1;
-                    taken += 1;
-                    if lane.integrand.sample(sample).is_break() {
-                        finish(lane.id, &lane.integrand, lane.walk.requested);
-                        *slot = None;
+                    for step in 0..steps {
+                        let gradient = if GRADIENT { chunk_gradients[step][j] } else { [0.0; 3] };
+                        let sample =
+                            Sample { t: run.first + run.k as f64 * run.dt, value: chunk_values[step][j], gradient };
+                        run.k += 1;
+                        taken += 1;
+                        if lane.integrand.sample(sample).is_break() {
+                            finish(lane.id, &lane.integrand, lane.walk.requested);
+                            *slot = None;
+                            break;
+                        }
                     }
-                }
-                for k in &mut kf {
-                    *k += 1.0;
                 }
             }
             stats.samples += taken;
