@@ -76,7 +76,7 @@ pub fn trace_one_by_one<T: PixelTracer + ?Sized>(
     }
 }
 
-/// Edge of the square image tiles handed to worker threads.
+/// Edge of the square image tiles handed to worker threads (in a sparse pass, this times its pixel stride).
 pub const IMAGE_TILE: u32 = 16;
 
 /// Bytes one pixel costs while a frame is rendered and written, counted in the memory budget: the progressive
@@ -152,8 +152,11 @@ pub fn render_pass(
         return Err(RenderError::InvalidSetting("progressive image size differs from the settings".into()));
     }
     let frame = camera.frame(width, height)?;
-    let tiles_x = width.div_ceil(IMAGE_TILE);
-    let tiles_y = height.div_ceil(IMAGE_TILE);
+    // A sparse pass traces one pixel in stride²: its tiles grow with the stride, so that each holds as many rays
+    // as a dense tile (the lanes of a tile with few rays mostly wait for its last ones).
+    let edge = IMAGE_TILE * settings.pixel_stride.clamp(1, 8);
+    let tiles_x = width.div_ceil(edge);
+    let tiles_y = height.div_ceil(edge);
     let pending = &progressive.pending;
     let results: Vec<TileResult> = if settings.surfaces.is_empty() {
         let caster = RayCaster::new(view, feedback, lut, settings);
@@ -162,7 +165,8 @@ pub fn render_pass(
             .map_init(
                 || descent_paths(&caster),
                 |paths, tile| {
-                    render_tile(&caster, &frame, settings, tile % tiles_x, tile / tiles_x, feedback, pending, paths)
+                    let corner = ((tile % tiles_x) * edge, (tile / tiles_x) * edge);
+                    render_tile(&caster, &frame, settings, corner, edge, feedback, pending, paths)
                 },
             )
             .collect()
@@ -174,7 +178,8 @@ pub fn render_pass(
             .map_init(
                 || descent_paths(&caster),
                 |paths, tile| {
-                    render_tile(&caster, &frame, settings, tile % tiles_x, tile / tiles_x, feedback, pending, paths)
+                    let corner = ((tile % tiles_x) * edge, (tile / tiles_x) * edge);
+                    render_tile(&caster, &frame, settings, corner, edge, feedback, pending, paths)
                 },
             )
             .collect()
@@ -182,8 +187,8 @@ pub fn render_pass(
     let mut stats = RayStats::default();
     let mut raw_requests = 0;
     for (tile, result) in results.into_iter().enumerate() {
-        let (x0, y0) = ((tile as u32 % tiles_x) * IMAGE_TILE, (tile as u32 / tiles_x) * IMAGE_TILE);
-        let tile_width = IMAGE_TILE.min(width - x0) as usize;
+        let (x0, y0) = ((tile as u32 % tiles_x) * edge, (tile as u32 / tiles_x) * edge);
+        let tile_width = edge.min(width - x0) as usize;
         for (row, (chunk, flags)) in result.pixels.chunks(tile_width).zip(result.pending.chunks(tile_width)).enumerate()
         {
             let start = (y0 as usize + row) * width as usize + x0 as usize;
@@ -219,17 +224,15 @@ fn render_tile<T: PixelTracer>(
     caster: &T,
     frame: &CameraFrame,
     settings: &RenderSettings,
-    tile_x: u32,
-    tile_y: u32,
+    (x0, y0): (u32, u32),
+    edge: u32,
     feedback: &FeedbackBuffer,
     pending: &[bool],
     paths: &mut [DescentPath; LANES],
 ) -> TileResult {
     let (width, height) = (settings.width, settings.height);
-    let x0 = tile_x * IMAGE_TILE;
-    let y0 = tile_y * IMAGE_TILE;
-    let x1 = (x0 + IMAGE_TILE).min(width);
-    let y1 = (y0 + IMAGE_TILE).min(height);
+    let x1 = (x0 + edge).min(width);
+    let y1 = (y0 + edge).min(height);
     let placement = &settings.placement;
     let scale = glam::DVec3::from(placement.scale);
     let origin = (frame.eye - glam::DVec3::from(placement.origin)) / scale;
