@@ -202,6 +202,9 @@ pub struct Traversal<'a> {
     bias_scale: f64,
     /// Voxel edge (unit cube) of every level: `N^(−d) / M`, decreasing.
     level_voxel: [f64; MAX_TABLE_LEVELS],
+    /// Per level `d`, a footprint below which the cone's continuous level is surely at least `d`
+    /// ([`Traversal::level_at`] without its logarithm; a relative margin of 10⁻⁹ covers its rounding).
+    footprint_within_level: [f64; MAX_TABLE_LEVELS],
     /// `log2 N` when `N` is a power of two.
     n_shift: Option<u32>,
     /// Edge of the finest level's nodes (unit cube).
@@ -218,6 +221,8 @@ impl<'a> Traversal<'a> {
         for d in 1..MAX_TABLE_LEVELS {
             scale[d] = scale[d - 1] * shape.n as f64;
         }
+        let level_voxel = scale.map(|s| 1.0 / (s * shape.brick_size as f64));
+        let bias_scale = (-settings.lod_bias * (shape.n as f64).ln()).exp();
         Traversal {
             view,
             dequantize: view.voxel_format.dequantize(),
@@ -237,8 +242,9 @@ impl<'a> Traversal<'a> {
             brick_size: shape.brick_size as f64,
             stored: shape.stored_brick_size() as usize,
             inv_ln_n: 1.0 / (shape.n as f64).ln(),
-            bias_scale: (-settings.lod_bias * (shape.n as f64).ln()).exp(),
-            level_voxel: scale.map(|s| 1.0 / (s * shape.brick_size as f64)),
+            bias_scale,
+            level_voxel,
+            footprint_within_level: level_voxel.map(|voxel| voxel / bias_scale * (1.0 - 1e-9)),
             n_shift: shape.n.is_power_of_two().then(|| shape.n.trailing_zeros()),
             finest_node: 1.0 / scale[(shape.max_level as usize).min(MAX_TABLE_LEVELS - 1)],
             blocks_per_axis: shape.blocks_per_axis(),
@@ -631,7 +637,16 @@ impl<'a> Traversal<'a> {
                             // blending caps (Thiele et al.: fade-in, coarser neighbours) at the first and the last
                             // sample, and ramped linearly between them.
                             let cone = if blend_level {
-                                (self.level_at(0.5 * (t + t_exit), ray.spread) - c.level as f64).clamp(0.0, 1.0) as f32
+                                let middle = 0.5 * (t + t_exit);
+                                // At least the fine level there (the usual case): the weight is 1 without the
+                                // logarithm.
+                                if middle * ray.spread / self.world_per_volume
+                                    <= self.footprint_within_level[c.level as usize + 1]
+                                {
+                                    1.0
+                                } else {
+                                    (self.level_at(middle, ray.spread) - c.level as f64).clamp(0.0, 1.0) as f32
+                                }
                             } else {
                                 1.0
                             };
