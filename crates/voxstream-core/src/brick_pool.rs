@@ -61,6 +61,8 @@ impl StoredVoxels {
 /// ([`PreparedBrick::new`]) and the insert, which runs on one thread, only copies.
 #[derive(Debug, Clone)]
 pub struct PreparedBrick {
+    /// The format it was prepared for (a pool of another format refuses it).
+    format: VoxelFormat,
     voxels: StoredVoxels,
     /// `[min, max]` of the brick, in 16-bit units.
     range: [u16; 2],
@@ -83,7 +85,7 @@ impl PreparedBrick {
         for range in &mut block_ranges {
             *range = format.wide_bounds(*range);
         }
-        PreparedBrick { voxels: stored, range: format.wide_bounds(range), block_ranges }
+        PreparedBrick { format, voxels: stored, range: format.wide_bounds(range), block_ranges }
     }
 }
 
@@ -247,6 +249,7 @@ impl BrickPool {
         mut keep: impl FnMut(NodeId) -> bool,
     ) -> Option<(BrickSlot, Option<NodeId>, bool)> {
         assert_eq!(brick.voxels.len(), self.voxels_per_brick, "a prepared brick has the pool's shape");
+        assert_eq!(brick.format, self.format, "a prepared brick has the pool's voxel format");
         let owners = &self.owners;
         let (allocation, yielded) = self.lru.allocate_avoiding(frame, |slot| keep(NodeId(owners[slot as usize])))?;
         let slot = allocation.slot() as usize;
@@ -426,6 +429,15 @@ mod tests {
             proptest::prop_assert_eq!(whole, whole_reference);
             proptest::prop_assert_eq!(blocks, blocks_reference);
         }
+    }
+
+    #[test]
+    #[should_panic(expected = "the pool's voxel format")]
+    fn a_brick_prepared_for_another_format_is_refused() {
+        let shape = TreeShape::new(2, 8, 4).unwrap();
+        let mut pool = BrickPool::with_format(&shape, 4, VoxelFormat::for_bytes([0.0, 255.0]).unwrap());
+        let other = PreparedBrick::new(&shape, VoxelFormat::for_bytes([10.0, 40.0]).unwrap(), &vec![7u16; 1000]);
+        pool.insert_avoiding(NodeId(1), &other, 1, |_| false);
     }
 
     #[test]

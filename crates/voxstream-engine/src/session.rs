@@ -445,13 +445,14 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
                 break;
             }
             let stalled = report.pending > 0 && report.served == 0;
-            if settings.pixel_stride > 1 && sparse_rays_served && !final_pass {
+            let out_of_passes = result.passes >= self.limits.max_passes;
+            if settings.pixel_stride > 1 && sparse_rays_served && (report.pending == 0 || !out_of_passes) && !final_pass
+            {
                 // The sparse rays need nothing more (nothing was asked for, only what cannot be had: bricks that
                 // failed to load, or what was just served): trace more of the pixels still pending (4×4, 2×2, all).
                 settings.pixel_stride /= 2;
                 continue;
             }
-            let out_of_passes = result.passes >= self.limits.max_passes;
             let stop = mode == Mode::Interactive || report.pending == 0 || stalled || out_of_passes || final_pass;
             if stop && mode == Mode::Converged && settings.pixel_stride > 1 {
                 // The frame would end while only some pixels were traced (the pools cannot hold what the view
@@ -578,6 +579,22 @@ mod tests {
         let reference = cpu.render(&camera, Mode::Converged).unwrap();
         assert_eq!(frame.image.pixels, reference.image.pixels);
         assert!(reference.image.pixels.iter().any(|&p| p != reference.image.pixels[0]), "the ball is visible");
+    }
+
+    #[test]
+    fn a_converged_frame_stops_at_its_pass_limit_plus_the_pass_that_traces_every_pixel() {
+        let (tf, mut settings, camera) = parts();
+        (settings.width, settings.height) = (64, 64);
+        settings.background = [0.2, 0.3, 0.4];
+        for max_passes in 1..4 {
+            let limits = LoopLimits { max_passes, ..LoopLimits::default() };
+            let mut session = Session::new(Ball, &tf, settings.clone(), 64 << 20, limits).unwrap();
+            let frame = session.render(&camera, Mode::Converged).unwrap();
+            assert!(!frame.is_converged(), "{max_passes} passes cannot converge the cold ball");
+            assert!(frame.passes <= max_passes + 1, "{} passes with a limit of {max_passes}", frame.passes);
+            let untraced = frame.image.pixels.iter().filter(|p| **p == [0.0; 4]).count();
+            assert_eq!(untraced, 0, "{untraced} pixels were never traced");
+        }
     }
 
     #[test]

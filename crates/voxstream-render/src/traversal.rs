@@ -640,7 +640,7 @@ impl<'a> Traversal<'a> {
                                 let middle = 0.5 * (t + t_exit);
                                 // At least the fine level there (the usual case): the weight is 1 without the
                                 // logarithm.
-                                if middle * ray.spread / self.world_per_volume
+                                if (middle * ray.spread / self.world_per_volume).max(1e-300)
                                     <= self.footprint_within_level[c.level as usize + 1]
                                 {
                                     1.0
