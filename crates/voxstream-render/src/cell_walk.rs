@@ -112,6 +112,12 @@ fn max_cells(stored: usize) -> usize {
     3 * stored + 3
 }
 
+/// Occupancy blocks one run of rejected blocks crosses at most (a ray crosses at most `3·blocks` of a `blocks³`
+/// lattice; the cap only guards against a numerical stall).
+fn max_blocks(blocks: usize) -> usize {
+    3 * blocks + 3
+}
+
 /// The DDA's state at one cell: the cell, and per axis the `t` of the next lattice plane.
 struct Lattice {
     cell: [i64; 3],
@@ -193,26 +199,45 @@ pub fn walk_cells<V: CellVisitor>(span: &BrickSpan<'_>, visitor: &mut V) -> (Con
                 let index = ((block[2] * span.blocks as i64 + block[1]) * span.blocks as i64 + block[0]) as usize;
                 let [lo, hi] = span.block_ranges[index];
                 if !visitor.block_can_contribute(lo, hi) {
-                    // Leave the block: the nearest of its exit planes.
-                    let mut exit = (f64::INFINITY, 0usize, 0i64);
-                    for a in 0..3 {
-                        let across = match step[a] {
-                            1 => ((block[a] + 1) * BLOCK_CELLS as i64).min(last_cell + 1),
-                            -1 => block[a] * BLOCK_CELLS as i64 - 1,
-                            _ => continue,
-                        };
-                        let plane = if step[a] > 0 { across } else { across + 1 };
-                        let t_plane = (plane as f64 - span.origin[a]) * inverse_rate[a];
-                        if t_plane < exit.0 {
-                            exit = (t_plane, a, across);
+                    // Cross the run of blocks the visitor rejects block by block (a DDA over blocks: each exit is
+                    // the nearest of the block's exit planes), and set up the cells only where the run ends.
+                    let mut block = block;
+                    let mut entered = None;
+                    for _ in 0..max_blocks(span.blocks) {
+                        let mut exit = (f64::INFINITY, 0usize, 0i64);
+                        for a in 0..3 {
+                            let across = match step[a] {
+                                1 => ((block[a] + 1) * BLOCK_CELLS as i64).min(last_cell + 1),
+                                -1 => block[a] * BLOCK_CELLS as i64 - 1,
+                                _ => continue,
+                            };
+                            let plane = if step[a] > 0 { across } else { across + 1 };
+                            let t_plane = (plane as f64 - span.origin[a]) * inverse_rate[a];
+                            if t_plane < exit.0 {
+                                exit = (t_plane, a, across);
+                            }
+                        }
+                        let (t_exit, axis, across) = exit;
+                        if t_exit >= span.to || across < 0 || across > last_cell {
+                            break;
+                        }
+                        t = t_exit.max(t);
+                        block[axis] = across >> shift;
+                        let index =
+                            ((block[2] * span.blocks as i64 + block[1]) * span.blocks as i64 + block[0]) as usize;
+                        let [lo, hi] = span.block_ranges[index];
+                        if visitor.block_can_contribute(lo, hi) {
+                            entered = Some((axis, across));
+                            break;
                         }
                     }
-                    let (t_exit, axis, across) = exit;
-                    if t_exit >= span.to || across < 0 || across > last_cell {
-                        break;
+                    let Some(forced) = entered else { break };
+                    Lattice { cell, next } = Lattice::at(span, &inverse_rate, t, Some(forced));
+                    // The block entered was checked, unless the cell's other coordinates round into another one.
+                    let landed = cell.map(|c| c >> shift);
+                    if landed == block {
+                        checked_block = key(cell[0]) | key(cell[1]) << 16 | key(cell[2]) << 32;
                     }
-                    t = t_exit.max(t);
-                    Lattice { cell, next } = Lattice::at(span, &inverse_rate, t, Some((axis, across)));
                     continue;
                 }
             }
@@ -377,5 +402,65 @@ mod tests {
         assert_eq!(n, 8 + 9, "{seen:?}");
         assert_eq!(seen[8], (3, 23.5));
         assert!(seen.iter().all(|&(block, _)| !(1..=2).contains(&block)));
+    }
+
+    /// Rejects the blocks whose index (their range's lower bound here) is set in a mask.
+    struct MaskedBlocks {
+        rejected: u128,
+        cells: Vec<usize>,
+    }
+
+    impl CellVisitor for MaskedBlocks {
+        fn block_can_contribute(&self, lower: u16, _upper: u16) -> bool {
+            self.rejected & (1 << lower) == 0
+        }
+        fn visit(&mut self, cell: &CellVisit<'_>) -> ControlFlow<()> {
+            self.cells.push(cell.corners[0] as usize);
+            ControlFlow::Continue(())
+        }
+    }
+
+    proptest::proptest! {
+        /// Culling only removes cells: a walk that rejects some blocks visits, in order, exactly the cells of the
+        /// walk without culling that lie in blocks it accepts, however long the runs of rejected blocks.
+        #[test]
+        fn culling_visits_the_unculled_walks_cells_in_accepted_blocks(
+            origin in proptest::array::uniform3(0.0f64..33.0),
+            rate in proptest::array::uniform3(-1.0f64..1.0),
+            rejected: u128,
+        ) {
+            let b = 34;
+            let blocks = 5;
+            // Each voxel's value is its index (each cell is named by its first corner); each block's range names
+            // the block.
+            let voxels: Vec<u16> = (0..b * b * b).map(|i| i as u16).collect();
+            let block_ranges: Vec<[u16; 2]> = (0..blocks * blocks * blocks).map(|i| [i as u16; 2]).collect();
+            let length = rate.iter().map(|r| r * r).sum::<f64>().sqrt().max(1e-3);
+            let span = |cull_blocks| BrickSpan {
+                voxels: PoolVoxels::Wide(&voxels),
+                dequantize: VoxelFormat::Wide.dequantize(),
+                stored: b,
+                origin,
+                rate,
+                from: 0.0,
+                to: 60.0 / length,
+                block_ranges: &block_ranges,
+                blocks,
+                cull_blocks,
+                step: 1.0,
+            };
+            let mut all = MaskedBlocks { rejected, cells: Vec::new() };
+            let _ = walk_cells(&span(false), &mut all);
+            let mut culled = MaskedBlocks { rejected, cells: Vec::new() };
+            let (_, visited) = walk_cells(&span(true), &mut culled);
+            let block_of = |base: usize| {
+                let [x, y, z] = [base % b, base / b % b, base / (b * b)].map(|c| c / BLOCK_CELLS);
+                (z * blocks + y) * blocks + x
+            };
+            let expected: Vec<usize> =
+                all.cells.iter().copied().filter(|&c| rejected & (1 << block_of(c)) == 0).collect();
+            proptest::prop_assert_eq!(visited as usize, culled.cells.len());
+            proptest::prop_assert_eq!(culled.cells, expected);
+        }
     }
 }
