@@ -903,7 +903,13 @@ fn walk_cells(state: ptr<function, RayState>, entry: PathNode, t_from: f32, t_to
                         break;
                     }
                     u = max(exit_u, u);
-                    cell = clamp(vec3<i32>(x0 + u * rate), vec3<i32>(0), vec3<i32>(last_cell));
+                    // Into the block across the plane, the other coordinates kept inside it (the CPU's
+                    // `Lattice::at`): rounding near a block's edge could otherwise land in a rejected neighbour whose
+                    // exit leads back.
+                    var entered = block;
+                    entered[exit_axis] = exit_across / block_cells;
+                    let first = entered * block_cells;
+                    cell = clamp(vec3<i32>(x0 + u * rate), first, min(first + vec3<i32>(block_cells - 1), vec3<i32>(last_cell)));
                     cell[exit_axis] = exit_across;
                     next = lattice_next(cell, x0, rate);
                     continue;
