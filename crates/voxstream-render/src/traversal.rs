@@ -203,7 +203,7 @@ pub struct Traversal<'a> {
     /// Voxel edge (unit cube) of every level: `N^(−d) / M`, decreasing.
     level_voxel: [f64; MAX_TABLE_LEVELS],
     /// Per level `d`, a footprint below which the cone's continuous level is surely at least `d`
-    /// ([`Traversal::level_at`] without its logarithm; a relative margin of 10⁻⁹ covers its rounding).
+    /// ([`Traversal::level_of_footprint`] without its logarithm; a relative margin of 10⁻⁹ covers its rounding).
     footprint_within_level: [f64; MAX_TABLE_LEVELS],
     /// `log2 N` when `N` is a power of two.
     n_shift: Option<u32>,
@@ -256,10 +256,16 @@ impl<'a> Traversal<'a> {
         self.view
     }
 
-    /// Continuous level of detail at distance `t` (world units) for a cone of `spread` per unit distance.
+    /// The cone's footprint at distance `t` (world units) for a cone of `spread` per unit distance: its width in
+    /// volume units (floored above 0, for the logarithm).
+    #[inline(always)]
+    fn footprint(&self, t: f64, spread: f64) -> f64 {
+        (t * spread / self.world_per_volume).max(1e-300)
+    }
+
+    /// Continuous level of detail of a cone whose footprint is `footprint` ([`Traversal::footprint`]).
     #[inline]
-    fn level_at(&self, t: f64, spread: f64) -> f64 {
-        let footprint = (t * spread / self.world_per_volume).max(1e-300);
+    fn level_of_footprint(&self, footprint: f64) -> f64 {
         let level = -(self.brick_size * footprint).ln() * self.inv_ln_n + self.lod_bias;
         level.clamp(0.0, self.view.shape.max_level as f64)
     }
@@ -271,7 +277,7 @@ impl<'a> Traversal<'a> {
     #[inline]
     fn footprint_at(&self, t: f64, spread: f64, hint: &mut usize) -> (f64, u32) {
         let max_level = self.view.shape.max_level as usize;
-        let footprint = (t * spread / self.world_per_volume).max(1e-300);
+        let footprint = self.footprint(t, spread);
         let voxel = (footprint * self.bias_scale).clamp(self.level_voxel[max_level], self.level_voxel[0]);
         // The first level whose voxel is not larger than `voxel` (the table decreases; at most max_level + 1).
         let mut target = (*hint).min(max_level);
@@ -637,15 +643,13 @@ impl<'a> Traversal<'a> {
                             // blending caps (Thiele et al.: fade-in, coarser neighbours) at the first and the last
                             // sample, and ramped linearly between them.
                             let cone = if blend_level {
-                                let middle = 0.5 * (t + t_exit);
+                                let footprint = self.footprint(0.5 * (t + t_exit), ray.spread);
                                 // At least the fine level there (the usual case): the weight is 1 without the
                                 // logarithm.
-                                if (middle * ray.spread / self.world_per_volume).max(1e-300)
-                                    <= self.footprint_within_level[c.level as usize + 1]
-                                {
+                                if footprint <= self.footprint_within_level[c.level as usize + 1] {
                                     1.0
                                 } else {
-                                    (self.level_at(middle, ray.spread) - c.level as f64).clamp(0.0, 1.0) as f32
+                                    (self.level_of_footprint(footprint) - c.level as f64).clamp(0.0, 1.0) as f32
                                 }
                             } else {
                                 1.0
