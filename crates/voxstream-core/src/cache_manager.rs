@@ -239,6 +239,14 @@ impl<P: Producer> CacheManager<P> {
         self.blending = fade_frames.map(LevelBlending::new);
     }
 
+    /// With blending on: how many levels per frame the camera's motion changes the wanted level by, for the next
+    /// [`CacheManager::begin_frame`] (see [`LevelBlending::set_level_rate`]). Without blending it does nothing.
+    pub fn set_blending_level_rate(&mut self, levels_per_frame: f64) {
+        if let Some(blending) = &mut self.blending {
+            blending.set_level_rate(levels_per_frame as f32);
+        }
+    }
+
     /// Keeps the working set restricted (Thiele et al.: neighbouring data at most one level apart, see
     /// [`crate::restriction`]) from the next frame on, or lets it free. Restricting a working set built free does
     /// not repair it at once: each ray request is served once its neighbourhood allows it, and the forced steps fill
@@ -1041,6 +1049,47 @@ mod tests {
     fn caps_of(cache: &CacheManager<Ramp>, node: NodeId) -> crate::BrickBlend {
         let slot = cache.node_pool().node(node).brick().expect("a brick");
         cache.view().brick_blends.get(slot.0 as usize).copied().unwrap_or(crate::BrickBlend::FULL)
+    }
+
+    #[test]
+    fn fades_keep_pace_with_a_camera_that_approaches() {
+        let mut cache = CacheManager::new(Ramp, 16 << 20).unwrap();
+        cache.set_blending(Some(4));
+        request(&mut cache, NodeId::ROOT, RequestKind::Produce, false);
+        request(&mut cache, NodeId::ROOT, RequestKind::Subdivide, false);
+        let [first, second] = [root_children(&cache)[1], root_children(&cache)[2]];
+        // The root fades in first.
+        for _ in 0..4 {
+            cache.begin_frame();
+            cache.end_frame(ServeOptions::ALL);
+        }
+        assert!(!cache.is_blending());
+        // At rest: a quarter per frame.
+        request(&mut cache, first, RequestKind::Produce, false);
+        cache.set_blending_level_rate(0.0);
+        cache.begin_frame();
+        assert_eq!(caps_of(&cache, first).fade, 0.25);
+        cache.end_frame(ServeOptions::ALL);
+        // The camera now wants a level finer every 8 frames: four fades in 8 frames, half a fade per frame.
+        cache.set_blending_level_rate(1.0 / 8.0);
+        cache.begin_frame();
+        assert_eq!(caps_of(&cache, first).fade, 0.75);
+        cache.end_frame(ServeOptions::ALL);
+        // Slower than the fade-in itself asks for: the fade-in's own pace; nonsense rates count as rest.
+        request(&mut cache, second, RequestKind::Produce, false);
+        for rate in [0.01, f64::NAN] {
+            cache.set_blending_level_rate(rate);
+            cache.begin_frame();
+            cache.end_frame(ServeOptions::ALL);
+        }
+        cache.begin_frame();
+        assert_eq!(caps_of(&cache, second).fade, 0.75, "{:?}", caps_of(&cache, second));
+        cache.end_frame(ServeOptions::ALL);
+        // Without blending the rate does nothing.
+        cache.set_blending(None);
+        cache.set_blending_level_rate(1.0);
+        cache.begin_frame();
+        assert!(cache.view().brick_blends.is_empty());
     }
 
     #[test]

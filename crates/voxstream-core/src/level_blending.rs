@@ -42,6 +42,11 @@ pub use voxstream_layout::BrickBlend;
 /// The default fade-in, in frames.
 pub const DEFAULT_FADE_FRAMES: u32 = 4;
 
+/// While the camera approaches or backs away, a fade takes at most `1 / (FADES_PER_LEVEL · rate)` frames, where
+/// `rate` is how many levels per frame the wanted level changes ([`LevelBlending::set_level_rate`]): four fades fit in
+/// the time the camera takes to want the next level, so the fades never fall behind the level of detail.
+pub const FADES_PER_LEVEL: f32 = 4.0;
+
 /// Most pending regions kept per frame (the first ones in request priority; the rest get no spatial cap).
 pub const MAX_PENDING_REGIONS: usize = 4096;
 
@@ -62,6 +67,8 @@ struct Transition {
 #[derive(Clone, Debug)]
 pub struct LevelBlending {
     fade_frames: u32,
+    /// Levels per frame by which the camera changes the wanted level this frame ([`LevelBlending::set_level_rate`]).
+    level_rate: f32,
     /// Bricks in transition, by slot: arrived, and not yet drawn fully everywhere.
     transitions: HashMap<u32, Transition>,
     /// Regions the rays want finer than resident: a node and the level they want inside it.
@@ -78,6 +85,7 @@ impl LevelBlending {
     pub fn new(fade_frames: u32) -> LevelBlending {
         LevelBlending {
             fade_frames: fade_frames.max(1),
+            level_rate: 0.0,
             transitions: HashMap::new(),
             pending: Vec::new(),
             caps: Vec::new(),
@@ -88,6 +96,19 @@ impl LevelBlending {
     /// The fade-in length, frames.
     pub fn fade_frames(&self) -> u32 {
         self.fade_frames
+    }
+
+    /// Tells the next [`LevelBlending::update`] how many levels per frame the camera's motion changes the wanted
+    /// level by (`voxstream_engine::level_rate`; 0 at rest and on an orbit). Fades then advance by at least
+    /// `FADES_PER_LEVEL · rate` per frame, so that they keep up with a camera that approaches: a fade that lags
+    /// shows coarse data longer, and its detail then arrives over more of the screen.
+    pub fn set_level_rate(&mut self, levels_per_frame: f32) {
+        self.level_rate = if levels_per_frame.is_finite() { levels_per_frame.max(0.0) } else { 0.0 };
+    }
+
+    /// What a fade advances by this frame: `1 / fade_frames`, or faster while the camera approaches.
+    fn advance_per_frame(&self) -> f32 {
+        (1.0 / self.fade_frames as f32).max(FADES_PER_LEVEL * self.level_rate)
     }
 
     /// Records that `owner`'s brick arrived in `slot`; `parent` is the slot of its parent's brick. It fades in from
@@ -159,12 +180,14 @@ impl LevelBlending {
                 current = transitions.get(&slot).and_then(&parent_of);
             }
         }
-        // Advance: a brick whose parent is in (as of the previous frame) rises by (1 + waiting) / fade_frames.
+        // Advance: a brick whose parent is in (as of the previous frame) rises by (1 + waiting) / fade_frames (or
+        // faster while the camera approaches).
+        let step = self.advance_per_frame();
         let advance: Vec<(u32, f32)> = transitions
             .iter()
             .filter(|(_, transition)| parent_of(transition).is_none_or(|(slot, _)| transitions[&slot].t >= 1.0))
             .map(|(&slot, transition)| {
-                let rate = (1 + waiting.get(&slot).copied().unwrap_or(0)) as f32 / self.fade_frames as f32;
+                let rate = (1 + waiting.get(&slot).copied().unwrap_or(0)) as f32 * step;
                 (slot, (transition.t + rate).min(1.0))
             })
             .collect();

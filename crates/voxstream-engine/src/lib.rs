@@ -39,12 +39,14 @@
 
 pub mod error;
 pub mod frame_renderer;
+pub mod level_pace;
 pub mod memory_budget;
 pub mod popping;
 pub mod session;
 
 pub use error::EngineError;
 pub use frame_renderer::{CpuRenderer, FrameRenderer};
+pub use level_pace::level_rate;
 pub use memory_budget::{
     machine_memory_bytes, BudgetError, MemoryBudget, MemoryPlan, MAX_BUDGET_MB, STORE_CACHE_SHARE,
 };

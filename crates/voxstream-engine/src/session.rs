@@ -22,6 +22,7 @@ use voxstream_render::{Camera, Image, ProgressiveImage, RenderSettings, Transfer
 
 use crate::error::EngineError;
 use crate::frame_renderer::{CpuRenderer, FrameRenderer};
+use crate::level_pace::level_rate;
 
 type Result<T> = std::result::Result<T, EngineError>;
 
@@ -65,6 +66,11 @@ pub struct LoopLimits {
     /// most one level apart, forced splits first; [`voxstream_core::restriction`]). Converged frames, and frames
     /// without blending, leave it free.
     pub restrict_working_set: bool,
+    /// Interactive frames with level blending: fades keep pace with a camera that approaches or backs away (at least
+    /// [`voxstream_core::level_blending::FADES_PER_LEVEL`] fades in the frames the camera takes to want the next
+    /// level, measured by [`crate::level_rate`] between consecutive interactive cameras). At rest and on an orbit
+    /// fades take their `blending_fade_frames`.
+    pub pace_fades_to_camera: bool,
 }
 
 /// The pixel stride of the request-gathering passes of a converged frame ([`LoopLimits::gather_sparsely`]).
@@ -79,6 +85,7 @@ impl Default for LoopLimits {
             gather_sparsely: true,
             blending_fade_frames: Some(DEFAULT_FADE_FRAMES),
             restrict_working_set: true,
+            pace_fades_to_camera: true,
         }
     }
 }
@@ -182,6 +189,9 @@ pub struct Session<P: Producer, R: FrameRenderer = CpuRenderer> {
     /// Whether the next converged frame starts with sparse passes: yes unless the last one needed no data (a warm
     /// view, where the sparse pass would only add a pass).
     gather_sparsely_next: bool,
+    /// The camera of the last interactive frame since the last converged one: where the camera came from, for the
+    /// pace of the fades ([`LoopLimits::pace_fades_to_camera`]).
+    previous_interactive_camera: Option<Camera>,
 }
 
 impl<P: Producer> Session<P, CpuRenderer> {
@@ -238,6 +248,7 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
             finest_voxel,
             peak_resident_bytes: 0,
             gather_sparsely_next: true,
+            previous_interactive_camera: None,
         })
     }
 
@@ -374,6 +385,13 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
         self.cache.set_restricted(
             mode == Mode::Interactive && self.limits.blending_fade_frames.is_some() && self.limits.restrict_working_set,
         );
+        // How fast the camera changes the wanted level since the last interactive frame: the fades keep that pace.
+        let level_rate = match (mode, &self.previous_interactive_camera) {
+            (Mode::Interactive, Some(previous)) if self.limits.pace_fades_to_camera => level_rate(previous, camera),
+            _ => 0.0,
+        };
+        self.cache.set_blending_level_rate(level_rate);
+        self.previous_interactive_camera = (mode == Mode::Interactive).then_some(*camera);
         if mode == Mode::Converged {
             settings.max_requests_per_ray = settings.max_requests_per_ray.max(CONVERGED_REQUESTS_PER_RAY);
             if self.limits.gather_sparsely && self.gather_sparsely_next {
