@@ -14,7 +14,15 @@
 //!   stand-in. (It is taken over every pixel, not only those on projected brick boundaries: a spurious edge
 //!   elsewhere is an artifact too.)
 //!
-//! Both are in 8-bit levels (0–255) of the written images. A sequence is measured from its first image that shows
+//! - **Floor** of a sequence's popping: the least mean popping that any sequence with the same first and last images
+//!   could have against the same converged images, per pixel `max(0, |I_last − I_first| − Σ_k |C_{k+1} − C_k|)`
+//!   summed over pixels and channels and divided by the same count as the mean. (By the triangle inequality,
+//!   `Σ_k max(0, |ΔI_k| − |ΔC_k|) ≥ |I_last − I_first| − Σ_k |ΔC_k|` for every pixel.) Blending spreads a change over
+//!   frames but cannot undo it: a cold start at rest must still get from its first image to its last, so the mean
+//!   popping of blending is bounded below by this floor, however the fades are shaped; only changes that reverse
+//!   (a level's shading replaced by the next one's and back) are above it and can be saved.
+//!
+//! All are in 8-bit levels (0–255) of the written images. A sequence is measured from its first image that shows
 //! anything: a cold start's first frames are empty until the root arrives, and the root's arrival is the image
 //! appearing, not a level changing.
 
@@ -84,6 +92,9 @@ pub struct PoppingSummary {
     pub popping_p99: f64,
     /// Largest popping of a frame pair.
     pub popping_max: f64,
+    /// The least mean popping any sequence from the same first to the same last image could have against the same
+    /// converged images (see the module docs), 8-bit levels.
+    pub popping_floor: f64,
     /// Mean seam error over frames, 8-bit levels.
     pub seam_mean: f64,
     /// Popping of each frame pair (`k−1`, `k`), in order.
@@ -108,6 +119,7 @@ impl PoppingSummary {
         let popping_mean = mean(&popping);
         let seam_mean = mean(&seams);
         let popping_per_frame = popping.clone();
+        let popping_floor = if count < 2 { 0.0 } else { popping_floor(frames, exact) };
         popping.sort_by(f64::total_cmp);
         let percentile = |p: f64| {
             if popping.is_empty() {
@@ -122,11 +134,27 @@ impl PoppingSummary {
             popping_mean,
             popping_p99: percentile(0.99),
             popping_max: percentile(1.0),
+            popping_floor,
             seam_mean,
             popping_per_frame,
             seam_per_frame: seams,
         }
     }
+}
+
+/// The floor of a sequence's mean popping (module docs): `frames` and `exact` of the same length, at least 2.
+fn popping_floor(frames: &[Rgb8<'_>], exact: &[Rgb8<'_>]) -> f64 {
+    let (first, last) = (frames[0].bytes, frames[frames.len() - 1].bytes);
+    let n = frames.iter().chain(exact).map(|f| f.bytes.len()).min().unwrap_or(0);
+    if n == 0 {
+        return 0.0;
+    }
+    let mut total = 0u64;
+    for i in 0..n {
+        let explained: u64 = exact.windows(2).map(|pair| pair[0].bytes[i].abs_diff(pair[1].bytes[i]) as u64).sum();
+        total += (first[i].abs_diff(last[i]) as u64).saturating_sub(explained);
+    }
+    total as f64 / (n as f64 * (frames.len() - 1) as f64)
 }
 
 #[cfg(test)]
@@ -180,5 +208,33 @@ mod tests {
         assert_eq!(summary.popping_mean, 20.0);
         assert_eq!(summary.popping_max, 30.0);
         assert_eq!(summary.popping_p99, 30.0);
+        // It ends where it began: a sequence could have stayed put.
+        assert_eq!(summary.popping_floor, 0.0);
+    }
+
+    #[test]
+    fn the_floor_is_the_straight_way_from_first_to_last_image() {
+        // 10 → 40 → 20 → 30 at rest: 30 + 20 + 10 over three pairs; going straight from 10 to 30 would pop 20.
+        let at_rest = |values: &[u8]| {
+            let frames: Vec<[u8; 3]> = values.iter().map(|&v| [v; 3]).collect();
+            let exact = vec![[30u8; 3]; values.len()];
+            let views: Vec<Rgb8<'_>> = frames.iter().map(|f| image(f, 1)).collect();
+            let exact_views: Vec<Rgb8<'_>> = exact.iter().map(|f| image(f, 1)).collect();
+            PoppingSummary::measure(&views, &exact_views)
+        };
+        let wandering = at_rest(&[10, 40, 20, 30]);
+        assert_eq!(wandering.popping_mean, 20.0);
+        assert!((wandering.popping_floor - 20.0 / 3.0).abs() < 1e-12);
+        // A monotone sequence between the same images reaches the floor: it cannot be beaten.
+        let straight = at_rest(&[10, 17, 24, 30]);
+        assert_eq!(straight.popping_mean, straight.popping_floor);
+        // Change the camera explains lowers the floor: the exact images move by 15 and back.
+        let frames = [[10u8; 3], [30; 3], [30; 3]];
+        let exact = [[0u8; 3], [15; 3], [0; 3]];
+        let views: Vec<Rgb8<'_>> = frames.iter().map(|f| image(f, 1)).collect();
+        let exact_views: Vec<Rgb8<'_>> = exact.iter().map(|f| image(f, 1)).collect();
+        let moving = PoppingSummary::measure(&views, &exact_views);
+        assert_eq!(moving.popping_mean, 2.5);
+        assert_eq!(moving.popping_floor, 0.0, "20 levels of change, 30 explained");
     }
 }
