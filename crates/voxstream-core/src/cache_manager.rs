@@ -1070,20 +1070,20 @@ mod tests {
         cache.begin_frame();
         assert_eq!(caps_of(&cache, first).fade, 0.25);
         cache.end_frame(ServeOptions::ALL);
-        // The camera now wants a level finer every 8 frames: four fades in 8 frames, half a fade per frame.
-        cache.set_blending_level_rate(1.0 / 8.0);
+        // The camera now wants a level finer every 16 frames: eight fades in 16 frames, half a fade per frame.
+        cache.set_blending_level_rate(1.0 / 16.0);
         cache.begin_frame();
         assert_eq!(caps_of(&cache, first).fade, 0.75);
         cache.end_frame(ServeOptions::ALL);
         // Slower than the fade-in itself asks for: the fade-in's own pace; nonsense rates count as rest.
         request(&mut cache, second, RequestKind::Produce, false);
-        for rate in [0.01, f64::NAN] {
+        for rate in [0.01, f64::NAN, -1.0] {
             cache.set_blending_level_rate(rate);
             cache.begin_frame();
             cache.end_frame(ServeOptions::ALL);
         }
-        cache.begin_frame();
         assert_eq!(caps_of(&cache, second).fade, 0.75, "{:?}", caps_of(&cache, second));
+        cache.begin_frame();
         cache.end_frame(ServeOptions::ALL);
         // Without blending the rate does nothing.
         cache.set_blending(None);

@@ -43,9 +43,12 @@ pub use voxstream_layout::BrickBlend;
 pub const DEFAULT_FADE_FRAMES: u32 = 4;
 
 /// While the camera approaches or backs away, a fade takes at most `1 / (FADES_PER_LEVEL · rate)` frames, where
-/// `rate` is how many levels per frame the wanted level changes ([`LevelBlending::set_level_rate`]): four fades fit in
+/// `rate` is how many levels per frame the wanted level changes ([`LevelBlending::set_level_rate`]): eight fades fit in
 /// the time the camera takes to want the next level, so the fades never fall behind the level of detail.
-pub const FADES_PER_LEVEL: f32 = 4.0;
+///
+/// Measured (MNI152 ×4 store, cold zoom to a thousandth of the distance, 128², 90 frames, 64 requests per frame):
+/// mean popping 0.065 without blending; with four-frame fades 0.084 at 4 fades per level, 0.061 at 8, 0.063 at 16.
+pub const FADES_PER_LEVEL: f32 = 8.0;
 
 /// Most pending regions kept per frame (the first ones in request priority; the rest get no spatial cap).
 pub const MAX_PENDING_REGIONS: usize = 4096;

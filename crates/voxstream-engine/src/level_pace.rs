@@ -5,7 +5,8 @@
 //! sooner than the one before finishes fading in, the image shows coarse data longer, and its detail then arrives
 //! while the data covers more of the screen — more change than the same detail arriving at once. On a zoom into the
 //! MNI152 ×4 store (128², 60 frames, 64 requests per frame), four-frame fades doubled the popping of no blending
-//! (0.144 → 0.288); two-frame fades did not (BENCHMARKS.md, "Level blending").
+//! (0.144 → 0.288); two-frame fades did not (BENCHMARKS.md, "Level blending"). Level blending therefore shortens the
+//! fades while the camera approaches ([`voxstream_core::level_blending::FADES_PER_LEVEL`]), by the rate measured here.
 //!
 //! The wanted level at a point `p` is `log2` of the eye's distance to it (plus constants: the cone's footprint
 //! grows linearly with distance). Between two cameras the level wanted at `p` changes by
