@@ -1083,7 +1083,12 @@ mod tests {
             cache.end_frame(ServeOptions::ALL);
         }
         assert_eq!(caps_of(&cache, second).fade, 0.75, "{:?}", caps_of(&cache, second));
+        // An infinite pace ends the fade at once.
+        let third = root_children(&cache)[3];
+        request(&mut cache, third, RequestKind::Produce, false);
+        cache.set_blending_level_rate(f64::INFINITY);
         cache.begin_frame();
+        assert_eq!(caps_of(&cache, third).fade, 1.0);
         cache.end_frame(ServeOptions::ALL);
         // Without blending the rate does nothing.
         cache.set_blending(None);

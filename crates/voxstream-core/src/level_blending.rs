@@ -102,11 +102,12 @@ impl LevelBlending {
     }
 
     /// Tells the next [`LevelBlending::update`] how many levels per frame the camera's motion changes the wanted
-    /// level by (`voxstream_engine::level_rate`; 0 at rest and on an orbit). Fades then advance by at least
+    /// level by (`voxstream_engine::level_rate`; 0 at rest, about 0 on an orbit). Fades then advance by at least
     /// `FADES_PER_LEVEL · rate` per frame, so that they keep up with a camera that approaches: a fade that lags
     /// shows coarse data longer, and its detail then arrives over more of the screen.
     pub fn set_level_rate(&mut self, levels_per_frame: f32) {
-        self.level_rate = if levels_per_frame.is_finite() { levels_per_frame.max(0.0) } else { 0.0 };
+        // NaN counts as rest; an infinite rate ends every fade this frame.
+        self.level_rate = if levels_per_frame.is_nan() { 0.0 } else { levels_per_frame.max(0.0) };
     }
 
     /// What a fade advances by this frame: `1 / fade_frames`, or faster while the camera approaches.

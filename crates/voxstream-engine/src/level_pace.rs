@@ -10,9 +10,11 @@
 //!
 //! The wanted level at a point `p` is `log2` of the eye's distance to it (plus constants: the cone's footprint
 //! grows linearly with distance). Between two cameras the level wanted at `p` changes by
-//! `|log2(|p − eye₁| / |p − eye₀|)|`. [`level_rate`] takes the largest such change over probe points where the first
+//! `|log2(|p − eye₁| / |p − eye₀|) + log2(s₁ / s₀)|`, where `s` is the angle one pixel subtends (a narrower field of
+//! view wants finer data too). [`level_rate`] takes the largest such change over probe points where the first
 //! camera looks: the rays through a 3×3 grid of the image, at the distance of its target (the point the user looks
-//! at, and where a viewer's zoom goes). An orbit around the target changes no distance and gives about 0; a zoom to
+//! at, and where a viewer's zoom goes). An orbit around the target changes the target's distance not at all and the
+//! other probes' little (0.006 levels per frame at 1° per frame with a 40° field of view, 0.05 at 8°); a zoom to
 //! a thousandth of the distance over 60 frames gives `log2(1000) / 60 ≈ 0.17` levels per frame; flying along the
 //! view by 3% of the distance per frame gives 0.04.
 
@@ -23,22 +25,20 @@ use voxstream_render::Camera;
 /// is degenerate (the renderer rejects those on its own).
 pub fn level_rate(previous: &Camera, current: &Camera) -> f64 {
     // The aspect ratio does not matter for a 3×3 grid of directions, only the field of view.
-    let Ok(frame) = previous.frame(3, 3) else {
+    let (Ok(frame), Ok(current_frame)) = (previous.frame(3, 3), current.frame(3, 3)) else {
         return 0.0;
     };
-    if current.frame(3, 3).is_err() {
-        return 0.0;
-    }
+    // A narrower field of view wants finer data at the same distance: the footprint is distance × pixel spread.
+    let zoom = (current_frame.pixel_spread / frame.pixel_spread).log2();
     let eye = frame.eye;
-    let current_eye = glam::DVec3::from(current.eye);
     let distance = (glam::DVec3::from(previous.target) - eye).length();
     let mut rate: f64 = 0.0;
     for y in 0..3 {
         for x in 0..3 {
             let point = eye + frame.direction(x, y, 3, 3) * distance;
-            let after = (point - current_eye).length();
+            let after = (point - current_frame.eye).length();
             if after > 0.0 {
-                rate = rate.max((after / distance).log2().abs());
+                rate = rate.max(((after / distance).log2() + zoom).abs());
             }
         }
     }
@@ -73,6 +73,9 @@ mod tests {
         assert!((rate - 1.0).abs() < 1e-12, "{rate}");
         // Backing away to twice the distance is the same pace the other way.
         assert!((level_rate(&closer, &view) - 1.0).abs() < 1e-12);
+        // Halving the field of view's tangent at the same place wants a level finer too.
+        let narrower = Camera { fov: 2.0 * (20f64.to_radians().tan() / 2.0).atan().to_degrees(), ..view };
+        assert!((level_rate(&view, &narrower) - 1.0).abs() < 1e-9, "{}", level_rate(&view, &narrower));
         // A degenerate camera gives 0 rather than an error.
         let degenerate = camera([0.0; 3], [0.0; 3]);
         assert_eq!(level_rate(&view, &degenerate), 0.0);

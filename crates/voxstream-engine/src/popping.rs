@@ -15,11 +15,12 @@
 //!   elsewhere is an artifact too.)
 //!
 //! - **Floor** of a sequence's popping: the least mean popping that any sequence with the same first and last images
-//!   could have against the same converged images, per pixel `max(0, |I_last − I_first| − Σ_k |C_{k+1} − C_k|)`
+//!   and the same number of frames could have against the same converged images, per pixel `max(0, |I_last − I_first| − Σ_k |C_{k+1} − C_k|)`
 //!   summed over pixels and channels and divided by the same count as the mean. (By the triangle inequality,
 //!   `Σ_k max(0, |ΔI_k| − |ΔC_k|) ≥ |I_last − I_first| − Σ_k |ΔC_k|` for every pixel.) Blending spreads a change over
 //!   frames but cannot undo it: a cold start at rest must still get from its first image to its last, so the mean
-//!   popping of blending is bounded below by this floor, however the fades are shaped; only changes that reverse
+//!   popping of a blended sequence that ends where it ends is bounded below by this floor, however the fades are
+//!   shaped (a sequence that ends elsewhere, e.g. not yet final, has its own floor); only changes that reverse
 //!   (a level's shading replaced by the next one's and back) are above it and can be saved.
 //!
 //! All are in 8-bit levels (0–255) of the written images. A sequence is measured from its first image that shows
@@ -145,8 +146,9 @@ impl PoppingSummary {
 /// The floor of a sequence's mean popping (module docs): `frames` and `exact` of the same length, at least 2.
 fn popping_floor(frames: &[Rgb8<'_>], exact: &[Rgb8<'_>]) -> f64 {
     let (first, last) = (frames[0].bytes, frames[frames.len() - 1].bytes);
-    let n = frames.iter().chain(exact).map(|f| f.bytes.len()).min().unwrap_or(0);
-    if n == 0 {
+    let n = first.len();
+    // Images of different sizes have no common per-pixel path: 0 is a floor still (a trivial one).
+    if n == 0 || frames.iter().chain(exact).any(|f| f.bytes.len() != n) {
         return 0.0;
     }
     let mut total = 0u64;
@@ -236,5 +238,9 @@ mod tests {
         let moving = PoppingSummary::measure(&views, &exact_views);
         assert_eq!(moving.popping_mean, 2.5);
         assert_eq!(moving.popping_floor, 0.0, "20 levels of change, 30 explained");
+        // Images of different sizes: only the trivial floor.
+        let small = [9u8; 3];
+        let mixed = [image(&frames[0], 1), image(&frames[1], 1), Rgb8 { width: 1, height: 1, bytes: &small[..2] }];
+        assert_eq!(popping_floor(&mixed, &views), 0.0);
     }
 }
