@@ -125,6 +125,10 @@ pub struct FrameResult {
     /// Whether the frame blended some brick towards its parent (a fade-in, or a finer neighbour still missing):
     /// the next frames still change the image.
     pub blended: bool,
+    /// Levels per frame by which the camera changed the wanted level since the previous interactive frame
+    /// ([`crate::level_rate`]): the pace the fades kept ([`LoopLimits::pace_fades_to_camera`]). 0 for a converged
+    /// frame, the first interactive frame after one, and with the pace off.
+    pub level_rate: f64,
     /// Producer failures met in this frame.
     pub failures: Vec<ProduceError>,
     /// Whether [`Session::render_interruptible`]'s observer stopped the frame early (then it is not converged,
@@ -370,6 +374,7 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
             pending: 0,
             served: 0,
             blended: false,
+            level_rate: 0.0,
             failures: Vec::new(),
             interrupted: false,
             missing: Vec::new(),
@@ -391,6 +396,7 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
             _ => 0.0,
         };
         self.cache.set_blending_level_rate(level_rate);
+        result.level_rate = level_rate;
         self.previous_interactive_camera = (mode == Mode::Interactive).then_some(*camera);
         if mode == Mode::Converged {
             settings.max_requests_per_ray = settings.max_requests_per_ray.max(CONVERGED_REQUESTS_PER_RAY);
@@ -572,6 +578,25 @@ mod tests {
         let settings = RenderSettings { width: 24, height: 24, ..RenderSettings::default() };
         let camera = Camera { eye: [0.5, 0.5, 3.0], target: [0.5, 0.5, 0.5], up: [0.0, 1.0, 0.0], fov: 30.0 };
         (tf, settings, camera)
+    }
+
+    #[test]
+    fn interactive_frames_measure_the_pace_of_the_camera_and_converged_frames_reset_it() {
+        let (tf, settings, camera) = parts();
+        let closer = Camera { eye: [0.5, 0.5, 1.75], ..camera };
+        for pace in [true, false] {
+            let limits = LoopLimits { pace_fades_to_camera: pace, ..LoopLimits::default() };
+            let mut session = Session::new(Ball, &tf, settings.clone(), 16 << 20, limits).unwrap();
+            // The first interactive frame has no previous camera.
+            assert_eq!(session.render(&camera, Mode::Interactive).unwrap().level_rate, 0.0);
+            // Half the distance to the target: a level finer.
+            let rate = session.render(&closer, Mode::Interactive).unwrap().level_rate;
+            let expected = if pace { 1.0 } else { 0.0 };
+            assert!((rate - expected).abs() < 1e-12, "pace {pace}: {rate}");
+            // A converged frame forgets where the camera came from.
+            assert_eq!(session.render(&camera, Mode::Converged).unwrap().level_rate, 0.0);
+            assert_eq!(session.render(&closer, Mode::Interactive).unwrap().level_rate, 0.0);
+        }
     }
 
     #[test]
