@@ -66,6 +66,9 @@ pub struct SceneFigures {
 
 /// Runs the benchmark and prints a Markdown table.
 pub fn run(args: &BenchArgs) -> Result<()> {
+    if args.fade_frames == 0 {
+        bail!("--fade-frames must be at least 1 (1 replaces a parent at once; use --blending off for no blending)");
+    }
     if args.popping {
         return crate::popping_bench::run(args);
     }
@@ -176,10 +179,7 @@ fn new_session(
     let budget = check_budget(args.budget_mb, args.size, args.size, "--size")?;
     let plan = plan_budget(&budget, &scene.producer.shape(), 0)?;
     let blending = args.blending == Switch::On;
-    let limits = LoopLimits {
-        blending_fade_frames: blending.then_some(voxstream_core::DEFAULT_FADE_FRAMES),
-        ..LoopLimits::default()
-    };
+    let limits = LoopLimits { blending_fade_frames: blending.then_some(args.fade_frames), ..LoopLimits::default() };
     let renderer = crate::backend::open_renderer(args.backend, args.gpu_filter)?;
     let session = Session::with_renderer(
         renderer,

@@ -444,6 +444,9 @@ pub struct BenchArgs {
     /// Level blending in the interactive frames (--popping measures both and ignores this).
     #[arg(long, value_enum, default_value_t = Switch::On)]
     pub blending: Switch,
+    /// With blending: frames over which an arriving brick fades in (as `render --fade-frames`; --popping too).
+    #[arg(long, default_value_t = voxstream_core::DEFAULT_FADE_FRAMES)]
+    pub fade_frames: u32,
     /// --popping: also measure this store (a folder made by `voxstream import`).
     #[arg(long, value_name = "STORE")]
     pub store: Option<PathBuf>,

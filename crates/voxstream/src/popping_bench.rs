@@ -8,7 +8,7 @@ use std::sync::Arc;
 
 use anyhow::{Context, Result};
 use serde::Serialize;
-use voxstream_core::{Producer, DEFAULT_FADE_FRAMES};
+use voxstream_core::Producer;
 use voxstream_engine::{LoopLimits, Mode, PoppingSummary, Session};
 use voxstream_render::{Camera, RenderSettings};
 use voxstream_store::{StoreProducer, StoreReader};
@@ -162,9 +162,7 @@ fn study<P: Producer>(
     let mut exact = Vec::new();
     let (mut forced_steps, mut restriction_yielded) = (0, 0);
     // Off, on with a free working set, on (restricted).
-    for (fade_frames, restrict) in
-        [(None, false), (Some(DEFAULT_FADE_FRAMES), false), (Some(DEFAULT_FADE_FRAMES), true)]
-    {
+    for (fade_frames, restrict) in [(None, false), (Some(args.fade_frames), false), (Some(args.fade_frames), true)] {
         let limits = LoopLimits {
             requests_per_frame: args.requests_per_frame,
             blending_fade_frames: fade_frames,
@@ -221,13 +219,14 @@ fn study<P: Producer>(
 
 fn print_table(figures: &[PathFigures], args: &BenchArgs, frames: usize) {
     println!(
-        "{frames} frames of {0}x{0}, {1} requests per frame, fade-in {DEFAULT_FADE_FRAMES} frames, threads: {2}; popping \
+        "{frames} frames of {0}x{0}, {1} requests per frame, fade-in {3} frames, threads: {2}; popping \
          and seams in 8-bit levels per pixel and channel (off → on); floor: the least mean popping any sequence from \
          the blended run's first to its last image could have, and the ratio to the popping without blending that \
          such a sequence would reach\n",
         args.size,
         args.requests_per_frame,
-        rayon::current_num_threads()
+        rayon::current_num_threads(),
+        args.fade_frames
     );
     println!("| source | path | popping mean | ratio | floor | ratio at the floor | popping p99 | ratio | seams mean | ratio | frame ms (median) | cost | frames to final |");
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");

@@ -181,6 +181,7 @@ fn bad_input_is_one_clear_line() {
     // bench --iso: checked before anything is measured.
     assert_fails(&["bench", "--iso", "2"], "outside the built-in scenes' values");
     assert_fails(&["bench", "--shadows"], "add --iso");
+    assert_fails(&["bench", "--popping", "--fade-frames", "0"], "--fade-frames must be at least 1");
     // --gpu-filter without the GPU renderer.
     assert_fails(&["render", "--gpu-filter", "hardware", "--out", "x.png"], "add --backend gpu");
     assert_fails(&["bench", "--gpu-filter", "exact"], "add --backend gpu");
