@@ -15,8 +15,9 @@
 //!   elsewhere is an artifact too.)
 //!
 //! - **Floor** of a sequence's popping: the least mean popping that any sequence with the same first and last images
-//!   and the same number of frames could have against the same converged images, per pixel `max(0, |I_last − I_first| − Σ_k |C_{k+1} − C_k|)`
-//!   summed over pixels and channels and divided by the same count as the mean. (By the triangle inequality,
+//!   and the same number of frames could have against the same converged images, per pixel
+//!   `max(0, |I_last − I_first| − Σ_k |C_{k+1} − C_k|)`, summed over pixels and channels and divided by the same
+//!   count as the mean. (By the triangle inequality,
 //!   `Σ_k max(0, |ΔI_k| − |ΔC_k|) ≥ |I_last − I_first| − Σ_k |ΔC_k|` for every pixel.) Blending spreads a change over
 //!   frames but cannot undo it: a cold start at rest must still get from its first image to its last, so the mean
 //!   popping of a blended sequence that ends where it ends is bounded below by this floor, however the fades are
@@ -93,8 +94,8 @@ pub struct PoppingSummary {
     pub popping_p99: f64,
     /// Largest popping of a frame pair.
     pub popping_max: f64,
-    /// The least mean popping any sequence from the same first to the same last image could have against the same
-    /// converged images (see the module docs), 8-bit levels.
+    /// The least mean popping any sequence of as many frames from the same first to the same last image could have
+    /// against the same converged images (see the module docs), 8-bit levels.
     pub popping_floor: f64,
     /// Mean seam error over frames, 8-bit levels.
     pub seam_mean: f64,

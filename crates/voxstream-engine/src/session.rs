@@ -391,12 +391,12 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
             mode == Mode::Interactive && self.limits.blending_fade_frames.is_some() && self.limits.restrict_working_set,
         );
         // How fast the camera changes the wanted level since the last interactive frame: the fades keep that pace.
-        let level_rate = match (mode, &self.previous_interactive_camera) {
+        let pace = match (mode, &self.previous_interactive_camera) {
             (Mode::Interactive, Some(previous)) if self.limits.pace_fades_to_camera => level_rate(previous, camera),
             _ => 0.0,
         };
-        self.cache.set_blending_level_rate(level_rate);
-        result.level_rate = level_rate;
+        self.cache.set_blending_level_rate(pace);
+        result.level_rate = pace;
         self.previous_interactive_camera = (mode == Mode::Interactive).then_some(*camera);
         if mode == Mode::Converged {
             settings.max_requests_per_ray = settings.max_requests_per_ray.max(CONVERGED_REQUESTS_PER_RAY);

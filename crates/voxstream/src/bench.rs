@@ -66,9 +66,7 @@ pub struct SceneFigures {
 
 /// Runs the benchmark and prints a Markdown table.
 pub fn run(args: &BenchArgs) -> Result<()> {
-    if args.fade_frames == 0 {
-        bail!("--fade-frames must be at least 1 (1 replaces a parent at once; use --blending off for no blending)");
-    }
+    crate::render_command::check_fade_frames(args.fade_frames)?;
     if args.popping {
         return crate::popping_bench::run(args);
     }

@@ -241,7 +241,12 @@ pub fn check_flags(args: &RenderArgs) -> Result<()> {
     if args.popping && (args.mode != Mode::Interactive || args.stats.is_none()) {
         bail!("--popping measures interactive frames into the stats file: add --mode interactive and --stats FILE");
     }
-    if args.fade_frames == 0 {
+    check_fade_frames(args.fade_frames)
+}
+
+/// `--fade-frames` (render and bench): at least 1.
+pub fn check_fade_frames(fade_frames: u32) -> Result<()> {
+    if fade_frames == 0 {
         bail!("--fade-frames must be at least 1 (1 replaces a parent at once; use --blending off for no blending)");
     }
     Ok(())
