@@ -25,6 +25,16 @@ impl InstructionSet {
         }
     }
 
+    /// Whether the ray loop reads brick corners with AVX2 gathers ([`crate::gathered_corners`]): where it runs the
+    /// x86-64-v3 build.
+    pub fn gathers(self) -> bool {
+        #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
+        if let (InstructionSet::Detect, pulp::Arch::V3(_)) = (self, pulp::Arch::new()) {
+            return true;
+        }
+        false
+    }
+
     /// What [`InstructionSet::Detect`] finds on this CPU, for reports: `"x86-64-v3 (AVX2+FMA)"` or `"baseline"`.
     pub fn detected() -> &'static str {
         #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]

@@ -33,6 +33,7 @@ pub mod cell_walk;
 pub mod emission_absorption;
 pub mod error;
 pub mod frame;
+pub mod gathered_corners;
 pub mod image;
 pub mod instruction_set;
 pub mod integrand;

@@ -6,6 +6,8 @@
 
 use voxstream_core::{Dequantize, Voxel, BLOCK_CELLS};
 
+use crate::gathered_corners::CornerGather;
+
 /// `⌊c⌋` capped at `last`, as an integer and as a float, for `c ∈ [0, 2²³)` (coordinates and table positions after
 /// clamping): `floor` and `min`, then the integer read off the mantissa of `2²³ + ⌊c⌋`. The same integer as
 /// `(c as u32).min(last)`, through float operations only, so it vectorises: Rust's saturating float→int conversion
@@ -117,8 +119,9 @@ pub fn values_along<V: Voxel>(
     delta: [f32; 3],
     k: f32,
     dq: Dequantize,
+    gather: CornerGather,
 ) -> [f32; LANES] {
-    let (corners, fractions) = corners_along(brick, b, start, delta, k);
+    let (corners, fractions) = corners_along(brick, b, start, delta, k, gather);
     interpolate::<V>(&corners, &fractions, dq)
 }
 
@@ -131,8 +134,9 @@ pub fn values_and_gradients_along<V: Voxel>(
     delta: [f32; 3],
     k: f32,
     dq: Dequantize,
+    gather: CornerGather,
 ) -> ([f32; LANES], [[f32; 3]; LANES]) {
-    let (corners, fractions) = corners_along(brick, b, start, delta, k);
+    let (corners, fractions) = corners_along(brick, b, start, delta, k, gather);
     interpolate_with_gradients::<V>(&corners, &fractions, dq)
 }
 
@@ -197,6 +201,7 @@ fn corners_along<V: Voxel>(
     start: [f32; 3],
     delta: [f32; 3],
     k: f32,
+    gather: CornerGather,
 ) -> ([[f32; LANES]; 8], [[f32; LANES]; 3]) {
     let max = (b - 1) as f32;
     let last_cell = b as u32 - 2;
@@ -214,16 +219,7 @@ fn corners_along<V: Voxel>(
         }
         base[j] = (ijk[2] * b as u32 + ijk[1]) * b as u32 + ijk[0];
     }
-    let mut corners = [[0f32; LANES]; 8];
-    let offsets = [0, 1, row, row + 1, slab, slab + 1, slab + row, slab + row + 1];
-    for j in 0..LANES {
-        let at = base[j] as usize;
-        let cell = &brick[at..at + slab + row + 2];
-        for (corner, &offset) in offsets.iter().enumerate() {
-            corners[corner][j] = cell[offset].stored();
-        }
-    }
-    (corners, fraction)
+    (gather.read(brick, &base, row, slab), fraction)
 }
 
 /// One point on each of `LANES` independent lines, each through its own brick of the pool (`voxels`, `b` voxels
@@ -233,6 +229,7 @@ fn corners_along<V: Voxel>(
 /// along one ray. Every lane reads inside its brick whatever its position (positions are clamped), so unused lanes
 /// are harmless; `bases[j] + b³ ≤ voxels.len()` is checked per lane.
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 pub fn values_across<V: Voxel>(
     voxels: &[V],
     b: usize,
@@ -241,13 +238,15 @@ pub fn values_across<V: Voxel>(
     delta: &[[f32; LANES]; 3],
     k: &[f32; LANES],
     dq: Dequantize,
+    gather: CornerGather,
 ) -> [f32; LANES] {
-    let (corners, fractions) = corners_across(voxels, b, bases, start, delta, k);
+    let (corners, fractions) = corners_across(voxels, b, bases, start, delta, k, gather);
     interpolate::<V>(&corners, &fractions, dq)
 }
 
 /// [`values_across`] with the analytic gradients of [`Cell::value_and_gradient`], bit for bit.
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 pub fn values_and_gradients_across<V: Voxel>(
     voxels: &[V],
     b: usize,
@@ -256,8 +255,9 @@ pub fn values_and_gradients_across<V: Voxel>(
     delta: &[[f32; LANES]; 3],
     k: &[f32; LANES],
     dq: Dequantize,
+    gather: CornerGather,
 ) -> ([f32; LANES], [[f32; 3]; LANES]) {
-    let (corners, fractions) = corners_across(voxels, b, bases, start, delta, k);
+    let (corners, fractions) = corners_across(voxels, b, bases, start, delta, k, gather);
     interpolate_with_gradients::<V>(&corners, &fractions, dq)
 }
 
@@ -270,6 +270,7 @@ fn corners_across<V: Voxel>(
     start: &[[f32; LANES]; 3],
     delta: &[[f32; LANES]; 3],
     k: &[f32; LANES],
+    gather: CornerGather,
 ) -> ([[f32; LANES]; 8], [[f32; LANES]; 3]) {
     let max = (b - 1) as f32;
     let last_cell = b as u32 - 2;
@@ -286,16 +287,8 @@ fn corners_across<V: Voxel>(
         }
         index[j] = (ijk[2] * b as u32 + ijk[1]) * b as u32 + ijk[0];
     }
-    let mut corners = [[0f32; LANES]; 8];
-    let offsets = [0, 1, row, row + 1, slab, slab + 1, slab + row, slab + row + 1];
-    for j in 0..LANES {
-        let at = bases[j] as usize + index[j] as usize;
-        let cell = &voxels[at..at + slab + row + 2];
-        for (corner, &offset) in offsets.iter().enumerate() {
-            corners[corner][j] = cell[offset].stored();
-        }
-    }
-    (corners, fraction)
+    let at: [u32; LANES] = std::array::from_fn(|j| bases[j] + index[j]);
+    (gather.read(voxels, &at, row, slab), fraction)
 }
 
 /// Samples a brick at continuous voxel index `x` (each axis clamped to `[0, B−1]`, `B = M + 2`).
@@ -391,9 +384,14 @@ mod tests {
                 delta[a][j] = ((j + 2 * a) as f32 * 0.29) % 1.3 - 0.6;
             }
         }
-        for k in [[0f32; LANES], std::array::from_fn(|j| (j * j) as f32), [40.0; LANES]] {
-            let values = values_across(&pool, b, &bases, &start, &delta, &k, DQ);
-            let (with_gradients, gradients) = values_and_gradients_across(&pool, b, &bases, &start, &delta, &k, DQ);
+        let gathers = [CornerGather::SCALAR, CornerGather::new(true)];
+        for (k, gather) in [[0f32; LANES], std::array::from_fn(|j| (j * j) as f32), [40.0; LANES]]
+            .into_iter()
+            .flat_map(|k| gathers.map(|gather| (k, gather)))
+        {
+            let values = values_across(&pool, b, &bases, &start, &delta, &k, DQ, gather);
+            let (with_gradients, gradients) =
+                values_and_gradients_across(&pool, b, &bases, &start, &delta, &k, DQ, gather);
             for j in 0..LANES {
                 let x: [f32; 3] = std::array::from_fn(|a| start[a][j] + k[j] * delta[a][j]);
                 let brick = &pool[bases[j] as usize..bases[j] as usize + per_brick];
@@ -414,9 +412,12 @@ mod tests {
             ([-2.0, 4.5, 9.5], [0.5, 0.0, -0.02]),
             ([8.9, 0.01, 3.3], [-1.1, 0.6, 0.7]),
         ] {
-            for k in [0.0f32, 3.0, 17.0] {
-                let values = values_along(&brick, b, start, delta, k, DQ);
-                let (with_gradient, gradients) = values_and_gradients_along(&brick, b, start, delta, k, DQ);
+            for (k, gather) in [0.0f32, 3.0, 17.0]
+                .into_iter()
+                .flat_map(|k| [CornerGather::SCALAR, CornerGather::new(true)].map(|gather| (k, gather)))
+            {
+                let values = values_along(&brick, b, start, delta, k, DQ, gather);
+                let (with_gradient, gradients) = values_and_gradients_along(&brick, b, start, delta, k, DQ, gather);
                 for (j, value) in values.iter().enumerate() {
                     let kj = k + j as f32;
                     let x = [start[0] + kj * delta[0], start[1] + kj * delta[1], start[2] + kj * delta[2]];
@@ -454,7 +455,10 @@ mod tests {
             for a in 0..3 {
                 assert!((g8[a] - g16[a]).abs() <= 2.0 / 65535.0 + 1e-6, "at {x:?}, axis {a}: {g8:?} vs {g16:?}");
             }
-            assert_eq!(values_along(&bytes, b, x, [0.25, -0.5, 0.125], 0.0, narrow)[0].to_bits(), v8.to_bits());
+            assert_eq!(
+                values_along(&bytes, b, x, [0.25, -0.5, 0.125], 0.0, narrow, CornerGather::new(true))[0].to_bits(),
+                v8.to_bits()
+            );
         }
     }
 }
