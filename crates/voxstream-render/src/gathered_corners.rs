@@ -7,10 +7,12 @@
 //! are the same bits as the scalar reads' (a test compares them on every cell of a brick pool).
 //!
 //! This is the one module of the workspace with `unsafe` code. [`CornerGather::new`] checks once per frame that the
-//! CPU has AVX2; [`CornerGather::read`] checks per call that the last word read lies inside the voxels and that
-//! every byte offset fits the gathers' 32-bit indices, and reads through slices otherwise. The offsets
-//! it is given are those of cells inside bricks (positions clamped into the brick), so the check fails only for the
-//! last cells of the pool's last brick with `u8` voxels, whose last word reaches two bytes past the pool.
+//! CPU has AVX2. [`CornerGather::read`] checks per call that the voxels are `u8` or `u16` (by type, not size), that
+//! the last word read lies inside them and that every byte offset fits the gathers' 32-bit indices (sums and
+//! products that would overflow fail the check); otherwise it reads through slices. The offsets it is given are
+//! those of cells inside bricks (positions clamped into the brick), so in the ray loop the check fails only for the
+//! last cells of the pool's last brick with `u8` voxels, whose last word reaches two bytes past the pool, and for
+//! pools over 2 GiB.
 
 #![allow(unsafe_code)]
 
@@ -43,19 +45,43 @@ impl CornerGather {
     /// with rows of `row` and slabs of `slab` voxels. Panics, as slice reads do, if a cell reaches past `voxels`.
     #[inline(always)]
     pub fn read<V: Voxel>(self, voxels: &[V], at: &[u32; LANES], row: usize, slab: usize) -> [[f32; LANES]; 8] {
+        match self.try_gather(voxels, at, row, slab) {
+            Some(corners) => corners,
+            None => scalar(voxels, at, row, slab),
+        }
+    }
+
+    /// [`CornerGather::read`] by gathers, or `None` where they may not run: gathers disabled, a voxel type other
+    /// than `u8` and `u16`, a word that would reach past `voxels`, or offsets beyond `i32` (arithmetic that would
+    /// overflow counts as beyond).
+    #[inline(always)]
+    fn try_gather<V: Voxel>(
+        self,
+        voxels: &[V],
+        at: &[u32; LANES],
+        row: usize,
+        slab: usize,
+    ) -> Option<[[f32; LANES]; 8]> {
         #[cfg(target_arch = "x86_64")]
-        if self.enabled && (size_of::<V>() == 1 || size_of::<V>() == 2) {
-            let last = at.iter().copied().max().unwrap_or(0) as usize + slab + row;
+        if self.enabled {
+            use std::any::TypeId;
+            let (narrow, wide) = (TypeId::of::<V>() == TypeId::of::<u8>(), TypeId::of::<V>() == TypeId::of::<u16>());
+            let size = size_of::<V>();
             let bytes = size_of_val(voxels);
-            // The word at the last pair's first voxel: 4 bytes from `last · size`.
-            if last * size_of::<V>() + 4 <= bytes && bytes <= i32::MAX as usize {
+            // The word at the last pair's first voxel: 4 bytes from `last · size`; every other word starts before.
+            let last = (at.iter().copied().max().unwrap_or(0) as usize).checked_add(slab)?.checked_add(row)?;
+            let end = last.checked_mul(size)?.checked_add(4)?;
+            if (narrow || wide) && end <= bytes && bytes <= i32::MAX as usize {
                 // SAFETY: `enabled` says the CPU has AVX2 (checked at run time in `new`), so the `avx2` function may
-                // run. Every word read starts at byte `(at[j] + offset) · size ≤ last · size` and ends 4 bytes later,
-                // inside `voxels` by the test above, and every byte offset fits `i32`.
-                return unsafe { gather_avx2::<V>(voxels, at, row, slab) };
+                // run; `V` is `u8` or `u16` (type ids above), so every byte of `voxels` is initialised and a word's
+                // bytes are two corners. Every word read starts at byte `(at[j] + o) · size ≤ last · size` for
+                // `o ≤ slab + row` and ends 4 bytes later, inside `voxels` (`end ≤ bytes`), and every byte offset
+                // is below `bytes ≤ i32::MAX`.
+                return Some(unsafe { gather_avx2::<V>(voxels, at, row * size, slab * size) });
             }
         }
-        scalar(voxels, at, row, slab)
+        let _ = (voxels, at, row, slab);
+        None
     }
 }
 
@@ -85,45 +111,50 @@ fn has_avx2() -> bool {
     }
 }
 
-/// Four gathers of 32-bit words, split into the eight corners.
+/// Four gathers of 32-bit words, split into the eight corners: lane `j`'s pairs start at byte
+/// `first[j] · size_of::<V>()`, `+ row_bytes`, `+ slab_bytes` and `+ slab_bytes + row_bytes`.
 ///
 /// # Safety
-/// The CPU must have AVX2; `V` must be one or two bytes; every word read (4 bytes from byte `(at[j] + o) · size` for
-/// `o` in `0, row, slab, slab + row`) must lie inside `voxels`, and those byte offsets must fit in `i32`.
+/// The CPU must have AVX2; `V` must be `u8` or `u16`; every word read (4 bytes from each of those byte offsets)
+/// must lie inside `voxels`, and every such offset must be below `i32::MAX`.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 #[inline]
-unsafe fn gather_avx2<V: Voxel>(voxels: &[V], at: &[u32; LANES], row: usize, slab: usize) -> [[f32; LANES]; 8] {
+unsafe fn gather_avx2<V: Voxel>(
+    voxels: &[V],
+    first: &[u32; LANES],
+    row_bytes: usize,
+    slab_bytes: usize,
+) -> [[f32; LANES]; 8] {
     use std::arch::x86_64::*;
     const { assert!(LANES == 8) };
-    let size = size_of::<V>() as i32;
+    let narrow = size_of::<V>() == 1;
     let base = voxels.as_ptr() as *const i32;
-    // SAFETY: `at` is 8 `u32`s, an unaligned 256-bit load reads exactly them.
-    let first =
-        _mm256_mullo_epi32(unsafe { _mm256_loadu_si256(at.as_ptr() as *const __m256i) }, _mm256_set1_epi32(size));
+    // SAFETY: `first` is 8 `u32`s; an unaligned 256-bit load reads exactly them.
+    let voxel = unsafe { _mm256_loadu_si256(first.as_ptr() as *const __m256i) };
+    // In bytes: twice the voxel index for `u16`.
+    let first = if narrow { voxel } else { _mm256_add_epi32(voxel, voxel) };
     let word = |offset: usize| {
-        let offsets = _mm256_add_epi32(first, _mm256_set1_epi32(offset as i32 * size));
+        // Below `i32::MAX` by the caller's guarantee, as is each sum.
+        let at = _mm256_add_epi32(first, _mm256_set1_epi32(offset as i32));
         // SAFETY: the caller guarantees every word at these byte offsets lies inside `voxels`.
-        unsafe { _mm256_i32gather_epi32::<1>(base, offsets) }
+        unsafe { _mm256_i32gather_epi32::<1>(base, at) }
     };
-    let (low, high) = if size == 1 {
-        let mask = _mm256_set1_epi32(0xff);
-        (mask, mask)
-    } else {
-        let mask = _mm256_set1_epi32(0xffff);
-        (mask, mask)
-    };
+    // A word holds the pair's two voxels: bytes 0 and 1 (`u8`), or its two halves (`u16`), little-endian.
     let split = |w: __m256i| -> (__m256, __m256) {
-        let first = _mm256_cvtepi32_ps(_mm256_and_si256(w, low));
-        let second = if size == 1 {
-            _mm256_cvtepi32_ps(_mm256_and_si256(_mm256_srli_epi32::<8>(w), high))
+        if narrow {
+            let byte = _mm256_set1_epi32(0xff);
+            (
+                _mm256_cvtepi32_ps(_mm256_and_si256(w, byte)),
+                _mm256_cvtepi32_ps(_mm256_and_si256(_mm256_srli_epi32::<8>(w), byte)),
+            )
         } else {
-            _mm256_cvtepi32_ps(_mm256_srli_epi32::<16>(w))
-        };
-        (first, second)
+            let half = _mm256_set1_epi32(0xffff);
+            (_mm256_cvtepi32_ps(_mm256_and_si256(w, half)), _mm256_cvtepi32_ps(_mm256_srli_epi32::<16>(w)))
+        }
     };
     let mut corners = [[0f32; LANES]; 8];
-    for (pair, offset) in [0, row, slab, slab + row].into_iter().enumerate() {
+    for (pair, offset) in [0, row_bytes, slab_bytes, slab_bytes + row_bytes].into_iter().enumerate() {
         let (a, b) = split(word(offset));
         // SAFETY: each corner row is 8 `f32`s; unaligned stores write exactly them.
         unsafe {
@@ -138,11 +169,12 @@ unsafe fn gather_avx2<V: Voxel>(voxels: &[V], at: &[u32; LANES], row: usize, sla
 mod tests {
     use super::*;
 
-    fn check<V: Voxel + std::fmt::Debug>(pool: &[V], b: usize) {
+    /// Every cell of every brick of `pool`, eight at a time with the lanes spread over the pool: gathered (where
+    /// allowed) and read through slices, bit for bit. Returns how many reads gathered.
+    fn check<V: Voxel + std::fmt::Debug>(pool: &[V], b: usize) -> usize {
         let gather = CornerGather::new(true);
         let (row, slab) = (b, b * b);
         let bricks = pool.len() / (b * b * b);
-        // Every cell of every brick, eight at a time, lanes spread over the bricks.
         let cells: Vec<u32> = (0..bricks)
             .flat_map(|brick| {
                 (0..(b - 1).pow(3)).map(move |c| {
@@ -153,21 +185,19 @@ mod tests {
             .collect();
         let mut gathered = 0;
         for (n, chunk) in cells.chunks(LANES).enumerate() {
-            let mut at = [0u32; LANES];
-            for j in 0..LANES {
-                // Interleave: lane j reads cells from different parts of the pool.
-                at[j] = chunk[(j * 3 + n) % chunk.len()];
-            }
+            let at: [u32; LANES] = std::array::from_fn(|j| chunk[(j * 3 + n) % chunk.len()]);
             let reference = scalar(pool, &at, row, slab);
-            let read = gather.read(pool, &at, row, slab);
-            assert_eq!(read.map(|c| c.map(f32::to_bits)), reference.map(|c| c.map(f32::to_bits)), "cells {at:?}");
-            let last = at.iter().copied().max().unwrap_or(0) as usize + slab + row;
-            gathered += (last * size_of::<V>() + 4 <= size_of_val(pool)) as u32;
+            assert_eq!(
+                gather.read(pool, &at, row, slab).map(|c| c.map(f32::to_bits)),
+                reference.map(|c| c.map(f32::to_bits)),
+                "cells {at:?}"
+            );
+            if let Some(corners) = gather.try_gather(pool, &at, row, slab) {
+                assert_eq!(corners.map(|c| c.map(f32::to_bits)), reference.map(|c| c.map(f32::to_bits)));
+                gathered += 1;
+            }
         }
-        // Most calls gathered (only the pool's last cells fall back for u8); on a CPU without AVX2, none did.
-        if gather.is_enabled() {
-            assert!(gathered as usize > cells.len() / LANES / 2, "{gathered} of {}", cells.len() / LANES);
-        }
+        gathered
     }
 
     #[test]
@@ -178,21 +208,53 @@ mod tests {
 
     #[test]
     fn gathered_corners_are_the_scalar_corners_bit_for_bit() {
-        let b = 6;
+        let b: usize = 6;
         let narrow: Vec<u8> = (0..3 * b * b * b).map(|i| (i * 37 + 11) as u8).collect();
         let wide: Vec<u16> = (0..3 * b * b * b).map(|i| (i * 7919 + 13) as u16).collect();
-        check(&narrow, b);
-        check(&wide, b);
+        let reads = (3 * (b - 1).pow(3)).div_ceil(LANES);
+        let (narrow_gathered, wide_gathered) = (check(&narrow, b), check(&wide, b));
+        if has_avx2() {
+            // Every read of the 16-bit pool gathers; of the 8-bit pool, all but those whose cells include one of
+            // the last brick's last cells (their last word would reach two bytes past the pool).
+            assert_eq!(wide_gathered, reads);
+            assert!(narrow_gathered > reads * 9 / 10 && narrow_gathered < reads, "{narrow_gathered} of {reads}");
+        } else {
+            assert_eq!((narrow_gathered, wide_gathered), (0, 0));
+        }
     }
 
     #[test]
-    fn reads_past_the_pool_fall_back_to_slices() {
+    fn reads_that_could_leave_the_voxels_do_not_gather() {
+        let gather = CornerGather::new(true);
         // The last cell of a one-brick u8 pool: its last word would reach two bytes past the pool.
         let b = 4;
         let pool: Vec<u8> = (0..b * b * b).map(|i| i as u8).collect();
-        let at = [((b - 2) * b * b + (b - 2) * b + (b - 2)) as u32; LANES];
-        let corners = CornerGather::new(true).read(&pool, &at, b, b * b);
+        let last = ((b - 2) * b * b + (b - 2) * b + (b - 2)) as u32;
+        assert!(gather.try_gather(&pool, &[last; LANES], b, b * b).is_none());
+        let corners = gather.read(&pool, &[last; LANES], b, b * b);
         assert_eq!(corners[7], [(b * b * b - 1) as f32; LANES]);
-        assert_eq!(corners[0], [at[0] as f32; LANES]);
+        assert_eq!(corners[0], [last as f32; LANES]);
+        // Its neighbour's last word still reaches a byte past; the cell two before ends exactly at the pool's end,
+        // and gathers where the CPU can.
+        assert!(gather.try_gather(&pool, &[last - 1; LANES], b, b * b).is_none());
+        assert_eq!(gather.try_gather(&pool, &[last - 2; LANES], b, b * b).is_some(), has_avx2());
+        // Sizes whose sums or products wrap around never gather.
+        assert!(gather.try_gather(&pool, &[0; LANES], 100, usize::MAX - 99).is_none());
+        assert!(gather.try_gather(&pool, &[0; LANES], usize::MAX, 1).is_none());
+        let wide: Vec<u16> = vec![0; 64];
+        assert!(gather.try_gather(&wide, &[0; LANES], usize::MAX / 2, 1).is_none());
+        // Only u8 and u16 voxels gather.
+        #[derive(Clone, Copy)]
+        struct Padded(u8);
+        impl Voxel for Padded {
+            fn stored(self) -> f32 {
+                self.0 as f32
+            }
+            fn value(stored: f32, dq: voxstream_core::Dequantize) -> f32 {
+                dq.value(stored)
+            }
+        }
+        let odd = vec![Padded(1); 64];
+        assert!(gather.try_gather(&odd, &[0; LANES], 4, 16).is_none());
     }
 }

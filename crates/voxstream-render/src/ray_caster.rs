@@ -40,7 +40,8 @@ impl<'a> RayCaster<'a> {
             traversal: Traversal::new(view, feedback, settings),
             lut,
             integrand: EmissionAbsorptionSettings::new(settings),
-            ray_packets: settings.ray_packets,
+            // The lanes address the pool with `u32` voxel indices.
+            ray_packets: settings.ray_packets && view.voxels.len() <= u32::MAX as usize,
             shaded: settings.shading == Shading::Phong,
             block_visibility: settings.block_visibility_bits.then(|| BlockVisibility::new(&view)),
         }

@@ -287,6 +287,7 @@ fn corners_across<V: Voxel>(
         }
         index[j] = (ijk[2] * b as u32 + ijk[1]) * b as u32 + ijk[0];
     }
+    // In `u32`: the lanes run only on pools of at most `u32::MAX` voxels (`RayCaster::new`).
     let at: [u32; LANES] = std::array::from_fn(|j| bases[j] + index[j]);
     (gather.read(voxels, &at, row, slab), fraction)
 }

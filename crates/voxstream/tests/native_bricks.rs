@@ -122,3 +122,50 @@ fn u16_stores_keep_16_bit_bricks_whatever_the_flag() {
     assert_eq!(auto, wide);
     assert_eq!(auto_stats["resident_bytes_peak"], wide_stats["resident_bytes_peak"]);
 }
+
+#[test]
+fn u8_bricks_give_the_same_bytes_with_and_without_gathered_corners() {
+    use std::sync::Arc;
+    use voxstream::render_command::{default_store_transfer_function, store_camera, store_placement};
+    use voxstream_core::VoxelFormat;
+    use voxstream_engine::{LoopLimits, Mode, Session};
+    use voxstream_render::{InstructionSet, RenderSettings};
+    use voxstream_store::{StoreProducer, StoreReader};
+
+    // The ray loop reads 8-bit bricks' corners with AVX2 gathers where the CPU has AVX2 (the detected instruction
+    // set), through slices in the baseline build: the same bytes. Bricks of 16³ so that many lanes share a pool
+    // whose last brick's last cells need the slices.
+    let dir = scratch("u8-gathers");
+    write_ball(&dir.join("ball.nrrd"), 0);
+    let output = voxstream(&["import", "ball.nrrd", "--out", "ball.zarr", "--brick-size", "16", "--quiet"], &dir);
+    assert!(output.status.success(), "{}", stderr(&output));
+    let reader = Arc::new(StoreReader::open(&dir.join("ball.zarr")).expect("store"));
+    let transfer_function = default_store_transfer_function(reader.attributes().typical_range()).expect("function");
+    println!("this CPU: {}, gathers: {}", InstructionSet::detected(), InstructionSet::Detect.gathers());
+    let render = |instruction_set: InstructionSet, format: Option<VoxelFormat>| {
+        let settings = RenderSettings {
+            width: 96,
+            height: 96,
+            placement: store_placement(&reader),
+            instruction_set,
+            ..RenderSettings::default()
+        };
+        let producer = StoreProducer::new(reader.clone()).expect("producer").with_voxel_format(format);
+        let range = reader.attributes().value_range;
+        let mut session =
+            Session::with_value_range(producer, &transfer_function, settings, 64 << 20, LoopLimits::default(), range)
+                .expect("session");
+        let frame = session.render(&store_camera(reader.info(), 96, 96), Mode::Converged).expect("render");
+        assert!(frame.is_converged());
+        (frame.image, frame.samples, session.peak_resident_bytes())
+    };
+    let (gathered, gathered_samples, narrow_bytes) = render(InstructionSet::Detect, None);
+    let (sliced, sliced_samples, _) = render(InstructionSet::Baseline, None);
+    let covered = gathered.pixels.iter().filter(|p| p[3] > 0.01).count();
+    assert!(covered > 800, "the ball covers {covered} pixels only");
+    assert_eq!(gathered_samples, sliced_samples);
+    assert!(gathered.pixels == sliced.pixels, "gathered and sliced corners give different images");
+    // The bricks were 8-bit ones: a 16-bit pool of the same bricks takes much more memory.
+    let (_, _, wide_bytes) = render(InstructionSet::Detect, Some(VoxelFormat::Wide));
+    assert!((narrow_bytes as f64) < 0.6 * wide_bytes as f64, "{narrow_bytes} bytes, 16-bit {wide_bytes}");
+}
