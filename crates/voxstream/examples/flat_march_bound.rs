@@ -22,9 +22,11 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
+use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use voxstream::camera_path::read_camera_path;
 use voxstream_render::step_table::{StepLength, StepTable};
+use voxstream_render::traversal::intersect_aabb;
 use voxstream_render::{CameraFrame, TransferFunction, TransferLut};
 use voxstream_store::StoreReader;
 
@@ -73,19 +75,12 @@ impl Volume {
     }
 }
 
-/// Where a ray enters and leaves the box of sample centres.
+/// Where a ray enters and leaves the box of sample centres (the renderer's slab test), from the eye on.
 fn clip(origin: [f32; 3], direction: [f32; 3], dims: [usize; 3]) -> Option<(f32, f32)> {
-    let (mut t0, mut t1) = (0f32, f32::INFINITY);
-    for a in 0..3 {
-        let inv = 1.0 / direction[a];
-        let (mut near, mut far) = ((0.0 - origin[a]) * inv, ((dims[a] - 1) as f32 - origin[a]) * inv);
-        if near > far {
-            std::mem::swap(&mut near, &mut far);
-        }
-        t0 = t0.max(near);
-        t1 = t1.min(far);
-    }
-    (t1 > t0).then_some((t0, t1))
+    let upper = DVec3::from_array(dims.map(|d| (d - 1) as f64));
+    let (o, d) = (Vec3::from_array(origin).as_dvec3(), Vec3::from_array(direction).as_dvec3());
+    let (t0, t1) = intersect_aabb(o, d, DVec3::ZERO, upper)?;
+    Some((t0.max(0.0) as f32, t1 as f32))
 }
 
 struct Scene<'a> {
