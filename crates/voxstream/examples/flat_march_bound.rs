@@ -226,7 +226,7 @@ fn main() -> Result<()> {
     let reader = StoreReader::open(Path::new(&args[0])).context("opening the store")?;
     let size: u32 = args.get(3).map(|s| s.parse()).transpose().context("SIZE")?.unwrap_or(512);
     let frames: usize = args.get(4).map(|s| s.parse()).transpose().context("FRAMES")?.unwrap_or(5);
-    if size % 4 != 0 || size == 0 {
+    if !size.is_multiple_of(4) || size == 0 {
         bail!("SIZE must be a positive multiple of 4");
     }
     let info = reader.info().clone();
