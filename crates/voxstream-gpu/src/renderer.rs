@@ -438,7 +438,12 @@ impl GpuRenderer {
         drop(mapped);
         readback.unmap();
         self.passes += 1;
-        let stats = RayStats { rays: rays.rays as u64, samples: rays.samples as u64, descents: rays.descents as u64 };
+        let stats = RayStats {
+            rays: rays.rays as u64,
+            samples: rays.samples as u64,
+            descents: rays.descents as u64,
+            ..RayStats::default()
+        };
         Ok((stats, counters.request_count as usize))
     }
 }

@@ -163,7 +163,7 @@ pub fn render_pass(
         (0..tiles_x * tiles_y)
             .into_par_iter()
             .map_init(
-                || descent_paths(&caster),
+                || descent_paths(&caster, settings.shared_descents),
                 |paths, tile| {
                     let corner = ((tile % tiles_x) * edge, (tile / tiles_x) * edge);
                     render_tile(&caster, &frame, settings, corner, edge, feedback, pending, paths)
@@ -176,7 +176,7 @@ pub fn render_pass(
         (0..tiles_x * tiles_y)
             .into_par_iter()
             .map_init(
-                || descent_paths(&caster),
+                || descent_paths(&caster, settings.shared_descents),
                 |paths, tile| {
                     let corner = ((tile % tiles_x) * edge, (tile / tiles_x) * edge);
                     render_tile(&caster, &frame, settings, corner, edge, feedback, pending, paths)
@@ -214,9 +214,12 @@ struct TileResult {
 }
 
 /// The lanes' descent paths, made once per worker's share of a pass's tiles rather than once per tile (each is a few
-/// KiB, and every ray resets its own).
-fn descent_paths<T: PixelTracer>(caster: &T) -> Box<[DescentPath; LANES]> {
-    Box::new(std::array::from_fn(|_| DescentPath::new(caster.view())))
+/// KiB). Each is kept from ray to ray within the pass ([`DescentPath::for_rays_of_one_view`]): a ray's first descent
+/// starts from the nodes its lane's last ray left, mostly a neighbour's
+/// ([`RenderSettings::shared_descents`]).
+fn descent_paths<T: PixelTracer>(caster: &T, shared: bool) -> Box<[DescentPath; LANES]> {
+    let path = |view| if shared { DescentPath::for_rays_of_one_view(view) } else { DescentPath::new(view) };
+    Box::new(std::array::from_fn(|_| path(caster.view())))
 }
 
 #[allow(clippy::too_many_arguments)]

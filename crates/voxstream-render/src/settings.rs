@@ -106,6 +106,11 @@ pub struct RenderSettings {
     /// the same image as the range tests, which stay as the reference (off only to test that). Volume rendering
     /// only.
     pub block_visibility_bits: bool,
+    /// Keep each lane's descent path from one ray to the next within a pass, so that a ray's first descent starts
+    /// from its neighbour's nodes instead of the root ([`crate::DescentPath::for_rays_of_one_view`]); the same
+    /// images, counters and feedback as starting every ray from the root, which stays as the reference (off only to
+    /// test that).
+    pub shared_descents: bool,
     /// Instructions the ray loop uses (detected at run time by default; the image is the same either way).
     pub instruction_set: InstructionSet,
     /// Isosurfaces to draw instead of the volume, or inside it with [`RenderSettings::surfaces_in_volume`] (Knoll
@@ -191,6 +196,7 @@ impl Default for RenderSettings {
             sample_batches: true,
             ray_packets: true,
             block_visibility_bits: true,
+            shared_descents: true,
             surfaces: Vec::new(),
             shadows: false,
             surface_normals: SurfaceNormals::Cell,

@@ -11,6 +11,7 @@ use voxstream_core::{FeedbackBuffer, Request, TreeView};
 
 use crate::frame::PixelTracer;
 use crate::isosurface::{Isosurfaces, SurfaceSettings};
+use crate::sampler::LANES;
 use crate::settings::RenderSettings;
 use crate::surfaces_in_volume::{SurfacesInVolume, VolumeAroundSurfaces};
 use crate::transfer_function::TransferLut;
@@ -75,24 +76,61 @@ impl PixelTracer for SurfaceCaster<'_> {
         path: &mut DescentPath,
     ) -> ([f32; 3], f32) {
         let ray = Ray { origin, direction, spread, start: 0.0 };
-        match self.volume {
-            None => {
-                let mut surfaces = Isosurfaces::new(self.surfaces, direction);
-                self.traversal.trace(&ray, &mut surfaces, stats, requests, path);
-                self.shadow(&ray, &mut surfaces, stats, requests, path);
-                surfaces.result()
-            }
-            Some(volume) => {
-                let mut both = SurfacesInVolume::new(self.surfaces, volume, direction);
-                self.traversal.trace(&ray, &mut both, stats, requests, path);
-                self.shadow(&ray, both.surfaces(), stats, requests, path);
-                both.result()
-            }
+        self.trace_with_shadow(&ray, stats, requests, path, None)
+    }
+
+    /// One ray after another, as [`trace_one_by_one`](crate::frame::trace_one_by_one), but the shadow rays descend
+    /// through a path of their own: a path kept between rays ([`DescentPath::for_rays_of_one_view`]) then starts each
+    /// primary ray from the last primary ray's nodes and each shadow ray from the last shadow ray's.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn trace_rays(
+        &self,
+        origin: DVec3,
+        rays: impl Iterator<Item = (usize, DVec3)>,
+        spread: f64,
+        stats: &mut RayStats,
+        requests: &mut Vec<Request>,
+        paths: &mut [DescentPath; LANES],
+        mut emit: impl FnMut(usize, [f32; 3], f32, bool),
+    ) {
+        let [primary_path, shadow_path, ..] = paths;
+        for (id, direction) in rays {
+            let before = requests.len();
+            let ray = Ray { origin, direction, spread, start: 0.0 };
+            let (color, alpha) = self.trace_with_shadow(&ray, stats, requests, primary_path, Some(shadow_path));
+            emit(id, color, alpha, requests.len() > before);
         }
     }
 }
 
 impl SurfaceCaster<'_> {
+    /// The primary ray, then its shadow ray (through `shadow_path` if given, else through `path` too).
+    #[inline(always)]
+    fn trace_with_shadow(
+        &self,
+        ray: &Ray,
+        stats: &mut RayStats,
+        requests: &mut Vec<Request>,
+        path: &mut DescentPath,
+        shadow_path: Option<&mut DescentPath>,
+    ) -> ([f32; 3], f32) {
+        match self.volume {
+            None => {
+                let mut surfaces = Isosurfaces::new(self.surfaces, ray.direction);
+                self.traversal.trace(ray, &mut surfaces, stats, requests, path);
+                self.shadow(ray, &mut surfaces, stats, requests, shadow_path.unwrap_or(path));
+                surfaces.result()
+            }
+            Some(volume) => {
+                let mut both = SurfacesInVolume::new(self.surfaces, volume, ray.direction);
+                self.traversal.trace(ray, &mut both, stats, requests, path);
+                self.shadow(ray, both.surfaces(), stats, requests, shadow_path.unwrap_or(path));
+                both.result()
+            }
+        }
+    }
+
     /// With shadows on, a ray from the first crossing towards the light; a blocked light leaves the crossing its
     /// ambient term.
     #[inline(always)]

@@ -72,8 +72,11 @@ pub struct RayStats {
     pub rays: u64,
     /// Brick samples taken plus constant segments integrated.
     pub samples: u64,
-    /// Descents from the root.
+    /// Descents (one per segment), each from the deepest node of the path kept that contains the segment's point.
     pub descents: u64,
+    /// Child nodes entered by those descents: the levels walked down, which a descent restarting from a kept path
+    /// saves ([`DescentPath`]). Counted by the CPU traversal only (0 from the GPU renderer).
+    pub nodes_entered: u64,
 }
 
 impl RayStats {
@@ -82,6 +85,7 @@ impl RayStats {
         self.rays += other.rays;
         self.samples += other.samples;
         self.descents += other.descents;
+        self.nodes_entered += other.nodes_entered;
     }
 }
 
@@ -99,22 +103,70 @@ struct PathEntry {
 /// The nodes from the root to the last node reached, reused between segments so that a new descent restarts from
 /// the deepest ancestor that still contains the point (a short-stack variant of kd-restart). One per thread, reused
 /// from ray to ray.
+///
+/// A path made by [`DescentPath::for_rays_of_one_view`] also keeps the nodes of each ray's first descent, and the
+/// next ray starts from them rather than from the root: its first descent restarts from the deepest of them that
+/// contains its first point (neighbouring rays of a tile mostly enter the volume in the same nodes). These are the
+/// shared descents of Knoll et al.'s packets (seed 002 §4), shared in time rather than in lock-step. What a descent
+/// finds depends only on the point, the level wanted and the tree, never on where it started, so the rays' results
+/// are the same bits; the nodes kept were marked used when they were first descended to, in the same feedback
+/// buffer.
 pub struct DescentPath {
     entries: [PathEntry; MAX_PATH],
     len: usize,
+    /// Whether a new ray starts from the last ray's first descent (see [`DescentPath::for_rays_of_one_view`]).
+    kept_between_rays: bool,
+    /// The nodes of the last ray's first descent, and how many.
+    first_descent: [PathEntry; MAX_PATH],
+    first_len: usize,
+    /// Whether the next descent is a ray's first (its nodes are then kept in `first_descent`).
+    first_to_keep: bool,
 }
 
 impl DescentPath {
-    /// A path holding only the root of `view`.
+    /// A path holding only the root of `view`; every ray starts from the root.
     pub fn new(view: TreeView<'_>) -> DescentPath {
         let root = PathEntry { id: NodeId::ROOT, node: view.root(), ijk: [0; 3] };
-        DescentPath { entries: [root; MAX_PATH], len: 1 }
+        DescentPath {
+            entries: [root; MAX_PATH],
+            len: 1,
+            kept_between_rays: false,
+            first_descent: [root; MAX_PATH],
+            first_len: 1,
+            first_to_keep: false,
+        }
     }
 
-    /// Back to the root, for a new ray.
-    fn reset(&mut self, view: TreeView<'_>) {
-        self.entries[0] = PathEntry { id: NodeId::ROOT, node: view.root(), ijk: [0; 3] };
-        self.len = 1;
+    /// A path that starts each ray from the nodes of the last ray's first descent. Only for rays traced through this
+    /// `view` and written into one feedback buffer (one pass of a frame): its nodes would be stale in a later view,
+    /// and their marks missing from another buffer.
+    pub fn for_rays_of_one_view(view: TreeView<'_>) -> DescentPath {
+        DescentPath { kept_between_rays: true, ..DescentPath::new(view) }
+    }
+
+    /// Readies the path for a new ray: the root, or with [`DescentPath::for_rays_of_one_view`] the nodes of the last
+    /// ray's first descent.
+    #[inline(always)]
+    fn start_ray(&mut self, view: TreeView<'_>) {
+        if self.kept_between_rays {
+            self.entries[..self.first_len].copy_from_slice(&self.first_descent[..self.first_len]);
+            self.len = self.first_len;
+            self.first_to_keep = true;
+        } else {
+            self.entries[0] = PathEntry { id: NodeId::ROOT, node: view.root(), ijk: [0; 3] };
+            self.len = 1;
+        }
+    }
+
+    /// After a descent that kept the first `kept` nodes: if it was the ray's first, its new nodes are kept for the
+    /// next ray.
+    #[inline(always)]
+    fn descended(&mut self, kept: usize) {
+        if self.first_to_keep {
+            self.first_to_keep = false;
+            self.first_descent[kept..self.len].copy_from_slice(&self.entries[kept..self.len]);
+            self.first_len = self.len;
+        }
     }
 }
 
@@ -531,13 +583,14 @@ impl<'a> Traversal<'a> {
         Some(LaneRun { line, first, dt, count, k, end, resume })
     }
 
-    /// Starts `ray`: counts it, clips it to the volume (`None` when it misses) and resets `path` to the root.
+    /// Starts `ray`: counts it, clips it to the volume (`None` when it misses) and starts `path` for it
+    /// ([`DescentPath::start_ray`]).
     #[inline(always)]
     fn begin(&self, ray: &Ray, stats: &mut RayStats, path: &mut DescentPath) -> Option<RayWalk> {
         stats.rays += 1;
         let (t_enter, t_leave) = intersect_aabb(ray.origin, ray.direction, self.clip_lower, self.clip_upper)?;
         let t = t_enter.max(ray.start);
-        path.reset(self.view);
+        path.start_ray(self.view);
         if let Some(slot) = path.entries[0].node.brick() {
             self.feedback.mark_brick(slot);
         }
@@ -582,7 +635,8 @@ impl<'a> Traversal<'a> {
             // a face the ray leaves through towards lower coordinates rounds into the node left behind, and the
             // ray would take one more descent for an empty sliver: two fifths of all descents on the MNI head.)
             let probe = origin + direction * (t + sliver(self.finest_node, p, t, speed));
-            let (data, box_level, box_ijk) = self.descend(probe, target_level, path, &mut sink, integrand);
+            let (data, box_level, box_ijk) =
+                self.descend(probe, target_level, path, &mut sink, integrand, &mut stats.nodes_entered);
             walk.requests_left = sink.remaining;
             walk.requested |= sink.pushed;
             let node_size = 1.0 / self.scale[box_level as usize];
@@ -1115,6 +1169,7 @@ impl<'a> Traversal<'a> {
         path: &mut DescentPath,
         request: &mut RequestSink<'_>,
         integrand: &I,
+        nodes_entered: &mut u64,
     ) -> (SegmentData, u32, [u64; 3]) {
         let n = self.n;
         let pa = [p.x, p.y, p.z];
@@ -1149,6 +1204,7 @@ impl<'a> Traversal<'a> {
             }
         }
         path.len = keep;
+        let kept = keep;
         loop {
             let level = (path.len - 1) as u32;
             let PathEntry { id, node, ijk } = path.entries[path.len - 1];
@@ -1157,6 +1213,8 @@ impl<'a> Traversal<'a> {
                     // Under a brick still fading in, the brick stands in (as for its other descendants).
                     if self.view.brick_blends.is_empty() || first_fading(path, self.view.brick_blends, level).is_none()
                     {
+                        *nodes_entered += (path.len - kept) as u64;
+                        path.descended(kept);
                         return (SegmentData::Constant(value), level, ijk);
                     }
                     break;
@@ -1208,6 +1266,8 @@ impl<'a> Traversal<'a> {
             path.entries[path.len] = PathEntry { id: child_id, node: child, ijk: child_ijk };
             path.len += 1;
         }
+        *nodes_entered += (path.len - kept) as u64;
+        path.descended(kept);
         // Every node on the path but the last holds a brick; find the two deepest bricks.
         let deepest = path.len - 1;
         let last = path.entries[deepest];

@@ -1,11 +1,16 @@
-//! The traversal's promises, checked on whole frames: skipping empty space changes no bit of the image, and the
-//! image is the same whatever the number of threads and the instruction set the CPU offers.
+//! The traversal's promises, checked on whole frames: skipping empty space changes no bit of the image, the image is
+//! the same whatever the number of threads and the instruction set the CPU offers, and descents that start from the
+//! last ray's nodes find what descents from the root find.
 
 mod common;
 
+use glam::DVec3;
 use voxstream::scenes::builtin;
+use voxstream_core::FeedbackBuffer;
 use voxstream_engine::{LoopLimits, Mode, Session};
-use voxstream_render::{Image, InstructionSet, RenderSettings, Shading};
+use voxstream_render::{
+    render_frame, Image, InstructionSet, IsoSurface, RayStats, RenderSettings, Shading, TransferLut,
+};
 
 const SIZE: u32 = 64;
 
@@ -138,6 +143,91 @@ fn block_bits_give_the_image_of_the_range_tests() {
             assert!(covered > (SIZE * SIZE / 10) as usize, "{case}: only {covered} pixels show anything");
             let differing = bits.pixels.iter().zip(&ranges.pixels).filter(|(a, b)| a != b).count();
             assert_eq!(differing, 0, "{case}: {differing} pixels differ with block bits");
+        }
+    }
+}
+
+#[test]
+fn rays_that_keep_their_neighbours_descents_equal_rays_that_start_at_the_root() {
+    // Each case converges the scene's own view, then renders it and a closer view (whose finer nodes are missing or
+    // not subdivided: requests) through the resident tree twice, with the lanes' descent paths kept from ray to ray
+    // and with every ray starting at the root. Everything a frame produces must be the same: the image, the
+    // counters, the requests and the feedback's marks; only the nodes entered differ, and must be fewer.
+    let cases: [(&str, Option<f64>, bool); 6] = [
+        ("shell", None, true),
+        ("sponge", None, true),
+        ("hypertexture", None, true),
+        ("hypertexture", None, false),
+        ("shell", Some(0.5), true),
+        ("hypertexture", Some(0.5), true),
+    ];
+    for (scene_name, iso, packets) in cases {
+        let scene = builtin(scene_name).expect("built-in scene");
+        let mut settings = RenderSettings {
+            width: SIZE,
+            height: SIZE,
+            shading: scene.shading,
+            light_direction: scene.light,
+            ray_packets: packets,
+            ..RenderSettings::default()
+        };
+        if let Some(value) = iso {
+            settings.surfaces = vec![IsoSurface { value, color: [0.9, 0.75, 0.65], opacity: 1.0 }];
+            settings.shading = Shading::Phong;
+            settings.light_direction = Some([0.3, 0.8, 0.5]);
+            settings.shadows = true;
+        }
+        let mut session =
+            Session::new(scene.producer, &scene.transfer_function, settings.clone(), 256 << 20, LoopLimits::default())
+                .expect("session");
+        let result = session.render(&scene.camera, Mode::Converged).expect("render");
+        assert!(result.is_converged(), "{scene_name}: not converged");
+        let view = session.cache().view();
+        let shape = view.shape;
+        let lut = TransferLut::new(&scene.transfer_function, 0.0, 1.0, shape.voxel_size(shape.max_level));
+        let closer = {
+            let mut camera = scene.camera;
+            let eye = DVec3::from(camera.eye);
+            camera.eye = (DVec3::from(camera.target) + (eye - DVec3::from(camera.target)) * 0.45).to_array();
+            camera
+        };
+        for (view_name, camera) in [("its view", scene.camera), ("closer", closer)] {
+            let frame = |shared: bool| {
+                let settings = RenderSettings { shared_descents: shared, ..settings.clone() };
+                let mut feedback = FeedbackBuffer::new(view.capacity.tiles, view.capacity.bricks);
+                let frame = render_frame(view, &feedback, &camera, &lut, &settings).expect("frame");
+                let mut requests = feedback.take_requests();
+                requests.sort();
+                let tiles: Vec<_> = feedback.used_tiles().collect();
+                let bricks: Vec<_> = feedback.used_bricks().collect();
+                (frame, requests, tiles, bricks)
+            };
+            let (kept, kept_requests, kept_tiles, kept_bricks) = frame(true);
+            let (root, root_requests, root_tiles, root_bricks) = frame(false);
+            let case = format!("{scene_name} (iso {iso:?}, packets {packets}), {view_name}");
+            println!(
+                "{case}: {} rays, {} descents, nodes entered {} from the root, {} kept, {} requests",
+                root.stats.rays,
+                root.stats.descents,
+                root.stats.nodes_entered,
+                kept.stats.nodes_entered,
+                root_requests.len()
+            );
+            let covered = root.image.pixels.iter().filter(|p| p[3] > 0.01).count();
+            assert!(covered > (SIZE * SIZE / 10) as usize, "{case}: only {covered} pixels show anything");
+            assert!(kept.image.pixels == root.image.pixels, "{case}: the images differ");
+            let counters = |s: RayStats| (s.rays, s.samples, s.descents);
+            assert_eq!(counters(kept.stats), counters(root.stats), "{case}: rays, samples or descents differ");
+            assert_eq!(kept.raw_requests, root.raw_requests, "{case}: the request counts differ");
+            assert_eq!(kept_requests, root_requests, "{case}: the requests differ");
+            assert_eq!(kept_tiles, root_tiles, "{case}: the tiles marked used differ");
+            assert_eq!(kept_bricks, root_bricks, "{case}: the bricks marked used differ");
+            assert!(
+                kept.stats.nodes_entered < root.stats.nodes_entered,
+                "{case}: keeping the paths saved no descent ({} against {})",
+                kept.stats.nodes_entered,
+                root.stats.nodes_entered
+            );
         }
     }
 }
