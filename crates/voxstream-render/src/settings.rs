@@ -107,7 +107,7 @@ pub struct RenderSettings {
     /// only.
     pub block_visibility_bits: bool,
     /// Keep each lane's descent path from one ray to the next within a pass, so that a ray's first descent starts
-    /// from its neighbour's nodes instead of the root ([`crate::DescentPath::for_rays_of_one_view`]); the same
+    /// from its neighbour's nodes instead of the root (see [`crate::DescentPath`]); the same
     /// images, counters and feedback as starting every ray from the root, which stays as the reference (off only to
     /// test that).
     pub shared_descents: bool,

@@ -80,8 +80,8 @@ impl PixelTracer for SurfaceCaster<'_> {
     }
 
     /// One ray after another, as [`trace_one_by_one`](crate::frame::trace_one_by_one), but the shadow rays descend
-    /// through a path of their own: a path kept between rays ([`DescentPath::for_rays_of_one_view`]) then starts each
-    /// primary ray from the last primary ray's nodes and each shadow ray from the last shadow ray's.
+    /// through a path of their own: paths kept between rays (a frame's, [`RenderSettings::shared_descents`]) then
+    /// start each primary ray from the last primary ray's nodes and each shadow ray from the last shadow ray's.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn trace_rays(

@@ -104,17 +104,19 @@ struct PathEntry {
 /// the deepest ancestor that still contains the point (a short-stack variant of kd-restart). One per thread, reused
 /// from ray to ray.
 ///
-/// A path made by [`DescentPath::for_rays_of_one_view`] also keeps the nodes of each ray's first descent, and the
-/// next ray starts from them rather than from the root: its first descent restarts from the deepest of them that
-/// contains its first point (neighbouring rays of a tile mostly enter the volume in the same nodes). These are the
-/// shared descents of Knoll et al.'s packets (seed 002 §4), shared in time rather than in lock-step. What a descent
-/// finds depends only on the point, the level wanted and the tree, never on where it started, so the rays' results
-/// are the same bits; the nodes kept were marked used when they were first descended to, in the same feedback
-/// buffer.
+/// A path made by `DescentPath::for_rays_of_one_view` (each pass of a frame makes its own) also keeps the nodes of
+/// each ray's first descent, and the next ray starts from them rather than from the root: its first descent restarts
+/// from the deepest of them that contains its first point (neighbouring rays of a tile mostly enter the volume in the
+/// same nodes). These are the shared descents of Knoll et al.'s packets (seed 002 §4), shared in time rather than in
+/// lock-step. A descent finds the same node from any kept ancestor of the point as from the root, so the rays'
+/// results are the same bits: where N is a power of two (an ancestor's coordinates are then the point's, shifted,
+/// with no rounding; other trees start every ray from the root), and with the kept nodes that an integrand's
+/// min/max culling would have stopped at cut off. The nodes kept were marked used when they were first descended
+/// to, in the same feedback buffer.
 pub struct DescentPath {
     entries: [PathEntry; MAX_PATH],
     len: usize,
-    /// Whether a new ray starts from the last ray's first descent (see [`DescentPath::for_rays_of_one_view`]).
+    /// Whether a new ray starts from the last ray's first descent (see `DescentPath::for_rays_of_one_view`).
     kept_between_rays: bool,
     /// The nodes of the last ray's first descent, and how many.
     first_descent: [PathEntry; MAX_PATH],
@@ -139,16 +141,18 @@ impl DescentPath {
 
     /// A path that starts each ray from the nodes of the last ray's first descent. Only for rays traced through this
     /// `view` and written into one feedback buffer (one pass of a frame): its nodes would be stale in a later view,
-    /// and their marks missing from another buffer.
-    pub fn for_rays_of_one_view(view: TreeView<'_>) -> DescentPath {
+    /// and their marks missing from another buffer. Crate-private for that reason: the frame makes these paths for
+    /// each pass ([`RenderSettings::shared_descents`]); paths made by [`DescentPath::new`] can be reused freely.
+    pub(crate) fn for_rays_of_one_view(view: TreeView<'_>) -> DescentPath {
         DescentPath { kept_between_rays: true, ..DescentPath::new(view) }
     }
 
-    /// Readies the path for a new ray: the root, or with [`DescentPath::for_rays_of_one_view`] the nodes of the last
-    /// ray's first descent.
+    /// Readies the path for a new ray: the root, or with `DescentPath::for_rays_of_one_view` and `may_keep` the nodes
+    /// of the last ray's first descent.
     #[inline(always)]
-    fn start_ray(&mut self, view: TreeView<'_>) {
-        if self.kept_between_rays {
+    fn start_ray(&mut self, view: TreeView<'_>, may_keep: bool) {
+        if self.kept_between_rays && may_keep {
+            debug_assert!(self.first_descent[0].node == view.root(), "a kept path used with another tree view");
             self.entries[..self.first_len].copy_from_slice(&self.first_descent[..self.first_len]);
             self.len = self.first_len;
             self.first_to_keep = true;
@@ -590,7 +594,10 @@ impl<'a> Traversal<'a> {
         stats.rays += 1;
         let (t_enter, t_leave) = intersect_aabb(ray.origin, ray.direction, self.clip_lower, self.clip_upper)?;
         let t = t_enter.max(ray.start);
-        path.start_ray(self.view);
+        // Kept nodes are found again exactly only where an ancestor's coordinates are the point's shifted (N a
+        // power of two); with N = 3 a point within a rounding of a node's face could keep a neighbour's node where
+        // the descent from the root clamps into the other (see `descend`).
+        path.start_ray(self.view, self.n_shift.is_some());
         if let Some(slot) = path.entries[0].node.brick() {
             self.feedback.mark_brick(slot);
         }
@@ -1201,6 +1208,19 @@ impl<'a> Traversal<'a> {
                     }
                     keep -= 1;
                 }
+            }
+        }
+        if I::CULLS_SUBTREES && self.skip_empty_space && path.first_to_keep {
+            // A ray's first descent from another ray's nodes: a descent from the root would have stopped at the first
+            // of them whose values cannot contribute for this ray (min/max culling, below), so keep none below it.
+            // (Integrands that cull have not seen data yet at their first descent, and today contribute anywhere.)
+            if let Some(culled) = (0..keep - 1).find(|&level| {
+                path.entries[level].node.brick().is_some_and(|slot| {
+                    let [lo, hi] = self.view.brick_range(slot);
+                    !integrand.can_contribute(lo, hi)
+                })
+            }) {
+                keep = culled + 1;
             }
         }
         path.len = keep;

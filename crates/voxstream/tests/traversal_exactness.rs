@@ -6,10 +6,11 @@ mod common;
 
 use glam::DVec3;
 use voxstream::scenes::builtin;
-use voxstream_core::FeedbackBuffer;
+use voxstream_core::{BrickSlot, FeedbackBuffer, Request, TileId, TreeView};
 use voxstream_engine::{LoopLimits, Mode, Session};
 use voxstream_render::{
-    render_frame, Image, InstructionSet, IsoSurface, RayStats, RenderSettings, Shading, TransferLut,
+    render_pass, Camera, Image, InstructionSet, IsoSurface, ProgressiveImage, RayStats, RenderSettings, Shading,
+    TransferLut,
 };
 
 const SIZE: u32 = 64;
@@ -147,22 +148,52 @@ fn block_bits_give_the_image_of_the_range_tests() {
     }
 }
 
+/// What one pass of a frame produces: the image, which pixels are still pending, the counters, the raw request
+/// count, the requests (sorted) and the feedback's marks.
+type PassOutcome = (ProgressiveImage, RayStats, usize, Vec<Request>, Vec<TileId>, Vec<BrickSlot>);
+
+/// One pass through `view` from `camera`, with a fresh feedback buffer.
+fn one_pass(view: TreeView<'_>, camera: &Camera, lut: &TransferLut, settings: &RenderSettings) -> PassOutcome {
+    let mut feedback = FeedbackBuffer::new(view.capacity.tiles, view.capacity.bricks);
+    let mut progressive = ProgressiveImage::new(settings.width, settings.height);
+    let (stats, raw_requests) = render_pass(view, &feedback, camera, lut, settings, &mut progressive).expect("pass");
+    let mut requests = feedback.take_requests();
+    requests.sort();
+    let (tiles, bricks) = (feedback.used_tiles().collect(), feedback.used_bricks().collect());
+    (progressive, stats, raw_requests, requests, tiles, bricks)
+}
+
 #[test]
 fn rays_that_keep_their_neighbours_descents_equal_rays_that_start_at_the_root() {
-    // Each case converges the scene's own view, then renders it and a closer view (whose finer nodes are missing or
-    // not subdivided: requests) through the resident tree twice, with the lanes' descent paths kept from ray to ray
-    // and with every ray starting at the root. Everything a frame produces must be the same: the image, the
-    // counters, the requests and the feedback's marks; only the nodes entered differ, and must be fewer.
-    let cases: [(&str, Option<f64>, bool); 6] = [
-        ("shell", None, true),
-        ("sponge", None, true),
-        ("hypertexture", None, true),
-        ("hypertexture", None, false),
-        ("shell", Some(0.5), true),
-        ("hypertexture", Some(0.5), true),
+    // Each case renders the resident tree twice per camera, with the lanes' descent paths kept from ray to ray and
+    // with every ray starting at the root, and compares everything a pass produces: the image, the pixels still
+    // pending, the counters, the requests and the feedback's marks. The cameras: the scene's own view once
+    // converged, a closer one whose finer nodes are missing or not subdivided (requests), and, for the blending
+    // case, the scene's view after a few interactive frames, while bricks are still fading in (level blending's
+    // stand-ins). Only the nodes entered may differ: fewer where N is a power of two, the same for the sponge (N = 3,
+    // whose rays always start at the root).
+    struct Case {
+        scene: &'static str,
+        iso: Option<f64>,
+        in_volume: bool,
+        packets: bool,
+        blending: bool,
+    }
+    let case = |scene, iso, in_volume, packets, blending| Case { scene, iso, in_volume, packets, blending };
+    let cases = [
+        case("shell", None, false, true, false),
+        case("sponge", None, false, true, false),
+        case("hypertexture", None, false, true, false),
+        case("hypertexture", None, false, false, false),
+        case("hypertexture", None, false, true, true),
+        case("shell", Some(0.5), false, true, false),
+        case("hypertexture", Some(0.5), false, true, false),
+        case("hypertexture", Some(0.5), true, true, false),
+        case("hypertexture", Some(0.5), false, true, true),
     ];
-    for (scene_name, iso, packets) in cases {
+    for Case { scene: scene_name, iso, in_volume, packets, blending } in cases {
         let scene = builtin(scene_name).expect("built-in scene");
+        let shares = scene_name != "sponge";
         let mut settings = RenderSettings {
             width: SIZE,
             height: SIZE,
@@ -173,61 +204,71 @@ fn rays_that_keep_their_neighbours_descents_equal_rays_that_start_at_the_root() 
         };
         if let Some(value) = iso {
             settings.surfaces = vec![IsoSurface { value, color: [0.9, 0.75, 0.65], opacity: 1.0 }];
+            settings.surfaces_in_volume = in_volume;
             settings.shading = Shading::Phong;
             settings.light_direction = Some([0.3, 0.8, 0.5]);
-            settings.shadows = true;
+            settings.shadows = !in_volume;
         }
-        let mut session =
-            Session::new(scene.producer, &scene.transfer_function, settings.clone(), 256 << 20, LoopLimits::default())
-                .expect("session");
-        let result = session.render(&scene.camera, Mode::Converged).expect("render");
-        assert!(result.is_converged(), "{scene_name}: not converged");
-        let view = session.cache().view();
-        let shape = view.shape;
-        let lut = TransferLut::new(&scene.transfer_function, 0.0, 1.0, shape.voxel_size(shape.max_level));
+        let limits = LoopLimits { requests_per_frame: 24, ..LoopLimits::default() };
+        let mut session = Session::new(scene.producer, &scene.transfer_function, settings.clone(), 256 << 20, limits)
+            .expect("session");
         let closer = {
             let mut camera = scene.camera;
             let eye = DVec3::from(camera.eye);
             camera.eye = (DVec3::from(camera.target) + (eye - DVec3::from(camera.target)) * 0.45).to_array();
             camera
         };
-        for (view_name, camera) in [("its view", scene.camera), ("closer", closer)] {
-            let frame = |shared: bool| {
+        let cameras = if blending {
+            for _ in 0..6 {
+                session.render(&scene.camera, Mode::Interactive).expect("interactive frame");
+            }
+            assert!(!session.cache().view().brick_blends.is_empty(), "{scene_name}: nothing is fading in");
+            vec![("fading in", scene.camera)]
+        } else {
+            let result = session.render(&scene.camera, Mode::Converged).expect("render");
+            assert!(result.is_converged(), "{scene_name}: not converged");
+            vec![("its view", scene.camera), ("closer", closer)]
+        };
+        let view = session.cache().view();
+        let shape = view.shape;
+        let lut = TransferLut::new(&scene.transfer_function, 0.0, 1.0, shape.voxel_size(shape.max_level));
+        for (view_name, camera) in cameras {
+            let pass = |shared: bool| {
                 let settings = RenderSettings { shared_descents: shared, ..settings.clone() };
-                let mut feedback = FeedbackBuffer::new(view.capacity.tiles, view.capacity.bricks);
-                let frame = render_frame(view, &feedback, &camera, &lut, &settings).expect("frame");
-                let mut requests = feedback.take_requests();
-                requests.sort();
-                let tiles: Vec<_> = feedback.used_tiles().collect();
-                let bricks: Vec<_> = feedback.used_bricks().collect();
-                (frame, requests, tiles, bricks)
+                one_pass(view, &camera, &lut, &settings)
             };
-            let (kept, kept_requests, kept_tiles, kept_bricks) = frame(true);
-            let (root, root_requests, root_tiles, root_bricks) = frame(false);
-            let case = format!("{scene_name} (iso {iso:?}, packets {packets}), {view_name}");
+            let (kept, kept_stats, kept_raw, kept_requests, kept_tiles, kept_bricks) = pass(true);
+            let (root, root_stats, root_raw, root_requests, root_tiles, root_bricks) = pass(false);
+            let case = format!("{scene_name} (iso {iso:?}, in volume {in_volume}, packets {packets}), {view_name}");
             println!(
-                "{case}: {} rays, {} descents, nodes entered {} from the root, {} kept, {} requests",
-                root.stats.rays,
-                root.stats.descents,
-                root.stats.nodes_entered,
-                kept.stats.nodes_entered,
-                root_requests.len()
+                "{case}: {} rays, {} descents, nodes entered {} from the root, {} kept, {} requests, {} pending",
+                root_stats.rays,
+                root_stats.descents,
+                root_stats.nodes_entered,
+                kept_stats.nodes_entered,
+                root_requests.len(),
+                root.pending_count()
             );
             let covered = root.image.pixels.iter().filter(|p| p[3] > 0.01).count();
             assert!(covered > (SIZE * SIZE / 10) as usize, "{case}: only {covered} pixels show anything");
             assert!(kept.image.pixels == root.image.pixels, "{case}: the images differ");
+            assert!(kept.pending == root.pending, "{case}: the pending pixels differ");
             let counters = |s: RayStats| (s.rays, s.samples, s.descents);
-            assert_eq!(counters(kept.stats), counters(root.stats), "{case}: rays, samples or descents differ");
-            assert_eq!(kept.raw_requests, root.raw_requests, "{case}: the request counts differ");
+            assert_eq!(counters(kept_stats), counters(root_stats), "{case}: rays, samples or descents differ");
+            assert_eq!(kept_raw, root_raw, "{case}: the request counts differ");
             assert_eq!(kept_requests, root_requests, "{case}: the requests differ");
             assert_eq!(kept_tiles, root_tiles, "{case}: the tiles marked used differ");
             assert_eq!(kept_bricks, root_bricks, "{case}: the bricks marked used differ");
-            assert!(
-                kept.stats.nodes_entered < root.stats.nodes_entered,
-                "{case}: keeping the paths saved no descent ({} against {})",
-                kept.stats.nodes_entered,
-                root.stats.nodes_entered
-            );
+            if shares {
+                assert!(
+                    kept_stats.nodes_entered < root_stats.nodes_entered,
+                    "{case}: keeping the paths saved no descent ({} against {})",
+                    kept_stats.nodes_entered,
+                    root_stats.nodes_entered
+                );
+            } else {
+                assert_eq!(kept_stats.nodes_entered, root_stats.nodes_entered, "{case}: N = 3 shared descents");
+            }
         }
     }
 }
