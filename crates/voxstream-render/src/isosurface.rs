@@ -372,6 +372,12 @@ impl Integrand for Isosurfaces<'_> {
         })
     }
 
+    /// Before the ray has read any data, every range can contribute (its side of each surface is not known yet).
+    #[inline(always)]
+    fn contributes_throughout(&self, _lower: f32, _upper: f32) -> bool {
+        !self.known
+    }
+
     fn wants_gradient(&self) -> bool {
         false
     }

@@ -1210,10 +1210,14 @@ impl<'a> Traversal<'a> {
                 }
             }
         }
-        if I::CULLS_SUBTREES && self.skip_empty_space && path.first_to_keep {
+        if I::CULLS_SUBTREES
+            && self.skip_empty_space
+            && path.first_to_keep
+            && !integrand.contributes_throughout(0.0, 1.0)
+        {
             // A ray's first descent from another ray's nodes: a descent from the root would have stopped at the first
             // of them whose values cannot contribute for this ray (min/max culling, below), so keep none below it.
-            // (Integrands that cull have not seen data yet at their first descent, and today contribute anywhere.)
+            // (Isosurfaces contribute anywhere before they have read data, as at a first descent: no test then.)
             if let Some(culled) = (0..keep - 1).find(|&level| {
                 path.entries[level].node.brick().is_some_and(|slot| {
                     let [lo, hi] = self.view.brick_range(slot);
