@@ -1,13 +1,15 @@
 //! Knoll et al.'s ablation for voxstream's isosurfaces, on one store and camera: exact cells alone, then culling,
-//! then the cone's level of detail, then shadows; the cold frame, the warm frame time and the cells examined per ray.
+//! then shared descents (in the packets' place), then the cone's level of detail, then shadows; the cold frame, the
+//! warm frame time and the cells examined per ray.
 //!
 //! ```sh
 //! cargo run --release -p voxstream --example isosurface_ablation -- STORE ISO [CAMERA.json] [SIZE] [FRAMES] [LIGHT]
 //! ```
 //!
 //! `CAMERA.json` is a camera path file (its first camera is used; `-` for the store's default view), `LIGHT` the
-//! direction towards the light for the shadow row, `x,y,z`. Packets (Knoll's coherent traversal) are not
-//! implemented, so they have no row.
+//! direction towards the light for the shadow row, `x,y,z`. Knoll's packets trace coherent rays in lock-step, which
+//! is not implemented; what stands in their row is the part of them voxstream has: each ray's first descent shared
+//! with the ray before it ([`RenderSettings::shared_descents`]).
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -48,12 +50,16 @@ fn main() -> Result<()> {
         surfaces: vec![IsoSurface { value: iso, color: [0.9, 0.75, 0.65], opacity: 1.0 }],
         ..RenderSettings::default()
     };
-    let variants: [(&str, RenderSettings); 4] = [
+    let variants: [(&str, RenderSettings); 5] = [
         (
             "exact cells, finest level, no culling",
-            RenderSettings { skip_empty_space: false, lod_bias: 8.0, ..base.clone() },
+            RenderSettings { skip_empty_space: false, lod_bias: 8.0, shared_descents: false, ..base.clone() },
         ),
-        ("+ culling (subtrees, bricks, blocks)", RenderSettings { lod_bias: 8.0, ..base.clone() }),
+        (
+            "+ culling (subtrees, bricks, blocks)",
+            RenderSettings { lod_bias: 8.0, shared_descents: false, ..base.clone() },
+        ),
+        ("+ shared descents (not lock-step packets)", RenderSettings { lod_bias: 8.0, ..base.clone() }),
         ("+ level of detail (the cone's)", base.clone()),
         ("+ shadows", RenderSettings { shadows: true, ..base.clone() }),
     ];
