@@ -214,9 +214,9 @@ struct TileResult {
 }
 
 /// The lanes' descent paths, made once per worker's share of a pass's tiles rather than once per tile (each is a few
-/// KiB). Each is kept from ray to ray within the pass ([`DescentPath::for_rays_of_one_view`]): a ray's first descent
-/// starts from the nodes its lane's last ray left, mostly a neighbour's
-/// ([`RenderSettings::shared_descents`]).
+/// KiB). With [`RenderSettings::shared_descents`] each is kept from ray to ray within the pass
+/// ([`DescentPath::for_rays_of_one_view`]): a ray's first descent starts from the nodes of the first descent of its
+/// lane's last ray, mostly a neighbour's.
 fn descent_paths<T: PixelTracer>(caster: &T, shared: bool) -> Box<[DescentPath; LANES]> {
     let path = |view| if shared { DescentPath::for_rays_of_one_view(view) } else { DescentPath::new(view) };
     Box::new(std::array::from_fn(|_| path(caster.view())))

@@ -106,10 +106,10 @@ pub struct RenderSettings {
     /// the same image as the range tests, which stay as the reference (off only to test that). Volume rendering
     /// only.
     pub block_visibility_bits: bool,
-    /// Keep each lane's descent path from one ray to the next within a pass, so that a ray's first descent starts
-    /// from its neighbour's nodes instead of the root (see [`crate::DescentPath`]); the same
-    /// images, counters and feedback as starting every ray from the root, which stays as the reference (off only to
-    /// test that).
+    /// Keep the nodes of each ray's first descent for the next ray of its lane within a pass, so that that ray's first
+    /// descent starts from its neighbour's nodes instead of the root (trees whose N is a power of two only; see
+    /// [`crate::DescentPath`]); the same images, counters and feedback as starting every ray from the root, which
+    /// stays as the reference (off only to test that and for the isosurface ablation's rows).
     pub shared_descents: bool,
     /// Instructions the ray loop uses (detected at run time by default; the image is the same either way).
     pub instruction_set: InstructionSet,
