@@ -15,7 +15,7 @@ use crate::cli::{BenchArgs, Switch};
 use crate::memory::peak_rss_bytes;
 use crate::render_budget::{check_budget, plan_budget};
 use crate::scenes::{builtin, Scene, SCENE_NAMES};
-use crate::trilinear_bound::scalar_trilinear_ns_per_sample;
+use crate::trilinear_bound::{lanes_trilinear_ns_per_sample, scalar_trilinear_ns_per_sample};
 
 /// How long the scalar trilinear bound is measured.
 const BOUND_DURATION: std::time::Duration = std::time::Duration::from_millis(500);
@@ -45,6 +45,8 @@ pub struct SceneFigures {
     pub ns_per_sample_per_core: f64,
     /// The scalar trilinear bound measured in the same run (see [`crate::trilinear_bound`]), ns per sample.
     pub trilinear_bound_ns: f64,
+    /// The same bound with eight rays in lock-step through the renderer's lane sampler, ns per sample.
+    pub lanes_trilinear_bound_ns: f64,
     /// Interactive camera path: median frame ms (render + bounded production).
     pub path_median_ms: f64,
     /// Interactive camera path: 95th percentile frame ms.
@@ -75,26 +77,28 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     check_budget(args.budget_mb, args.size, args.size, "--size")?;
     bench_surfaces(args)?;
     crate::backend::check_backend_flags(args.backend, args.gpu_filter)?;
-    eprintln!("bench: the scalar trilinear bound …");
+    eprintln!("bench: the trilinear bounds …");
     let bound_ns = scalar_trilinear_ns_per_sample(BOUND_DURATION);
+    let lanes_bound_ns = lanes_trilinear_ns_per_sample(BOUND_DURATION, voxstream_render::InstructionSet::Detect);
+    let bounds = (bound_ns, lanes_bound_ns);
     let mut figures = Vec::new();
     for name in &names {
         let scene = builtin(name).with_context(|| format!("unknown scene '{name}'"))?;
         eprintln!("bench: {name} at {0}x{0} …", args.size);
-        figures.push(bench_scene(&scene, args, bound_ns)?);
+        figures.push(bench_scene(&scene, args, bounds)?);
     }
     println!(
-        "backend: {}\nthreads: {}, ray loop: {}, peak RSS: {:.0} MiB, scalar trilinear bound: {bound_ns:.1} ns per sample on one core\n",
+        "backend: {}\nthreads: {}, ray loop: {}, peak RSS: {:.0} MiB, trilinear bounds: {bound_ns:.1} ns per sample on one core (scalar), {lanes_bound_ns:.1} ns (8 rays in lock-step)\n",
         figures.first().map_or("", |f| f.backend.as_str()),
         rayon::current_num_threads(),
         voxstream_render::InstructionSet::detected(),
         peak_rss_bytes().unwrap_or(0) as f64 / 1048576.0
     );
-    println!("| scene | size | converged (cold) | passes | frames to converge (interactive) | warm frame | warm fps | rays/s | samples/s | ns/sample/core (bound) | path median | path p95 | uploaded: cold, per warm frame, per path frame |");
+    println!("| scene | size | converged (cold) | passes | frames to converge (interactive) | warm frame | warm fps | rays/s | samples/s | ns/sample/core (bounds: scalar, lanes) | path median | path p95 | uploaded: cold, per warm frame, per path frame |");
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for f in &figures {
         println!(
-            "| {} | {}² | {:.0} ms | {} | {} | {:.1} ms | {:.1} | {:.2} M | {:.1} M | {:.1} ({:.1}) | {:.1} ms | {:.1} ms | {:.1} MB, {:.0} B, {:.1} kB |",
+            "| {} | {}² | {:.0} ms | {} | {} | {:.1} ms | {:.1} | {:.2} M | {:.1} M | {:.1} ({:.1}, {:.1}) | {:.1} ms | {:.1} ms | {:.1} MB, {:.0} B, {:.1} kB |",
             f.scene,
             f.size,
             f.converged_ms,
@@ -106,6 +110,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             f.samples_per_second / 1e6,
             f.ns_per_sample_per_core,
             f.trilinear_bound_ns,
+            f.lanes_trilinear_bound_ns,
             f.path_median_ms,
             f.path_p95_ms,
             f.converged_bytes_uploaded as f64 / 1e6,
@@ -191,7 +196,7 @@ fn new_session(
     Ok(session)
 }
 
-fn bench_scene(scene: &Scene, args: &BenchArgs, bound_ns: f64) -> Result<SceneFigures> {
+fn bench_scene(scene: &Scene, args: &BenchArgs, (bound_ns, lanes_bound_ns): (f64, f64)) -> Result<SceneFigures> {
     // Cold, converged.
     let mut session = new_session(scene, args)?;
     let cold = session.render(&scene.camera, Mode::Converged)?;
@@ -240,6 +245,7 @@ fn bench_scene(scene: &Scene, args: &BenchArgs, bound_ns: f64) -> Result<SceneFi
         samples_per_second: samples as f64 / warm_seconds,
         ns_per_sample_per_core: warm_seconds * 1e9 * rayon::current_num_threads() as f64 / samples.max(1) as f64,
         trilinear_bound_ns: bound_ns,
+        lanes_trilinear_bound_ns: lanes_bound_ns,
         path_median_ms,
         path_p95_ms,
         bricks_resident: session.residency().bricks,

@@ -2,7 +2,7 @@
 //!
 //! The producers form a closed set, dispatched through an enum (no `dyn` call per brick).
 
-use voxstream_core::{NodeKey, ProduceError, Produced, Producer, TreeShape};
+use voxstream_core::{NodeKey, ProduceError, Produced, Producer, TreeShape, VoxelFormat};
 use voxstream_procedural::{Hypertexture, MengerSponge, Shell};
 use voxstream_render::{Camera, Shading, TransferFunction};
 
@@ -45,6 +45,14 @@ impl Producer for SceneProducer {
             SceneProducer::Sponge(p) => p.produce(key, voxels),
             SceneProducer::Hypertexture(p) => p.produce(key, voxels),
             SceneProducer::Shell(p) => p.produce(key, voxels),
+        }
+    }
+
+    fn voxel_format(&self) -> VoxelFormat {
+        match self {
+            SceneProducer::Sponge(p) => p.voxel_format(),
+            SceneProducer::Hypertexture(p) => p.voxel_format(),
+            SceneProducer::Shell(p) => p.voxel_format(),
         }
     }
 }

@@ -1,11 +1,23 @@
-//! A bound for the ray caster's cost per sample, measured on the machine the benchmark runs on: a plain scalar loop
-//! that marches straight rays through one cache-resident brick and takes a trilinear sample every half voxel (no
-//! tree, no transfer function, no compositing). The number of steps of each chord is computed before its loop, and the
-//! eight corners are read through one slice, so the loop holds one bounds check per sample and no other test. `voxstream bench` reports the ray caster's nanoseconds per sample
-//! and core next to it, so that the gap is read on one machine in one run rather than across machines and days.
+//! Bounds for the ray caster's cost per sample, measured on the machine the benchmark runs on: straight rays marched
+//! through one cache-resident brick, a trilinear sample every half voxel, and nothing else (no tree, no transfer
+//! function, no compositing). `voxstream bench` reports the ray caster's nanoseconds per sample and core next to them,
+//! so that the gap is read on one machine in one run rather than across machines and days.
+//!
+//! - [`scalar_trilinear_ns_per_sample`]: a plain scalar loop, one ray at a time. The number of steps of each chord is
+//!   computed before its loop, and the eight corners are read through one slice, so the loop holds one bounds check
+//!   per sample and no other test.
+//! - [`lanes_trilinear_ns_per_sample`]: eight rays in lock-step through the renderer's own lane sampler
+//!   ([`voxstream_render::sampler::values_across`], the one its lanes take their samples with: positions, cells and
+//!   weights as SIMD, the corners read by AVX2 gathers where the CPU has them), compiled for the instruction set the
+//!   ray loop uses. What SIMD across rays can give the trilinear part of a sample on this CPU.
 
 use std::hint::black_box;
 use std::time::{Duration, Instant};
+
+use voxstream_core::Dequantize;
+use voxstream_render::gathered_corners::CornerGather;
+use voxstream_render::sampler::{values_across, LANES};
+use voxstream_render::InstructionSet;
 
 /// Brick edge including its one-voxel border, as the brick pool stores a 32³ brick.
 const EDGE: usize = 34;
@@ -15,13 +27,7 @@ const STEP: f32 = 0.5;
 /// Nanoseconds per trilinear sample on one core, measured for about `duration`.
 pub fn scalar_trilinear_ns_per_sample(duration: Duration) -> f64 {
     let brick = brick();
-    let mut state = 0x9e37_79b9_7f4a_7c15u64;
-    let mut random = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 40) as f32 / (1u64 << 24) as f32
-    };
+    let mut random = xorshift();
     let (mut samples, mut sum) = (0u64, 0.0f32);
     let start = Instant::now();
     while start.elapsed() < duration {
@@ -32,17 +38,7 @@ pub fn scalar_trilinear_ns_per_sample(duration: Duration) -> f64 {
             let d = normalised([random() - 0.5, random() - 0.5, random() - 0.5]);
             let advance = d.map(|c| c * STEP);
             // Steps before the chord leaves the brick, computed once: the loop itself tests nothing.
-            let steps = (0..3)
-                .map(|a| {
-                    let room = if advance[a] > 0.0 { limit - p[a] } else { p[a] };
-                    if advance[a] == 0.0 {
-                        u32::MAX
-                    } else {
-                        ((room / advance[a].abs()).ceil() as u32).saturating_sub(1)
-                    }
-                })
-                .min()
-                .unwrap_or(0);
+            let steps = chord_steps(p, advance, limit);
             for _ in 0..steps {
                 sum += trilinear(&brick, p);
                 p = [p[0] + advance[0], p[1] + advance[1], p[2] + advance[2]];
@@ -52,6 +48,89 @@ pub fn scalar_trilinear_ns_per_sample(duration: Duration) -> f64 {
     }
     black_box(sum);
     start.elapsed().as_secs_f64() * 1e9 / samples.max(1) as f64
+}
+
+/// Nanoseconds per trilinear sample on one core with eight rays in lock-step (see the module docs), measured for
+/// about `duration`: each round gives the eight lanes a chord of the brick each and takes as many steps as the
+/// shortest chord has (the lanes' bursts), on the instruction set `instruction_set` selects.
+pub fn lanes_trilinear_ns_per_sample(duration: Duration, instruction_set: InstructionSet) -> f64 {
+    instruction_set.arch().dispatch(LanesBound { duration, gather: CornerGather::new(instruction_set.gathers()) })
+}
+
+/// [`lanes_trilinear_ns_per_sample`]'s loop, compiled for each instruction set by `pulp` (as the renderer's tile loop).
+struct LanesBound {
+    duration: Duration,
+    gather: CornerGather,
+}
+
+impl pulp::WithSimd for LanesBound {
+    type Output = f64;
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) -> f64 {
+        let brick = brick();
+        let mut random = xorshift();
+        let dq = Dequantize { scale: 1.0 / 65535.0, offset: 0.0 };
+        let bases = [0u32; LANES];
+        let limit = (EDGE - 1) as f32;
+        let (mut samples, mut sum) = (0u64, 0.0f32);
+        let start_time = Instant::now();
+        while start_time.elapsed() < self.duration {
+            for _ in 0..32 {
+                let mut start = [[0f32; LANES]; 3];
+                let mut delta = [[0f32; LANES]; 3];
+                let mut steps = u32::MAX;
+                for lane in 0..LANES {
+                    let p = [random() * limit, random() * limit, random() * limit];
+                    let d = normalised([random() - 0.5, random() - 0.5, random() - 0.5]);
+                    let advance = d.map(|c| c * STEP);
+                    steps = steps.min(chord_steps(p, advance, limit));
+                    for a in 0..3 {
+                        start[a][lane] = p[a];
+                        delta[a][lane] = advance[a];
+                    }
+                }
+                let mut k = [0f32; LANES];
+                for _ in 0..steps {
+                    let values = values_across(&brick, EDGE, &bases, &start, &delta, &k, dq, self.gather);
+                    sum += values.iter().sum::<f32>();
+                    for kk in &mut k {
+                        *kk += 1.0;
+                    }
+                }
+                samples += steps as u64 * LANES as u64;
+            }
+        }
+        black_box(sum);
+        start_time.elapsed().as_secs_f64() * 1e9 / samples.max(1) as f64
+    }
+}
+
+/// A small xorshift generator of `[0, 1)` floats (the bounds need no statistical quality, only no pattern the
+/// branch predictor or the prefetcher could learn).
+fn xorshift() -> impl FnMut() -> f32 {
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
+
+/// Steps of `advance` from `p` before the chord leaves `[0, limit]³`.
+fn chord_steps(p: [f32; 3], advance: [f32; 3], limit: f32) -> u32 {
+    (0..3)
+        .map(|a| {
+            let room = if advance[a] > 0.0 { limit - p[a] } else { p[a] };
+            if advance[a] == 0.0 {
+                u32::MAX
+            } else {
+                ((room / advance[a].abs()).ceil() as u32).saturating_sub(1)
+            }
+        })
+        .min()
+        .unwrap_or(0)
 }
 
 fn brick() -> Vec<u16> {
@@ -101,5 +180,35 @@ mod tests {
     fn the_bound_is_a_positive_time() {
         let ns = scalar_trilinear_ns_per_sample(Duration::from_millis(20));
         assert!(ns.is_finite() && ns > 0.0, "{ns}");
+        for set in [InstructionSet::Detect, InstructionSet::Baseline] {
+            let ns = lanes_trilinear_ns_per_sample(Duration::from_millis(20), set);
+            assert!(ns.is_finite() && ns > 0.0, "{set:?}: {ns}");
+        }
+    }
+
+    #[test]
+    fn the_lanes_take_the_scalar_loops_values() {
+        // The lane sampler and the scalar bound's trilinear agree on chords of the bound's brick, so both bounds
+        // time the same work.
+        let brick = brick();
+        let mut random = xorshift();
+        let limit = (EDGE - 1) as f32;
+        let dq = Dequantize { scale: 1.0 / 65535.0, offset: 0.0 };
+        let (mut start, mut delta) = ([[0f32; LANES]; 3], [[0f32; LANES]; 3]);
+        for lane in 0..LANES {
+            for a in 0..3 {
+                start[a][lane] = random() * (limit - 4.0) + 2.0;
+                delta[a][lane] = (random() - 0.5) * STEP;
+            }
+        }
+        for step in 0..4 {
+            let k = [step as f32; LANES];
+            let values = values_across(&brick, EDGE, &[0; LANES], &start, &delta, &k, dq, CornerGather::SCALAR);
+            for (lane, value) in values.iter().enumerate() {
+                let p = [0, 1, 2].map(|a| start[a][lane] + step as f32 * delta[a][lane]);
+                let expected = trilinear(&brick, p) / 65535.0;
+                assert!((value - expected).abs() < 1e-5, "lane {lane}, step {step}: {value} against {expected}");
+            }
+        }
     }
 }
