@@ -15,7 +15,7 @@ use crate::cli::{BenchArgs, Switch};
 use crate::memory::peak_rss_bytes;
 use crate::render_budget::{check_budget, plan_budget};
 use crate::scenes::{builtin, Scene, SCENE_NAMES};
-use crate::trilinear_bound::{lanes_trilinear_ns_per_sample, scalar_trilinear_ns_per_sample};
+use crate::trilinear_bound::{lanes_trilinear_ns_per_sample_of, scalar_trilinear_ns_per_sample_of, BoundVoxel};
 
 /// How long the scalar trilinear bound is measured.
 const BOUND_DURATION: std::time::Duration = std::time::Duration::from_millis(500);
@@ -43,10 +43,13 @@ pub struct SceneFigures {
     pub samples_per_second: f64,
     /// Warm: wall time per sample multiplied by the worker threads, ns (the cost of a sample on one core).
     pub ns_per_sample_per_core: f64,
-    /// The scalar trilinear bound measured in the same run (see [`crate::trilinear_bound`]), ns per sample.
+    /// The scalar trilinear bound measured in the same run on voxels of the scene's width (see
+    /// [`crate::trilinear_bound`]), ns per sample.
     pub trilinear_bound_ns: f64,
     /// The same bound with eight rays in lock-step through the renderer's lane sampler, ns per sample.
     pub lanes_trilinear_bound_ns: f64,
+    /// Bytes per voxel of the scene's bricks (the bounds' voxel width).
+    pub voxel_bytes: usize,
     /// Interactive camera path: median frame ms (render + bounded production).
     pub path_median_ms: f64,
     /// Interactive camera path: 95th percentile frame ms.
@@ -78,23 +81,26 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     bench_surfaces(args)?;
     crate::backend::check_backend_flags(args.backend, args.gpu_filter)?;
     eprintln!("bench: the trilinear bounds …");
-    let bound_ns = scalar_trilinear_ns_per_sample(BOUND_DURATION);
-    let lanes_bound_ns = lanes_trilinear_ns_per_sample(BOUND_DURATION, voxstream_render::InstructionSet::Detect);
-    let bounds = (bound_ns, lanes_bound_ns);
+    let bounds = TrilinearBounds { wide: TrilinearBounds::measure::<u16>(), narrow: TrilinearBounds::measure::<u8>() };
     let mut figures = Vec::new();
     for name in &names {
         let scene = builtin(name).with_context(|| format!("unknown scene '{name}'"))?;
         eprintln!("bench: {name} at {0}x{0} …", args.size);
-        figures.push(bench_scene(&scene, args, bounds)?);
+        figures.push(bench_scene(&scene, args, &bounds)?);
     }
     println!(
-        "backend: {}\nthreads: {}, ray loop: {}, peak RSS: {:.0} MiB, trilinear bounds: {bound_ns:.1} ns per sample on one core (scalar), {lanes_bound_ns:.1} ns (8 rays in lock-step)\n",
+        "backend: {}\nthreads: {}, ray loop: {}, peak RSS: {:.0} MiB, trilinear bounds in ns per sample on one core \
+         (scalar, 8 rays in lock-step): 16-bit voxels {:.1}, {:.1}; 8-bit voxels {:.1}, {:.1}\n",
         figures.first().map_or("", |f| f.backend.as_str()),
         rayon::current_num_threads(),
         voxstream_render::InstructionSet::detected(),
-        peak_rss_bytes().unwrap_or(0) as f64 / 1048576.0
+        peak_rss_bytes().unwrap_or(0) as f64 / 1048576.0,
+        bounds.wide.0,
+        bounds.wide.1,
+        bounds.narrow.0,
+        bounds.narrow.1,
     );
-    println!("| scene | size | converged (cold) | passes | frames to converge (interactive) | warm frame | warm fps | rays/s | samples/s | ns/sample/core (bounds: scalar, lanes) | path median | path p95 | uploaded: cold, per warm frame, per path frame |");
+    println!("| scene | size | converged (cold) | passes | frames to converge (interactive) | warm frame | warm fps | rays/s | samples/s | ns/sample/core (bounds at its voxel width: scalar, lanes) | path median | path p95 | uploaded: cold, per warm frame, per path frame |");
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for f in &figures {
         println!(
@@ -196,7 +202,24 @@ fn new_session(
     Ok(session)
 }
 
-fn bench_scene(scene: &Scene, args: &BenchArgs, (bound_ns, lanes_bound_ns): (f64, f64)) -> Result<SceneFigures> {
+/// The trilinear bounds (scalar, eight rays in lock-step; ns per sample on one core) per voxel width.
+struct TrilinearBounds {
+    wide: (f64, f64),
+    narrow: (f64, f64),
+}
+
+impl TrilinearBounds {
+    fn measure<V: BoundVoxel>() -> (f64, f64) {
+        (
+            scalar_trilinear_ns_per_sample_of::<V>(BOUND_DURATION),
+            lanes_trilinear_ns_per_sample_of::<V>(BOUND_DURATION, voxstream_render::InstructionSet::Detect),
+        )
+    }
+}
+
+fn bench_scene(scene: &Scene, args: &BenchArgs, bounds: &TrilinearBounds) -> Result<SceneFigures> {
+    let voxel_bytes = scene.producer.voxel_format().voxel_bytes();
+    let (bound_ns, lanes_bound_ns) = if voxel_bytes == 1 { bounds.narrow } else { bounds.wide };
     // Cold, converged.
     let mut session = new_session(scene, args)?;
     let cold = session.render(&scene.camera, Mode::Converged)?;
@@ -246,6 +269,7 @@ fn bench_scene(scene: &Scene, args: &BenchArgs, (bound_ns, lanes_bound_ns): (f64
         ns_per_sample_per_core: warm_seconds * 1e9 * rayon::current_num_threads() as f64 / samples.max(1) as f64,
         trilinear_bound_ns: bound_ns,
         lanes_trilinear_bound_ns: lanes_bound_ns,
+        voxel_bytes,
         path_median_ms,
         path_p95_ms,
         bricks_resident: session.residency().bricks,

@@ -10,11 +10,14 @@
 //!   ([`voxstream_render::sampler::values_across`], the one its lanes take their samples with: positions, cells and
 //!   weights as SIMD, the corners read by AVX2 gathers where the CPU has them), compiled for the instruction set the
 //!   ray loop uses. What SIMD across rays can give the trilinear part of a sample on this CPU.
+//!
+//! Both are measured on 16-bit bricks (the `…_ns_per_sample` functions, comparable with earlier figures) or on bricks
+//! of either voxel width (the `…_of` functions: the 8-bit scans and the sponge are stored as bytes).
 
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
-use voxstream_core::Dequantize;
+use voxstream_core::{Dequantize, Voxel};
 use voxstream_render::gathered_corners::CornerGather;
 use voxstream_render::sampler::{values_across, LANES};
 use voxstream_render::InstructionSet;
@@ -24,9 +27,14 @@ const EDGE: usize = 34;
 /// March step, in voxels (the ray caster's default `--step`).
 const STEP: f32 = 0.5;
 
-/// Nanoseconds per trilinear sample on one core, measured for about `duration`.
+/// Nanoseconds per trilinear sample on one core, measured for about `duration` (16-bit voxels).
 pub fn scalar_trilinear_ns_per_sample(duration: Duration) -> f64 {
-    let brick = brick();
+    scalar_trilinear_ns_per_sample_of::<u16>(duration)
+}
+
+/// [`scalar_trilinear_ns_per_sample`] on voxels of type `V`.
+pub fn scalar_trilinear_ns_per_sample_of<V: BoundVoxel>(duration: Duration) -> f64 {
+    let brick = brick::<V>();
     let mut random = xorshift();
     let (mut samples, mut sum) = (0u64, 0.0f32);
     let start = Instant::now();
@@ -54,23 +62,30 @@ pub fn scalar_trilinear_ns_per_sample(duration: Duration) -> f64 {
 /// about `duration`: each round gives the eight lanes a chord of the brick each and takes as many steps as the
 /// shortest chord has (the lanes' bursts), on the instruction set `instruction_set` selects.
 pub fn lanes_trilinear_ns_per_sample(duration: Duration, instruction_set: InstructionSet) -> f64 {
-    instruction_set.arch().dispatch(LanesBound { duration, gather: CornerGather::new(instruction_set.gathers()) })
+    lanes_trilinear_ns_per_sample_of::<u16>(duration, instruction_set)
+}
+
+/// [`lanes_trilinear_ns_per_sample`] on voxels of type `V`.
+pub fn lanes_trilinear_ns_per_sample_of<V: BoundVoxel>(duration: Duration, instruction_set: InstructionSet) -> f64 {
+    let gather = CornerGather::new(instruction_set.gathers());
+    instruction_set.arch().dispatch(LanesBound::<V> { duration, gather, voxel: std::marker::PhantomData })
 }
 
 /// [`lanes_trilinear_ns_per_sample`]'s loop, compiled for each instruction set by `pulp` (as the renderer's tile loop).
-struct LanesBound {
+struct LanesBound<V> {
     duration: Duration,
     gather: CornerGather,
+    voxel: std::marker::PhantomData<V>,
 }
 
-impl pulp::WithSimd for LanesBound {
+impl<V: BoundVoxel> pulp::WithSimd for LanesBound<V> {
     type Output = f64;
 
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _simd: S) -> f64 {
-        let brick = brick();
+        let brick = brick::<V>();
         let mut random = xorshift();
-        let dq = Dequantize { scale: 1.0 / 65535.0, offset: 0.0 };
+        let dq = V::DEQUANTIZE;
         let bases = [0u32; LANES];
         let limit = (EDGE - 1) as f32;
         let (mut samples, mut sum) = (0u64, 0.0f32);
@@ -133,8 +148,31 @@ fn chord_steps(p: [f32; 3], advance: [f32; 3], limit: f32) -> u32 {
         .unwrap_or(0)
 }
 
-fn brick() -> Vec<u16> {
-    (0..EDGE * EDGE * EDGE).map(|i| (i as u32).wrapping_mul(2_654_435_761) as u16).collect()
+/// A voxel type the bounds can be measured on: the pool's two.
+pub trait BoundVoxel: Voxel {
+    /// The voxel holding the low bits of `bits`.
+    fn from_low_bits(bits: u32) -> Self;
+    /// How the renderer turns the interpolated stored value into the normalised one.
+    const DEQUANTIZE: Dequantize;
+}
+
+impl BoundVoxel for u16 {
+    fn from_low_bits(bits: u32) -> u16 {
+        bits as u16
+    }
+    const DEQUANTIZE: Dequantize = Dequantize { scale: 1.0 / 65535.0, offset: 0.0 };
+}
+
+impl BoundVoxel for u8 {
+    fn from_low_bits(bits: u32) -> u8 {
+        bits as u8
+    }
+    const DEQUANTIZE: Dequantize = Dequantize { scale: 1.0 / 255.0, offset: 0.0 };
+}
+
+/// A brick of pseudo-random voxels (no pattern a predictor could learn).
+fn brick<V: BoundVoxel>() -> Vec<V> {
+    (0..EDGE * EDGE * EDGE).map(|i| V::from_low_bits((i as u32).wrapping_mul(2_654_435_761))).collect()
 }
 
 fn normalised(v: [f32; 3]) -> [f32; 3] {
@@ -145,7 +183,7 @@ fn normalised(v: [f32; 3]) -> [f32; 3] {
 /// The trilinear interpolation of `brick` at `p` (voxel units, inside `[0, EDGE − 1)³`): the eight corners are read
 /// through one slice, so one bounds check per sample remains.
 #[inline]
-fn trilinear(brick: &[u16], p: [f32; 3]) -> f32 {
+fn trilinear<V: Voxel>(brick: &[V], p: [f32; 3]) -> f32 {
     const ROW: usize = EDGE;
     const SLAB: usize = EDGE * EDGE;
     let cell = p.map(|c| c.floor());
@@ -153,7 +191,7 @@ fn trilinear(brick: &[u16], p: [f32; 3]) -> f32 {
     let [x, y, z] = cell.map(|c| c as usize);
     let base = (z * EDGE + y) * EDGE + x;
     let corners = &brick[base..base + SLAB + ROW + 2];
-    let at = |offset: usize| f32::from(corners[offset]);
+    let at = |offset: usize| corners[offset].stored();
     let lerp = |a: f32, b: f32, t: f32| a + (b - a) * t;
     let x00 = lerp(at(0), at(1), f[0]);
     let x10 = lerp(at(ROW), at(ROW + 1), f[0]);
@@ -184,16 +222,27 @@ mod tests {
             let ns = lanes_trilinear_ns_per_sample(Duration::from_millis(20), set);
             assert!(ns.is_finite() && ns > 0.0, "{set:?}: {ns}");
         }
+        for ns in [
+            scalar_trilinear_ns_per_sample_of::<u8>(Duration::from_millis(20)),
+            lanes_trilinear_ns_per_sample_of::<u8>(Duration::from_millis(20), InstructionSet::Detect),
+        ] {
+            assert!(ns.is_finite() && ns > 0.0, "bytes: {ns}");
+        }
     }
 
     #[test]
     fn the_lanes_take_the_scalar_loops_values() {
-        // The lane sampler and the scalar bound's trilinear agree on chords of the bound's brick, so both bounds
-        // time the same work.
-        let brick = brick();
+        lanes_take_the_scalar_loops_values::<u16>();
+        lanes_take_the_scalar_loops_values::<u8>();
+    }
+
+    /// The lane sampler and the scalar bound's trilinear agree on chords of the bound's brick, so both bounds time
+    /// the same work.
+    fn lanes_take_the_scalar_loops_values<V: BoundVoxel>() {
+        let brick = brick::<V>();
         let mut random = xorshift();
         let limit = (EDGE - 1) as f32;
-        let dq = Dequantize { scale: 1.0 / 65535.0, offset: 0.0 };
+        let dq = V::DEQUANTIZE;
         let (mut start, mut delta) = ([[0f32; LANES]; 3], [[0f32; LANES]; 3]);
         for lane in 0..LANES {
             for a in 0..3 {
@@ -206,7 +255,7 @@ mod tests {
             let values = values_across(&brick, EDGE, &[0; LANES], &start, &delta, &k, dq, CornerGather::SCALAR);
             for (lane, value) in values.iter().enumerate() {
                 let p = [0, 1, 2].map(|a| start[a][lane] + step as f32 * delta[a][lane]);
-                let expected = trilinear(&brick, p) / 65535.0;
+                let expected = trilinear(&brick, p) * dq.scale;
                 assert!((value - expected).abs() < 1e-5, "lane {lane}, step {step}: {value} against {expected}");
             }
         }
