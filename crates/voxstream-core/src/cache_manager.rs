@@ -160,8 +160,19 @@ fn empty_pools(
 impl<P: Producer> CacheManager<P> {
     /// A cache for `producer` within `budget_bytes`. Only the root exists; its data is requested by the first rays.
     pub fn new(producer: P, budget_bytes: u64) -> Result<CacheManager<P>, CoreError> {
-        let shape = producer.shape();
         let format = producer.voxel_format();
+        CacheManager::with_format(producer, budget_bytes, format)
+    }
+
+    /// [`CacheManager::new`] with 16-bit bricks whatever [`Producer::voxel_format`] allows: for renderers that keep
+    /// their own copy of the bricks in 16 bits (the GPU atlas), so that the budget, planned in the pool's voxels,
+    /// also bounds that copy.
+    pub fn with_sixteen_bit_bricks(producer: P, budget_bytes: u64) -> Result<CacheManager<P>, CoreError> {
+        CacheManager::with_format(producer, budget_bytes, VoxelFormat::Wide)
+    }
+
+    fn with_format(producer: P, budget_bytes: u64, format: VoxelFormat) -> Result<CacheManager<P>, CoreError> {
+        let shape = producer.shape();
         let capacities = PoolCapacities::plan_for(&shape, format, budget_bytes)?;
         let (node_pool, brick_pool, feedback) = empty_pools(&shape, &capacities, format);
         Ok(CacheManager {

@@ -31,6 +31,13 @@ pub trait FrameRenderer {
     fn bytes_uploaded(&self) -> u64 {
         0
     }
+
+    /// Whether the renderer keeps its own copy of the bricks in 16 bits whatever the pool holds (the GPU atlas):
+    /// the session then plans its pool with 16-bit bricks, so that the memory budget bounds that copy too (8-bit
+    /// bricks would fit twice as many in the budget as the copy has room for).
+    fn needs_sixteen_bit_bricks(&self) -> bool {
+        false
+    }
 }
 
 /// A renderer chosen at run time (`--backend`), `Send` so that it can move to the viewer's render thread.
@@ -53,6 +60,10 @@ impl FrameRenderer for Box<dyn FrameRenderer + Send + '_> {
 
     fn bytes_uploaded(&self) -> u64 {
         (**self).bytes_uploaded()
+    }
+
+    fn needs_sixteen_bit_bricks(&self) -> bool {
+        (**self).needs_sixteen_bit_bricks()
     }
 }
 

@@ -240,7 +240,11 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
         let shape = producer.shape();
         let finest_voxel = settings.placement.mean_scale() * shape.voxel_size(shape.max_level);
         let lut = TransferLut::new(transfer_function, value_range[0] as f32, value_range[1] as f32, finest_voxel);
-        let mut cache = CacheManager::new(producer, budget_bytes)?;
+        let mut cache = if renderer.needs_sixteen_bit_bricks() {
+            CacheManager::with_sixteen_bit_bricks(producer, budget_bytes)?
+        } else {
+            CacheManager::new(producer, budget_bytes)?
+        };
         cache.set_blending(limits.blending_fade_frames);
         Ok(Session {
             cache,

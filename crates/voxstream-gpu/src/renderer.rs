@@ -468,6 +468,11 @@ impl FrameRenderer for GpuRenderer {
     fn bytes_uploaded(&self) -> u64 {
         self.total_upload.bytes()
     }
+
+    /// The atlas holds 16-bit texels whatever the pool holds.
+    fn needs_sixteen_bit_bricks(&self) -> bool {
+        true
+    }
 }
 
 /// The ray caster's pipeline, for isosurfaces or for volumes (the shader's `ISOSURFACES` constant).

@@ -40,13 +40,8 @@ pub fn scalar_trilinear_ns_per_sample_of<V: BoundVoxel>(duration: Duration) -> f
     let start = Instant::now();
     while start.elapsed() < duration {
         for _ in 0..256 {
-            // A chord of the brick: from a random interior point in a random direction, until it leaves.
-            let limit = (EDGE - 1) as f32;
-            let mut p = [random() * limit, random() * limit, random() * limit];
-            let d = normalised([random() - 0.5, random() - 0.5, random() - 0.5]);
-            let advance = d.map(|c| c * STEP);
             // Steps before the chord leaves the brick, computed once: the loop itself tests nothing.
-            let steps = chord_steps(p, advance, limit);
+            let Chord { start: mut p, advance, steps } = random_chord(&mut random);
             for _ in 0..steps {
                 sum += trilinear(&brick, p);
                 p = [p[0] + advance[0], p[1] + advance[1], p[2] + advance[2]];
@@ -59,8 +54,9 @@ pub fn scalar_trilinear_ns_per_sample_of<V: BoundVoxel>(duration: Duration) -> f
 }
 
 /// Nanoseconds per trilinear sample on one core with eight rays in lock-step (see the module docs), measured for
-/// about `duration`: each round gives the eight lanes a chord of the brick each and takes as many steps as the
-/// shortest chord has (the lanes' bursts), on the instruction set `instruction_set` selects.
+/// about `duration` on the instruction set `instruction_set` selects: each lane marches a chord of the brick of its
+/// own and takes a new one when it ends, and the lanes step together in bursts that last until the first lane's
+/// chord ends (the renderer's lanes refill the same way). Each chord costs what it costs the scalar loop to set up.
 pub fn lanes_trilinear_ns_per_sample(duration: Duration, instruction_set: InstructionSet) -> f64 {
     lanes_trilinear_ns_per_sample_of::<u16>(duration, instruction_set)
 }
@@ -85,39 +81,92 @@ impl<V: BoundVoxel> pulp::WithSimd for LanesBound<V> {
     fn with_simd<S: pulp::Simd>(self, _simd: S) -> f64 {
         let brick = brick::<V>();
         let mut random = xorshift();
-        let dq = V::DEQUANTIZE;
-        let bases = [0u32; LANES];
-        let limit = (EDGE - 1) as f32;
+        let mut next_chord = || random_chord(&mut random);
+        let mut lanes = Lanes::new();
         let (mut samples, mut sum) = (0u64, 0.0f32);
         let start_time = Instant::now();
         while start_time.elapsed() < self.duration {
-            for _ in 0..32 {
-                let mut start = [[0f32; LANES]; 3];
-                let mut delta = [[0f32; LANES]; 3];
-                let mut steps = u32::MAX;
-                for lane in 0..LANES {
-                    let p = [random() * limit, random() * limit, random() * limit];
-                    let d = normalised([random() - 0.5, random() - 0.5, random() - 0.5]);
-                    let advance = d.map(|c| c * STEP);
-                    steps = steps.min(chord_steps(p, advance, limit));
-                    for a in 0..3 {
-                        start[a][lane] = p[a];
-                        delta[a][lane] = advance[a];
-                    }
-                }
-                let mut k = [0f32; LANES];
-                for _ in 0..steps {
-                    let values = values_across(&brick, EDGE, &bases, &start, &delta, &k, dq, self.gather);
-                    sum += values.iter().sum::<f32>();
-                    for kk in &mut k {
-                        *kk += 1.0;
-                    }
-                }
-                samples += steps as u64 * LANES as u64;
-            }
+            let (taken, total) = lanes.march(&brick, &mut next_chord, 64, V::DEQUANTIZE, self.gather);
+            samples += taken;
+            sum += total;
         }
         black_box(sum);
         start_time.elapsed().as_secs_f64() * 1e9 / samples.max(1) as f64
+    }
+}
+
+/// One chord of the bound's brick: where it starts, its step, and how many steps it takes inside.
+#[derive(Clone, Copy, Debug)]
+struct Chord {
+    start: [f32; 3],
+    advance: [f32; 3],
+    steps: u32,
+}
+
+/// A chord from a random interior point in a random direction, until it leaves the brick.
+fn random_chord(random: &mut impl FnMut() -> f32) -> Chord {
+    let limit = (EDGE - 1) as f32;
+    let start = [random() * limit, random() * limit, random() * limit];
+    let d = normalised([random() - 0.5, random() - 0.5, random() - 0.5]);
+    let advance = d.map(|c| c * STEP);
+    // A direction too short to normalise would stay put: a few brick edges at most.
+    Chord { start, advance, steps: chord_steps(start, advance, limit).min(4 * EDGE as u32) }
+}
+
+/// Eight lanes, each on its own chord (positions `start + k·delta`, as the renderer's lanes hold them).
+struct Lanes {
+    start: [[f32; LANES]; 3],
+    delta: [[f32; LANES]; 3],
+    k: [f32; LANES],
+    /// Steps left on each lane's chord.
+    left: [u32; LANES],
+}
+
+impl Lanes {
+    fn new() -> Lanes {
+        Lanes { start: [[0.0; LANES]; 3], delta: [[0.0; LANES]; 3], k: [0.0; LANES], left: [0; LANES] }
+    }
+
+    /// `bursts` bursts: lanes whose chord has ended take new ones from `next_chord` (which must give chords with
+    /// steps now and then), then all eight step together until the first chord ends. Returns the samples taken and
+    /// their sum.
+    #[inline(always)]
+    fn march<V: Voxel>(
+        &mut self,
+        brick: &[V],
+        next_chord: &mut impl FnMut() -> Chord,
+        bursts: usize,
+        dq: Dequantize,
+        gather: CornerGather,
+    ) -> (u64, f32) {
+        let bases = [0u32; LANES];
+        let (mut samples, mut sum) = (0u64, 0.0f32);
+        for _ in 0..bursts {
+            for lane in 0..LANES {
+                while self.left[lane] == 0 {
+                    let chord = next_chord();
+                    for a in 0..3 {
+                        self.start[a][lane] = chord.start[a];
+                        self.delta[a][lane] = chord.advance[a];
+                    }
+                    self.k[lane] = 0.0;
+                    self.left[lane] = chord.steps;
+                }
+            }
+            let burst = self.left.iter().copied().min().unwrap_or(0);
+            for _ in 0..burst {
+                let values = values_across(brick, EDGE, &bases, &self.start, &self.delta, &self.k, dq, gather);
+                sum += values.iter().sum::<f32>();
+                for k in &mut self.k {
+                    *k += 1.0;
+                }
+            }
+            for left in &mut self.left {
+                *left -= burst;
+            }
+            samples += u64::from(burst) * LANES as u64;
+        }
+        (samples, sum)
     }
 }
 
@@ -231,33 +280,44 @@ mod tests {
     }
 
     #[test]
-    fn the_lanes_take_the_scalar_loops_values() {
-        lanes_take_the_scalar_loops_values::<u16>();
-        lanes_take_the_scalar_loops_values::<u8>();
+    fn the_lanes_take_the_scalar_loops_samples() {
+        lanes_take_the_scalar_loops_samples::<u16>();
+        lanes_take_the_scalar_loops_samples::<u8>();
     }
 
-    /// The lane sampler and the scalar bound's trilinear agree on chords of the bound's brick, so both bounds time
-    /// the same work.
-    fn lanes_take_the_scalar_loops_values<V: BoundVoxel>() {
+    /// The timed loop of the lanes bound ([`Lanes::march`], with the gathers where the CPU has them) takes the same
+    /// samples as the scalar loop: on chords of equal length, every burst ends with all eight chords, and the sum of
+    /// its samples is the sum of the scalar loop's over the same chords.
+    fn lanes_take_the_scalar_loops_samples<V: BoundVoxel>() {
+        const STEPS: u32 = 12;
+        const BURSTS: usize = 5;
         let brick = brick::<V>();
         let mut random = xorshift();
-        let limit = (EDGE - 1) as f32;
-        let dq = V::DEQUANTIZE;
-        let (mut start, mut delta) = ([[0f32; LANES]; 3], [[0f32; LANES]; 3]);
-        for lane in 0..LANES {
-            for a in 0..3 {
-                start[a][lane] = random() * (limit - 4.0) + 2.0;
-                delta[a][lane] = (random() - 0.5) * STEP;
+        // Chords of STEPS steps that stay inside: starts at least STEPS half-voxels from every face.
+        let margin = STEPS as f32 * STEP + 1.0;
+        let room = (EDGE - 1) as f32 - 2.0 * margin;
+        let chords: Vec<Chord> = (0..BURSTS * LANES)
+            .map(|_| {
+                let start = [0, 1, 2].map(|_| margin + random() * room);
+                let d = normalised([random() - 0.5, random() - 0.5, random() - 0.5]);
+                Chord { start, advance: d.map(|c| c * STEP), steps: STEPS }
+            })
+            .collect();
+        let mut expected = 0.0f64;
+        for chord in &chords {
+            let mut p = chord.start;
+            for _ in 0..chord.steps {
+                expected += f64::from(trilinear(&brick, p) * V::DEQUANTIZE.scale);
+                p = [0, 1, 2].map(|a| p[a] + chord.advance[a]);
             }
         }
-        for step in 0..4 {
-            let k = [step as f32; LANES];
-            let values = values_across(&brick, EDGE, &[0; LANES], &start, &delta, &k, dq, CornerGather::SCALAR);
-            for (lane, value) in values.iter().enumerate() {
-                let p = [0, 1, 2].map(|a| start[a][lane] + step as f32 * delta[a][lane]);
-                let expected = trilinear(&brick, p) * dq.scale;
-                assert!((value - expected).abs() < 1e-5, "lane {lane}, step {step}: {value} against {expected}");
-            }
-        }
+        let mut given = chords.iter().copied();
+        let mut next_chord = || given.next().expect("the lanes asked for more chords than they take");
+        let gather = CornerGather::new(InstructionSet::Detect.gathers());
+        let (samples, sum) = Lanes::new().march(&brick, &mut next_chord, BURSTS, V::DEQUANTIZE, gather);
+        assert_eq!(samples, (BURSTS * LANES) as u64 * u64::from(STEPS));
+        let relative = (f64::from(sum) - expected).abs() / expected;
+        assert!(relative < 1e-4, "lanes sum {sum} against the scalar loop's {expected}");
+        assert!(given.next().is_none(), "every chord was marched");
     }
 }

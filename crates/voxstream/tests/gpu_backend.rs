@@ -13,6 +13,7 @@ use std::path::PathBuf;
 
 use voxstream::png_output::write_rgb8_png;
 use voxstream::scenes::{builtin, SceneProducer, SCENE_NAMES};
+use voxstream_core::VoxelFormat;
 use voxstream_engine::{FrameRenderer, LoopLimits, Mode, Session};
 use voxstream_gpu::{BrickFiltering, GpuRenderer};
 use voxstream_render::{psnr, Camera, Image, RenderSettings};
@@ -184,6 +185,25 @@ fn interactive_frames_converge_to_the_converged_image() {
     let mut cpu = cpu_session("shell", SIZE, 64 << 20, LoopLimits::default());
     let expected = common::converged(&mut cpu, &camera);
     assert_close("shell-interactive", &last.image, &expected);
+}
+
+#[test]
+fn a_source_of_byte_bricks_keeps_sixteen_bit_pools_on_the_gpu() {
+    // The sponge's bricks are bytes on the CPU; the GPU atlas is 16-bit, so the session plans 16-bit bricks for it
+    // and the atlas stays within the budget (with byte bricks the pool would hold twice the bricks the budget has
+    // room for in the atlas).
+    let budget = 6 << 20;
+    let (_, _, _, camera) = settings("sponge", SIZE);
+    let cpu = cpu_session("sponge", SIZE, budget, LoopLimits::default());
+    assert!(
+        matches!(cpu.cache().brick_pool().format(), VoxelFormat::Narrow { .. }),
+        "the CPU session should keep the sponge's bricks as bytes"
+    );
+    let mut gpu = gpu_session("sponge", SIZE, budget, LoopLimits::default());
+    assert_eq!(gpu.cache().brick_pool().format(), VoxelFormat::Wide, "the GPU session's pool");
+    gpu.render(&camera, Mode::Converged).expect("sponge frame");
+    let pool_bytes = gpu.renderer().pool_bytes().expect("pools were uploaded");
+    assert!(pool_bytes <= budget, "GPU pools of {pool_bytes} bytes exceed the budget of {budget}");
 }
 
 #[test]
