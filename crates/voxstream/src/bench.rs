@@ -15,7 +15,7 @@ use crate::cli::{BenchArgs, Switch};
 use crate::memory::peak_rss_bytes;
 use crate::render_budget::{check_budget, plan_budget};
 use crate::scenes::{builtin, Scene, SCENE_NAMES};
-use crate::trilinear_bound::{lanes_trilinear_ns_per_sample_of, scalar_trilinear_ns_per_sample_of, BoundVoxel};
+use crate::trilinear_bound::{lanes_trilinear_ns_per_sample, scalar_trilinear_ns_per_sample, BoundVoxel};
 
 /// How long each trilinear bound is measured (four of them: scalar and lanes, 16-bit and 8-bit voxels; 2 s in all).
 const BOUND_DURATION: std::time::Duration = std::time::Duration::from_millis(500);
@@ -211,18 +211,19 @@ struct TrilinearBounds {
 impl TrilinearBounds {
     fn measure<V: BoundVoxel>() -> (f64, f64) {
         (
-            scalar_trilinear_ns_per_sample_of::<V>(BOUND_DURATION),
-            lanes_trilinear_ns_per_sample_of::<V>(BOUND_DURATION, voxstream_render::InstructionSet::Detect),
+            scalar_trilinear_ns_per_sample::<V>(BOUND_DURATION),
+            lanes_trilinear_ns_per_sample::<V>(BOUND_DURATION, voxstream_render::InstructionSet::Detect),
         )
     }
 }
 
 fn bench_scene(scene: &Scene, args: &BenchArgs, bounds: &TrilinearBounds) -> Result<SceneFigures> {
-    let voxel_bytes = scene.producer.voxel_format().voxel_bytes();
-    let (bound_ns, lanes_bound_ns) = if voxel_bytes == 1 { bounds.narrow } else { bounds.wide };
     // Cold, converged.
     let mut session = new_session(scene, args)?;
     let cold = session.render(&scene.camera, Mode::Converged)?;
+    // The bounds for the width the session's pool keeps (a GPU session keeps 16 bits whatever the scene allows).
+    let voxel_bytes = session.cache().brick_pool().format().voxel_bytes();
+    let (bound_ns, lanes_bound_ns) = if voxel_bytes == 1 { bounds.narrow } else { bounds.wide };
     let converged_bytes_uploaded = session.renderer().bytes_uploaded();
 
     // Warm: everything resident, no request left.

@@ -15,7 +15,7 @@ use voxstream_store::{InMemoryVolume, StoreProducer, StoreReader};
 
 use crate::backend::open_renderer;
 use crate::camera_path::{generated_path, parse_generated_path, read_camera_file, read_camera_path};
-use crate::cli::{Backend, BrickBits, NormalsArg, RenderArgs, ShadingArg, Switch};
+use crate::cli::{BrickBits, NormalsArg, RenderArgs, ShadingArg, Switch};
 use crate::exit_status::IncompleteImage;
 use crate::geometry_source;
 use crate::iso_flags;
@@ -165,11 +165,10 @@ pub fn open_source(args: &RenderArgs, budget: &MemoryBudget, user: impl SourceUs
     let reader = Arc::new(StoreReader::open_with_cache(path, cache_bytes)?);
     let attributes = reader.attributes().clone();
     let transfer_function = default_store_transfer_function(attributes.typical_range())?;
-    // The GPU's atlas is 16-bit: with 8-bit bricks the pools would hold twice the bricks the atlas has room for
-    // within the budget, so the GPU backend keeps 16-bit bricks.
-    let format = match (args.brick_bits, args.backend) {
-        (BrickBits::Auto, Backend::Cpu) => None,
-        (BrickBits::Sixteen, _) | (_, Backend::Gpu) => Some(VoxelFormat::Wide),
+    // (A GPU session keeps 16-bit bricks whatever the producer allows: `FrameRenderer::needs_sixteen_bit_bricks`.)
+    let format = match args.brick_bits {
+        BrickBits::Auto => None,
+        BrickBits::Sixteen => Some(VoxelFormat::Wide),
     };
     if args.in_memory {
         let volume = Arc::new(InMemoryVolume::load(&reader)?);

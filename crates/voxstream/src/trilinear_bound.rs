@@ -11,8 +11,8 @@
 //!   weights as SIMD, the corners read by AVX2 gathers where the CPU has them), compiled for the instruction set the
 //!   ray loop uses. What SIMD across rays can give the trilinear part of a sample on this CPU.
 //!
-//! Both are measured on 16-bit bricks (the `…_ns_per_sample` functions, comparable with earlier figures) or on bricks
-//! of either voxel width (the `…_of` functions: the 8-bit scans and the sponge are stored as bytes).
+//! Both are measured on bricks of either voxel width (`u16`: comparable with earlier figures; `u8`: the 8-bit scans
+//! and the sponge are stored as bytes).
 
 use std::hint::black_box;
 use std::time::{Duration, Instant};
@@ -27,13 +27,8 @@ const EDGE: usize = 34;
 /// March step, in voxels (the ray caster's default `--step`).
 const STEP: f32 = 0.5;
 
-/// Nanoseconds per trilinear sample on one core, measured for about `duration` (16-bit voxels).
-pub fn scalar_trilinear_ns_per_sample(duration: Duration) -> f64 {
-    scalar_trilinear_ns_per_sample_of::<u16>(duration)
-}
-
-/// [`scalar_trilinear_ns_per_sample`] on voxels of type `V`.
-pub fn scalar_trilinear_ns_per_sample_of<V: BoundVoxel>(duration: Duration) -> f64 {
+/// Nanoseconds per trilinear sample on one core with voxels of type `V`, measured for about `duration`.
+pub fn scalar_trilinear_ns_per_sample<V: BoundVoxel>(duration: Duration) -> f64 {
     let brick = brick::<V>();
     let mut random = xorshift();
     let (mut samples, mut sum) = (0u64, 0.0f32);
@@ -57,12 +52,7 @@ pub fn scalar_trilinear_ns_per_sample_of<V: BoundVoxel>(duration: Duration) -> f
 /// about `duration` on the instruction set `instruction_set` selects: each lane marches a chord of the brick of its
 /// own and takes a new one when it ends, and the lanes step together in bursts that last until the first lane's
 /// chord ends (the renderer's lanes refill the same way). Each chord costs what it costs the scalar loop to set up.
-pub fn lanes_trilinear_ns_per_sample(duration: Duration, instruction_set: InstructionSet) -> f64 {
-    lanes_trilinear_ns_per_sample_of::<u16>(duration, instruction_set)
-}
-
-/// [`lanes_trilinear_ns_per_sample`] on voxels of type `V`.
-pub fn lanes_trilinear_ns_per_sample_of<V: BoundVoxel>(duration: Duration, instruction_set: InstructionSet) -> f64 {
+pub fn lanes_trilinear_ns_per_sample<V: BoundVoxel>(duration: Duration, instruction_set: InstructionSet) -> f64 {
     let gather = CornerGather::new(instruction_set.gathers());
     instruction_set.arch().dispatch(LanesBound::<V> { duration, gather, voxel: std::marker::PhantomData })
 }
@@ -265,15 +255,15 @@ mod tests {
 
     #[test]
     fn the_bound_is_a_positive_time() {
-        let ns = scalar_trilinear_ns_per_sample(Duration::from_millis(20));
+        let ns = scalar_trilinear_ns_per_sample::<u16>(Duration::from_millis(20));
         assert!(ns.is_finite() && ns > 0.0, "{ns}");
         for set in [InstructionSet::Detect, InstructionSet::Baseline] {
-            let ns = lanes_trilinear_ns_per_sample(Duration::from_millis(20), set);
+            let ns = lanes_trilinear_ns_per_sample::<u16>(Duration::from_millis(20), set);
             assert!(ns.is_finite() && ns > 0.0, "{set:?}: {ns}");
         }
         for ns in [
-            scalar_trilinear_ns_per_sample_of::<u8>(Duration::from_millis(20)),
-            lanes_trilinear_ns_per_sample_of::<u8>(Duration::from_millis(20), InstructionSet::Detect),
+            scalar_trilinear_ns_per_sample::<u8>(Duration::from_millis(20)),
+            lanes_trilinear_ns_per_sample::<u8>(Duration::from_millis(20), InstructionSet::Detect),
         ] {
             assert!(ns.is_finite() && ns > 0.0, "bytes: {ns}");
         }
