@@ -14,15 +14,20 @@
 //!   stand-in. (It is taken over every pixel, not only those on projected brick boundaries: a spurious edge
 //!   elsewhere is an artifact too.)
 //!
-//! - **Floor** of a sequence's popping: the least mean popping that any sequence with the same first and last images
-//!   and the same number of frames could have against the same converged images, per pixel
-//!   `max(0, |I_last − I_first| − Σ_k |C_{k+1} − C_k|)`, summed over pixels and channels and divided by the same
+//! - **Floor** of a sequence's popping: the least mean popping that any sequence with the same first image, the same
+//!   number of frames and the same frame `S` from which on it shows the converged images (or, for a sequence that
+//!   never settles, the same last image, with `S` its last frame) could have against the same converged images: per
+//!   pixel
+//!   `max(0, |I_S − I_first| − Σ_{k<S} |C_{k+1} − C_k|)`, summed over pixels and channels and divided by the same
 //!   count as the mean. (By the triangle inequality,
-//!   `Σ_k max(0, |ΔI_k| − |ΔC_k|) ≥ |I_last − I_first| − Σ_k |ΔC_k|` for every pixel.) Blending spreads a change over
-//!   frames but cannot undo it: a cold start at rest must still get from its first image to its last, so the mean
-//!   popping of a blended sequence that ends where it ends is bounded below by this floor, however the fades are
-//!   shaped (a sequence that ends elsewhere, e.g. not yet final, has its own floor); only changes that reverse
-//!   (a level's shading replaced by the next one's and back) are above it and can be saved.
+//!   `Σ_{k<S} max(0, |ΔI_k| − |ΔC_k|) ≥ |I_S − I_first| − Σ_{k<S} |ΔC_k|` for every pixel, and the pairs after `S`
+//!   pop no less than 0.) Blending spreads a change over frames but cannot undo it: a cold start must still get
+//!   from its first image to the converged one, so the mean popping of a blended sequence that settles when it
+//!   settles is bounded below by this floor, however the fades are shaped; only changes that reverse (a level's
+//!   shading replaced by the next one's and back), and changes hidden in the camera's own, are above it and can be
+//!   saved. Ending the sum at `S` rather than at the last frame leaves out the motion after the sequence settled,
+//!   which no blending can hide anything in: on a camera path whose data all arrive in its first frames (an orbit
+//!   of a cold start), the floor is that of the cold start alone, not about 0.
 //!
 //! All are in 8-bit levels (0–255) of the written images. A sequence is measured from its first image that shows
 //! anything: a cold start's first frames are empty until the root arrives, and the root's arrival is the image
@@ -94,9 +99,13 @@ pub struct PoppingSummary {
     pub popping_p99: f64,
     /// Largest popping of a frame pair.
     pub popping_max: f64,
-    /// The least mean popping any sequence of as many frames from the same first to the same last image could have
-    /// against the same converged images (see the module docs), 8-bit levels.
+    /// The least mean popping any sequence of as many frames from the same first image, settled on the converged
+    /// images from the same frame on (or ending at the same last image, if it never settles), could have against the
+    /// same converged images (see the module docs), 8-bit levels.
     pub popping_floor: f64,
+    /// The frame (counted after the empty ones) from which the sequence shows the converged images to its end, if
+    /// it does.
+    pub settled_from: Option<usize>,
     /// Mean seam error over frames, 8-bit levels.
     pub seam_mean: f64,
     /// Popping of each frame pair (`k−1`, `k`), in order.
@@ -121,7 +130,9 @@ impl PoppingSummary {
         let popping_mean = mean(&popping);
         let seam_mean = mean(&seams);
         let popping_per_frame = popping.clone();
-        let popping_floor = if count < 2 { 0.0 } else { popping_floor(frames, exact) };
+        // A run that showed nothing has not settled.
+        let settled_from = if count == 0 { None } else { settled_from(frames, exact) };
+        let popping_floor = if count < 2 { 0.0 } else { popping_floor(frames, exact, settled_from) };
         popping.sort_by(f64::total_cmp);
         let percentile = |p: f64| {
             if popping.is_empty() {
@@ -137,6 +148,7 @@ impl PoppingSummary {
             popping_p99: percentile(0.99),
             popping_max: percentile(1.0),
             popping_floor,
+            settled_from,
             seam_mean,
             popping_per_frame,
             seam_per_frame: seams,
@@ -144,9 +156,22 @@ impl PoppingSummary {
     }
 }
 
-/// The floor of a sequence's mean popping (module docs): `frames` and `exact` of the same length, at least 2.
-fn popping_floor(frames: &[Rgb8<'_>], exact: &[Rgb8<'_>]) -> f64 {
-    let (first, last) = (frames[0].bytes, frames[frames.len() - 1].bytes);
+/// The first frame from which every frame of `frames` is its converged image in `exact`, if any (the same length).
+fn settled_from(frames: &[Rgb8<'_>], exact: &[Rgb8<'_>]) -> Option<usize> {
+    let unsettled = frames.iter().zip(exact).rposition(|(frame, exact)| frame.bytes != exact.bytes);
+    match unsettled {
+        None => Some(0),
+        Some(k) if k + 1 < frames.len() => Some(k + 1),
+        Some(_) => None,
+    }
+}
+
+/// The floor of a sequence's mean popping (module docs): `frames` and `exact` of the same length, at least 2;
+/// `settled` is [`settled_from`] of them.
+fn popping_floor(frames: &[Rgb8<'_>], exact: &[Rgb8<'_>], settled: Option<usize>) -> f64 {
+    // The frame the sum ends at: where the sequence settles, else its last.
+    let end = settled.unwrap_or(frames.len() - 1);
+    let (first, settled) = (frames[0].bytes, frames[end].bytes);
     let n = first.len();
     // Images of different sizes have no common per-pixel path: 0 is a floor still (a trivial one).
     if n == 0 || frames.iter().chain(exact).any(|f| f.bytes.len() != n) {
@@ -154,8 +179,9 @@ fn popping_floor(frames: &[Rgb8<'_>], exact: &[Rgb8<'_>]) -> f64 {
     }
     let mut total = 0u64;
     for i in 0..n {
-        let explained: u64 = exact.windows(2).map(|pair| pair[0].bytes[i].abs_diff(pair[1].bytes[i]) as u64).sum();
-        total += (first[i].abs_diff(last[i]) as u64).saturating_sub(explained);
+        let explained: u64 =
+            exact[..=end].windows(2).map(|pair| pair[0].bytes[i].abs_diff(pair[1].bytes[i]) as u64).sum();
+        total += (first[i].abs_diff(settled[i]) as u64).saturating_sub(explained);
     }
     total as f64 / (n as f64 * (frames.len() - 1) as f64)
 }
@@ -239,9 +265,26 @@ mod tests {
         let moving = PoppingSummary::measure(&views, &exact_views);
         assert_eq!(moving.popping_mean, 2.5);
         assert_eq!(moving.popping_floor, 0.0, "20 levels of change, 30 explained");
+        // A sequence that settles before the camera moves: the motion after it settled hides nothing. 10 → 30 at
+        // rest, then the exact images move by 40 and back; the floor over the whole path would be 0.
+        let settling_frames = [[10u8; 3], [20; 3], [30; 3], [70; 3], [30; 3]];
+        let settling_exact = [[30u8; 3], [30; 3], [30; 3], [70; 3], [30; 3]];
+        let settling_views: Vec<Rgb8<'_>> = settling_frames.iter().map(|f| image(f, 1)).collect();
+        let settling_exact_views: Vec<Rgb8<'_>> = settling_exact.iter().map(|f| image(f, 1)).collect();
+        let settling = PoppingSummary::measure(&settling_views, &settling_exact_views);
+        assert_eq!(settling.settled_from, Some(2));
+        assert_eq!(settling.popping_mean, 20.0 / 4.0);
+        assert_eq!(settling.popping_floor, 20.0 / 4.0, "the straight way from 10 to 30, over the four pairs");
+        assert_eq!(moving.settled_from, None);
+        // Exact from the first frame: settled at once, nothing to bound. Nothing shown: not settled.
+        let exact_all = PoppingSummary::measure(&settling_exact_views, &settling_exact_views);
+        assert_eq!((exact_all.settled_from, exact_all.popping_floor), (Some(0), 0.0));
+        let empty = [[0u8; 3]; 3];
+        let empty_views: Vec<Rgb8<'_>> = empty.iter().map(|f| image(f, 1)).collect();
+        assert_eq!(PoppingSummary::measure(&empty_views, &settling_exact_views[..3]).settled_from, None);
         // Images of different sizes: only the trivial floor.
         let small = [9u8; 3];
         let mixed = [image(&frames[0], 1), image(&frames[1], 1), Rgb8 { width: 1, height: 1, bytes: &small[..2] }];
-        assert_eq!(popping_floor(&mixed, &views), 0.0);
+        assert_eq!(popping_floor(&mixed, &views, None), 0.0);
     }
 }

@@ -25,6 +25,7 @@ use anyhow::{bail, Context, Result};
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use voxstream::camera_path::read_camera_path;
+use voxstream::png_output::write_rgb8_png;
 use voxstream_render::step_table::{StepLength, StepTable};
 use voxstream_render::traversal::intersect_aabb;
 use voxstream_render::{CameraFrame, TransferFunction, TransferLut};
@@ -294,10 +295,7 @@ fn main() -> Result<()> {
     if let Some(out) = args.get(5) {
         let bytes: Vec<u8> =
             image.iter().flat_map(|p| [p[0], p[1], p[2]].map(|c| (c.clamp(0.0, 1.0) * 255.0).round() as u8)).collect();
-        let file = std::io::BufWriter::new(std::fs::File::create(out)?);
-        let mut encoder = png::Encoder::new(file, size, size);
-        encoder.set_color(png::ColorType::Rgb);
-        encoder.write_header()?.write_image_data(&bytes)?;
+        write_rgb8_png(&bytes, size, size, Path::new(out))?;
     }
     Ok(())
 }

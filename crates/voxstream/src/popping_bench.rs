@@ -221,8 +221,8 @@ fn print_table(figures: &[PathFigures], args: &BenchArgs, frames: usize) {
     println!(
         "{frames} frames of {0}x{0}, {1} requests per frame, fade-in {3} frames, threads: {2}; popping \
          and seams in 8-bit levels per pixel and channel (off → on); floor: the least mean popping any sequence from \
-         the blended run's first to its last image could have, and the ratio to the popping without blending that \
-         such a sequence would reach\n",
+         the blended run's first image, showing the converged images from the frame it does on (or ending at its \
+         last image), could have, and the ratio to the popping without blending that such a sequence would reach\n",
         args.size,
         args.requests_per_frame,
         rayon::current_num_threads(),
