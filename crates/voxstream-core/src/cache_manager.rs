@@ -1109,26 +1109,48 @@ mod tests {
     }
 
     #[test]
+    fn the_root_is_in_at_once_and_its_children_fade_in_from_the_next_frame() {
+        let mut cache = CacheManager::new(Ramp, 16 << 20).unwrap();
+        cache.set_blending(Some(4));
+        request(&mut cache, NodeId::ROOT, RequestKind::Produce, false);
+        // The root has no parent brick to fade from: nothing blends.
+        assert!(cache.view().brick_blends.is_empty());
+        request(&mut cache, NodeId::ROOT, RequestKind::Subdivide, false);
+        assert!(cache.view().brick_blends.is_empty());
+        let child = root_children(&cache)[1];
+        request(&mut cache, child, RequestKind::Produce, false);
+        // The next frame draws the child a quarter in: it does not wait for the root.
+        cache.begin_frame();
+        assert_eq!(caps_of(&cache, child).fade, 0.25);
+        assert_eq!(caps_of(&cache, NodeId::ROOT), crate::BrickBlend::FULL);
+        cache.end_frame(ServeOptions::ALL);
+    }
+
+    #[test]
     fn an_arriving_brick_fades_in_to_1_its_children_wait_for_it_and_speed_it_up() {
         let mut cache = CacheManager::new(Ramp, 16 << 20).unwrap();
         cache.set_blending(Some(4));
         request(&mut cache, NodeId::ROOT, RequestKind::Produce, false);
         request(&mut cache, NodeId::ROOT, RequestKind::Subdivide, false);
-        assert_eq!(caps_of(&cache, NodeId::ROOT).fade, 0.25, "a quarter per frame");
-        let child = root_children(&cache)[1];
-        // The child arrives while the root is at 0.5.
+        let parent = root_children(&cache)[1];
+        request(&mut cache, parent, RequestKind::Produce, false);
+        request(&mut cache, parent, RequestKind::Subdivide, false);
+        assert_eq!(caps_of(&cache, parent).fade, 0.25, "a quarter per frame");
+        let tile = cache.node_pool().node(parent).child_tile().unwrap();
+        let child = NodeId::new(tile, 1, 8);
+        // The child arrives while its parent is at 0.5.
         request(&mut cache, child, RequestKind::Produce, false);
-        let mut root_fades = Vec::new();
+        let mut parent_fades = Vec::new();
         let mut child_fades = Vec::new();
         for _ in 0..7 {
             cache.begin_frame();
-            root_fades.push(caps_of(&cache, NodeId::ROOT).fade);
+            parent_fades.push(caps_of(&cache, parent).fade);
             child_fades.push(caps_of(&cache, child).fade);
             cache.end_frame(ServeOptions::ALL);
         }
-        // With a generation waiting below it, the root rises by two quarters: in at once.
-        assert_eq!(root_fades, [1.0; 7]);
-        // The child waited at 0 while the root was below 1, then rises by a quarter per frame to 1.
+        // With a generation waiting below it, the parent rises by two quarters: in at once.
+        assert_eq!(parent_fades, [1.0; 7]);
+        // The child waited at 0 while its parent was below 1, then rises by a quarter per frame to 1.
         assert_eq!(child_fades[..5], [0.0, 0.25, 0.5, 0.75, 1.0]);
         assert!(!cache.is_blending(), "all in: the view carries no caps");
         assert!(cache.view().brick_blends.is_empty());

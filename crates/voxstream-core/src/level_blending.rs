@@ -10,7 +10,9 @@
 //!   so the image never jumps from a half-faded parent to a child that starts from the whole parent. So that a
 //!   chain of levels arriving together (a cold start, a fast zoom) does not take `fade_frames` per level, a brick
 //!   with `g` generations of arrived descendants waiting below it fades `1 + g` times as fast: the whole chain is in
-//!   about `fade_frames` frames after its last brick arrived.
+//!   about `fade_frames` frames after its last brick arrived. A brick without a parent brick (the root) has nothing
+//!   to fade from: the renderer draws it in full from its arrival, so it is not in transition and its children do
+//!   not wait for it (they did, for one or two frames of every cold start, with nothing on screen changing).
 //! - **Spatial.** Each brick in transition has a cap at each of its eight corners ([`BrickBlend`]), interpolated
 //!   trilinearly by the renderer. It aims at the minimum of `t` over the equal-level bricks in transition sharing
 //!   the corner, and at 0 where a region the rays want at this brick's level is still coarser (a node whose brick
@@ -116,9 +118,14 @@ impl LevelBlending {
     }
 
     /// Records that `owner`'s brick arrived in `slot`; `parent` is the slot of its parent's brick. It fades in from
-    /// the next frame on, or once its parent is in if the parent is still fading; its caps start at 0.
+    /// the next frame on, or once its parent is in if the parent is still fading; its caps start at 0. Without a
+    /// parent brick (the root) it is in at once: there is nothing to fade from.
     pub fn arrived(&mut self, slot: BrickSlot, owner: NodeId, parent: Option<BrickSlot>) {
-        let parent = parent.and_then(|p| self.transitions.get(&p.0).map(|transition| (p.0, transition.owner)));
+        let Some(parent) = parent else {
+            self.transitions.remove(&slot.0);
+            return;
+        };
+        let parent = self.transitions.get(&parent.0).map(|transition| (parent.0, transition.owner));
         self.transitions.insert(slot.0, Transition { owner, parent, t: 0.0, blend: BrickBlend::uniform(0.0) });
     }
 

@@ -140,10 +140,10 @@ pub struct SurfaceParameters {
 pub struct Isosurfaces<'a> {
     settings: &'a SurfaceSettings,
     /// The ray's light, once something needs it ([`Isosurfaces::light`]): most rays of a frame meet no surface, and
-    /// the light's normalisations were about 5% of a frame when every ray made it up front.
+    /// making it up front for every ray was 7.3% of the samples of an MNI isosurface profile (BENCHMARKS.md).
     light: Option<RayLight>,
     /// The ray's direction in volume units per world unit while `light` is not made yet (`None` once it is, and for
-    /// rays that shade nothing).
+    /// shadow rays, which never shade).
     light_pending: Option<DVec3>,
     /// Per surface (bit `i`): whether the ray is inside (`f ≥ iso`) where it is now.
     inside: u32,
@@ -450,14 +450,20 @@ mod tests {
         let (rgb, alpha) = ray.result();
         assert_eq!(rgb, eager.shade(color, 1.0, gradient).to_array());
         assert_eq!(alpha, 1.0);
+        // In shadow, the crossing keeps the ambient term of that same light.
+        ray.shadow_first_hit();
+        let ambient = eager.ambient(color).to_array();
+        assert!(ray.result().0.iter().zip(ambient).all(|(a, b)| (a - b).abs() < 1e-6), "{:?}", ray.result());
     }
 
-    /// Shadow rays only ask whether anything blocks the light: they never make a light of their own.
+    /// Shadow rays only ask whether anything blocks the light: they have no light, and nothing left to make one
+    /// from.
     #[test]
     fn a_shadow_ray_has_no_light() {
         let render = phong_settings();
         let surfaces = SurfaceSettings::new(&render, |v| v);
         let mut blocker = Isosurfaces::occlusion(&surfaces);
+        assert!(blocker.light_pending.is_none(), "a shadow ray has no light to make");
         assert!(blocker.light().is_none());
         assert!(blocker.constant(0.0, 1.0, 0.2).is_continue());
         assert!(blocker.constant(1.0, 2.0, 0.8).is_break(), "the first crossing stops a shadow ray");
