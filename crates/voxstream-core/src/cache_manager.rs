@@ -1069,11 +1069,7 @@ mod tests {
         request(&mut cache, NodeId::ROOT, RequestKind::Produce, false);
         request(&mut cache, NodeId::ROOT, RequestKind::Subdivide, false);
         let [first, second] = [root_children(&cache)[1], root_children(&cache)[2]];
-        // The root fades in first.
-        for _ in 0..4 {
-            cache.begin_frame();
-            cache.end_frame(ServeOptions::ALL);
-        }
+        // The root is in at once: nothing blends.
         assert!(!cache.is_blending());
         // At rest: a quarter per frame.
         request(&mut cache, first, RequestKind::Produce, false);
@@ -1113,10 +1109,10 @@ mod tests {
         let mut cache = CacheManager::new(Ramp, 16 << 20).unwrap();
         cache.set_blending(Some(4));
         request(&mut cache, NodeId::ROOT, RequestKind::Produce, false);
-        // The root has no parent brick to fade from: nothing blends.
-        assert!(cache.view().brick_blends.is_empty());
+        // The next frame's caps: the root has no parent brick to fade from, so nothing blends.
         request(&mut cache, NodeId::ROOT, RequestKind::Subdivide, false);
         assert!(cache.view().brick_blends.is_empty());
+        assert!(!cache.is_blending());
         let child = root_children(&cache)[1];
         request(&mut cache, child, RequestKind::Produce, false);
         // The next frame draws the child a quarter in: it does not wait for the root.

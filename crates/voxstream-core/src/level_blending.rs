@@ -12,7 +12,8 @@
 //!   with `g` generations of arrived descendants waiting below it fades `1 + g` times as fast: the whole chain is in
 //!   about `fade_frames` frames after its last brick arrived. A brick without a parent brick (the root) has nothing
 //!   to fade from: the renderer draws it in full from its arrival, so it is not in transition and its children do
-//!   not wait for it (they did, for one or two frames of every cold start, with nothing on screen changing).
+//!   not wait for it (they did: a frame of every cold start at the default four-frame fade, more with longer fades,
+//!   with nothing on screen changing).
 //! - **Spatial.** Each brick in transition has a cap at each of its eight corners ([`BrickBlend`]), interpolated
 //!   trilinearly by the renderer. It aims at the minimum of `t` over the equal-level bricks in transition sharing
 //!   the corner, and at 0 where a region the rays want at this brick's level is still coarser (a node whose brick
