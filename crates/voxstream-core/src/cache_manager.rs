@@ -1326,6 +1326,18 @@ mod tests {
         let corners = caps_of(&cache, served).corners();
         assert!((0..8).filter(|&c| !touches(c)).all(|c| corners[c] == 1.0), "the other corners are in: {corners:?}");
         assert!(cache.is_blending(), "the served brick is not drawn in full while its neighbour waits");
+        // A camera that approaches so fast that a fade ends within the frame (eight fades per level, a level in
+        // eight frames): the region still waiting caps nothing, and the served brick is drawn in full.
+        cache.set_blending_level_rate(1.0 / 8.0);
+        cache.begin_frame();
+        assert_eq!(caps_of(&cache, served), crate::BrickBlend::FULL);
+        cache.feedback().push_requests(&[Request { node: waiting, kind: RequestKind::Produce, deficit: 1 }]);
+        cache.end_frame(ServeOptions { limit: Some(0), prefetch_new_children: false });
+        // Caps never fall: at rest again, the waiting region does not take it back.
+        cache.set_blending_level_rate(0.0);
+        cache.begin_frame();
+        assert_eq!(caps_of(&cache, served), crate::BrickBlend::FULL);
+        cache.end_frame(ServeOptions::ALL);
     }
 
     #[test]
