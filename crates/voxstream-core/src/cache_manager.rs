@@ -1291,7 +1291,7 @@ mod tests {
     }
 
     #[test]
-    fn corners_touching_a_region_still_waiting_for_data_stay_at_0() {
+    fn corners_touching_a_region_still_waiting_for_data_stay_at_0_unless_the_camera_outpaces_the_fades() {
         let mut cache = CacheManager::new(Ramp, 16 << 20).unwrap();
         cache.set_blending(Some(2));
         request(&mut cache, NodeId::ROOT, RequestKind::Produce, false);
@@ -1326,14 +1326,21 @@ mod tests {
         let corners = caps_of(&cache, served).corners();
         assert!((0..8).filter(|&c| !touches(c)).all(|c| corners[c] == 1.0), "the other corners are in: {corners:?}");
         assert!(cache.is_blending(), "the served brick is not drawn in full while its neighbour waits");
-        // A camera that approaches so fast that a fade ends within the frame (eight fades per level, a level in
-        // eight frames): the region still waiting caps nothing, and the served brick is drawn in full.
-        cache.set_blending_level_rate(1.0 / 8.0);
+        // A camera that approaches a hair slower than a fade per frame: the waiting region still caps the corners.
+        let outpacing = 1.0 / crate::level_blending::FADES_PER_LEVEL as f64;
+        cache.set_blending_level_rate(outpacing * 0.99);
+        cache.begin_frame();
+        assert!((0..8).filter(|&c| touches(c)).all(|c| caps_of(&cache, served).corners()[c] == 0.0));
+        cache.feedback().push_requests(&[Request { node: waiting, kind: RequestKind::Produce, deficit: 1 }]);
+        cache.end_frame(ServeOptions { limit: Some(0), prefetch_new_children: false });
+        // One so fast that a fade ends within the frame (FADES_PER_LEVEL fades in the frames it takes to want the
+        // next level): the region still waiting caps nothing, and the served brick is drawn in full.
+        cache.set_blending_level_rate(outpacing);
         cache.begin_frame();
         assert_eq!(caps_of(&cache, served), crate::BrickBlend::FULL);
         cache.feedback().push_requests(&[Request { node: waiting, kind: RequestKind::Produce, deficit: 1 }]);
         cache.end_frame(ServeOptions { limit: Some(0), prefetch_new_children: false });
-        // Caps never fall: at rest again, the waiting region does not take it back.
+        // At rest again the waiting region does not take it back (it left the transitions, drawn in full).
         cache.set_blending_level_rate(0.0);
         cache.begin_frame();
         assert_eq!(caps_of(&cache, served), crate::BrickBlend::FULL);

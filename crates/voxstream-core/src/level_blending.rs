@@ -20,10 +20,11 @@
 //!   was requested but not produced this frame, or a node whose children were requested but not created). There the
 //!   brick's weight goes to zero, i.e. it shows its parent, which is what the rays on the other side show: no seam.
 //!   Caps rise towards their aim and never fall, so a brick drawn in full is never taken back by a neighbour that
-//!   arrives later (the newcomer fades in against it instead). While the camera approaches so fast that a fade ends
-//!   within a frame ([`FADES_PER_LEVEL`]), regions still loading lower no caps: the wanted level moves on before
-//!   most of them are served, and bricks kept at their parents beside them only delayed detail (a cold zoom into the
-//!   MNI152 store, 128², 16 requests per frame: popping 0.198 → 0.166, as without blending, seams 0.134 → 0.111).
+//!   arrives later (the newcomer fades in against it instead). While the camera approaches or backs away so fast
+//!   that a fade ends within a frame ([`FADES_PER_LEVEL`]), regions still loading lower no caps: the wanted level
+//!   moves on before most of them are served, and bricks kept at their parents beside them only delayed detail (a
+//!   cold zoom into the MNI152 store, 128², 16 requests per frame: popping 0.198 → 0.166, as without blending,
+//!   seams 0.134 → 0.111).
 //! - **The renderer** uses `min(cone weight, cap)` where the cone weight is its usual quadrilinear level blend. With
 //!   no brick in transition the view carries no caps at all and the renderer takes its usual path: a camera at rest
 //!   converges to the same bytes with blending on and off.
@@ -121,8 +122,10 @@ impl LevelBlending {
         (1.0 / self.fade_frames as f32).max(FADES_PER_LEVEL * self.level_rate)
     }
 
-    /// Whether the camera approaches so fast that its pace alone ends a fade within one frame
-    /// (`FADES_PER_LEVEL · rate ≥ 1`). Then regions still loading get no spatial caps (see [`LevelBlending::update`]).
+    /// Whether the camera approaches or backs away so fast that its pace alone ends a fade within one frame
+    /// (`FADES_PER_LEVEL · rate ≥ 1`). Then regions still loading get no spatial caps (see
+    /// [`LevelBlending::update`]). The pace alone, not `advance_per_frame() ≥ 1`: `--fade-frames 1` keeps its
+    /// spatial caps.
     fn fades_outpaced(&self) -> bool {
         FADES_PER_LEVEL * self.level_rate >= 1.0
     }
@@ -177,8 +180,9 @@ impl LevelBlending {
     ///
     /// A brick in transition aims at the minimum, per corner, of its own fade, the fades of the equal-level bricks
     /// in transition that share the corner, and 0 where a pending region touches it (unless the camera approaches
-    /// so fast that a fade ends within the frame); its caps rise towards that aim and never fall. A brick drawn in full is never taken back: what a new neighbour changes is the new
-    /// neighbour (it fades in against it), so every pixel moves one way during a transition.
+    /// or backs away so fast that a fade ends within the frame); its caps rise towards that aim and never fall. A
+    /// brick drawn in full is never taken back: what a new neighbour changes is the new neighbour (it fades in
+    /// against it), so every pixel moves one way during a transition.
     pub fn update(&mut self, pool: &NodePool, slots: u32, owner_of: impl Fn(BrickSlot) -> Option<NodeId>) {
         let shape = *pool.shape();
         self.transitions.retain(|&slot, transition| owner_of(BrickSlot(slot)) == Some(transition.owner));
@@ -248,13 +252,14 @@ impl LevelBlending {
         // While the camera's pace alone ends a fade within a frame, a region still loading gets no spatial cap: the
         // wanted level moves on before most such regions are served, and the caps kept the bricks beside them
         // showing their parents for as long, detail that then arrived over more of the screen.
-        let pending: &[(NodeKey, u32)] = if self.fades_outpaced() { &[] } else { &self.pending };
-        for &(key, wanted_level) in pending {
-            let span = (shape.n as u64).pow(wanted_level - key.level);
-            let lower_corner = key.ijk.map(|c| c * span);
-            for_each_touching(&shape, pool, lower_corner, span, wanted_level, |neighbour, corner| {
-                lower(neighbour, corner, 0.0)
-            });
+        if !self.fades_outpaced() {
+            for &(key, wanted_level) in &self.pending {
+                let span = (shape.n as u64).pow(wanted_level - key.level);
+                let lower_corner = key.ijk.map(|c| c * span);
+                for_each_touching(&shape, pool, lower_corner, span, wanted_level, |neighbour, corner| {
+                    lower(neighbour, corner, 0.0)
+                });
+            }
         }
         // Rise towards the aims, never fall; a brick drawn in full everywhere leaves the transitions.
         for (slot, aim) in aims {

@@ -251,7 +251,8 @@ pub struct RenderArgs {
     #[arg(long)]
     pub path: Option<PathBuf>,
     /// Interactive mode: level blending (Thiele et al.): bricks fade in from their parents over --fade-frames frames
-    /// and blend towards coarser neighbours still loading, so nothing pops. Converged frames are the same either way.
+    /// and blend towards coarser neighbours still loading (unless the camera approaches faster than the fades), so
+    /// nothing pops. Converged frames are the same either way.
     #[arg(long, value_enum, default_value_t = Switch::On)]
     pub blending: Switch,
     /// Interactive mode with --blending on: frames over which an arriving brick fades in.
