@@ -19,9 +19,9 @@ use std::sync::Arc;
 
 use serde_json::Value;
 use zarrs::array::{Array, ArraySubset};
-use zarrs::filesystem::FilesystemStore;
 use zarrs::storage::ReadableStorageTraits;
 
+use crate::checked_store::CheckedStore;
 use crate::error::StoreError;
 use crate::layout::PyramidLayout;
 use crate::level_source::{retrieve_f32, LevelSource};
@@ -61,7 +61,7 @@ fn transform(dataset: &Value, kind: &str) -> Option<Vec<f64>> {
 /// Opens a foreign OME-Zarr image: voxstream's attributes for it, and where each level's bricks come from.
 pub(crate) fn open_foreign(
     path: &Path,
-    store: &Arc<FilesystemStore>,
+    store: &Arc<CheckedStore>,
     attributes: &serde_json::Map<String, Value>,
 ) -> Result<(StoreAttributes, Vec<LevelSource>), StoreError> {
     let bad = |m: String| StoreError::store(path, m);

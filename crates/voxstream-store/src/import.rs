@@ -37,11 +37,21 @@ pub struct ImportOptions {
     pub overwrite: bool,
     /// Replaces NaN and ±inf samples; `None` refuses them (see [`crate::non_finite`]).
     pub nan_as: Option<f32>,
+    /// Follow each brick's zstd frame with the Zarr v3 `crc32c` codec (verified on read); `false` writes the codec
+    /// chain of stores made before checksums, which readers still accept.
+    pub brick_checksums: bool,
 }
 
 impl Default for ImportOptions {
     fn default() -> Self {
-        ImportOptions { brick_size: 32, shard_bricks: 8, zstd_level: 3, overwrite: false, nan_as: None }
+        ImportOptions {
+            brick_size: 32,
+            shard_bricks: 8,
+            zstd_level: 3,
+            overwrite: false,
+            nan_as: None,
+            brick_checksums: true,
+        }
     }
 }
 
@@ -269,7 +279,12 @@ fn build_level_array(
     let shard = vec![b, b * options.shard_bricks, b * options.shard_bricks];
     let edge = std::num::NonZeroU64::new(b).ok_or("brick size must be positive")?;
     let mut sharding = ShardingCodecBuilder::new(vec![edge; 3], &data_type(dtype));
-    sharding.bytes_to_bytes_codecs(vec![Arc::new(ZstdCodec::new(options.zstd_level, false))]);
+    let mut brick_codecs: Vec<Arc<dyn zarrs::array::codec::api::BytesToBytesCodecTraits>> =
+        vec![Arc::new(ZstdCodec::new(options.zstd_level, false))];
+    if options.brick_checksums {
+        brick_codecs.push(Arc::new(zarrs::array::codec::Crc32cCodec::new()));
+    }
+    sharding.bytes_to_bytes_codecs(brick_codecs);
     let fill = match dtype {
         DType::U8 => zarrs::array::FillValue::from(0u8),
         DType::U16 => zarrs::array::FillValue::from(0u16),

@@ -9,6 +9,8 @@
 //! - [`store_producer`]: bricks with borders, streamed from the store (GigaVoxels' producer reading from disk;
 //!   Reichl's streaming supplier, seed 004 ch. 4).
 
+pub mod bounded_codecs;
+pub mod checked_store;
 pub mod error;
 pub mod foreign;
 pub mod formats;

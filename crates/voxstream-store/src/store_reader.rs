@@ -16,10 +16,10 @@ use std::sync::Mutex;
 
 use lru::LruCache;
 use zarrs::array::{Array, ArraySubset};
-use zarrs::filesystem::FilesystemStore;
 use zarrs::group::Group;
 use zarrs::storage::ReadableStorageTraits;
 
+use crate::checked_store::{zstd_encoded_bound, CheckedStore};
 use crate::error::StoreError;
 use crate::import::{aside_paths, partial_path};
 use crate::layout::PyramidLayout;
@@ -90,7 +90,7 @@ fn metadata_json(array: &Array<dyn ReadableStorageTraits>) -> serde_json::Value 
 /// otherwise a missing file would read as empty space.
 fn read_minmax(
     path: &Path,
-    store: &Arc<FilesystemStore>,
+    store: &Arc<CheckedStore>,
     layout: &PyramidLayout,
     level: usize,
     volume_is_zero: bool,
@@ -123,6 +123,9 @@ fn read_minmax(
     }
     Ok(entries)
 }
+
+/// Bytes of the CRC32C that follows each brick's zstd frame (stores written before it have none).
+const BRICK_CHECKSUM_BYTES: u64 = 4;
 
 /// Default size of the host-side brick cache.
 pub const DEFAULT_CACHE_BYTES: u64 = 64 << 20;
@@ -174,7 +177,13 @@ impl StoreReader {
             }
             return Err(StoreError::store(path, "no such store (expected a folder holding zarr.json)"));
         }
-        let store = Arc::new(FilesystemStore::new(path).map_err(|e| StoreError::store(path, e.to_string()))?);
+        // Every read goes through checks of its byte range and file kind, and every decoder stops at the chunk's
+        // size (see `checked_store` and `bounded_codecs`): a forged shard index or a decompression bomb is an error.
+        crate::bounded_codecs::register();
+        let checked = |max_range_bytes| {
+            CheckedStore::new(path, max_range_bytes).map_err(|e| StoreError::store(path, e.to_string()))
+        };
+        let store = Arc::new(checked(u64::MAX)?);
         let group = Group::open(store.clone(), "/")
             .map_err(|e| StoreError::store(path, format!("missing or corrupt zarr.json: {e}")))?;
         let attributes: StoreAttributes = match group.attributes().get("voxstream") {
@@ -193,11 +202,14 @@ impl StoreReader {
         if !attributes.complete {
             return Err(StoreError::store(path, "incomplete store: its import was interrupted; run the import again"));
         }
-        let (_, layout) = validate_attributes(path, &attributes)?;
+        let (info, layout) = validate_attributes(path, &attributes)?;
+        // A brick read from a shard is at most one zstd frame of brick_size³ samples and its CRC32C.
+        let brick_bytes = layout.brick_size.pow(3) * info.dtype.size() as u64;
+        let bricks_store = Arc::new(checked(zstd_encoded_bound(brick_bytes, BRICK_CHECKSUM_BYTES))?);
         let mut levels = Vec::new();
         let mut minmax = Vec::new();
         for level in 0..layout.levels() {
-            let readable: Arc<dyn ReadableStorageTraits> = store.clone();
+            let readable: Arc<dyn ReadableStorageTraits> = bricks_store.clone();
             let array = Array::open(readable, &format!("/{level}"))
                 .map_err(|e| StoreError::store(path, format!("level {level}: {e}")))?;
             let [x, y, z] = layout.level_dims[level];
@@ -426,7 +438,14 @@ impl StoreReader {
         ranges.extend([lower[2]..upper[2], lower[1]..upper[1], lower[0]..upper[0]]);
         let subset = ArraySubset::new_with_ranges(&ranges);
         let corrupt = |e: zarrs::array::ArrayError| {
-            StoreError::store(&self.path, format!("level {level}, samples {lower:?}..{upper:?}: {e}"))
+            use zarrs::array::{codec::api::CodecError, ArrayError};
+            let problem = match e {
+                ArrayError::CodecError(CodecError::InvalidChecksum) => {
+                    "a brick's CRC32C does not match its bytes: the shard is corrupt; import the volume again".into()
+                }
+                e => e.to_string(),
+            };
+            StoreError::store(&self.path, format!("level {level}, samples {lower:?}..{upper:?}: {problem}"))
         };
         retrieve_f32(array, &subset, self.info.dtype).map_err(corrupt)
     }

@@ -1,0 +1,188 @@
+//! A read-only storage adapter that checks every byte range before anything is allocated or read.
+//!
+//! zarrs reads a shard by its index: the index says where each brick lies (offset, length), and zarrs's filesystem
+//! store allocates the claimed length before reading. A forged index entry (a brick of 2^62 bytes, CRC32C of the
+//! index recomputed) would then abort the process on the allocation. [`CheckedStore`] sits between zarrs and the
+//! [`FilesystemStore`] and refuses, with a [`StorageError`], every read that
+//! - names something other than a regular file (a FIFO in place of a shard would block `open` forever, a device
+//!   would stream without end),
+//! - reaches past the end of the file (the file's real size, taken before the read), or
+//! - asks for more than `max_range_bytes` in one explicit range (the largest a brick can take encoded: an index
+//!   entry within the file can still claim more than any brick needs).
+//!
+//! Whole-value reads (`zarr.json`, unsharded chunks) are bounded by the file's real size. The checks hold for any
+//! store that knows its values' sizes, so the same adapter can wrap a remote store later.
+
+use std::path::Path;
+
+use zarrs::filesystem::FilesystemStore;
+use zarrs::storage::byte_range::{ByteRange, ByteRangeIterator};
+use zarrs::storage::{MaybeBytesIterator, ReadableStorageTraits, StorageError, StoreKey};
+
+/// A [`FilesystemStore`] whose reads are checked against the files' real sizes and kinds.
+#[derive(Debug)]
+pub struct CheckedStore {
+    inner: FilesystemStore,
+    /// The most bytes one explicit range may ask for; `u64::MAX` when unbounded (the file's size still bounds it).
+    max_range_bytes: u64,
+}
+
+impl CheckedStore {
+    /// Reads from the folder `base`; each explicit byte range is at most `max_range_bytes` long.
+    pub fn new(base: &Path, max_range_bytes: u64) -> Result<CheckedStore, StorageError> {
+        let inner = FilesystemStore::new(base).map_err(|e| StorageError::Other(e.to_string()))?;
+        Ok(CheckedStore { inner, max_range_bytes })
+    }
+
+    /// The size of `key`'s file, `None` when it does not exist; an error when it is not a regular file.
+    fn regular_file_size(&self, key: &StoreKey) -> Result<Option<u64>, StorageError> {
+        let path = self.inner.key_to_fspath(key);
+        // `metadata` follows symbolic links: what counts is what a read would open.
+        match std::fs::metadata(&path) {
+            Ok(metadata) if metadata.is_file() => Ok(Some(metadata.len())),
+            Ok(metadata) if metadata.is_dir() => Ok(None),
+            Ok(_) => Err(StorageError::Other(format!(
+                "{key} is not a regular file (a FIFO, socket or device in place of a chunk); replace it with the \
+                 store's own file or import the volume again"
+            ))),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+            Err(e) => Err(StorageError::Other(format!("{key}: {}", crate::error::describe_io(&e)))),
+        }
+    }
+
+    /// Checks `range` of `key` (a file of `size` bytes): within the file, and no longer than `max_range_bytes`.
+    fn check_range(&self, key: &StoreKey, size: u64, range: ByteRange) -> Result<(), StorageError> {
+        let (start, length) = match range {
+            ByteRange::FromStart(start, None) => (start, size.checked_sub(start).unwrap_or(u64::MAX)),
+            ByteRange::FromStart(start, Some(length)) => (start, length),
+            ByteRange::Suffix(length) => (size.saturating_sub(length), length),
+        };
+        let explicit = !matches!(range, ByteRange::FromStart(_, None));
+        if start.checked_add(length).is_none_or(|end| end > size) {
+            return Err(StorageError::Other(format!(
+                "{key}: the shard index (or a read) asks for bytes {start}+{length}, past the end of the file \
+                 ({size} bytes): the file is truncated or its index corrupt; import the volume again"
+            )));
+        }
+        if explicit && length > self.max_range_bytes {
+            return Err(StorageError::Other(format!(
+                "{key}: the shard index claims a brick of {length} bytes, more than the {} any brick can take \
+                 encoded: the index is corrupt; import the volume again",
+                self.max_range_bytes
+            )));
+        }
+        Ok(())
+    }
+}
+
+impl ReadableStorageTraits for CheckedStore {
+    fn get_partial_many<'a>(
+        &'a self,
+        key: &StoreKey,
+        byte_ranges: ByteRangeIterator<'a>,
+    ) -> Result<MaybeBytesIterator<'a>, StorageError> {
+        let Some(size) = self.regular_file_size(key)? else {
+            return Ok(None);
+        };
+        let ranges: Vec<ByteRange> = byte_ranges.collect();
+        for &range in &ranges {
+            self.check_range(key, size, range)?;
+        }
+        self.inner.get_partial_many(key, Box::new(ranges.into_iter()))
+    }
+
+    fn size_key(&self, key: &StoreKey) -> Result<Option<u64>, StorageError> {
+        self.regular_file_size(key)
+    }
+
+    fn supports_get_partial(&self) -> bool {
+        true
+    }
+}
+
+/// The largest a zstd frame of `decoded` bytes can be (zstd's `ZSTD_COMPRESSBOUND`), plus `trailer` bytes (a
+/// checksum after it).
+pub fn zstd_encoded_bound(decoded: u64, trailer: u64) -> u64 {
+    let small_input_margin = if decoded < (128 << 10) { ((128 << 10) - decoded) >> 11 } else { 0 };
+    decoded + (decoded >> 8) + small_input_margin + trailer
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn store_with(name: &str, bytes: &[u8]) -> (tempdir::Dir, CheckedStore) {
+        let dir = tempdir::Dir::new(name);
+        std::fs::write(dir.path().join("shard"), bytes).unwrap();
+        let store = CheckedStore::new(dir.path(), 64).unwrap();
+        (dir, store)
+    }
+
+    mod tempdir {
+        /// A folder removed when dropped.
+        pub struct Dir(std::path::PathBuf);
+        impl Dir {
+            pub fn new(name: &str) -> Dir {
+                let path = std::env::temp_dir().join(format!("voxstream-checked-{}-{name}", std::process::id()));
+                let _ = std::fs::remove_dir_all(&path);
+                std::fs::create_dir_all(&path).unwrap();
+                Dir(path)
+            }
+            pub fn path(&self) -> &std::path::Path {
+                &self.0
+            }
+        }
+        impl Drop for Dir {
+            fn drop(&mut self) {
+                let _ = std::fs::remove_dir_all(&self.0);
+            }
+        }
+    }
+
+    #[test]
+    fn ranges_within_the_file_read_and_ranges_past_it_or_too_long_are_refused() {
+        let (_dir, store) = store_with("ranges", &[7u8; 100]);
+        let key = StoreKey::new("shard").unwrap();
+        assert_eq!(store.get_partial(&key, ByteRange::FromStart(90, Some(10))).unwrap().unwrap().len(), 10);
+        assert_eq!(store.get_partial(&key, ByteRange::Suffix(20)).unwrap().unwrap().len(), 20);
+        assert_eq!(store.get(&key).unwrap().unwrap().len(), 100, "a whole read is bounded by the file only");
+        let past = store.get_partial(&key, ByteRange::FromStart(90, Some(11))).unwrap_err().to_string();
+        assert!(past.contains("past the end of the file (100 bytes)"), "{past}");
+        let forged = store.get_partial(&key, ByteRange::FromStart(8, Some(1 << 62))).unwrap_err().to_string();
+        assert!(forged.contains("past the end"), "{forged}");
+        let wrapping = store.get_partial(&key, ByteRange::FromStart(u64::MAX - 4, Some(10))).unwrap_err();
+        assert!(wrapping.to_string().contains("past the end"), "{wrapping}");
+        let long = store.get_partial(&key, ByteRange::FromStart(0, Some(65))).unwrap_err().to_string();
+        assert!(long.contains("more than the 64"), "{long}");
+        assert!(store.get_partial(&key, ByteRange::Suffix(101)).is_err());
+        let missing = StoreKey::new("absent").unwrap();
+        assert!(store.get(&missing).unwrap().is_none(), "a missing file is a missing value, not an error");
+        assert_eq!(store.size_key(&key).unwrap(), Some(100));
+    }
+
+    #[test]
+    fn a_fifo_in_place_of_a_file_is_refused_without_opening_it() {
+        let (dir, store) = store_with("fifo", &[]);
+        let fifo = dir.path().join("pipe");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status().expect("mkfifo");
+        assert!(made.success(), "mkfifo failed");
+        let key = StoreKey::new("pipe").unwrap();
+        // Opening a FIFO for reading blocks until a writer comes: refusing before the open is what keeps this test
+        // (and every reader) from hanging.
+        let error = store.get(&key).unwrap_err().to_string();
+        assert!(error.contains("not a regular file"), "{error}");
+        assert!(store.size_key(&key).is_err());
+    }
+
+    #[test]
+    fn the_zstd_bound_matches_zstd() {
+        for decoded in [0u64, 1, 1000, 32 * 32 * 32 * 4, 1 << 20] {
+            let expected = zstd_bound_of_the_library(decoded as usize) as u64;
+            assert_eq!(zstd_encoded_bound(decoded, 0), expected, "{decoded}");
+        }
+    }
+
+    fn zstd_bound_of_the_library(n: usize) -> usize {
+        zstd::zstd_safe::compress_bound(n)
+    }
+}
