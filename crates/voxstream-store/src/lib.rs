@@ -9,7 +9,6 @@
 //! - [`store_producer`]: bricks with borders, streamed from the store (GigaVoxels' producer reading from disk;
 //!   Reichl's streaming supplier, seed 004 ch. 4).
 
-pub mod bounded_codecs;
 pub mod checked_store;
 pub mod error;
 pub mod foreign;
@@ -22,6 +21,7 @@ pub mod metadata_check;
 pub mod non_finite;
 pub mod store_producer;
 pub mod store_reader;
+pub mod strict_codecs;
 pub mod value_histogram;
 pub mod volume;
 

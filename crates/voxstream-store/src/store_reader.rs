@@ -178,8 +178,8 @@ impl StoreReader {
             return Err(StoreError::store(path, "no such store (expected a folder holding zarr.json)"));
         }
         // Every read goes through checks of its byte range and file kind, and every decoder stops at the chunk's
-        // size (see `checked_store` and `bounded_codecs`): a forged shard index or a decompression bomb is an error.
-        crate::bounded_codecs::register();
+        // size (see `checked_store` and `strict_codecs`): a forged shard index or a decompression bomb is an error.
+        crate::strict_codecs::register();
         let checked = |max_range_bytes| {
             CheckedStore::new(path, max_range_bytes).map_err(|e| StoreError::store(path, e.to_string()))
         };
