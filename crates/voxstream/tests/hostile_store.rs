@@ -396,6 +396,117 @@ fn concurrent_renders_to_one_output_never_share_a_temporary_file() {
     assert_eq!(names.len(), 2, "temporary files left: {names:?}");
 }
 
+/// CRC32C (Castagnoli), as the shard index and the bricks' `crc32c` codec use it.
+fn crc32c(bytes: &[u8]) -> u32 {
+    let mut crc = !0u32;
+    for &byte in bytes {
+        crc ^= byte as u32;
+        for _ in 0..8 {
+            crc = if crc & 1 == 1 { (crc >> 1) ^ 0x82f6_3b78 } else { crc >> 1 };
+        }
+    }
+    !crc
+}
+
+/// Rewrites the shard at `path` (64 bricks, index at the end): `edit` gets the bytes before the index and the
+/// index's (offset, length) of each brick (`u64::MAX` twice: absent); the index's CRC32C is recomputed, as a forger
+/// would.
+fn edit_shard(path: &Path, edit: impl Fn(&mut Vec<u8>, &mut [(u64, u64)])) {
+    const BRICKS: usize = 64;
+    let bytes = std::fs::read(path).unwrap();
+    let start = bytes.len() - BRICKS * 16 - 4;
+    assert_eq!(
+        u32::from_le_bytes(bytes[bytes.len() - 4..].try_into().unwrap()),
+        crc32c(&bytes[start..bytes.len() - 4])
+    );
+    let word = |at: usize| u64::from_le_bytes(bytes[at..at + 8].try_into().unwrap());
+    let mut index: Vec<(u64, u64)> = (0..BRICKS).map(|i| (word(start + 16 * i), word(start + 16 * i + 8))).collect();
+    let mut data = bytes[..start].to_vec();
+    edit(&mut data, &mut index);
+    let encoded: Vec<u8> = index.iter().flat_map(|(o, n)| o.to_le_bytes().into_iter().chain(n.to_le_bytes())).collect();
+    data.extend(&encoded);
+    data.extend(crc32c(&encoded).to_le_bytes());
+    std::fs::write(path, data).unwrap();
+}
+
+/// Renders `store` and asserts an incomplete image (exit 3) whose warnings hold `needle`.
+fn assert_bricks_fail(dir: &Path, store: &str, needle: &str) {
+    let png = format!("{store}.png");
+    let args = ["render", store, "--out", &png, "--width", "64", "--height", "64", "--lod-bias", "3"];
+    let out = checked(&args, dir);
+    assert_eq!(out.code, 3, "{store}: exit {}: {}", out.code, out.stderr);
+    assert!(out.stderr.lines().any(|l| l.starts_with("warning:") && l.contains(needle)), "{store}: {}", out.stderr);
+    assert!(dir.join(&png).exists(), "{store}: no image");
+}
+
+#[test]
+fn forged_shard_indexes_bombs_fifos_and_flipped_bits_are_failed_bricks() {
+    let dir = scratch("shards");
+    import_ball(&dir, "base.zarr");
+    let shard = |store: &str| dir.join(store).join("0/c/1/0/0");
+    let present = |index: &[(u64, u64)]| index.iter().filter(|e| **e != (u64::MAX, u64::MAX)).count();
+
+    // Every brick of a shard inside the ball claims 2^62 bytes (zarrs allocated that, and aborted).
+    copy_dir(&dir.join("base.zarr"), &dir.join("forged.zarr"));
+    edit_shard(&shard("forged.zarr"), |_, index| {
+        assert!(present(index) > 0, "the shard holds no brick to forge");
+        index.iter_mut().filter(|e| **e != (u64::MAX, u64::MAX)).for_each(|e| e.1 = 1 << 62);
+    });
+    assert_bricks_fail(&dir, "forged.zarr", "past the end of the file");
+    // Read whole into memory, the first failed brick is the error: one line, exit 1.
+    let in_memory = ["render", "forged.zarr", "--in-memory", "--out", "m.png", "--width", "32", "--height", "32"];
+    let out = checked(&in_memory, &dir);
+    assert_eq!(out.code, 1, "--in-memory: exit {}: {}", out.code, out.stderr);
+    assert_eq!(out.stderr.trim_end().lines().count(), 1, "--in-memory: not one line:\n{}", out.stderr);
+    assert!(out.stderr.contains("past the end of the file"), "{}", out.stderr);
+    // A foreign (OME-Zarr) copy of the forged store: the same check, without voxstream's brick bound.
+    foreign_copy(&dir, "forged-foreign.zarr", |_, _| {});
+    edit_shard(&shard("forged-foreign.zarr"), |_, index| {
+        index.iter_mut().filter(|e| **e != (u64::MAX, u64::MAX)).for_each(|e| e.1 = 1 << 62);
+    });
+    assert_bricks_fail(&dir, "forged-foreign.zarr", "past the end of the file");
+
+    // Every brick of the shard points at one zstd frame that inflates to 256 MiB (8 KiB on disk, a brick's size),
+    // with a valid CRC32C: decoding stops at the brick's 8 KiB.
+    copy_dir(&dir.join("base.zarr"), &dir.join("bomb.zarr"));
+    edit_shard(&shard("bomb.zarr"), |data, index| {
+        let mut encoder = zstd::stream::write::Encoder::new(Vec::new(), 1).unwrap();
+        let zeros = vec![0u8; 1 << 20];
+        for _ in 0..256 {
+            std::io::Write::write_all(&mut encoder, &zeros).unwrap();
+        }
+        let mut bomb = encoder.finish().unwrap();
+        bomb.extend(crc32c(&bomb).to_le_bytes());
+        let at = data.len() as u64;
+        data.extend(&bomb);
+        index.iter_mut().filter(|e| **e != (u64::MAX, u64::MAX)).for_each(|e| *e = (at, bomb.len() as u64));
+    });
+    assert_bricks_fail(&dir, "bomb.zarr", "inflates past the 8192 bytes");
+
+    // One flipped bit in the first brick's compressed bytes: its CRC32C no longer matches.
+    copy_dir(&dir.join("base.zarr"), &dir.join("flip.zarr"));
+    edit_shard(&shard("flip.zarr"), |data, index| {
+        let &(offset, length) = index.iter().find(|e| **e != (u64::MAX, u64::MAX)).unwrap();
+        data[(offset + length / 2) as usize] ^= 0x10;
+    });
+    let png = "flip.png";
+    let args = ["render", "flip.zarr", "--out", png, "--width", "64", "--height", "64", "--lod-bias", "3"];
+    let out = checked(&args, &dir);
+    // The flipped brick fails wherever the render reads it; whether the view reads it depends on the view, so the
+    // store is also read whole, which reads every brick.
+    assert!(out.code == 0 || out.code == 3, "exit {}: {}", out.code, out.stderr);
+    let whole = ["render", "flip.zarr", "--in-memory", "--out", "w.png", "--width", "32", "--height", "32"];
+    let out = checked(&whole, &dir);
+    assert_eq!(out.code, 1, "exit {}: {}", out.code, out.stderr);
+    assert!(out.stderr.contains("CRC32C does not match"), "{}", out.stderr);
+
+    // A FIFO in place of the shard: refused before it is opened (opening it would wait for a writer forever).
+    copy_dir(&dir.join("base.zarr"), &dir.join("fifo.zarr"));
+    std::fs::remove_file(shard("fifo.zarr")).unwrap();
+    assert!(Command::new("mkfifo").arg(shard("fifo.zarr")).status().expect("mkfifo").success());
+    assert_bricks_fail(&dir, "fifo.zarr", "not a regular file");
+}
+
 fn copy_dir(from: &Path, to: &Path) {
     let _ = std::fs::remove_dir_all(to);
     std::fs::create_dir_all(to).unwrap();
