@@ -137,6 +137,10 @@ put("vdb_converter_header", "fog", json.dumps({"name": "density", "class": "fog 
                                                "spacing": [0.5, 0.5, 0.5], "origin": [0, 0, 0], "background": 0.0}))
 attributes = {"format_version": 1, "dims": [40, 30, 20], "dtype": "u8", "spacing": [1, 1, 2], "origin": [0, 0, 0],
               "brick_size": 32, "levels": 2, "value_range": [0, 255], "complete": True}
+# store_shards: the first byte picks what the rest replaces in the template store's shard (0: the file, 1: the
+# index's (offset, nbytes) pairs, 2: brick 0's bytes, a zstd frame); here a small index and an empty zstd frame.
+put("store_shards", "index", b"\x01" + struct.pack("<QQ", 0, 64))
+put("store_shards", "brick", b"\x02" + bytes.fromhex("28b52ffd2000010000"))
 put("store_metadata", "voxstream", json.dumps({"zarr_format": 3, "node_type": "group",
                                                "attributes": {"voxstream": attributes}}))
 put("store_metadata", "foreign-ome", json.dumps({"zarr_format": 3, "node_type": "group", "attributes": {"ome": {

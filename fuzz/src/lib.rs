@@ -32,3 +32,13 @@ pub fn import_file(input: &Path, raw: Option<&RawLayout>, store: &Path) {
     let _ = import_volume(source.as_mut(), store, &options, &mut |_, _| {});
     let _ = std::fs::remove_dir_all(store);
 }
+
+/// The `store_shards` target's driver (also replayed by `crates/voxstream/tests/fuzz_regressions.rs`).
+#[path = "shard_input.rs"]
+mod shard_input;
+pub use shard_input::{edited_shard, read_shard_input as read_shard_input_in};
+
+/// [`read_shard_input_in`] this process's scratch folder.
+pub fn read_shard_input(data: &[u8]) {
+    let _ = read_shard_input_in(&scratch(), data);
+}

@@ -9,6 +9,10 @@ use voxstream_geometry::{ParticleSet, TriangleMesh};
 use voxstream_store::formats::{open_volume, Endian, RawLayout};
 use voxstream_store::{import_volume, DType, ImportOptions, VolumeInfo};
 
+/// The `store_shards` target's driver, the very file the fuzz crate builds.
+#[path = "../../../fuzz/src/shard_input.rs"]
+mod shard_input;
+
 fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("voxstream-fuzz-regressions-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
@@ -64,6 +68,7 @@ fn replay(dir: &Path, target: &str, data: &[u8]) {
             std::fs::write(store.join("zarr.json"), data).unwrap();
             let _ = voxstream_store::StoreReader::open(&store);
         }
+        "store_shards" => assert!(shard_input::read_shard_input(dir, data), "the template store could not be made"),
         "transfer_function" => {
             if let Some(Ok(tf)) = text.map(voxstream_render::transfer_function::TransferFunction::from_json) {
                 for value in [-1.0, 0.0, 0.5, 1.0, 1e9, f64::NAN] {
