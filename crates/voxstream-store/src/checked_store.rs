@@ -60,8 +60,8 @@ impl CheckedStore {
         let explicit = !matches!(range, ByteRange::FromStart(_, None));
         if start.checked_add(length).is_none_or(|end| end > size) {
             return Err(StorageError::Other(format!(
-                "{key}: the shard index (or a read) asks for bytes {start}+{length}, past the end of the file \
-                 ({size} bytes): the file is truncated or its index corrupt; import the volume again"
+                "{key}: {length} bytes at offset {start} reach past the end of the file ({size} bytes): the shard \
+                 is truncated or its index corrupt; import the volume again"
             )));
         }
         if explicit && length > self.max_range_bytes {

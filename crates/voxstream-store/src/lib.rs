@@ -6,6 +6,8 @@
 //!
 //! - [`formats`]: importers (raw, NRRD, NIfTI-1, MetaImage, INR, NumPy), read in z slabs.
 //! - [`import`]: the streaming pyramid writer (OME-Zarr 0.5 / Zarr v3, sharded, zstd, per-brick min/max).
+//! - [`checked_store`] and [`strict_codecs`]: every store read checked before it allocates (file kind, byte ranges
+//!   against the file's size, decoding bounded by the chunk's size, each brick's CRC-32C verified).
 //! - [`store_producer`]: bricks with borders, streamed from the store (GigaVoxels' producer reading from disk;
 //!   Reichl's streaming supplier, seed 004 ch. 4).
 
