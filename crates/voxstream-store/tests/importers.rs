@@ -457,6 +457,49 @@ fn tiff_multipage_and_folder_of_slices() {
 }
 
 #[test]
+fn tiff_folder_members_of_several_pages_give_every_page_in_order() {
+    use tiff::encoder::{colortype, TiffEncoder};
+    let folder = scratch("tiff-pages").join("slices");
+    std::fs::create_dir_all(&folder).unwrap();
+    let values = samples(DType::U16);
+    let slice = (DIMS[0] * DIMS[1]) as usize;
+    let page = |z: usize| -> Vec<u16> { values[z * slice..(z + 1) * slice].iter().map(|&v| v as u16).collect() };
+    // Files 0..10 hold one slice each, file 10 holds slices 10, 11 and 12, the rest one each again.
+    let mut z = 0;
+    for file_index in 0..DIMS[2] as usize - 2 {
+        let file = std::fs::File::create(folder.join(format!("slice_{file_index:03}.tif"))).unwrap();
+        let mut encoder = TiffEncoder::new(file).unwrap();
+        for _ in 0..if file_index == 10 { 3 } else { 1 } {
+            encoder.write_image::<colortype::Gray16>(DIMS[0] as u32, DIMS[1] as u32, &page(z)).unwrap();
+            z += 1;
+        }
+    }
+    check_import(&folder, None, DType::U16, [1.0; 3], [0.0; 3]);
+
+    // A page of another size in a multi-page member is refused, naming the file and the page.
+    let file = std::fs::File::create(folder.join("slice_010.tif")).unwrap();
+    let mut encoder = TiffEncoder::new(file).unwrap();
+    encoder.write_image::<colortype::Gray16>(DIMS[0] as u32, DIMS[1] as u32, &page(10)).unwrap();
+    encoder.write_image::<colortype::Gray16>(3, 3, &[0; 9]).unwrap();
+    std::fs::remove_dir_all(folder.with_file_name("slices.zarr")).unwrap();
+    let e = import_error(&folder, None).to_string();
+    assert!(e.contains("slice_010.tif") && e.contains("page 1 is 3x3"), "{e}");
+}
+
+#[test]
+fn nifti_datatype_and_bitpix_must_agree() {
+    let dir = scratch("nifti-bitpix");
+    // uint8 samples announced as 16 bits: reading either way reads the wrong bytes.
+    std::fs::write(dir.join("u8-16.nii"), nifti(DType::U8, 2, 16)).unwrap();
+    let e = import_error(&dir.join("u8-16.nii"), None).to_string();
+    assert!(e.contains("u8-16.nii") && e.contains("datatype 2 (uint8, 8 bits) and bitpix 16 disagree"), "{e}");
+    std::fs::write(dir.join("f32-8.nii"), nifti(DType::F32, 16, 8)).unwrap();
+    let e = import_error(&dir.join("f32-8.nii"), None).to_string();
+    assert!(e.contains("datatype 16 (float32, 32 bits) and bitpix 8 disagree"), "{e}");
+    assert_eq!(e.lines().count(), 1, "{e}");
+}
+
+#[test]
 fn nifti_scaling_is_applied_as_float() {
     let dir = scratch("nifti-scale");
     let mut bytes = nifti(DType::I16, 4, 16);
