@@ -6,6 +6,7 @@
 //!
 //! - [`formats`]: importers (raw, NRRD, NIfTI-1, MetaImage, INR, NumPy), read in z slabs.
 //! - [`import`]: the streaming pyramid writer (OME-Zarr 0.5 / Zarr v3, sharded, zstd, per-brick min/max).
+//! - [`store_lock`]: one writer per store (the import lock), and aside folders left by interrupted swaps.
 //! - [`store_producer`]: bricks with borders, streamed from the store (GigaVoxels' producer reading from disk;
 //!   Reichl's streaming supplier, seed 004 ch. 4).
 
@@ -18,6 +19,7 @@ pub mod level_source;
 pub mod metadata;
 pub mod metadata_check;
 pub mod non_finite;
+pub mod store_lock;
 pub mod store_producer;
 pub mod store_reader;
 pub mod value_histogram;

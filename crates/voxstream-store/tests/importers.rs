@@ -359,6 +359,65 @@ fn existing_store_is_kept_unless_overwritten_and_interrupted_imports_never_open(
 }
 
 #[test]
+fn one_import_per_store_the_second_refuses_touching_nothing() {
+    use voxstream_store::import::{aside_path, partial_path};
+    let dir = scratch("lock");
+    let mut bytes = nrrd_header("uchar", "raw", None).into_bytes();
+    bytes.extend(encode(DType::U8, Endian::Little));
+    std::fs::write(dir.join("a.nrrd"), bytes).unwrap();
+    let mut bytes = nrrd_header("ushort", "raw", None).into_bytes();
+    bytes.extend(encode(DType::U16, Endian::Little));
+    std::fs::write(dir.join("b.nrrd"), bytes).unwrap();
+    let store = dir.join("v.zarr");
+    let options = |overwrite: bool| ImportOptions { brick_size: 8, overwrite, ..ImportOptions::default() };
+    let import = |input: &str, overwrite: bool, progress: &mut dyn FnMut(u64, u64)| {
+        let mut source = open_volume(&dir.join(input), None).unwrap();
+        import_volume(source.as_mut(), &store, &options(overwrite), progress)
+    };
+    // A good store, then a leftover aside folder beside it, as a kill after the swap leaves.
+    import("a.nrrd", false, &mut |_, _| {}).unwrap();
+    let leftover = aside_path(&store, 4_000_000_000);
+    std::fs::create_dir_all(leftover.join("0")).unwrap();
+    for overwrite in [false, true] {
+        // While `b` is being imported with --overwrite, a second import of the same store (with or without
+        // --overwrite) is refused and neither deletes the first one's partial store nor touches the store.
+        let mut refusals = Vec::new();
+        let mut during = |_: u64, _: u64| {
+            assert!(!leftover.exists(), "the leftover aside folder survived into the import");
+            let error = import("a.nrrd", overwrite, &mut |_, _| panic!("the second import wrote")).unwrap_err();
+            assert!(partial_path(&store).is_dir(), "the refused import deleted the running one's partial store");
+            assert_eq!(StoreReader::open(&store).unwrap().info().dtype, DType::U8, "the store changed mid-import");
+            refusals.push(error);
+        };
+        import("b.nrrd", true, &mut during).unwrap();
+        assert!(!refusals.is_empty());
+        for error in &refusals {
+            assert!(matches!(error, StoreError::Busy { pid: Some(pid), .. } if *pid == std::process::id()), "{error}");
+            let text = error.to_string();
+            assert!(text.starts_with(&format!("another import is writing {}", store.display())), "{text}");
+        }
+        // The winner's store is in place, whole; nothing is left beside it.
+        let reader = StoreReader::open(&store).unwrap();
+        assert_eq!(reader.info().dtype, DType::U16);
+        assert!(reader.read_region(0, [0, 0, 0], DIMS).unwrap() == samples(DType::U16));
+        let beside: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .filter(|n| n.starts_with("v.zarr."))
+            .collect();
+        assert!(beside.is_empty(), "{beside:?}");
+        import("a.nrrd", true, &mut |_, _| {}).unwrap();
+        std::fs::create_dir_all(leftover.join("0")).unwrap();
+    }
+    // With the store missing, an aside folder is its only whole copy: kept while the new store is written.
+    std::fs::remove_dir_all(&store).unwrap();
+    let mut seen = false;
+    import("b.nrrd", false, &mut |_, _| seen |= leftover.is_dir()).unwrap();
+    assert!(seen, "the only copy of the store was deleted before the new one was in place");
+}
+
+#[test]
 fn vti_appended_raw_inline_compressed_and_ascii() {
     let dir = scratch("vti");
     let extent = format!("2 {} 0 {} 1 {}", 2 + DIMS[0] - 1, DIMS[1] - 1, DIMS[2]);
