@@ -72,6 +72,18 @@ pub enum StoreError {
         /// What is wrong with it, and the fix where there is one.
         problem: String,
     },
+    /// Another import holds the store's lock (see [`crate::store_lock`]).
+    #[error(
+        "another import is writing {path}{}; wait for it to finish (or stop it), then run this import again",
+        .pid.map(|pid| format!(" (pid {pid})")).unwrap_or_default(),
+        path = .path.display()
+    )]
+    Busy {
+        /// The store.
+        path: PathBuf,
+        /// The process holding the lock, as its lock file says.
+        pid: Option<u32>,
+    },
 }
 
 impl StoreError {

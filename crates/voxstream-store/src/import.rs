@@ -21,6 +21,7 @@ use crate::error::StoreError;
 use crate::layout::PyramidLayout;
 use crate::metadata::{ome_multiscales, StoreAttributes, MINMAX_GROUP};
 use crate::non_finite;
+use crate::store_lock::ImportLock;
 use crate::value_histogram::ValueHistogram;
 use crate::volume::{DType, VolumeInfo, VolumeSource};
 
@@ -71,17 +72,21 @@ pub struct ImportReport {
 }
 
 /// Imports `source` into a new store at `out`. `progress(done, total)` is called with input bytes. On failure the
-/// partial store is removed and an existing store at `out` is left untouched.
+/// partial store is removed and an existing store at `out` is left untouched. One import per store at a time: the
+/// store's [`ImportLock`] is taken before anything is written and held until the new store is in place; while
+/// another import holds it this one fails with [`StoreError::Busy`], touching nothing.
 pub fn import_volume(
     source: &mut dyn VolumeSource,
     out: &Path,
     options: &ImportOptions,
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<ImportReport, StoreError> {
+    let lock = ImportLock::acquire(out)?;
     let result = import_into_partial(source, out, options, progress);
     if result.is_err() {
         let _ = std::fs::remove_dir_all(partial_path(out));
     }
+    drop(lock);
     result
 }
 
@@ -102,6 +107,11 @@ fn import_into_partial(
     }
     if out.exists() && !options.overwrite {
         return Err(StoreError::store(out, "already exists (use --overwrite to replace it)"));
+    }
+    // This import holds the lock, so aside folders beside a store in place are leftovers of killed imports (with
+    // the store missing, one of them is its only whole copy: kept until the new store is in place).
+    if out.is_dir() {
+        remove_asides(out, &aside_paths(out))?;
     }
     let info = source.info().clone();
     let layout =
@@ -191,7 +201,7 @@ fn import_into_partial(
 /// Puts the complete store `partial` at `out`. An existing store is first renamed aside (`STORE.old-<pid>`), the
 /// new one renamed in, then the old one deleted: at every instant either `out` is a complete store, or (killed
 /// between the two renames) the old store is whole in the aside folder, which `StoreReader::open` names. Aside
-/// folders left by interrupted swaps are deleted once a new store is in place.
+/// folders left by interrupted swaps are deleted once a new store is in place. The caller holds the import lock.
 fn commit(partial: &Path, out: &Path) -> Result<(), StoreError> {
     if out.exists() {
         let aside = aside_path(out, std::process::id());
@@ -204,11 +214,20 @@ fn commit(partial: &Path, out: &Path) -> Result<(), StoreError> {
     } else {
         std::fs::rename(partial, out).map_err(|e| StoreError::io(out, e))?;
     }
-    for stale in aside_paths(out) {
-        std::fs::remove_dir_all(&stale).map_err(|e| {
+    remove_asides(out, &aside_paths(out))
+}
+
+/// Deletes aside folders of `out` (under the import lock: none of them belongs to a running import).
+fn remove_asides(out: &Path, asides: &[PathBuf]) -> Result<(), StoreError> {
+    for stale in asides {
+        std::fs::remove_dir_all(stale).map_err(|e| {
             StoreError::store(
                 out,
-                format!("replaced, but the previous store {} could not be deleted: {e}", stale.display()),
+                format!(
+                    "the previous store {} could not be deleted ({}): delete it by hand",
+                    stale.display(),
+                    crate::error::describe_io(&e)
+                ),
             )
         })?;
     }

@@ -8,6 +8,7 @@
 //! - [`import`]: the streaming pyramid writer (OME-Zarr 0.5 / Zarr v3, sharded, zstd, per-brick min/max).
 //! - [`checked_store`] and [`strict_codecs`]: every store read checked before it allocates (file kind, byte ranges
 //!   against the file's size, decoding bounded by the chunk's size, each brick's CRC-32C verified).
+//! - [`store_lock`]: one writer per store (the import lock), and aside folders left by interrupted swaps.
 //! - [`store_producer`]: bricks with borders, streamed from the store (GigaVoxels' producer reading from disk;
 //!   Reichl's streaming supplier, seed 004 ch. 4).
 
@@ -21,6 +22,7 @@ pub mod level_source;
 pub mod metadata;
 pub mod metadata_check;
 pub mod non_finite;
+pub mod store_lock;
 pub mod store_producer;
 pub mod store_reader;
 pub mod strict_codecs;

@@ -359,6 +359,65 @@ fn existing_store_is_kept_unless_overwritten_and_interrupted_imports_never_open(
 }
 
 #[test]
+fn one_import_per_store_the_second_refuses_touching_nothing() {
+    use voxstream_store::import::{aside_path, partial_path};
+    let dir = scratch("lock");
+    let mut bytes = nrrd_header("uchar", "raw", None).into_bytes();
+    bytes.extend(encode(DType::U8, Endian::Little));
+    std::fs::write(dir.join("a.nrrd"), bytes).unwrap();
+    let mut bytes = nrrd_header("ushort", "raw", None).into_bytes();
+    bytes.extend(encode(DType::U16, Endian::Little));
+    std::fs::write(dir.join("b.nrrd"), bytes).unwrap();
+    let store = dir.join("v.zarr");
+    let options = |overwrite: bool| ImportOptions { brick_size: 8, overwrite, ..ImportOptions::default() };
+    let import = |input: &str, overwrite: bool, progress: &mut dyn FnMut(u64, u64)| {
+        let mut source = open_volume(&dir.join(input), None).unwrap();
+        import_volume(source.as_mut(), &store, &options(overwrite), progress)
+    };
+    // A good store, then a leftover aside folder beside it, as a kill after the swap leaves.
+    import("a.nrrd", false, &mut |_, _| {}).unwrap();
+    let leftover = aside_path(&store, 4_000_000_000);
+    std::fs::create_dir_all(leftover.join("0")).unwrap();
+    for overwrite in [false, true] {
+        // While `b` is being imported with --overwrite, a second import of the same store (with or without
+        // --overwrite) is refused and neither deletes the first one's partial store nor touches the store.
+        let mut refusals = Vec::new();
+        let mut during = |_: u64, _: u64| {
+            assert!(!leftover.exists(), "the leftover aside folder survived into the import");
+            let error = import("a.nrrd", overwrite, &mut |_, _| panic!("the second import wrote")).unwrap_err();
+            assert!(partial_path(&store).is_dir(), "the refused import deleted the running one's partial store");
+            assert_eq!(StoreReader::open(&store).unwrap().info().dtype, DType::U8, "the store changed mid-import");
+            refusals.push(error);
+        };
+        import("b.nrrd", true, &mut during).unwrap();
+        assert!(!refusals.is_empty());
+        for error in &refusals {
+            assert!(matches!(error, StoreError::Busy { pid: Some(pid), .. } if *pid == std::process::id()), "{error}");
+            let text = error.to_string();
+            assert!(text.starts_with(&format!("another import is writing {}", store.display())), "{text}");
+        }
+        // The winner's store is in place, whole; nothing is left beside it.
+        let reader = StoreReader::open(&store).unwrap();
+        assert_eq!(reader.info().dtype, DType::U16);
+        assert!(reader.read_region(0, [0, 0, 0], DIMS).unwrap() == samples(DType::U16));
+        let beside: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .filter(|n| n.starts_with("v.zarr."))
+            .collect();
+        assert!(beside.is_empty(), "{beside:?}");
+        import("a.nrrd", true, &mut |_, _| {}).unwrap();
+        std::fs::create_dir_all(leftover.join("0")).unwrap();
+    }
+    // With the store missing, an aside folder is its only whole copy: kept while the new store is written.
+    std::fs::remove_dir_all(&store).unwrap();
+    let mut seen = false;
+    import("b.nrrd", false, &mut |_, _| seen |= leftover.is_dir()).unwrap();
+    assert!(seen, "the only copy of the store was deleted before the new one was in place");
+}
+
+#[test]
 fn vti_appended_raw_inline_compressed_and_ascii() {
     let dir = scratch("vti");
     let extent = format!("2 {} 0 {} 1 {}", 2 + DIMS[0] - 1, DIMS[1] - 1, DIMS[2]);
@@ -454,6 +513,49 @@ fn tiff_multipage_and_folder_of_slices() {
     std::fs::remove_dir_all(dir.join("slices.zarr")).unwrap();
     let e = import_error(&folder, None).to_string();
     assert!(e.contains("slice_999.tiff"), "{e}");
+}
+
+#[test]
+fn tiff_folder_members_of_several_pages_give_every_page_in_order() {
+    use tiff::encoder::{colortype, TiffEncoder};
+    let folder = scratch("tiff-pages").join("slices");
+    std::fs::create_dir_all(&folder).unwrap();
+    let values = samples(DType::U16);
+    let slice = (DIMS[0] * DIMS[1]) as usize;
+    let page = |z: usize| -> Vec<u16> { values[z * slice..(z + 1) * slice].iter().map(|&v| v as u16).collect() };
+    // Files 0..10 hold one slice each, file 10 holds slices 10, 11 and 12, the rest one each again.
+    let mut z = 0;
+    for file_index in 0..DIMS[2] as usize - 2 {
+        let file = std::fs::File::create(folder.join(format!("slice_{file_index:03}.tif"))).unwrap();
+        let mut encoder = TiffEncoder::new(file).unwrap();
+        for _ in 0..if file_index == 10 { 3 } else { 1 } {
+            encoder.write_image::<colortype::Gray16>(DIMS[0] as u32, DIMS[1] as u32, &page(z)).unwrap();
+            z += 1;
+        }
+    }
+    check_import(&folder, None, DType::U16, [1.0; 3], [0.0; 3]);
+
+    // A page of another size in a multi-page member is refused, naming the file and the page.
+    let file = std::fs::File::create(folder.join("slice_010.tif")).unwrap();
+    let mut encoder = TiffEncoder::new(file).unwrap();
+    encoder.write_image::<colortype::Gray16>(DIMS[0] as u32, DIMS[1] as u32, &page(10)).unwrap();
+    encoder.write_image::<colortype::Gray16>(3, 3, &[0; 9]).unwrap();
+    std::fs::remove_dir_all(folder.with_file_name("slices.zarr")).unwrap();
+    let e = import_error(&folder, None).to_string();
+    assert!(e.contains("slice_010.tif") && e.contains("page 1 is 3x3"), "{e}");
+}
+
+#[test]
+fn nifti_datatype_and_bitpix_must_agree() {
+    let dir = scratch("nifti-bitpix");
+    // uint8 samples announced as 16 bits: reading either way reads the wrong bytes.
+    std::fs::write(dir.join("u8-16.nii"), nifti(DType::U8, 2, 16)).unwrap();
+    let e = import_error(&dir.join("u8-16.nii"), None).to_string();
+    assert!(e.contains("u8-16.nii") && e.contains("datatype 2 (uint8, 8 bits) and bitpix 16 disagree"), "{e}");
+    std::fs::write(dir.join("f32-8.nii"), nifti(DType::F32, 16, 8)).unwrap();
+    let e = import_error(&dir.join("f32-8.nii"), None).to_string();
+    assert!(e.contains("datatype 16 (float32, 32 bits) and bitpix 8 disagree"), "{e}");
+    assert_eq!(e.lines().count(), 1, "{e}");
 }
 
 #[test]

@@ -5,7 +5,7 @@ use serde::Serialize;
 use voxstream_store::StoreReader;
 
 use crate::cli::InfoArgs;
-use crate::source_path::check_store_path;
+use crate::source_path::{check_store_path, warn_about_leftovers};
 
 /// Bricks of one level.
 #[derive(Serialize)]
@@ -39,6 +39,7 @@ struct StoreInfo {
 pub fn run(args: &InfoArgs) -> Result<()> {
     check_store_path(&args.store, "info")?;
     let reader = StoreReader::open(&args.store)?;
+    warn_about_leftovers(&args.store);
     let layout = reader.layout();
     let attributes = reader.attributes();
     let levels = (0..layout.levels())

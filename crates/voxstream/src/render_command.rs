@@ -27,7 +27,7 @@ use crate::render_budget::{check_budget, plan_budget};
 use crate::render_progress::RenderProgress;
 use crate::render_warnings::{empty_image, transfer_function_mismatch};
 use crate::scenes::builtin;
-use crate::source_path::check_store_path;
+use crate::source_path::{check_store_path, warn_about_leftovers};
 use crate::stats::RunStats;
 
 /// What `voxstream render` and `voxstream view` draw: a built-in scene, a store, or a mesh or particle file, with
@@ -163,6 +163,7 @@ pub fn open_source(args: &RenderArgs, budget: &MemoryBudget, user: impl SourceUs
     check_geometry_flags(args, &args.source)?;
     let cache_bytes = budget.store_cache_bytes();
     let reader = Arc::new(StoreReader::open_with_cache(path, cache_bytes)?);
+    warn_about_leftovers(path);
     let attributes = reader.attributes().clone();
     let transfer_function = default_store_transfer_function(attributes.typical_range())?;
     // (A GPU session keeps 16-bit bricks whatever the producer allows: `FrameRenderer::needs_sixteen_bit_bricks`.)

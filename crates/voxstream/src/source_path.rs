@@ -6,6 +6,7 @@ use std::path::Path;
 
 use anyhow::{bail, Result};
 use voxstream_store::import::{aside_paths, partial_path};
+use voxstream_store::store_lock::leftover_aside_paths;
 
 use crate::scenes::SCENE_NAMES;
 
@@ -57,6 +58,22 @@ pub fn check_store_path(path: &Path, command: &str) -> Result<()> {
         );
     }
     bail!("store {shown} not found: expected a folder made by `voxstream import` (check the path)")
+}
+
+/// Prints one warning line per folder `STORE.old-<pid>` left beside the store `path` (complete, just opened) by an
+/// interrupted `import --overwrite`. Only named: `info` and `render` read and take no lock, and deleting a folder
+/// the user did not name is the import's job (it holds the lock, so it knows no other import is swapping).
+pub fn warn_about_leftovers(path: &Path) {
+    for aside in leftover_aside_paths(path) {
+        eprintln!(
+            "warning: {} is left over from an interrupted `voxstream import --overwrite` ({} is complete): delete it \
+             (`rm -r {}`), or the next import of {} will",
+            aside.display(),
+            path.display(),
+            aside.display(),
+            path.display()
+        );
+    }
 }
 
 /// `scan.nii.gz` → `scan.zarr`, next to the input.

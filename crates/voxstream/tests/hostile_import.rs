@@ -445,3 +445,153 @@ fn nan_as_maps_non_finite_samples_and_the_error_names_the_first_position() {
     assert_eq!(bad_flag.exit, Some(1), "{bad_flag:?}");
     assert!(bad_flag.stderr.contains("--nan-as must be a finite number"), "{}", bad_flag.stderr);
 }
+
+/// A `nx`×`ny`×`nz` NRRD whose samples depend on `kind` (uchar or ushort), so that a store tells which input it holds.
+fn ramp_nrrd(kind: &str, [nx, ny, nz]: [usize; 3]) -> Vec<u8> {
+    let mut data = Vec::new();
+    for index in 0..nx * ny * nz {
+        match kind {
+            "uchar" => data.push((index % 251) as u8),
+            _ => data.extend(((index % 4093) as u16 * 16).to_le_bytes()),
+        }
+    }
+    nrrd(kind, [nx as u64, ny as u64, nz as u64], "raw", &data)
+}
+
+/// Starts `voxstream import INPUT --out out.zarr ARGS` in `dir`.
+fn spawn_import(dir: &Path, input: &str, args: &[&str]) -> std::process::Child {
+    Command::new(binary())
+        .args(["import", input, "--out", "out.zarr", "--quiet"])
+        .args(args)
+        .current_dir(dir)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("run voxstream")
+}
+
+/// Exit status and stderr of a finished child.
+fn finish(child: std::process::Child) -> (Option<i32>, String) {
+    let output = child.wait_with_output().expect("wait");
+    (output.status.code(), String::from_utf8_lossy(&output.stderr).into_owned())
+}
+
+/// The sample type of the store `dir/out.zarr` and whether it is whole (every level-0 sample readable).
+fn store_dtype(dir: &Path) -> voxstream_store::DType {
+    let reader = voxstream_store::StoreReader::open(&dir.join("out.zarr")).expect("the store opens");
+    let dims = reader.info().dims;
+    reader.read_region(0, [0, 0, 0], dims).expect("every sample of the store reads");
+    reader.info().dtype
+}
+
+/// Names beside `dir/out.zarr` that an import may leave (partial, aside and lock files).
+fn leftovers(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with("out.zarr."))
+        .collect()
+}
+
+#[test]
+fn concurrent_imports_to_one_store_one_writer_at_a_time() {
+    let dir = scratch("concurrent-imports");
+    std::fs::write(dir.join("a.nrrd"), ramp_nrrd("uchar", [160, 160, 96])).unwrap();
+    std::fs::write(dir.join("b.nrrd"), ramp_nrrd("ushort", [160, 160, 96])).unwrap();
+    let dtype_of =
+        |input: &str| if input == "a.nrrd" { voxstream_store::DType::U8 } else { voxstream_store::DType::U16 };
+    let refused = |stderr: &str| {
+        stderr.trim_end().lines().count() == 1
+            && (stderr.contains("another import is writing out.zarr (pid ") || stderr.contains("already exists"))
+    };
+    for overwrite in [false, true] {
+        for trial in 0..2 {
+            if !overwrite {
+                let _ = std::fs::remove_dir_all(dir.join("out.zarr"));
+            }
+            let args: &[&str] = if overwrite { &["--overwrite"] } else { &[] };
+            let (first, second) = if trial % 2 == 0 { ("a.nrrd", "b.nrrd") } else { ("b.nrrd", "a.nrrd") };
+            let children = [spawn_import(&dir, first, args), spawn_import(&dir, second, args)];
+            let [one, two] = children.map(finish);
+            let outcomes = [(first, one), (second, two)];
+            for (input, (code, stderr)) in &outcomes {
+                assert!(
+                    *code == Some(0) || (*code == Some(1) && refused(stderr)),
+                    "overwrite {overwrite}, {input}: exit {code:?}, {stderr}"
+                );
+            }
+            println!("overwrite {overwrite}, trial {trial}: {outcomes:?}");
+            let winners: Vec<&str> =
+                outcomes.iter().filter(|(_, (code, _))| *code == Some(0)).map(|(input, _)| *input).collect();
+            // The store opens, whole, and holds a winner's samples; nothing is left beside it.
+            let dtype = store_dtype(&dir);
+            assert!(winners.iter().any(|w| dtype_of(w) == dtype), "overwrite {overwrite}: {dtype:?} {winners:?}");
+            if !overwrite {
+                assert_eq!(winners.len(), 1, "exactly one import of a new store succeeds: {outcomes:?}");
+            } else {
+                assert!(!winners.is_empty(), "{outcomes:?}");
+            }
+            assert!(leftovers(&dir).is_empty(), "{:?}", leftovers(&dir));
+        }
+    }
+}
+
+#[test]
+fn an_import_refuses_while_another_holds_the_store_and_touches_nothing() {
+    let dir = scratch("held-lock");
+    std::fs::write(dir.join("a.nrrd"), ramp_nrrd("uchar", [40, 30, 20])).unwrap();
+    std::fs::write(dir.join("b.nrrd"), ramp_nrrd("ushort", [40, 30, 20])).unwrap();
+    assert_eq!(finish(spawn_import(&dir, "a.nrrd", &[])).0, Some(0));
+    let before = std::fs::read(dir.join("out.zarr/zarr.json")).unwrap();
+    // This test process plays the import in progress.
+    let lock = voxstream_store::store_lock::ImportLock::acquire(&dir.join("out.zarr")).unwrap();
+    let (code, stderr) = finish(spawn_import(&dir, "b.nrrd", &["--overwrite"]));
+    assert_eq!(code, Some(1), "{stderr}");
+    assert_eq!(
+        stderr.trim_end(),
+        format!(
+            "error: another import is writing out.zarr (pid {}); wait for it to finish (or stop it), then run this \
+             import again",
+            std::process::id()
+        )
+    );
+    assert_eq!(std::fs::read(dir.join("out.zarr/zarr.json")).unwrap(), before, "the refused import touched the store");
+    assert_eq!(store_dtype(&dir), voxstream_store::DType::U8);
+    assert_eq!(leftovers(&dir), vec!["out.zarr.lock".to_string()]);
+    drop(lock);
+    assert!(leftovers(&dir).is_empty(), "{:?}", leftovers(&dir));
+    // Free again, the same import goes through.
+    assert_eq!(finish(spawn_import(&dir, "b.nrrd", &["--overwrite"])).0, Some(0));
+    assert_eq!(store_dtype(&dir), voxstream_store::DType::U16);
+}
+
+#[test]
+fn leftover_aside_folders_are_named_by_info_and_render_and_removed_by_import() {
+    let dir = scratch("leftover-asides");
+    std::fs::write(dir.join("a.nrrd"), ramp_nrrd("uchar", [40, 30, 20])).unwrap();
+    assert_eq!(finish(spawn_import(&dir, "a.nrrd", &[])).0, Some(0));
+    // A kill after the swap leaves the previous store aside, perhaps half deleted, beside the complete one (pid
+    // 4000000000 is never a running process).
+    let aside = dir.join("out.zarr.old-4000000000");
+    std::fs::create_dir_all(aside.join("0")).unwrap();
+    std::fs::write(aside.join("0/c"), b"half").unwrap();
+    for args in
+        [vec!["info", "out.zarr"], vec!["render", "out.zarr", "--out", "x.png", "--width", "32", "--height", "32"]]
+    {
+        let output = Command::new(binary()).args(&args).current_dir(&dir).output().expect("run voxstream");
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(0), "{args:?}: {stderr}");
+        let named: Vec<&str> = stderr.lines().filter(|l| l.contains("out.zarr.old-4000000000")).collect();
+        assert_eq!(named.len(), 1, "{args:?}: {stderr}");
+        assert!(
+            named[0].starts_with("warning: ") && named[0].contains("rm -r out.zarr.old-4000000000"),
+            "{}",
+            named[0]
+        );
+        assert!(aside.exists(), "{args:?} deleted a folder it was not asked to");
+    }
+    // The next import removes it (before writing its own store).
+    assert_eq!(finish(spawn_import(&dir, "a.nrrd", &["--overwrite"])).0, Some(0));
+    assert!(leftovers(&dir).is_empty(), "{:?}", leftovers(&dir));
+}

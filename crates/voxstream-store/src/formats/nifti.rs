@@ -3,7 +3,8 @@
 //! Spacing comes from `pixdim[1..3]`, the origin from the qform offsets (or the sform translation). Rotations in
 //! the qform/sform are not applied: the volume is axis-aligned in voxstream's world, as in VTK's image data. Values
 //! are kept as stored, unless the header sets a `scl_slope`/`scl_inter` scaling other than the identity: then the
-//! scaled values are imported, as f32.
+//! scaled values are imported, as f32. `datatype` and `bitpix` must agree: a header where they do not is refused,
+//! never read by either one.
 
 use std::io::Read;
 use std::path::Path;
@@ -51,11 +52,11 @@ pub fn open(path: &Path, is_gzip: bool) -> Result<SampleStream, StoreError> {
     if dim.iter().any(|&d| d <= 0) {
         return Err(StoreError::format(path, format!("dimensions must be positive, got {dim:?}")));
     }
-    let dtype = match i16_at(70) {
-        2 => DType::U8,
-        4 => DType::I16,
-        16 => DType::F32,
-        512 => DType::U16,
+    let (dtype, name) = match i16_at(70) {
+        2 => (DType::U8, "uint8"),
+        4 => (DType::I16, "int16"),
+        16 => (DType::F32, "float32"),
+        512 => (DType::U16, "uint16"),
         code => {
             return Err(StoreError::Unsupported {
                 path: path.into(),
@@ -63,6 +64,19 @@ pub fn open(path: &Path, is_gzip: bool) -> Result<SampleStream, StoreError> {
             })
         }
     };
+    // The samples' size is said twice; when the two disagree, either reading reads the wrong bytes.
+    let bitpix = i16_at(72);
+    let bits = 8 * dtype.size() as i16;
+    if bitpix != bits {
+        return Err(StoreError::format(
+            path,
+            format!(
+                "datatype {} ({name}, {bits} bits) and bitpix {bitpix} disagree: the header is inconsistent; fix \
+                 whichever of the two is wrong (e.g. with nibabel) and import again",
+                i16_at(70)
+            ),
+        ));
+    }
     let spacing = [f32_at(80), f32_at(84), f32_at(88)].map(|v| if v > 0.0 { v.abs() as f64 } else { 1.0 });
     let origin = if i16_at(252) > 0 {
         [f32_at(268), f32_at(272), f32_at(276)].map(|v| v as f64)

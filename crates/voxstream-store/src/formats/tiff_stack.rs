@@ -1,4 +1,5 @@
-//! TIFF stacks: one multi-page file (a page per z slice) or a folder of single-page slices (sorted by name).
+//! TIFF stacks: one multi-page file (a page per z slice) or a folder of slice files (sorted by name), each of one
+//! or more pages: every page of every file is a slice, in order.
 //! Greyscale 8/16-bit unsigned, 16-bit signed and 32-bit float pages; all pages the same size and type. TIFF carries
 //! no reliable z spacing: spacing 1 and origin 0 unless `--spacing`/`--origin` are given.
 
@@ -15,11 +16,10 @@ use crate::volume::{DType, VolumeInfo, VolumeSource};
 /// A TIFF stack read one page per z slice.
 pub struct TiffStack {
     info: VolumeInfo,
-    /// Files to read, in order; a multi-page file appears once.
-    files: Vec<PathBuf>,
-    /// Current multi-page decoder and the file it reads.
-    decoder: Option<(usize, Decoder<BufReader<File>>)>,
-    next_file: usize,
+    /// Files to read, in order, with their page counts (checked on open).
+    members: Vec<(PathBuf, u64)>,
+    /// The member being read, its decoder, and the pages of it read so far.
+    decoder: Option<(usize, Decoder<BufReader<File>>, u64)>,
     pages_read: u64,
 }
 
@@ -92,25 +92,38 @@ impl TiffStack {
         } else {
             vec![path.to_path_buf()]
         };
+        // Every page of every member is a slice, in order: a folder may hold multi-page files (acquisition software
+        // splits long stacks into files of a few GB). Each page is checked now, so a page of another size or type is
+        // refused before anything is written, naming its file and page.
         let mut decoder = open_decoder(&files[0])?;
         let (width, height, dtype) = page_format(&files[0], &mut decoder)?;
-        let depth = if files.len() == 1 {
-            let mut pages = 1u64;
-            while decoder.more_images() {
-                decoder.next_image().map_err(|e| tiff_error(&files[0], e))?;
-                let (w, h, t) = page_format(&files[0], &mut decoder)?;
+        let mut members = Vec::with_capacity(files.len());
+        for (index, file) in files.iter().enumerate() {
+            if index > 0 {
+                decoder = open_decoder(file)?;
+            }
+            let mut pages = 0u64;
+            loop {
+                let (w, h, t) = page_format(file, &mut decoder)?;
                 if (w, h, t) != (width, height, dtype) {
                     return Err(StoreError::format(
-                        &files[0],
-                        format!("page {pages} is {w}x{h} {t:?}, page 0 {width}x{height} {dtype:?}"),
+                        file,
+                        format!(
+                            "page {pages} is {w}x{h} {t:?}, but {} page 0 is {width}x{height} {dtype:?}: every page \
+                             of every slice file must have one size and sample type",
+                            files[0].display()
+                        ),
                     ));
                 }
                 pages += 1;
+                if !decoder.more_images() {
+                    break;
+                }
+                decoder.next_image().map_err(|e| tiff_error(file, e))?;
             }
-            pages
-        } else {
-            files.len() as u64
-        };
+            members.push((file.clone(), pages));
+        }
+        let depth = members.iter().map(|(_, pages)| pages).sum::<u64>();
         let info =
             VolumeInfo { dims: [width as u64, height as u64, depth], dtype, spacing: [1.0; 3], origin: [0.0; 3] };
         info.validate(path)?;
@@ -127,24 +140,27 @@ impl TiffStack {
                 ),
             ));
         }
-        Ok(TiffStack { info, files, decoder: None, next_file: 0, pages_read: 0 })
+        Ok(TiffStack { info, members, decoder: None, pages_read: 0 })
     }
 
     fn read_page(&mut self, out: &mut Vec<f32>) -> Result<(), StoreError> {
-        let multi_page = self.files.len() == 1;
-        if self.decoder.is_none() || !multi_page {
-            let index = if multi_page { 0 } else { self.next_file };
-            let path = self
-                .files
-                .get(index)
-                .ok_or_else(|| StoreError::format(&self.files[0], "fewer slices than expected"))?;
-            self.decoder = Some((index, open_decoder(path)?));
-            self.next_file += 1;
-        } else if let Some((index, decoder)) = self.decoder.as_mut() {
-            decoder.next_image().map_err(|e| tiff_error(&self.files[*index], e))?;
+        // The next page of the member being read, or the first page of the next member.
+        match self.decoder.as_mut() {
+            Some((index, decoder, pages)) if *pages < self.members[*index].1 => {
+                decoder.next_image().map_err(|e| tiff_error(&self.members[*index].0, e))?;
+                *pages += 1;
+            }
+            current => {
+                let index = current.map_or(0, |(index, _, _)| *index + 1);
+                let (path, _) = self
+                    .members
+                    .get(index)
+                    .ok_or_else(|| StoreError::format(&self.members[0].0, "fewer slices than expected"))?;
+                self.decoder = Some((index, open_decoder(path)?, 1));
+            }
         }
-        let Some((index, decoder)) = self.decoder.as_mut() else { unreachable!("decoder opened above") };
-        let path = self.files[*index].clone();
+        let Some((index, decoder, _)) = self.decoder.as_mut() else { unreachable!("decoder opened above") };
+        let path = self.members[*index].0.clone();
         let (w, h, t) = page_format(&path, decoder)?;
         if [w as u64, h as u64] != [self.info.dims[0], self.info.dims[1]] || t != self.info.dtype {
             return Err(StoreError::format(
