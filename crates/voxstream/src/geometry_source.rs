@@ -171,9 +171,11 @@ pub fn open(path: &Path, args: &GeometryOptions) -> Result<GeometrySource> {
             let description = format!(
                 "{shown}: {} triangles{}, {}³ virtual voxels{}, distance index built in {:.1} s",
                 mesh.triangles().len(),
-                match mesh.degenerate_dropped {
-                    0 => String::new(),
-                    n => format!(" ({n} of zero area dropped)"),
+                match (mesh.degenerate_dropped, mesh.repeated_dropped) {
+                    (0, 0) => String::new(),
+                    (n, 0) => format!(" ({n} of zero area dropped)"),
+                    (0, r) => format!(" ({r} repeated dropped)"),
+                    (n, r) => format!(" ({n} of zero area and {r} repeated dropped)"),
                 },
                 producer.shape().virtual_resolution(),
                 if amplify.is_some() { ", amplified" } else { "" },

@@ -4,7 +4,7 @@
 //! `double`/`float64`); list properties with any count and item types; `comment` and `obj_info` lines.
 //!
 //! A file whose `face` element holds at least one face is a mesh: the `vertex` element's `x y z`, and the face
-//! element's `vertex_indices` (or `vertex_index`) list with polygons fanned into triangles `(0, i, i+1)`. Otherwise
+//! element's `vertex_indices` (or `vertex_index`) list with polygons into triangles by [`super::polygon::triangulate`]. Otherwise
 //! the vertices are particles: `x y z`; `radius`, `h`, `smoothing_length` or `hsml` as the smoothing length; `mass`
 //! or `m` as the mass; the first other scalar property (normals `nx ny nz`, colours `red green blue alpha` and
 //! texture coordinates `u v s t` excepted) as the value. Every other element (edges, materials, a scanner's range
@@ -20,6 +20,7 @@
 
 use std::path::Path;
 
+use super::polygon::triangulate;
 use super::words::shown;
 use super::RawGeometry;
 use crate::error::GeometryError;
@@ -659,6 +660,8 @@ fn read_body(
         // A valid face takes at least 4 bytes (a length and 3 one-byte indices), or 4 words.
         triangles: Vec::with_capacity(face_count.min(body_len / 4)),
     };
+    // One face's corners (each read from the body: bounded by the file).
+    let mut corners: Vec<u32> = Vec::new();
     let mut particles = RawParticles {
         positions: Vec::with_capacity(if plan.mesh { 0 } else { vertex_count }),
         smoothing: Vec::with_capacity(column(Role::Smoothing)),
@@ -713,19 +716,16 @@ fn read_body(
                                 format!("face {index} uses {length} vertices: a face needs at least 3"),
                             ));
                         }
-                        // Fanned as read: (first, previous, this) for the third index on.
-                        let (mut first, mut previous) = (0u32, 0u32);
-                        for k in 0..length {
+                        corners.clear();
+                        for _ in 0..length {
                             let v = body.scalar(item).map_err(|m| missed(body, m))?;
-                            let vertex = vertex_index(v)
-                                .map_err(|problem| fail(body, format!("face {index} uses vertex {v}: {problem}")))?;
-                            match k {
-                                0 => first = vertex,
-                                1 => {}
-                                _ => mesh.triangles.push([first, previous, vertex]),
-                            }
-                            previous = vertex;
+                            corners.push(
+                                vertex_index(v).map_err(|problem| {
+                                    fail(body, format!("face {index} uses vertex {v}: {problem}"))
+                                })?,
+                            );
                         }
+                        triangulate(&corners, &mut mesh.triangles);
                     }
                 }
             }
