@@ -310,6 +310,45 @@ struct Header {
     body_line: u64,
 }
 
+/// The points a PLY point file (`.ply`, or `.ply.gz` decompressed only as far as its header) declares, read from its
+/// header alone, before anything is allocated for them: `None` for a mesh, an unreadable file or a header this
+/// reader refuses (reading the file then names the problem).
+pub fn declared_points(path: &Path) -> Option<u64> {
+    use std::io::Read;
+    let file = std::fs::File::open(path).ok()?;
+    let file_len = file.metadata().ok()?.len();
+    let gz = path.to_string_lossy().to_lowercase().ends_with(".gz");
+    let mut head = Vec::new();
+    if gz {
+        let decoder = flate2::read::MultiGzDecoder::new(std::io::BufReader::new(file));
+        // A header shorter than the limit ends the read early; a gzip error leaves what was decoded before it.
+        let _ = decoder.take(STREAM_HEADER_BYTES).read_to_end(&mut head);
+    } else {
+        file.take(STREAM_HEADER_BYTES).read_to_end(&mut head).ok()?;
+    }
+    let header = parse_header(&head, path).ok()?;
+    let plan = Plan::new(&header, path).ok()?;
+    if plan.mesh {
+        return None;
+    }
+    let vertex = header.elements.iter().find(|e| e.name == "vertex")?;
+    // An uncompressed file too short for its count is the reader's to name (a truncated body, not a budget).
+    let least_bytes: u64 = vertex
+        .properties
+        .iter()
+        .map(|p| match (&header.encoding, &p.kind) {
+            (Encoding::Ascii, _) => 2,
+            (_, Kind::Scalar(ty)) => ty.size(),
+            (_, Kind::List { .. }) => 1,
+        })
+        .sum();
+    let body = file_len.saturating_sub(header.body_start as u64);
+    if !gz && vertex.count.saturating_mul(least_bytes) > body {
+        return None;
+    }
+    Some(vertex.count)
+}
+
 /// At most this many characters of a file's word are quoted in an error.
 fn parse_header(bytes: &[u8], path: &Path) -> Result<Header, GeometryError> {
     let at = |line: u64, message: String| GeometryError::format(path, Some(line), message);
