@@ -8,6 +8,13 @@
 //! respect to the nearest surface, so a hole reads as a locally closed surface — and an edge used by only one
 //! triangle takes that triangle's normal; an edge shared by more than two triangles (non-manifold) sums all of
 //! their normals. Inconsistently oriented triangles flip the sign locally: the mesh's own winding is trusted.
+//!
+//! The pseudo-normal sign is exact only for a closed mesh that does not cross itself: a fold (triangles crossed
+//! through each other at a thin tip) gives a crease whose pseudo-normal points inwards, and every point whose
+//! nearest feature it is — a cone reaching far outside — would read inside. So the side of points away from the
+//! surface comes from the whole mesh instead ([`MeshDistance::is_inside`]: the winding number counted along rays
+//! through the BVH); the pseudo-normal signs only the distance near the surface, where a fold's error stays within
+//! the producer's band.
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -60,6 +67,14 @@ impl UnitCubeFit {
         (DVec3::from(p) - DVec3::from(self.origin)) / self.size
     }
 }
+
+/// Directions of the rays of [`MeshDistance::is_inside`]: far from the axes and from each other, so that a ray
+/// rarely runs through an edge, a vertex or an axis-aligned face's plane.
+const RAY_DIRECTIONS: [DVec3; 3] = [
+    DVec3::new(0.539_138_8, 0.612_456_1, 0.577_812_3),
+    DVec3::new(-0.703_316_4, 0.316_227_8, -0.636_654_7),
+    DVec3::new(0.128_452_3, -0.871_293_9, 0.473_506_2),
+];
 
 /// A mesh in unit-cube coordinates with everything a signed distance query needs.
 #[derive(Clone, Debug)]
@@ -167,6 +182,29 @@ impl MeshDistance {
             }
             radius = if radius > 16.0 { f64::INFINITY } else { radius * 2.0 };
         }
+    }
+
+    /// Whether unit-cube point `p` lies inside the mesh, decided from the whole mesh rather than the nearest feature:
+    /// the winding number counted along rays (positive: inside), taken where two of three fixed directions agree,
+    /// else (a mesh open along those rays) the sign of the nearest feature's pseudo-normal.
+    ///
+    /// The pseudo-normal sign is exact only for a mesh without folds or self-intersections: a triangle folded back
+    /// at a thin tip (CGAL's `cow.off` has one at its tail) makes a crease whose pseudo-normal points the wrong way,
+    /// and every point whose nearest feature is that crease — a cone reaching far outside the mesh — reads inside.
+    /// Callers use this test wherever a sign reaches beyond the surface's immediate neighbourhood (whole nodes, the
+    /// voxels of a brick away from the band).
+    pub fn is_inside(&self, p: DVec3) -> bool {
+        let winding = |direction: DVec3| self.bvh.ray_winding(&self.positions, &self.triangles, p, direction);
+        let [first, second, third] = RAY_DIRECTIONS;
+        let (a, b) = (winding(first), winding(second));
+        if a == b {
+            return a > 0;
+        }
+        let c = winding(third);
+        if c == a || c == b {
+            return c > 0;
+        }
+        self.signed_distance(p) < 0.0
     }
 
     /// Number of triangles.

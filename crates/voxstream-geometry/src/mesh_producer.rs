@@ -11,11 +11,13 @@
 //! exact zero set, and every level is the same field band-limited to its voxels (the band widens with the voxel;
 //! noise octaves shorter than two voxels are dropped). Inside the band, `D = (½ − v)·band` recovers the distance.
 //!
-//! The oracle answers from one distance query at the node's centre: a node whose centre is farther from the surface
-//! than its half-diagonal plus half the band (plus the noise bound) is wholly outside (empty) or inside (solid).
-//! Within a brick, each voxel searches only within the band (plus the noise bound): beyond it the value is 0 or 1 and
-//! only the sign matters, which a voxel takes from its neighbour (the distance is 1-Lipschitz, so the surface cannot
-//! pass between two neighbours both farther from it than half a voxel). Only a brick's first voxel needs a full search.
+//! The oracle answers from one bounded distance query at the node's centre: a node whose centre is farther from the
+//! surface than its half-diagonal plus half the band (plus the noise bound) is wholly outside (empty) or inside
+//! (solid), the side given by the whole mesh's winding number along rays ([`MeshDistance::is_inside`]), never by the
+//! nearest feature's pseudo-normal, which a fold in the mesh can turn (issue 42: solid boxes beyond the cow's tail).
+//! Within a brick, each voxel searches only within the band (plus the noise bound, and at least a voxel): beyond it
+//! the value is 0 or 1 and only the side matters, which is the same for each 6-connected group of such far voxels
+//! (the distance is 1-Lipschitz), so one winding test per group decides it.
 
 use std::sync::Arc;
 
@@ -151,7 +153,14 @@ impl MeshProducer {
     /// The voxel value at `p` as seen at `level` (the reference the bricks are made of).
     pub fn value(&self, p: DVec3, level: u32) -> f64 {
         let distance = self.field.signed_distance(p);
-        (0.5 - self.displaced(p, distance, level) / self.band(level)).clamp(0.0, 1.0)
+        let value = 0.5 - self.displaced(p, distance, level) / self.band(level);
+        if value > 0.0 && value < 1.0 {
+            value
+        } else if self.field.is_inside(p) {
+            1.0
+        } else {
+            0.0
+        }
     }
 }
 
@@ -166,14 +175,12 @@ impl Producer for MeshProducer {
         let reach = (size * 0.5 + voxel) * 3f64.sqrt();
         let slack = self.band(key.level) * 0.5 + self.noise_bound();
         let centre = DVec3::from(lower) + DVec3::splat(size * 0.5);
-        let distance = self.field.signed_distance(centre);
-        if distance - reach > slack {
-            Some(0.0)
-        } else if distance + reach < -slack {
-            Some(1.0)
-        } else {
-            None
+        // The node lies in a ball around its centre that the surface does not enter: one side of it throughout, the
+        // side the whole mesh's winding gives (the nearest feature's sign can be wrong far from a fold).
+        if self.field.signed_distance_within(centre, reach + slack).is_some() {
+            return None;
         }
+        Some(if self.field.is_inside(centre) { 1.0 } else { 0.0 })
     }
 
     fn produce(&self, key: NodeKey, voxels: &mut [u16]) -> Result<Produced, ProduceError> {
@@ -182,44 +189,56 @@ impl Producer for MeshProducer {
         // Beyond the band's half (and the noise), values saturate; the search also reaches at least one voxel, so
         // that a voxel with nothing found and its neighbour are together farther from the surface than the step.
         let slack = (band * 0.5 + self.noise_bound()).max(self.shape.voxel_size(key.level) * (1.0 + 1e-9));
-        // Each voxel searches only within `slack`: beyond it the value is 0 or 1 and only the sign matters. A voxel
-        // with nothing within `slack` has the sign of its neighbour one voxel away (x, else y, else z): the
-        // distance is 1-Lipschitz, so the surface cannot pass between two points whose distances sum to more than
-        // the step between them, and `slack` exceeds one voxel. Only the first voxel needs a full search.
-        let mut inside = vec![false; b * b * b];
+        // Each voxel searches only within `slack`. Inside it, the value comes from the distance and the nearest
+        // feature's sign (a wrong sign there, at a fold, stays within the band). Beyond it the value is 0 or 1 and
+        // only the side matters: two neighbouring voxels one of which is farther than `slack` (more than a voxel)
+        // from the surface are on the same side of it (the distance is 1-Lipschitz), so each 6-connected group of
+        // such far voxels lies on one side, which one test of the whole mesh (`is_inside`) decides. A near voxel's
+        // pseudo-normal sign is never passed on to far ones.
+        let mut far = vec![false; b * b * b];
         let mut index = 0;
         for k in 0..b {
             for j in 0..b {
                 for i in 0..b {
                     let p = voxel_centre(&self.shape, &key, i as u32, j as u32, k as u32);
-                    let value = match self.field.signed_distance_within(p, slack) {
+                    match self.field.signed_distance_within(p, slack) {
                         Some(distance) => {
-                            inside[index] = distance < 0.0;
-                            (0.5 - self.displaced(p, distance, key.level) / band).clamp(0.0, 1.0)
+                            let value = (0.5 - self.displaced(p, distance, key.level) / band).clamp(0.0, 1.0);
+                            voxels[index] = quantize(value as f32);
                         }
-                        None => {
-                            let neighbour = if i > 0 {
-                                Some(index - 1)
-                            } else if j > 0 {
-                                Some(index - b)
-                            } else if k > 0 {
-                                Some(index - b * b)
-                            } else {
-                                None
-                            };
-                            inside[index] = match neighbour {
-                                Some(n) => inside[n],
-                                None => self.field.signed_distance(p) < 0.0,
-                            };
-                            if inside[index] {
-                                1.0
-                            } else {
-                                0.0
-                            }
-                        }
-                    };
-                    voxels[index] = quantize(value as f32);
+                        None => far[index] = true,
+                    }
                     index += 1;
+                }
+            }
+        }
+        let mut pending = Vec::new();
+        for seed in 0..far.len() {
+            if !far[seed] {
+                continue;
+            }
+            let (i, j, k) = (seed % b, seed / b % b, seed / (b * b));
+            let p = voxel_centre(&self.shape, &key, i as u32, j as u32, k as u32);
+            let value = quantize(if self.field.is_inside(p) { 1.0 } else { 0.0 });
+            // Flood the seed's group: each far voxel is written once and leaves the group.
+            far[seed] = false;
+            pending.push(seed);
+            while let Some(n) = pending.pop() {
+                voxels[n] = value;
+                let (i, j, k) = (n % b, n / b % b, n / (b * b));
+                let neighbours = [
+                    (i > 0).then(|| n - 1),
+                    (i + 1 < b).then(|| n + 1),
+                    (j > 0).then(|| n - b),
+                    (j + 1 < b).then(|| n + b),
+                    (k > 0).then(|| n - b * b),
+                    (k + 1 < b).then(|| n + b * b),
+                ];
+                for m in neighbours.into_iter().flatten() {
+                    if far[m] {
+                        far[m] = false;
+                        pending.push(m);
+                    }
                 }
             }
         }

@@ -204,6 +204,13 @@ impl ParticleProducer {
         let shape = TreeShape::new(2, settings.brick_size, max_level)
             .map_err(|error| GeometryError::Invalid { message: error.to_string() })?;
 
+        // Particles at one position with one kernel add up to one particle of their summed mass: the density is the
+        // same, and a pile of copies (a file of one point repeated) no longer makes every gather and every density
+        // probe visit all of them (50,000 copies took a minute to open, a million hours). Not for an attribute,
+        // whose weights are per particle.
+        let (unit, support, masses) =
+            if settings.attribute { (unit, support, masses) } else { merge_copies(unit, support, masses) };
+        let count = unit.len();
         // Particles by support class (powers of two from the smallest), each class on a grid of cells no smaller
         // than its own largest support, sorted by (class, cell).
         let (index, order) = ParticleIndex::build(&unit, &support, &masses, true);
@@ -317,6 +324,36 @@ impl ParticleProducer {
     }
 }
 
+/// Bytes per particle the in-memory producer holds while it renders (the index's position, support, class and
+/// mass: [`ParticleProducer::heap_bytes`] without the coarse count tables and the attribute's weights), for checking
+/// a file's declared count against the memory budget before reading it.
+pub const HELD_BYTES_PER_PARTICLE: u64 = 12 + 4 + 4 + 8;
+
+/// Particles with bit-identical position and support merged into one of their summed mass (order otherwise kept).
+fn merge_copies(unit: Vec<DVec3>, support: Vec<f64>, masses: Vec<f32>) -> (Vec<DVec3>, Vec<f64>, Vec<f32>) {
+    let key = |i: usize| {
+        let p = unit[i].to_array().map(|c| (c + 0.0).to_bits());
+        [p[0], p[1], p[2], (support[i] + 0.0).to_bits()]
+    };
+    let mut order: Vec<usize> = (0..unit.len()).collect();
+    order.par_sort_by_key(|&i| key(i));
+    if order.windows(2).all(|w| key(w[0]) != key(w[1])) {
+        return (unit, support, masses);
+    }
+    let (mut merged_unit, mut merged_support, mut merged_masses) = (Vec::new(), Vec::new(), Vec::new());
+    let mut mass = 0.0f64;
+    for (n, &i) in order.iter().enumerate() {
+        mass += f64::from(masses[i]);
+        if n + 1 == order.len() || key(order[n + 1]) != key(i) {
+            merged_unit.push(unit[i]);
+            merged_support.push(support[i]);
+            merged_masses.push(mass as f32);
+            mass = 0.0;
+        }
+    }
+    (merged_unit, merged_support, merged_masses)
+}
+
 /// Neighbours the adaptive smoothing length reaches: `h = 2 · (distance to the 8th nearest other particle)`, about
 /// 65 neighbours within the support in a uniform volume (SPH codes use 30 to 100).
 pub const SMOOTHING_NEIGHBOURS: usize = 8;
@@ -328,18 +365,46 @@ fn adaptive_support(unit: &[DVec3]) -> Vec<f64> {
     if unit.len() < 2 {
         return vec![0.05; unit.len()];
     }
-    let points: Vec<[f64; 3]> = unit.iter().map(|p| p.to_array()).collect();
-    let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&points);
-    let k = (SMOOTHING_NEIGHBOURS + 1).min(points.len());
-    let wanted = NonZero::new(k).unwrap_or(NonZero::<usize>::MIN);
-    let mut support: Vec<f64> = points
+    // The k-d tree is built over distinct positions, each with its multiplicity: a tree over many copies of one
+    // point cannot split them, and every query then scanned them all (50,000 identical points took a minute, a
+    // million hours).
+    let mut order: Vec<u32> = (0..unit.len() as u32).collect();
+    let bits = |i: u32| unit[i as usize].to_array().map(|c| (c + 0.0).to_bits());
+    order.par_sort_unstable_by_key(|&i| bits(i));
+    let mut distinct: Vec<[f64; 3]> = Vec::new();
+    let mut multiplicity: Vec<u64> = Vec::new();
+    let mut distinct_of = vec![0u32; unit.len()];
+    for (n, &i) in order.iter().enumerate() {
+        if n == 0 || bits(i) != bits(order[n - 1]) {
+            distinct.push(unit[i as usize].to_array());
+            multiplicity.push(0);
+        }
+        *multiplicity.last_mut().unwrap_or(&mut 0) += 1;
+        distinct_of[i as usize] = distinct.len() as u32 - 1;
+    }
+    let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&distinct);
+    // The k nearest points (the particle itself included) lie among the k nearest distinct positions.
+    let k = (SMOOTHING_NEIGHBOURS + 1).min(unit.len());
+    let wanted = NonZero::new(k.min(distinct.len())).unwrap_or(NonZero::<usize>::MIN);
+    let distinct_support: Vec<f64> = distinct
         .par_iter()
         .map(|p| {
-            let nearest = tree.nearest_n::<SquaredEuclidean>(p, wanted);
-            let farthest = nearest.iter().map(|n| n.distance).fold(0.0, f64::max);
+            let mut nearest = tree.nearest_n::<SquaredEuclidean>(p, wanted);
+            nearest.sort_by(|a, b| a.distance.total_cmp(&b.distance));
+            // The distance at which the points counted (with their multiplicities) reach k.
+            let mut counted = 0;
+            let mut farthest = 0.0f64;
+            for n in &nearest {
+                farthest = n.distance;
+                counted += multiplicity[n.item as usize];
+                if counted >= k as u64 {
+                    break;
+                }
+            }
             (2.0 * farthest.sqrt()).clamp(1e-6, 0.1)
         })
         .collect();
+    let mut support: Vec<f64> = distinct_of.iter().map(|&d| distinct_support[d as usize]).collect();
     // Isolated particles (outliers, a sparse halo) would get kernels spanning much of the volume: their density is
     // negligible, but every brick their kernel touches would have to be made. At most four times the median.
     let mut sorted = support.clone();
@@ -407,6 +472,45 @@ mod tests {
                 }
             })
             .collect()
+    }
+
+    /// Issue 41: a file of one point repeated (100 M copies in a 600 KB `.ply.gz`) made every density probe and
+    /// every gather visit every copy: opening 50,000 copies took a minute. Copies merge into one particle of their
+    /// summed mass, with the same field.
+    #[test]
+    fn copies_of_one_point_merge_into_one_particle_with_the_same_density() {
+        let copies = 20_000;
+        let mut positions = vec![[0.25, 0.5, 0.5]; copies];
+        positions.extend([[0.75, 0.5, 0.5], [0.5, 0.25, 0.5]]);
+        let count = positions.len();
+        let set = ParticleSet::new(RawParticles {
+            positions,
+            smoothing: vec![0.1; count],
+            masses: vec![1.0; count],
+            ..RawParticles::default()
+        })
+        .unwrap();
+        let producer = ParticleProducer::new(&set, ParticleTreeSettings::default()).unwrap();
+        assert_eq!(producer.index.positions.len(), 3, "the copies are one particle");
+        assert_eq!(producer.total_mass(), count as f64);
+        // The density at the copies: all their kernels at distance zero (h = 0.1 file units).
+        let fit = producer.fit();
+        let at = fit.to_unit([0.25, 0.5, 0.5]);
+        let h = 0.1 / fit.size;
+        let expected = copies as f64 * cubic_spline(0.0, h);
+        let density = producer.density(at, 0.0);
+        assert!((density - expected).abs() < 1e-5 * expected, "{density} vs {expected}");
+        // The attribute keeps every particle (its weights are per particle).
+        let lone = ParticleSet::new(RawParticles {
+            positions: vec![[0.0, 0.0, 0.0]; 4],
+            smoothing: vec![0.1; 4],
+            values: vec![1.0, 2.0, 3.0, 4.0],
+            value_name: "v".into(),
+            ..RawParticles::default()
+        })
+        .unwrap();
+        let settings = ParticleTreeSettings { attribute: true, ..ParticleTreeSettings::default() };
+        assert_eq!(ParticleProducer::new(&lone, settings).unwrap().index.positions.len(), 4);
     }
 
     #[test]

@@ -141,6 +141,38 @@ impl TriangleBvh {
         best
     }
 
+    /// The winding number of the mesh around `origin` counted along the ray `origin + t·direction`, `t > 0`: each
+    /// triangle the ray crosses adds +1 where it leaves through the triangle's front (the ray along its normal) and
+    /// −1 where it enters. For a closed, consistently oriented mesh this is the winding number whatever the
+    /// direction: 1 inside, 0 outside (2 where two closed parts overlap). A ray through an edge or a vertex may count
+    /// a crossing twice or not at all, and through a hole it misses the surface: callers compare several directions.
+    pub fn ray_winding(&self, positions: &[DVec3], triangles: &[[u32; 3]], origin: DVec3, direction: DVec3) -> i64 {
+        let inverse = direction.recip();
+        let mut winding = 0;
+        // Both children of a hit node are pushed: at most one pending sibling per level, as in `closest_point`.
+        let mut stack = [0u32; MAX_DEPTH + 2];
+        let mut depth = usize::from(ray_hits_box(&self.nodes[0], origin, inverse));
+        while depth > 0 {
+            depth -= 1;
+            let node = &self.nodes[stack[depth] as usize];
+            if node.count > 0 {
+                let first = node.first as usize;
+                for &t in &self.order[first..first + node.count as usize] {
+                    let [a, b, c] = triangles[t as usize].map(|i| positions[i as usize]);
+                    winding += ray_crossing(origin, direction, a, b, c);
+                }
+                continue;
+            }
+            for child in [stack[depth] + 1, node.first] {
+                if ray_hits_box(&self.nodes[child as usize], origin, inverse) {
+                    stack[depth] = child;
+                    depth += 1;
+                }
+            }
+        }
+        winding
+    }
+
     /// Depth of the hierarchy (root = 1).
     pub fn depth(&self) -> usize {
         fn depth_of(nodes: &[BvhNode], index: usize) -> usize {
@@ -312,6 +344,50 @@ fn box_distance_squared(node: &BvhNode, p: DVec3) -> f64 {
     sum
 }
 
+/// Whether the ray `origin + t·direction` (`t ≥ 0`, `inverse` the direction's reciprocal) meets the node's box.
+#[inline]
+fn ray_hits_box(node: &BvhNode, origin: DVec3, inverse: DVec3) -> bool {
+    let (mut near, mut far) = (0.0f64, f64::INFINITY);
+    for a in 0..3 {
+        let t0 = (f64::from(node.lower[a]) - origin[a]) * inverse[a];
+        let t1 = (f64::from(node.upper[a]) - origin[a]) * inverse[a];
+        near = near.max(t0.min(t1));
+        far = far.min(t0.max(t1));
+    }
+    near <= far
+}
+
+/// +1 if the ray `origin + t·direction` (`t > 0`) leaves through triangle `abc`'s front, −1 if it enters through it,
+/// 0 if it misses (Möller and Trumbore, "Fast, minimum storage ray/triangle intersection", 1997).
+#[inline]
+fn ray_crossing(origin: DVec3, direction: DVec3, a: DVec3, b: DVec3, c: DVec3) -> i64 {
+    let (ab, ac) = (b - a, c - a);
+    let pvec = direction.cross(ac);
+    // det = −direction · (ab × ac): negative where the ray runs along the front normal.
+    let det = ab.dot(pvec);
+    if det == 0.0 || !det.is_finite() {
+        return 0;
+    }
+    let tvec = origin - a;
+    let u = tvec.dot(pvec) / det;
+    if !(0.0..=1.0).contains(&u) {
+        return 0;
+    }
+    let qvec = tvec.cross(ab);
+    let v = direction.dot(qvec) / det;
+    if v < 0.0 || u + v > 1.0 {
+        return 0;
+    }
+    if ac.dot(qvec) / det <= 0.0 {
+        return 0;
+    }
+    if det < 0.0 {
+        1
+    } else {
+        -1
+    }
+}
+
 /// The point of triangle `abc` closest to `p`, and the feature it lies on (Ericson §5.1.5, Voronoi regions).
 pub fn closest_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> (DVec3, TriangleFeature) {
     let ab = b - a;
@@ -414,6 +490,25 @@ mod tests {
                 .fold(f64::INFINITY, f64::min);
             assert_eq!(bvh.closest_point(&positions, &triangles, p, f64::INFINITY).unwrap().distance_squared, brute);
         }
+    }
+
+    #[test]
+    fn ray_winding_counts_a_tetrahedron_from_every_direction() {
+        // An outward-facing tetrahedron: winding 1 inside, 0 outside, whatever the direction.
+        let positions = vec![DVec3::ZERO, DVec3::X, DVec3::Y, DVec3::Z];
+        let triangles = vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]];
+        let bvh = TriangleBvh::build(&positions, &triangles);
+        let directions = [DVec3::new(0.3, 0.5, 0.81), DVec3::new(-0.7, 0.2, -0.1), DVec3::new(0.1, -0.9, 0.35)];
+        for direction in directions {
+            let inside = bvh.ray_winding(&positions, &triangles, DVec3::splat(0.1), direction);
+            assert_eq!(inside, 1, "inside along {direction}");
+            let outside = bvh.ray_winding(&positions, &triangles, DVec3::new(0.6, 0.6, 0.6), direction);
+            assert_eq!(outside, 0, "outside along {direction}");
+            let below = bvh.ray_winding(&positions, &triangles, DVec3::new(0.2, 0.2, -1.0), direction);
+            assert_eq!(below, 0, "below along {direction}");
+        }
+        // Entering and leaving: from below along +z crosses the base (−1) and the slanted face (+1).
+        assert_eq!(bvh.ray_winding(&positions, &triangles, DVec3::new(0.2, 0.2, -1.0), DVec3::new(0.01, 0.02, 1.0)), 0);
     }
 
     #[test]

@@ -1,4 +1,5 @@
-//! A validated triangle mesh: finite vertex positions and triangles that index them, degenerate triangles dropped.
+//! A validated triangle mesh: finite vertex positions and triangles that index them, degenerate and repeated
+//! triangles dropped.
 //!
 //! Readers (`formats`) produce a [`RawMesh`] (polygons already fanned into triangles); [`TriangleMesh::new`] checks it
 //! once, so that the distance queries of the mesh producer never meet a NaN or an out-of-range index.
@@ -21,6 +22,8 @@ pub struct TriangleMesh {
     triangles: Vec<[u32; 3]>,
     /// Triangles dropped because their area is zero (repeated or collinear vertices).
     pub degenerate_dropped: usize,
+    /// Triangles dropped because an earlier one has the same corners in the same turn.
+    pub repeated_dropped: usize,
 }
 
 impl TriangleMesh {
@@ -62,6 +65,23 @@ impl TriangleMesh {
             (b - a).cross(c - a).length_squared() > 0.0
         });
         let degenerate_dropped = before - triangles.len();
+        // Repeated triangles (the same corners in the same turn) lie on each other: every distance query near them
+        // would test them all, and no hierarchy can split them (a polygon listing its corners over and over made
+        // 100,000 copies of two triangles). One copy stays; a copy turned the other way (a two-sided wall) stays too.
+        let mut seen = std::collections::HashSet::with_capacity(triangles.len());
+        let nondegenerate = triangles.len();
+        triangles.retain(|&[a, b, c]| {
+            // The rotation that starts at the smallest index names the turn.
+            let turned = if a <= b && a <= c {
+                [a, b, c]
+            } else if b <= c {
+                [b, c, a]
+            } else {
+                [c, a, b]
+            };
+            seen.insert(turned)
+        });
+        let repeated_dropped = nondegenerate - triangles.len();
         if triangles.is_empty() {
             return Err(GeometryError::Invalid {
                 message: if before == 0 {
@@ -71,7 +91,7 @@ impl TriangleMesh {
                 },
             });
         }
-        Ok(TriangleMesh { positions, triangles, degenerate_dropped })
+        Ok(TriangleMesh { positions, triangles, degenerate_dropped, repeated_dropped })
     }
 
     /// Vertex positions.
@@ -121,6 +141,17 @@ mod tests {
         assert!(range.contains("uses vertex 7 but the mesh has 3 vertices"), "{range}");
         let flat = TriangleMesh::new(raw(good, vec![[0, 0, 1]])).unwrap_err().to_string();
         assert!(flat.contains("zero area"), "{flat}");
+    }
+
+    #[test]
+    fn repeated_triangles_are_dropped_but_not_turned_ones() {
+        let positions = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+        let mut triangles = vec![[0, 1, 2]; 1000];
+        triangles.extend([[1, 2, 0], [2, 0, 1], [0, 2, 1], [2, 1, 0]]);
+        let mesh = TriangleMesh::new(raw(positions, triangles)).unwrap();
+        assert_eq!(mesh.triangles(), &[[0, 1, 2], [0, 2, 1]]);
+        assert_eq!(mesh.repeated_dropped, 1002);
+        assert_eq!(mesh.degenerate_dropped, 0);
     }
 
     #[test]

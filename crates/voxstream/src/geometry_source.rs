@@ -10,9 +10,9 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use voxstream_core::{NodeKey, ProduceError, Produced, Producer, TreeShape};
-use voxstream_geometry::formats::ply::PlyPointStream;
+use voxstream_geometry::formats::ply::{declared_points, PlyPointStream};
 use voxstream_geometry::formats::{read_geometry, RawGeometry};
-use voxstream_geometry::particle_producer::SMOOTHING_SCALE_RANGE;
+use voxstream_geometry::particle_producer::{HELD_BYTES_PER_PARTICLE, SMOOTHING_SCALE_RANGE};
 use voxstream_geometry::superbrick_particles::{
     open_out_of_core, OutOfCoreSettings, MIN_MEMORY_BYTES, STREAMED_FILE_ENDINGS,
 };
@@ -20,7 +20,7 @@ use voxstream_geometry::{
     Amplification, MeshProducer, MeshTreeSettings, ParticleProducer, ParticleSet, ParticleTreeSettings,
     SuperbrickParticleProducer, TriangleMesh, UnitCubeFit,
 };
-use voxstream_render::{Camera, IsoSurface, TransferFunction, VolumePlacement};
+use voxstream_render::{Camera, IsoSurface, TransferFunction, VolumePlacement, FRAME_BYTES_PER_PIXEL};
 
 use crate::render_command::frame_box;
 
@@ -37,6 +37,8 @@ pub struct GeometryOptions {
     pub smoothing_scale: Option<f64>,
     /// `--particle-memory`: read a binary PLY point file out of core with this many MiB for its particles.
     pub particle_memory: Option<u64>,
+    /// `--budget-mb` of `render`: particles held in memory must fit it beside the image (`None`: no budget).
+    pub budget_mb: Option<u64>,
     /// Image size, for the default camera.
     pub width: u32,
     /// Image height.
@@ -145,6 +147,10 @@ pub fn open(path: &Path, args: &GeometryOptions) -> Result<GeometrySource> {
     if let Some(memory) = out_of_core_memory(path, args)? {
         return open_streamed(path, args, memory, started);
     }
+    // A point file's header says how many particles it holds: refuse before reading a file whose index cannot fit.
+    if let Some(count) = declared_points(path) {
+        check_particle_budget(path, count, "declares", args)?;
+    }
     let raw = read_geometry(path)?;
     match raw {
         RawGeometry::Mesh(raw) => {
@@ -171,9 +177,11 @@ pub fn open(path: &Path, args: &GeometryOptions) -> Result<GeometrySource> {
             let description = format!(
                 "{shown}: {} triangles{}, {}³ virtual voxels{}, distance index built in {:.1} s",
                 mesh.triangles().len(),
-                match mesh.degenerate_dropped {
-                    0 => String::new(),
-                    n => format!(" ({n} of zero area dropped)"),
+                match (mesh.degenerate_dropped, mesh.repeated_dropped) {
+                    (0, 0) => String::new(),
+                    (n, 0) => format!(" ({n} of zero area dropped)"),
+                    (0, r) => format!(" ({r} repeated dropped)"),
+                    (n, r) => format!(" ({n} of zero area and {r} repeated dropped)"),
                 },
                 producer.shape().virtual_resolution(),
                 if amplify.is_some() { ", amplified" } else { "" },
@@ -199,6 +207,8 @@ pub fn open(path: &Path, args: &GeometryOptions) -> Result<GeometrySource> {
             }
             let molecular = is_molecular(path);
             let smoothing_scale = smoothing_scale(args, molecular)?;
+            // Formats without a count in a header are checked once read, before the index is built.
+            check_particle_budget(path, raw.positions.len() as u64, "holds", args)?;
             let particles = ParticleSet::new(raw).with_context(|| format!("in {shown}"))?;
             let settings = ParticleTreeSettings {
                 resolution: args.resolution,
@@ -243,6 +253,34 @@ pub fn open(path: &Path, args: &GeometryOptions) -> Result<GeometrySource> {
             })
         }
     }
+}
+
+/// Refuses `count` particles whose in-memory index ([`HELD_BYTES_PER_PARTICLE`] each) would not fit `--budget-mb`
+/// beside the image, naming the count, the bytes and the flags that help (`verb`: "declares" for a header's count,
+/// "holds" for particles read).
+fn check_particle_budget(path: &Path, count: u64, verb: &str, args: &GeometryOptions) -> Result<()> {
+    let Some(budget_mb) = args.budget_mb else { return Ok(()) };
+    let held = count.saturating_mul(HELD_BYTES_PER_PARTICLE);
+    let image = FRAME_BYTES_PER_PIXEL * u64::from(args.width) * u64::from(args.height);
+    let needed_mb = held.saturating_add(image).div_ceil(1 << 20);
+    if needed_mb < budget_mb {
+        return Ok(());
+    }
+    let name = path.to_string_lossy().to_lowercase();
+    let out_of_core = if STREAMED_FILE_ENDINGS.iter().any(|e| name.ends_with(e)) {
+        ", or read it out of core with --particle-memory MIB"
+    } else {
+        ""
+    };
+    bail!(
+        "{} {verb} {count} particles: held in memory their index takes {} MiB ({HELD_BYTES_PER_PARTICLE} bytes \
+         each), which with the {}x{} image leaves nothing of --budget-mb {budget_mb} for the bricks: raise \
+         --budget-mb above {needed_mb}{out_of_core}",
+        path.display(),
+        held.div_ceil(1 << 20),
+        args.width,
+        args.height,
+    )
 }
 
 /// `--smoothing-scale` checked, or its default (2 for molecules, 1 otherwise).

@@ -28,6 +28,7 @@ pub fn run(args: &ImportArgs) -> Result<()> {
             attribute: false,
             smoothing_scale: args.smoothing_scale,
             particle_memory: args.particle_memory,
+            budget_mb: None,
             width: 512,
             height: 512,
         };

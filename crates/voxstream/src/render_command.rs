@@ -132,6 +132,7 @@ pub fn open_source(args: &RenderArgs, budget: &MemoryBudget, user: impl SourceUs
             attribute: args.attribute,
             smoothing_scale: args.smoothing_scale,
             particle_memory: args.particle_memory,
+            budget_mb: Some(args.budget_mb),
             width: args.width,
             height: args.height,
         };

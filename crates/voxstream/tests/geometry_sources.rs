@@ -344,6 +344,70 @@ fn assert_fails(args: &[&str], needle: &str) {
     assert!(lines[0].starts_with("error: ") && lines[0].contains(needle), "{args:?}: {text}");
 }
 
+/// Issue 41: particle files bypassed the budget. A point file is held to `--budget-mb` from its header's count
+/// before anything is read (on main: read and indexed, then refused with "need at least 71760 MiB", a wrong
+/// figure); a gzip-compressed pile of copies of one point is refused from its header too.
+#[test]
+fn particle_files_beyond_the_budget_are_refused_from_their_header() {
+    let dir = scratch("particle_budget");
+    let header = |count: usize| {
+        format!(
+            "ply\nformat binary_little_endian 1.0\nelement vertex {count}\nproperty float x\nproperty float y\n\
+             property float z\nend_header\n"
+        )
+    };
+    let count = 100_000;
+    let mut ply = header(count).into_bytes();
+    for i in 0..count {
+        for c in [i % 97, i % 89, i % 83] {
+            ply.extend((c as f32).to_le_bytes());
+        }
+    }
+    let path = dir.join("many.ply");
+    std::fs::write(&path, &ply).unwrap();
+    let out = dir.join("x.png");
+    let args = [
+        "render",
+        path.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--width",
+        "64",
+        "--height",
+        "64",
+        "--budget-mb",
+        "2",
+    ];
+    assert_fails(
+        &args,
+        "many.ply declares 100000 particles: held in memory their index takes 3 MiB (28 bytes each), which with the \
+         64x64 image leaves nothing of --budget-mb 2 for the bricks: raise --budget-mb above 3, or read it out of \
+         core with --particle-memory MIB",
+    );
+    // One point a million times, compressed to a few kilobytes.
+    let count = 1_000_000;
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    gz.write_all(header(count).as_bytes()).unwrap();
+    let point: Vec<u8> = [0.5f32; 3].iter().flat_map(|c| c.to_le_bytes()).collect();
+    (0..count).for_each(|_| gz.write_all(&point).unwrap());
+    let path = dir.join("copies.ply.gz");
+    std::fs::write(&path, gz.finish().unwrap()).unwrap();
+    let args = [
+        "render",
+        path.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--width",
+        "64",
+        "--height",
+        "64",
+        "--budget-mb",
+        "8",
+    ];
+    assert_fails(&args, "copies.ply.gz declares 1000000 particles: held in memory their index takes 27 MiB");
+    assert!(!out.exists(), "no image is written");
+}
+
 #[test]
 fn bad_geometry_files_get_one_clear_line() {
     let dir = scratch("bad");

@@ -31,6 +31,7 @@ pub mod obj;
 pub mod off;
 pub mod pdb;
 pub mod ply;
+pub mod polygon;
 pub mod stl;
 pub mod vtk_legacy;
 pub mod vtp;

@@ -1,7 +1,8 @@
 //! Wavefront OBJ geometry (<http://paulbourke.net/dataformats/obj/>): `v x y z [w]` vertices (further numbers,
 //! such as the vertex colours some tools append, are read past; `w` is ignored) and `f` faces whose corners are
 //! `i`, `i/t`, `i//n` or `i/t/n`, with 1-based or negative (relative: `-1` is the latest vertex) indices; polygons
-//! are fanned into triangles `(0, i, i+1)`. Every other statement (`vn`, `vt`, `g`, `o`, `usemtl`, `mtllib`, `s`,
+//! become triangles by [`super::polygon::triangulate`] (fanned `(0, i, i+1)` up to 16 corners, split in balanced
+//! halves above). Every other statement (`vn`, `vt`, `g`, `o`, `usemtl`, `mtllib`, `s`,
 //! `l`, `p`, curves and surfaces …) and every comment is ignored; materials are never opened.
 //!
 //! Not read: line continuations (`\` at a line's end), free-form geometry, texture coordinates and normals.
@@ -14,6 +15,7 @@
 
 use std::path::Path;
 
+use super::polygon::triangulate;
 use super::words::{shown_bytes as shown, text};
 use crate::error::GeometryError;
 use crate::triangle_mesh::RawMesh;
@@ -22,6 +24,8 @@ use crate::triangle_mesh::RawMesh;
 pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh, GeometryError> {
     let mut mesh = RawMesh::default();
     let mut faces = 0u64;
+    // One face's corners (a line's words: bounded by the file).
+    let mut corners: Vec<u32> = Vec::new();
     for (number, line) in bytes.split(|&b| b == b'\n').enumerate() {
         let number = number as u64 + 1;
         let at = |message: String| GeometryError::format(path, Some(number), message);
@@ -42,22 +46,16 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh, GeometryError> {
             Some(b"f") => {
                 let face = faces;
                 faces += 1;
-                // Fanned as read: (first, previous, this) from the third corner on.
-                let (mut first, mut previous, mut corners) = (0u32, 0u32, 0u64);
+                corners.clear();
                 for word in words {
                     let vertex =
                         corner(word, mesh.positions.len()).map_err(|problem| at(format!("face {face} {problem}")))?;
-                    match corners {
-                        0 => first = vertex,
-                        1 => {}
-                        _ => mesh.triangles.push([first, previous, vertex]),
-                    }
-                    previous = vertex;
-                    corners += 1;
+                    corners.push(vertex);
                 }
-                if corners < 3 {
-                    return Err(at(format!("face {face} uses {corners} vertices: a face needs at least 3")));
+                if corners.len() < 3 {
+                    return Err(at(format!("face {face} uses {} vertices: a face needs at least 3", corners.len())));
                 }
+                triangulate(&corners, &mut mesh.triangles);
             }
             _ => {}
         }
@@ -145,5 +143,31 @@ mod tests {
                 let _ = parse(&changed, path());
             }
         }
+    }
+
+    /// Issue 41: a 1.1 MB OBJ with one 200,000-corner face took 203 s to render.
+    #[test]
+    fn a_face_of_200000_corners_makes_no_fan_of_slivers_and_no_pile_of_copies() {
+        const CORNERS: usize = 200_000;
+        // Corners on a circle: a fan put all 199,998 triangles on corner 1, whose boxes all overlapped there.
+        let mut text = String::new();
+        for i in 0..CORNERS {
+            let angle = std::f64::consts::TAU * i as f64 / CORNERS as f64;
+            text.push_str(&format!("v {:.6} {:.6} 0\n", angle.cos(), angle.sin()));
+        }
+        text.push('f');
+        (1..=CORNERS).for_each(|i| text.push_str(&format!(" {i}")));
+        let mesh = parse(text.as_bytes(), path()).unwrap();
+        assert_eq!(mesh.triangles.len(), CORNERS - 2);
+        let mut uses = vec![0u32; CORNERS];
+        mesh.triangles.iter().flatten().for_each(|&c| uses[c as usize] += 1);
+        let most = uses.iter().max().copied().unwrap();
+        assert!(most <= 40, "{most} triangles meet at one corner");
+        // Four corners listed over and over: 100,000 copies of two triangles, which no hierarchy splits.
+        let mut text = String::from("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf");
+        (0..CORNERS).for_each(|i| text.push_str(&format!(" {}", 1 + i % 4)));
+        let mesh = crate::TriangleMesh::new(parse(text.as_bytes(), path()).unwrap()).unwrap();
+        assert!(mesh.triangles().len() <= 8, "{} triangles", mesh.triangles().len());
+        assert!(mesh.repeated_dropped > 100_000, "{}", mesh.repeated_dropped);
     }
 }

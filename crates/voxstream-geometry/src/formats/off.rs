@@ -1,8 +1,8 @@
 //! OFF, Geomview's object file format (<http://www.geomview.org/docs/html/OFF.html>), ASCII: the `OFF` keyword
 //! (also with the `ST`, `C` and `N` prefixes: `COFF`, `NOFF`, `STOFF`, `STCNOFF` …, whose extra per-vertex
 //! columns are read past), a counts line `vertices faces [edges]` (also accepted on the keyword's line), one vertex
-//! per line (`x y z …`), one face per line (`n i0 i1 … i(n-1) [colour]`, polygons fanned into triangles
-//! `(0, i, i+1)`). `#` starts a comment anywhere; blank lines are skipped.
+//! per line (`x y z …`), one face per line (`n i0 i1 … i(n-1) [colour]`, polygons into triangles by
+//! [`super::polygon::triangulate`]). `#` starts a comment anywhere; blank lines are skipped.
 //!
 //! Not read: binary OFF (`OFF BINARY`), homogeneous (`4OFF`) and n-dimensional (`nOFF`) vertices, and files with
 //! more than one vertex or face on a line. Colours and normals are read past.
@@ -12,6 +12,7 @@
 
 use std::path::Path;
 
+use super::polygon::triangulate;
 use super::words::{shown_bytes as shown, text};
 use crate::error::GeometryError;
 use crate::triangle_mesh::RawMesh;
@@ -59,6 +60,8 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh, GeometryError> {
         positions: Vec::with_capacity(vertex_count.min(remaining / 6) as usize),
         triangles: Vec::with_capacity(face_count.min(remaining / 8) as usize),
     };
+    // One face's corners (bounded by its line).
+    let mut corners: Vec<u32> = Vec::new();
     for index in 0..vertex_count {
         let Some((words, line)) = lines.next() else {
             return Err(GeometryError::format(
@@ -98,16 +101,11 @@ pub fn parse(bytes: &[u8], path: &Path) -> Result<RawMesh, GeometryError> {
             return Err(at(line, format!("face {index} announces {n} vertices but lists {}", rest.len())));
         }
         // The words after the n indices are a colour: read past.
-        let (mut first, mut previous) = (0u32, 0u32);
-        for (k, word) in rest.iter().take(n as usize).enumerate() {
-            let vertex = vertex_index(word).map_err(|problem| at(line, format!("face {index} {problem}")))?;
-            match k {
-                0 => first = vertex,
-                1 => {}
-                _ => mesh.triangles.push([first, previous, vertex]),
-            }
-            previous = vertex;
+        corners.clear();
+        for word in rest.iter().take(n as usize) {
+            corners.push(vertex_index(word).map_err(|problem| at(line, format!("face {index} {problem}")))?);
         }
+        triangulate(&corners, &mut mesh.triangles);
     }
     Ok(mesh)
 }

@@ -4,7 +4,7 @@
 //! `double`/`float64`); list properties with any count and item types; `comment` and `obj_info` lines.
 //!
 //! A file whose `face` element holds at least one face is a mesh: the `vertex` element's `x y z`, and the face
-//! element's `vertex_indices` (or `vertex_index`) list with polygons fanned into triangles `(0, i, i+1)`. Otherwise
+//! element's `vertex_indices` (or `vertex_index`) list with polygons into triangles by [`super::polygon::triangulate`]. Otherwise
 //! the vertices are particles: `x y z`; `radius`, `h`, `smoothing_length` or `hsml` as the smoothing length; `mass`
 //! or `m` as the mass; the first other scalar property (normals `nx ny nz`, colours `red green blue alpha` and
 //! texture coordinates `u v s t` excepted) as the value. Every other element (edges, materials, a scanner's range
@@ -20,6 +20,7 @@
 
 use std::path::Path;
 
+use super::polygon::triangulate;
 use super::words::shown;
 use super::RawGeometry;
 use crate::error::GeometryError;
@@ -307,6 +308,45 @@ struct Header {
     body_start: usize,
     /// Line number of the body's first line.
     body_line: u64,
+}
+
+/// The points a PLY point file (`.ply`, or `.ply.gz` decompressed only as far as its header) declares, read from its
+/// header alone, before anything is allocated for them: `None` for a mesh, an unreadable file or a header this
+/// reader refuses (reading the file then names the problem).
+pub fn declared_points(path: &Path) -> Option<u64> {
+    use std::io::Read;
+    let file = std::fs::File::open(path).ok()?;
+    let file_len = file.metadata().ok()?.len();
+    let gz = path.to_string_lossy().to_lowercase().ends_with(".gz");
+    let mut head = Vec::new();
+    if gz {
+        let decoder = flate2::read::MultiGzDecoder::new(std::io::BufReader::new(file));
+        // A header shorter than the limit ends the read early; a gzip error leaves what was decoded before it.
+        let _ = decoder.take(STREAM_HEADER_BYTES).read_to_end(&mut head);
+    } else {
+        file.take(STREAM_HEADER_BYTES).read_to_end(&mut head).ok()?;
+    }
+    let header = parse_header(&head, path).ok()?;
+    let plan = Plan::new(&header, path).ok()?;
+    if plan.mesh {
+        return None;
+    }
+    let vertex = header.elements.iter().find(|e| e.name == "vertex")?;
+    // An uncompressed file too short for its count is the reader's to name (a truncated body, not a budget).
+    let least_bytes: u64 = vertex
+        .properties
+        .iter()
+        .map(|p| match (&header.encoding, &p.kind) {
+            (Encoding::Ascii, _) => 2,
+            (_, Kind::Scalar(ty)) => ty.size(),
+            (_, Kind::List { .. }) => 1,
+        })
+        .sum();
+    let body = file_len.saturating_sub(header.body_start as u64);
+    if !gz && vertex.count.saturating_mul(least_bytes) > body {
+        return None;
+    }
+    Some(vertex.count)
 }
 
 /// At most this many characters of a file's word are quoted in an error.
@@ -659,6 +699,8 @@ fn read_body(
         // A valid face takes at least 4 bytes (a length and 3 one-byte indices), or 4 words.
         triangles: Vec::with_capacity(face_count.min(body_len / 4)),
     };
+    // One face's corners (each read from the body: bounded by the file).
+    let mut corners: Vec<u32> = Vec::new();
     let mut particles = RawParticles {
         positions: Vec::with_capacity(if plan.mesh { 0 } else { vertex_count }),
         smoothing: Vec::with_capacity(column(Role::Smoothing)),
@@ -713,19 +755,16 @@ fn read_body(
                                 format!("face {index} uses {length} vertices: a face needs at least 3"),
                             ));
                         }
-                        // Fanned as read: (first, previous, this) for the third index on.
-                        let (mut first, mut previous) = (0u32, 0u32);
-                        for k in 0..length {
+                        corners.clear();
+                        for _ in 0..length {
                             let v = body.scalar(item).map_err(|m| missed(body, m))?;
-                            let vertex = vertex_index(v)
-                                .map_err(|problem| fail(body, format!("face {index} uses vertex {v}: {problem}")))?;
-                            match k {
-                                0 => first = vertex,
-                                1 => {}
-                                _ => mesh.triangles.push([first, previous, vertex]),
-                            }
-                            previous = vertex;
+                            corners.push(
+                                vertex_index(v).map_err(|problem| {
+                                    fail(body, format!("face {index} uses vertex {v}: {problem}"))
+                                })?,
+                            );
                         }
+                        triangulate(&corners, &mut mesh.triangles);
                     }
                 }
             }
