@@ -11,6 +11,7 @@ pub mod backend;
 pub mod bench;
 pub mod camera_path;
 pub mod cli;
+pub mod error_message;
 pub mod exit_status;
 pub mod geometry_import;
 pub mod geometry_source;
