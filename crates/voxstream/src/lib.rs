@@ -19,6 +19,7 @@ pub mod import_command;
 pub mod info_command;
 pub mod iso_flags;
 pub mod memory;
+pub mod near_names;
 pub mod output_file;
 pub mod png_output;
 pub mod popping_bench;

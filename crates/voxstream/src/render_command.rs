@@ -27,7 +27,7 @@ use crate::render_budget::{check_budget, plan_budget};
 use crate::render_progress::RenderProgress;
 use crate::render_warnings::{empty_image, transfer_function_mismatch};
 use crate::scenes::builtin;
-use crate::source_path::check_store_path;
+use crate::source_path::{check_store_path, missing_geometry_file};
 use crate::stats::RunStats;
 
 /// What `voxstream render` and `voxstream view` draw: a built-in scene, a store, or a mesh or particle file, with
@@ -157,7 +157,7 @@ pub fn open_source(args: &RenderArgs, budget: &MemoryBudget, user: impl SourceUs
         return user.use_source(args, source, budget);
     }
     if is_geometry_file_name(path) && !path.exists() {
-        bail!("mesh or particle file {} not found (check the path)", path.display());
+        return Err(missing_geometry_file(path));
     }
     check_store_path(path, "render")?;
     check_geometry_flags(args, &args.source)?;
