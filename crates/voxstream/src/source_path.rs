@@ -26,6 +26,9 @@ const RAW_FILE_ENDINGS: [&str; 3] = [".raw", ".den", ".img"];
 /// How many folders up a path is looked at for the store it lies in.
 const MAX_STORE_DEPTH: usize = 8;
 
+/// Most entries of a folder looked at for TIFF slices.
+const MAX_LISTED_ENTRIES: usize = 10_000;
+
 /// Most bytes of a `zarr.json` or `.zattrs` read to tell whether its folder is a store.
 const MAX_METADATA_BYTES: u64 = 1 << 20;
 
@@ -44,6 +47,13 @@ pub fn check_store_path(path: &Path, command: &str) -> Result<()> {
                 "{shown} is {what} the store {}: pass the store's folder instead (`voxstream {command} {}`)",
                 store.display(),
                 shell_word(&store.display().to_string())
+            );
+        }
+        if holds_tiff_slices(path) {
+            let (input, store) = (shell_word(&shown.to_string()), suggested_store_name(path));
+            bail!(
+                "{shown} is a folder of TIFF slices, not a store: run `voxstream import {input} --out {store}` first, \
+                 then `voxstream {command} {store}`"
             );
         }
     }
@@ -120,6 +130,17 @@ fn is_store(folder: &Path) -> bool {
         let mut text = String::new();
         file.take(MAX_METADATA_BYTES).read_to_string(&mut text).is_ok() && text.contains("\"multiscales\"")
     })
+}
+
+/// Whether `folder` holds `.tif`/`.tiff` files and no Zarr metadata (among its first entries).
+fn holds_tiff_slices(folder: &Path) -> bool {
+    let has_metadata = ["zarr.json", ".zattrs", ".zgroup"].iter().any(|name| folder.join(name).exists());
+    let Ok(entries) = std::fs::read_dir(folder) else { return false };
+    !has_metadata
+        && entries.take(MAX_LISTED_ENTRIES).filter_map(|entry| entry.ok()).any(|entry| {
+            let name = entry.file_name().to_string_lossy().to_lowercase();
+            name.ends_with(".tif") || name.ends_with(".tiff")
+        })
 }
 
 /// The store that `path` lies inside (not `path` itself), if any within [`MAX_STORE_DEPTH`] folders up.

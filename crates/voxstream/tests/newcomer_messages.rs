@@ -90,6 +90,20 @@ fn a_volume_file_gets_an_import_command_into_the_current_folder() {
 }
 
 #[test]
+fn a_folder_of_tiff_slices_gets_an_import_command() {
+    let dir = scratch("tiff");
+    std::fs::create_dir_all(dir.join("data/slices")).unwrap();
+    std::fs::write(dir.join("data/slices/z000.tif"), b"II*\0").unwrap();
+    let output = voxstream(&["info", "data/slices"], &dir);
+    assert_eq!(output.status.code(), Some(1));
+    assert_eq!(
+        stderr(&output).trim_end(),
+        "error: data/slices is a folder of TIFF slices, not a store: run `voxstream import data/slices --out \
+         slices.zarr` first, then `voxstream info slices.zarr`"
+    );
+}
+
+#[test]
 fn store_and_mesh_typos_get_the_near_name() {
     let dir = scratch("typos");
     import_ramp(&dir);
