@@ -317,7 +317,8 @@ pub fn frame_box(
     Camera { eye: eye.to_array(), target: centre.to_array(), up: up_hint.to_array(), fov }
 }
 
-/// A soft ramp over the upper 80% of the value range, reaching opacity 0.05 per voxel (one sample spacing).
+/// A soft ramp over the upper 80% of `range` (the data's 0.5th to 99.5th percentile), reaching opacity 0.12 per
+/// sample spacing at its top.
 pub fn default_store_transfer_function(range: [f64; 2]) -> Result<TransferFunction> {
     let [lo, hi] = range;
     let hi = if hi > lo { hi } else { lo + 1.0 };
