@@ -8,6 +8,7 @@ use voxstream_store::{import_volume, DType, ImportOptions, StoreError, VolumeInf
 use crate::cli::{EndianArg, ImportArgs};
 use crate::geometry_import::{BakedGeometry, DEFAULT_BAKE_RESOLUTION};
 use crate::geometry_source::{self, GeometryOptions};
+use crate::source_path::missing_geometry_file;
 
 /// Runs `voxstream import`.
 pub fn run(args: &ImportArgs) -> Result<()> {
@@ -20,7 +21,7 @@ pub fn run(args: &ImportArgs) -> Result<()> {
             bail!("--dtype, --spacing, --origin and --nan-as apply to volume files; a mesh or particle file keeps its own units");
         }
         if !args.input.is_file() {
-            bail!("mesh or particle file {} not found (check the path)", args.input.display());
+            return Err(missing_geometry_file(&args.input));
         }
         let options = GeometryOptions {
             amplify: args.amplify,

@@ -54,7 +54,7 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(error) => {
-            eprintln!("error: {error:#}");
+            eprintln!("error: {}", voxstream::error_message::user_message(&error));
             ExitCode::from(voxstream::exit_status::exit_code(&error))
         }
     }

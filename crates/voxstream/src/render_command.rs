@@ -27,7 +27,7 @@ use crate::render_budget::{check_budget, plan_budget};
 use crate::render_progress::RenderProgress;
 use crate::render_warnings::{empty_image, transfer_function_mismatch};
 use crate::scenes::builtin;
-use crate::source_path::{check_store_path, warn_about_leftovers};
+use crate::source_path::{check_store_path, missing_geometry_file, warn_about_leftovers};
 use crate::stats::RunStats;
 
 /// What `voxstream render` and `voxstream view` draw: a built-in scene, a store, or a mesh or particle file, with
@@ -158,7 +158,7 @@ pub fn open_source(args: &RenderArgs, budget: &MemoryBudget, user: impl SourceUs
         return user.use_source(args, source, budget);
     }
     if is_geometry_file_name(path) && !path.exists() {
-        bail!("mesh or particle file {} not found (check the path)", path.display());
+        return Err(missing_geometry_file(path));
     }
     check_store_path(path, "render")?;
     check_geometry_flags(args, &args.source)?;
@@ -319,7 +319,8 @@ pub fn frame_box(
     Camera { eye: eye.to_array(), target: centre.to_array(), up: up_hint.to_array(), fov }
 }
 
-/// A soft ramp over the upper 80% of the value range, reaching opacity 0.05 per voxel (one sample spacing).
+/// A soft ramp over the upper 80% of `range` (the data's 0.5th to 99.5th percentile), reaching opacity 0.12 per
+/// sample spacing at its top.
 pub fn default_store_transfer_function(range: [f64; 2]) -> Result<TransferFunction> {
     let [lo, hi] = range;
     let hi = if hi > lo { hi } else { lo + 1.0 };
