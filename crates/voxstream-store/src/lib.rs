@@ -9,8 +9,11 @@
 //! - [`store_producer`]: bricks with borders, streamed from the store (GigaVoxels' producer reading from disk;
 //!   Reichl's streaming supplier, seed 004 ch. 4).
 
+pub mod chunk_cache;
+pub mod chunk_keys;
 pub mod error;
 pub mod foreign;
+pub mod foreign_axes;
 pub mod formats;
 pub mod import;
 pub mod layout;
@@ -21,6 +24,7 @@ pub mod non_finite;
 pub mod store_producer;
 pub mod store_reader;
 pub mod value_histogram;
+pub mod value_range;
 pub mod volume;
 
 pub use error::StoreError;
