@@ -23,14 +23,14 @@ use serde_json::Value;
 use zarrs::array::Array;
 use zarrs::storage::ReadableStorageTraits;
 
-use crate::error::StoreError;
-use crate::layout::PyramidLayout;
 use crate::chunk_keys::stored_chunks;
+use crate::error::StoreError;
 use crate::foreign_axes::{check_axes, transform_xyz};
+use crate::layout::PyramidLayout;
 use crate::level_source::LevelSource;
-use crate::value_range::ScanProgress;
 use crate::metadata::StoreAttributes;
-use crate::metadata_check::{check_chunk_sizes, validate_attributes};
+use crate::metadata_check::{check_chunk_sizes, dtype_range, validate_attributes};
+use crate::value_range::ScanProgress;
 use crate::volume::DType;
 
 /// Brick edge used for foreign stores.
@@ -91,7 +91,8 @@ pub(crate) fn open_foreign(
         check_chunk_sizes(path, name, &metadata)?;
         check_axes(ms, shape.len()).map_err(|m| bad(format!("dataset '{name}': {m}")))?;
         let folder = path.join(name.trim_start_matches('/'));
-        let chunks = stored_chunks(&folder, &metadata, shape.len()).map_err(|m| bad(format!("dataset '{name}' {m}")))?;
+        let chunks =
+            stored_chunks(&folder, &metadata, shape.len()).map_err(|m| bad(format!("dataset '{name}' {m}")))?;
         if arrays.is_empty() {
             level_zero_chunks = chunks;
         }
@@ -151,6 +152,17 @@ pub(crate) fn open_foreign(
     }
 
     let (value_range, scan) = match options.value_range {
+        Some([lo, hi]) if !(lo < hi && lo >= dtype_range(dtype)[0] && hi <= dtype_range(dtype)[1]) => {
+            let [type_lo, type_hi] = dtype_range(dtype);
+            return Err(StoreError::Unsupported {
+                path: path.into(),
+                message: format!(
+                    "the value range given, {lo} to {hi}, is not an increasing range within what {} samples hold \
+                     ({type_lo} to {type_hi})",
+                    dtype.name()
+                ),
+            });
+        }
         Some(range) => (range, None),
         None => ([0.0, 1.0], Some(level_zero_chunks)),
     };

@@ -19,8 +19,7 @@ pub(crate) fn check_axes(multiscale: &Value, dimensions: usize) -> Result<(), St
     let Some(axes) = axes.as_array() else {
         return Err(format!("multiscales 'axes' is {axes}, expected a list of axes"));
     };
-    let names: Vec<String> =
-        axes.iter().map(|a| axis_name(a).unwrap_or_else(|| format!("{a}"))).collect::<Vec<_>>();
+    let names: Vec<String> = axes.iter().map(|a| axis_name(a).unwrap_or_else(|| format!("{a}"))).collect::<Vec<_>>();
     let listed = names.join(", ");
     if axes.len() != dimensions {
         return Err(format!("multiscales axes [{listed}] are {} axes, but the arrays have {dimensions}", axes.len()));
@@ -28,10 +27,9 @@ pub(crate) fn check_axes(multiscale: &Value, dimensions: usize) -> Result<(), St
     let is_space = |a: &Value| a.get("type").and_then(Value::as_str).is_none_or(|t| t == "space");
     let split = dimensions - 3;
     let spatial_tail = names[split..] == ["z", "y", "x"] && axes[split..].iter().all(is_space);
-    let leading_space = names[..split]
-        .iter()
-        .zip(&axes[..split])
-        .any(|(name, a)| ["x", "y", "z"].contains(&name.as_str()) || a.get("type").and_then(Value::as_str) == Some("space"));
+    let leading_space = names[..split].iter().zip(&axes[..split]).any(|(name, a)| {
+        ["x", "y", "z"].contains(&name.as_str()) || a.get("type").and_then(Value::as_str) == Some("space")
+    });
     if !spatial_tail || leading_space {
         return Err(format!(
             "axes are [{listed}]: voxstream reads images whose last three axes are the space axes z, y, x in that \
@@ -54,7 +52,8 @@ pub(crate) fn transform_xyz(dataset: &Value, kind: &str, dimensions: usize) -> R
         return Ok(None);
     };
     let values = transform.get(kind);
-    let numbers: Option<Vec<f64>> = values.and_then(Value::as_array).and_then(|v| v.iter().map(Value::as_f64).collect());
+    let numbers: Option<Vec<f64>> =
+        values.and_then(Value::as_array).and_then(|v| v.iter().map(Value::as_f64).collect());
     match numbers {
         Some(v) if v.len() == dimensions => Ok(Some([v[dimensions - 1], v[dimensions - 2], v[dimensions - 3]])),
         _ => Err(format!(

@@ -11,6 +11,7 @@
 
 pub mod chunk_cache;
 pub mod chunk_keys;
+pub mod encoded_cache;
 pub mod error;
 pub mod foreign;
 pub mod foreign_axes;

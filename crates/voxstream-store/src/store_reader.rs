@@ -22,14 +22,15 @@ use zarrs::storage::storage_adapter::performance_metrics::PerformanceMetricsStor
 use zarrs::storage::ReadableStorageTraits;
 
 use crate::chunk_cache::ChunkCache;
+use crate::encoded_cache::EncodedCache;
 use crate::error::StoreError;
 use crate::foreign::ForeignOptions;
-use crate::value_range::{bricks_over_stored_chunks, fold_samples, unwritten_fill_value, ScanProgress, EMPTY_RANGE};
 use crate::import::{aside_paths, partial_path};
 use crate::layout::PyramidLayout;
 use crate::level_source::{retrieve_f32, LevelSource};
 use crate::metadata::{StoreAttributes, MINMAX_GROUP};
 use crate::metadata_check::{check_chunk_sizes, validate_attributes};
+use crate::value_range::{bricks_over_stored_chunks, fold_samples, unwritten_fill_value, ScanProgress, EMPTY_RANGE};
 use crate::volume::VolumeInfo;
 
 /// Extends `data` (dims `have`, x fastest) to dims `want` by repeating its last samples.
@@ -206,9 +207,12 @@ impl StoreReader {
                 None => StoreError::store(path, format!("corrupt voxstream attributes: {e}")),
             })?,
             None => {
+                // A quarter of the host cache keeps chunks as stored, the rest decoded chunks and bricks.
+                let encoded = Arc::new(EncodedCache::new(metrics.clone(), cache_bytes / 4));
                 let (attributes, levels, scan) =
-                    crate::foreign::open_foreign(path, metrics.clone(), group.attributes(), foreign)?;
-                let mut reader = StoreReader::assemble(path, attributes, levels, None, cache_bytes)?;
+                    crate::foreign::open_foreign(path, encoded, group.attributes(), foreign)?;
+                let mut reader = StoreReader::assemble(path, attributes, levels, None, cache_bytes - cache_bytes / 4)?;
+                reader.cache_bytes = cache_bytes;
                 reader.metrics = Some(metrics);
                 if let Some(stored) = scan {
                     reader.scan_value_range(&stored, foreign.progress.unwrap_or(&|_, _| {}))?;
@@ -384,10 +388,15 @@ impl StoreReader {
                 } else {
                     let got = if self.chunk_cache.caches(level) {
                         let corrupt = |e: zarrs::array::ArrayError| {
-                            StoreError::store(&self.path, format!("level {level}, samples {lower:?}..{read_upper:?}: {e}"))
+                            StoreError::store(
+                                &self.path,
+                                format!("level {level}, samples {lower:?}..{read_upper:?}: {e}"),
+                            )
                         };
                         let dtype = self.info.dtype;
-                        self.chunk_cache.read(level, array, *leading, *shape, dtype, lower, read_upper).map_err(corrupt)?
+                        self.chunk_cache
+                            .read(level, array, *leading, *shape, dtype, lower, read_upper)
+                            .map_err(corrupt)?
                     } else {
                         self.read_array(level, array, *leading, lower, read_upper)?
                     };

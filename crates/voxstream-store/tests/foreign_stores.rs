@@ -145,7 +145,8 @@ fn pyramid(level0: Level) -> Vec<Level> {
         let dims = finer.dims.map(|d| d.div_ceil(2));
         let level = Level::filled(dims, |x, y, z| {
             let mut sum = 0u32;
-            for (dx, dy, dz) in [(0, 0, 0), (1, 0, 0), (0, 1, 0), (1, 1, 0), (0, 0, 1), (1, 0, 1), (0, 1, 1), (1, 1, 1)] {
+            for (dx, dy, dz) in [(0, 0, 0), (1, 0, 0), (0, 1, 0), (1, 1, 0), (0, 0, 1), (1, 0, 1), (0, 1, 1), (1, 1, 1)]
+            {
                 sum += finer.samples[(((2 * z + dz) * fy + 2 * y + dy) * fx + 2 * x + dx) as usize] as u32;
             }
             (sum / 8) as u16
@@ -167,7 +168,8 @@ fn a_bright_outlier_only_at_level_zero_keeps_its_value() {
     let dir = scratch("outlier");
     // A stent-like scan: 100 everywhere, one strut voxel at 2000; the coarse levels average it away (to 100 + 1900/8
     // at level 1, and less above), so the coarsest level says nothing of it.
-    let mut levels = pyramid(Level::filled([128, 128, 128], |x, y, z| if [x, y, z] == [70, 61, 52] { 2000 } else { 100 }));
+    let mut levels =
+        pyramid(Level::filled([128, 128, 128], |x, y, z| if [x, y, z] == [70, 61, 52] { 2000 } else { 100 }));
     let coarsest = levels.last_mut().unwrap();
     coarsest.samples.iter_mut().for_each(|v| *v = 100);
     write_v2(&dir.join("stent.zarr"), &levels, &Layout::default());
@@ -233,8 +235,11 @@ fn chunks_larger_than_bricks_are_read_once() {
 fn axes_other_than_z_y_x_are_refused() {
     let dir = scratch("axes");
     let levels = pyramid(Level::filled([64, 48, 40], |x, _, _| x as u16));
-    let layout = Layout { axes: Some(json!([{"name": "x", "type": "space"}, {"name": "y", "type": "space"},
-                                          {"name": "z", "type": "space"}])), ..Layout::default() };
+    let layout = Layout {
+        axes: Some(json!([{"name": "x", "type": "space"}, {"name": "y", "type": "space"},
+                                          {"name": "z", "type": "space"}])),
+        ..Layout::default()
+    };
     write_v2(&dir.join("xyz.zarr"), &levels, &layout);
     let message = open_error(&dir.join("xyz.zarr"));
     assert!(message.contains("[x, y, z]") && message.contains("z, y, x"), "{message}");
