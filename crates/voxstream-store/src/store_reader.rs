@@ -507,7 +507,7 @@ impl StoreReader {
 
     /// Foreign stores: sets the value range to level 0's, read brick by brick over the `stored` chunks, chunk by
     /// chunk (through the caches, which keep what they can for the first frames), plus the fill value where a chunk
-    /// was never written. A level 0 with no finite sample gets `[0, 1]`.
+    /// was never written; bricks that cannot be read are left out. A level 0 with no finite sample gets `[0, 1]`.
     fn scan_value_range(&mut self, stored: &[Vec<u64>], progress: ScanProgress) -> Result<(), StoreError> {
         let LevelSource::Array { array, leading, .. } = &self.levels[0] else {
             return Err(StoreError::store(&self.path, "level 0 has no array"));
@@ -521,7 +521,11 @@ impl StoreReader {
         }
         let total = bricks.len() as u64;
         for (done, ijk) in bricks.into_iter().enumerate() {
-            fold_samples(&self.brick(0, ijk)?, &mut range);
+            // A brick that cannot be read is left out here: reading it fails again when it is wanted, and is
+            // reported then (its ancestor stands in), as for any unreadable brick.
+            if let Ok(samples) = self.brick(0, ijk) {
+                fold_samples(&samples, &mut range);
+            }
             progress(done as u64 + 1, total);
         }
         self.attributes.value_range = if range[0] <= range[1] { range } else { [0.0, 1.0] };
