@@ -78,6 +78,9 @@ pub(crate) fn open_foreign(
     let mut level_zero_chunks = Vec::new();
     for dataset in datasets {
         let name = dataset.get("path").and_then(Value::as_str).ok_or_else(|| bad("a dataset has no path".into()))?;
+        if name.split(['/', '\\']).any(|part| part == "..") {
+            return Err(bad(format!("dataset path '{name}' leaves the store (it holds '..')")));
+        }
         let array = Array::open(readable.clone(), &format!("/{}", name.trim_start_matches('/')))
             .map_err(|e| bad(format!("dataset '{name}': {e}")))?;
         let shape = array.shape().to_vec();

@@ -280,3 +280,15 @@ fn a_separator_that_does_not_match_the_files_is_refused() {
         assert_eq!(reader.read_region(0, [10, 20, 30], [1, 1, 1]).unwrap(), [7.0]);
     }
 }
+
+#[test]
+fn a_dataset_path_leaving_the_store_is_refused() {
+    let dir = scratch("escape");
+    let levels = pyramid(Level::filled([64, 64, 64], |_, _, _| 7));
+    write_v2(&dir.join("inner/image.zarr"), &levels, &Layout::default());
+    let attributes = dir.join("inner/image.zarr/.zattrs");
+    let text = std::fs::read_to_string(&attributes).unwrap().replace(r#""path":"0""#, r#""path":"../image.zarr/0""#);
+    std::fs::write(&attributes, text).unwrap();
+    let message = open_error(&dir.join("inner/image.zarr"));
+    assert!(message.contains("leaves the store"), "{message}");
+}
