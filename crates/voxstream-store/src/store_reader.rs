@@ -6,7 +6,10 @@
 //! Reads go brick by brick (one inner chunk of a shard: the shard index, then only that chunk's bytes) through a
 //! host-side LRU cache of decoded bricks (Reichl's host cache, seed 004 ch. 4). A brick's one-voxel border comes from
 //! up to 26 neighbours, which the rays usually need next anyway, so the cache turns border reads into hits. The
-//! cache's size is part of the memory budget (see `voxstream render --budget-mb`).
+//! cache's size is part of the memory budget (see `voxstream render --budget-mb`). Foreign images whose chunks do
+//! not tile the bricks also keep decoded chunks ([`crate::chunk_cache`]) and chunks as stored
+//! ([`crate::encoded_cache`]) within the same bytes, and get their value range from level 0 at open
+//! ([`crate::value_range`]).
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
