@@ -1,15 +1,17 @@
 //! Reading OME-Zarr images that voxstream did not write: Zarr v3 (OME-Zarr 0.5, `attributes.ome.multiscales`) and
 //! Zarr v2 (OME-Zarr ≤ 0.4, `multiscales` in `.zattrs`).
 //!
-//! The last three axes are taken as z, y, x (leading axes such as time or channel are read at index 0). Level 0 is
-//! the first dataset; spacing and origin come from its `scale` and `translation`. voxstream's own pyramid (each level
+//! The last three axes are read as z, y, x (leading axes such as time or channel are read at index 0); `axes`
+//! metadata saying otherwise, and `scale` or `translation` that are not one number per axis, are refused
+//! ([`crate::foreign_axes`]), as are arrays whose chunk files do not follow their declared key separator
+//! ([`crate::chunk_keys`]). Level 0 is the first dataset; spacing and origin come from its `scale` and `translation`. voxstream's own pyramid (each level
 //! halving level 0, rounding up, down to one 32³ brick) is mapped onto the datasets whose shapes match within one
 //! sample per axis (pyramids that round down); levels with no such dataset are averaged from the level below when a
 //! brick is read. Per-brick min/max are unknown: the oracle never claims a region constant, and the brick pool
 //! computes each brick's range when it arrives (for empty-space skipping). The value range used to normalise bricks
-//! and for the default transfer function is that of the coarsest dataset (of a central block of at most
-//! [`VALUE_RANGE_WINDOW`]³ samples when it is larger), widened by a quarter of its span on each side (clamped to the
-//! type's range); samples beyond it saturate.
+//! and for the default transfer function is the exact range of level 0, streamed once at open
+//! ([`crate::value_range`]), unless the caller gives one ([`ForeignOptions::value_range`]); samples beyond a given
+//! range saturate, and the reader counts them ([`crate::StoreReader::clipped_samples`]).
 //!
 //! Everything read from the metadata is checked before it sizes anything: dimensions, spacing and origin as for a
 //! voxstream store, and every dataset's declared chunks against [`crate::metadata_check::MAX_CHUNK_SAMPLES`].
@@ -18,22 +20,30 @@ use std::path::Path;
 use std::sync::Arc;
 
 use serde_json::Value;
-use zarrs::array::{Array, ArraySubset};
+use zarrs::array::Array;
 use zarrs::storage::ReadableStorageTraits;
 
-use crate::checked_store::CheckedStore;
+use crate::chunk_keys::stored_chunks;
 use crate::error::StoreError;
+use crate::foreign_axes::{check_axes, transform_xyz};
 use crate::layout::PyramidLayout;
-use crate::level_source::{retrieve_f32, LevelSource};
+use crate::level_source::LevelSource;
 use crate::metadata::StoreAttributes;
 use crate::metadata_check::{check_chunk_sizes, dtype_range, validate_attributes};
+use crate::value_range::ScanProgress;
 use crate::volume::DType;
 
 /// Brick edge used for foreign stores.
 pub const FOREIGN_BRICK_SIZE: u64 = 32;
 
-/// Edge of the largest block of the coarsest dataset read to estimate the value range.
-pub const VALUE_RANGE_WINDOW: u64 = 256;
+/// How to open a foreign image.
+#[derive(Clone, Copy, Default)]
+pub struct ForeignOptions<'a> {
+    /// The value range to normalise by (`[lo, hi]`), instead of level 0's, which is then not scanned.
+    pub value_range: Option<[f64; 2]>,
+    /// Told `(chunks done, chunks in all)` while level 0 is scanned for its value range.
+    pub progress: Option<ScanProgress<'a>>,
+}
 
 fn multiscales(attributes: &serde_json::Map<String, Value>) -> Option<&Value> {
     attributes
@@ -43,27 +53,18 @@ fn multiscales(attributes: &serde_json::Map<String, Value>) -> Option<&Value> {
         .and_then(|m| m.get(0))
 }
 
-fn transform(dataset: &Value, kind: &str) -> Option<Vec<f64>> {
-    dataset
-        .get("coordinateTransformations")?
-        .as_array()?
-        .iter()
-        .find(|t| t.get("type").and_then(Value::as_str) == Some(kind))
-        .and_then(|t| {
-            t.get(if kind == "scale" { "scale" } else { "translation" })?
-                .as_array()?
-                .iter()
-                .map(Value::as_f64)
-                .collect()
-        })
-}
+/// Level 0's chunks as stored on disk (their indices), to be scanned for the value range.
+pub(crate) type StoredChunks = Vec<Vec<u64>>;
 
-/// Opens a foreign OME-Zarr image: voxstream's attributes for it, and where each level's bricks come from.
+/// Opens a foreign OME-Zarr image: voxstream's attributes for it, where each level's bricks come from, and, unless
+/// `options` gives the value range, level 0's stored chunks, whose range the attributes' `value_range` (then
+/// `[0, 1]`) must be replaced with.
 pub(crate) fn open_foreign(
     path: &Path,
-    store: &Arc<CheckedStore>,
+    readable: Arc<dyn ReadableStorageTraits>,
     attributes: &serde_json::Map<String, Value>,
-) -> Result<(StoreAttributes, Vec<LevelSource>), StoreError> {
+    options: &ForeignOptions,
+) -> Result<(StoreAttributes, Vec<LevelSource>, Option<StoredChunks>), StoreError> {
     let bad = |m: String| StoreError::store(path, m);
     let ms = multiscales(attributes).ok_or_else(|| {
         bad("neither a voxstream store nor an OME-Zarr image (no 'voxstream' or 'multiscales' attributes)".into())
@@ -73,10 +74,13 @@ pub(crate) fn open_foreign(
         .and_then(Value::as_array)
         .filter(|d| !d.is_empty())
         .ok_or_else(|| bad("multiscales has no datasets".into()))?;
-    let readable: Arc<dyn ReadableStorageTraits> = store.clone();
     let mut arrays = Vec::new();
+    let mut level_zero_chunks = Vec::new();
     for dataset in datasets {
         let name = dataset.get("path").and_then(Value::as_str).ok_or_else(|| bad("a dataset has no path".into()))?;
+        if name.split(['/', '\\']).any(|part| part == "..") {
+            return Err(bad(format!("dataset path '{name}' leaves the store (it holds '..')")));
+        }
         let array = Array::open(readable.clone(), &format!("/{}", name.trim_start_matches('/')))
             .map_err(|e| bad(format!("dataset '{name}': {e}")))?;
         let shape = array.shape().to_vec();
@@ -88,6 +92,13 @@ pub(crate) fn open_foreign(
         }
         let metadata = serde_json::to_value(array.metadata()).unwrap_or(Value::Null);
         check_chunk_sizes(path, name, &metadata)?;
+        check_axes(ms, shape.len()).map_err(|m| bad(format!("dataset '{name}': {m}")))?;
+        let folder = path.join(name.trim_start_matches('/'));
+        let chunks =
+            stored_chunks(&folder, &metadata, shape.len()).map_err(|m| bad(format!("dataset '{name}' {m}")))?;
+        if arrays.is_empty() {
+            level_zero_chunks = chunks;
+        }
         arrays.push((name.to_string(), array));
     }
     let (_, first) = &arrays[0];
@@ -110,17 +121,12 @@ pub(crate) fn open_foreign(
         [shape[n - 1], shape[n - 2], shape[n - 3]]
     };
     let dims = last3(first.shape());
-    let tail3 = |v: Option<Vec<f64>>, default: f64| -> [f64; 3] {
-        match v {
-            Some(v) if v.len() >= 3 => {
-                let n = v.len();
-                [v[n - 1], v[n - 2], v[n - 3]]
-            }
-            _ => [default; 3],
-        }
+    let dimensions = first.shape().len();
+    let transform = |kind: &str| {
+        transform_xyz(&datasets[0], kind, dimensions).map_err(|m| bad(format!("dataset '{}': {m}", arrays[0].0)))
     };
-    let spacing = tail3(transform(&datasets[0], "scale"), 1.0);
-    let origin = tail3(transform(&datasets[0], "translation"), 0.0);
+    let spacing = transform("scale")?.unwrap_or([1.0; 3]);
+    let origin = transform("translation")?.unwrap_or([0.0; 3]);
 
     let info = crate::volume::VolumeInfo { dims, dtype, spacing, origin };
     info.validate(path)?;
@@ -148,29 +154,22 @@ pub(crate) fn open_foreign(
         }
     }
 
-    // The value range, from the coarsest dataset (read whole when small, else a central block of it).
-    let samples_of =
-        |a: &Array<dyn ReadableStorageTraits>| last3(a.shape()).iter().fold(1u64, |n, &d| n.saturating_mul(d));
-    let (_, coarsest) = arrays.iter().min_by_key(|(_, a)| samples_of(a)).unwrap_or(&arrays[0]);
-    let shape = coarsest.shape().to_vec();
-    let mut ranges: Vec<std::ops::Range<u64>> = shape[..shape.len() - 3].iter().map(|_| 0..1).collect();
-    ranges.extend(shape[shape.len() - 3..].iter().map(|&d| {
-        let take = d.min(VALUE_RANGE_WINDOW);
-        let start = (d - take) / 2;
-        start..start + take
-    }));
-    let subset = ArraySubset::new_with_ranges(&ranges);
-    let read_err = |e: zarrs::array::ArrayError| bad(format!("coarsest dataset: {e}"));
-    let values = retrieve_f32(coarsest, &subset, dtype).map_err(read_err)?;
-    let (lo, hi) = values
-        .iter()
-        .filter(|v| v.is_finite())
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| (lo.min(v as f64), hi.max(v as f64)));
-    let (lo, hi) = if lo.is_finite() { (lo, hi) } else { (0.0, 1.0) };
-    let margin = (hi - lo).max(1e-6) * 0.25;
-    let [type_lo, type_hi] = dtype_range(dtype);
-    let value_range = [(lo - margin).max(type_lo), (hi + margin).min(type_hi)];
+    let (value_range, scan) = match options.value_range {
+        Some([lo, hi]) if !(lo < hi && lo >= dtype_range(dtype)[0] && hi <= dtype_range(dtype)[1]) => {
+            let [type_lo, type_hi] = dtype_range(dtype);
+            return Err(StoreError::Unsupported {
+                path: path.into(),
+                message: format!(
+                    "the value range given, {lo} to {hi}, is not an increasing range within what {} samples hold \
+                     ({type_lo} to {type_hi})",
+                    dtype.name()
+                ),
+            });
+        }
+        Some(range) => (range, None),
+        None => ([0.0, 1.0], Some(level_zero_chunks)),
+    };
     let attributes = StoreAttributes::new(&info, &layout, value_range, true);
     validate_attributes(path, &attributes)?;
-    Ok((attributes, levels))
+    Ok((attributes, levels, scan))
 }

@@ -13,8 +13,12 @@
 //!   Reichl's streaming supplier, seed 004 ch. 4).
 
 pub mod checked_store;
+pub mod chunk_cache;
+pub mod chunk_keys;
+pub mod encoded_cache;
 pub mod error;
 pub mod foreign;
+pub mod foreign_axes;
 pub mod formats;
 pub mod import;
 pub mod layout;
@@ -27,6 +31,7 @@ pub mod store_producer;
 pub mod store_reader;
 pub mod strict_codecs;
 pub mod value_histogram;
+pub mod value_range;
 pub mod volume;
 
 pub use error::StoreError;

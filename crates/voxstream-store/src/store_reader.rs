@@ -6,7 +6,10 @@
 //! Reads go brick by brick (one inner chunk of a shard: the shard index, then only that chunk's bytes) through a
 //! host-side LRU cache of decoded bricks (Reichl's host cache, seed 004 ch. 4). A brick's one-voxel border comes from
 //! up to 26 neighbours, which the rays usually need next anyway, so the cache turns border reads into hits. The
-//! cache's size is part of the memory budget (see `voxstream render --budget-mb`).
+//! cache's size is part of the memory budget (see `voxstream render --budget-mb`). Foreign images whose chunks do
+//! not tile the bricks also keep decoded chunks ([`crate::chunk_cache`]) and chunks as stored
+//! ([`crate::encoded_cache`]) within the same bytes, and get their value range from level 0 at open
+//! ([`crate::value_range`]).
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -17,15 +20,20 @@ use std::sync::Mutex;
 use lru::LruCache;
 use zarrs::array::{Array, ArraySubset};
 use zarrs::group::Group;
+use zarrs::storage::storage_adapter::performance_metrics::PerformanceMetricsStorageAdapter;
 use zarrs::storage::ReadableStorageTraits;
 
 use crate::checked_store::{zstd_encoded_bound, CheckedStore};
+use crate::chunk_cache::ChunkCache;
+use crate::encoded_cache::EncodedCache;
 use crate::error::StoreError;
+use crate::foreign::ForeignOptions;
 use crate::import::{aside_paths, partial_path};
 use crate::layout::PyramidLayout;
 use crate::level_source::{retrieve_f32, LevelSource};
 use crate::metadata::{StoreAttributes, MINMAX_GROUP};
 use crate::metadata_check::{check_chunk_sizes, validate_attributes};
+use crate::value_range::{bricks_over_stored_chunks, fold_samples, unwritten_fill_value, ScanProgress, EMPTY_RANGE};
 use crate::volume::VolumeInfo;
 
 /// Extends `data` (dims `have`, x fastest) to dims `want` by repeating its last samples.
@@ -142,6 +150,12 @@ pub struct StoreReader {
     /// Decoded bricks (inner chunks) by level and brick index, least recently used first out.
     brick_cache: Mutex<LruCache<(usize, [u64; 3]), Arc<Vec<f32>>>>,
     cache_bytes: u64,
+    /// Decoded chunks of foreign arrays whose chunks do not tile the bricks (a share of `cache_bytes`).
+    chunk_cache: ChunkCache,
+    /// Counts the bytes the level arrays read from the storage.
+    metrics: Option<Arc<PerformanceMetricsStorageAdapter<CheckedStore>>>,
+    /// Samples read from a foreign store that lay outside its value range (they saturate).
+    clipped: std::sync::atomic::AtomicU64,
     /// A background prefetch is running.
     prefetching: std::sync::atomic::AtomicBool,
     /// Per level, per brick (x fastest): `[min, max]` of the full-resolution samples below it; `None` for foreign
@@ -158,6 +172,15 @@ impl StoreReader {
     /// Opens and validates the store at `path`; bricks read from disk are kept decoded in RAM up to `cache_bytes`,
     /// least recently used first out.
     pub fn open_with_cache(path: &Path, cache_bytes: u64) -> Result<StoreReader, StoreError> {
+        StoreReader::open_with_options(path, cache_bytes, &ForeignOptions::default())
+    }
+
+    /// As [`StoreReader::open_with_cache`]; a foreign (not voxstream-written) store is opened with `foreign`.
+    pub fn open_with_options(
+        path: &Path,
+        cache_bytes: u64,
+        foreign: &ForeignOptions,
+    ) -> Result<StoreReader, StoreError> {
         if !path.is_dir() {
             if let Some(aside) = aside_paths(path).first() {
                 return Err(StoreError::store(
@@ -195,8 +218,18 @@ impl StoreReader {
                 None => StoreError::store(path, format!("corrupt voxstream attributes: {e}")),
             })?,
             None => {
-                let (attributes, levels) = crate::foreign::open_foreign(path, &store, group.attributes())?;
-                return StoreReader::assemble(path, attributes, levels, None, cache_bytes);
+                // A quarter of the host cache keeps chunks as stored, the rest decoded chunks and bricks.
+                let metrics = Arc::new(PerformanceMetricsStorageAdapter::new(store.clone()));
+                let encoded = Arc::new(EncodedCache::new(metrics.clone(), cache_bytes / 4));
+                let (attributes, levels, scan) =
+                    crate::foreign::open_foreign(path, encoded, group.attributes(), foreign)?;
+                let mut reader = StoreReader::assemble(path, attributes, levels, None, cache_bytes - cache_bytes / 4)?;
+                reader.cache_bytes = cache_bytes;
+                reader.metrics = Some(metrics);
+                if let Some(stored) = scan {
+                    reader.scan_value_range(&stored, foreign.progress.unwrap_or(&|_, _| {}))?;
+                }
+                return Ok(reader);
             }
         };
         if !attributes.complete {
@@ -206,10 +239,11 @@ impl StoreReader {
         // A brick read from a shard is at most one zstd frame of brick_size³ samples and its CRC32C.
         let brick_bytes = layout.brick_size.pow(3) * info.dtype.size() as u64;
         let bricks_store = Arc::new(checked(zstd_encoded_bound(brick_bytes, BRICK_CHECKSUM_BYTES))?);
+        let metrics = Arc::new(PerformanceMetricsStorageAdapter::new(bricks_store));
         let mut levels = Vec::new();
         let mut minmax = Vec::new();
         for level in 0..layout.levels() {
-            let readable: Arc<dyn ReadableStorageTraits> = bricks_store.clone();
+            let readable: Arc<dyn ReadableStorageTraits> = metrics.clone();
             let array = Array::open(readable, &format!("/{level}"))
                 .map_err(|e| StoreError::store(path, format!("level {level}: {e}")))?;
             let [x, y, z] = layout.level_dims[level];
@@ -236,7 +270,9 @@ impl StoreReader {
                 ),
             ));
         }
-        StoreReader::assemble(path, attributes, levels, Some(minmax), cache_bytes)
+        let mut reader = StoreReader::assemble(path, attributes, levels, Some(minmax), cache_bytes)?;
+        reader.metrics = Some(metrics);
+        Ok(reader)
     }
 
     /// A reader over validated parts; `minmax` is `None` when the store has no per-brick ranges (foreign stores).
@@ -248,9 +284,14 @@ impl StoreReader {
         cache_bytes: u64,
     ) -> Result<StoreReader, StoreError> {
         let (info, layout) = validate_attributes(path, &attributes)?;
-        // The cache holds at most `cache_bytes` of decoded bricks (each at most brick_size³ f32), at least one.
+        // Foreign chunks that do not tile the bricks take half of `cache_bytes` for decoded chunks.
+        let chunk_cache = ChunkCache::new(&levels, attributes.brick_size, cache_bytes / 2);
+        let brick_cache_bytes = if chunk_cache.is_used() { cache_bytes - cache_bytes / 2 } else { cache_bytes };
+        let chunk_cache =
+            if chunk_cache.is_used() { chunk_cache } else { ChunkCache::new(&[], attributes.brick_size, 0) };
+        // The cache holds at most `brick_cache_bytes` of decoded bricks (each at most brick_size³ f32), at least one.
         let brick_bytes = attributes.brick_size.pow(3) * 4;
-        let capacity = NonZeroUsize::new((cache_bytes / brick_bytes) as usize).unwrap_or(NonZeroUsize::MIN);
+        let capacity = NonZeroUsize::new((brick_cache_bytes / brick_bytes) as usize).unwrap_or(NonZeroUsize::MIN);
         let brick_cache = Mutex::new(LruCache::new(capacity));
         Ok(StoreReader {
             path: path.into(),
@@ -260,6 +301,9 @@ impl StoreReader {
             levels,
             brick_cache,
             cache_bytes,
+            chunk_cache,
+            metrics: None,
+            clipped: std::sync::atomic::AtomicU64::new(0),
             prefetching: std::sync::atomic::AtomicBool::new(false),
             minmax,
         })
@@ -358,8 +402,22 @@ impl StoreReader {
                     let got = self.read_array(level, array, *leading, inner, [0, 1, 2].map(|a| inner[a] + 1))?;
                     vec![got[0]; ((upper[0] - lower[0]) * (upper[1] - lower[1]) * (upper[2] - lower[2])) as usize]
                 } else {
-                    let got = self.read_array(level, array, *leading, lower, read_upper)?;
+                    let got = if self.chunk_cache.caches(level) {
+                        let corrupt = |e: zarrs::array::ArrayError| {
+                            StoreError::store(
+                                &self.path,
+                                format!("level {level}, samples {lower:?}..{read_upper:?}: {e}"),
+                            )
+                        };
+                        let dtype = self.info.dtype;
+                        self.chunk_cache
+                            .read(level, array, *leading, *shape, dtype, lower, read_upper)
+                            .map_err(corrupt)?
+                    } else {
+                        self.read_array(level, array, *leading, lower, read_upper)?
+                    };
                     self.check_brick(level, ijk, array, &got)?;
+                    self.count_clipped(&got);
                     pad_to(&got, [0, 1, 2].map(|a| read_upper[a] - lower[a]), [0, 1, 2].map(|a| upper[a] - lower[a]))
                 }
             }
@@ -468,6 +526,65 @@ impl StoreReader {
             }
             reader.prefetching.store(false, Ordering::Release);
         });
+    }
+
+    /// Foreign stores: sets the value range to level 0's, read brick by brick over the `stored` chunks, chunk by
+    /// chunk (through the caches, which keep what they can for the first frames), plus the fill value where a chunk
+    /// was never written; bricks that cannot be read are left out. A level 0 with no finite sample gets `[0, 1]`.
+    fn scan_value_range(&mut self, stored: &[Vec<u64>], progress: ScanProgress) -> Result<(), StoreError> {
+        let LevelSource::Array { array, leading, .. } = &self.levels[0] else {
+            return Err(StoreError::store(&self.path, "level 0 has no array"));
+        };
+        let failed = |e: zarrs::array::ArrayError| StoreError::store(&self.path, format!("level 0: {e}"));
+        let leading = *leading;
+        let bricks = bricks_over_stored_chunks(array, leading, stored, self.layout.brick_size).map_err(failed)?;
+        let mut range = EMPTY_RANGE;
+        if let Some(fill) = unwritten_fill_value(array, leading, self.info.dtype, stored) {
+            range = [fill, fill];
+        }
+        let total = bricks.len() as u64;
+        for (done, ijk) in bricks.into_iter().enumerate() {
+            // A brick that cannot be read is left out here: reading it fails again when it is wanted, and is
+            // reported then (its ancestor stands in), as for any unreadable brick.
+            if let Ok(samples) = self.brick(0, ijk) {
+                fold_samples(&samples, &mut range);
+            }
+            progress(done as u64 + 1, total);
+        }
+        self.attributes.value_range = if range[0] <= range[1] { range } else { [0.0, 1.0] };
+        validate_attributes(&self.path, &self.attributes)?;
+        // The bricks were read against the placeholder range.
+        self.clipped.store(0, std::sync::atomic::Ordering::Relaxed);
+        Ok(())
+    }
+
+    /// Foreign stores: counts the samples outside the value range (they saturate when normalised).
+    fn count_clipped(&self, samples: &[f32]) {
+        if self.minmax.is_some() {
+            return;
+        }
+        let [lo, hi] = self.attributes.value_range.map(|v| v as f32);
+        let outside = samples.iter().filter(|&&v| v < lo || v > hi).count() as u64;
+        if outside > 0 {
+            self.clipped.fetch_add(outside, std::sync::atomic::Ordering::Relaxed);
+        }
+    }
+
+    /// Samples read so far from a foreign store that lay outside its value range, so that they saturate (0 for a
+    /// range taken from level 0; more where `--value-range` or a coarse level written by another tool exceeds it).
+    pub fn clipped_samples(&self) -> u64 {
+        self.clipped.load(std::sync::atomic::Ordering::Relaxed)
+    }
+
+    /// Bytes the level arrays have read from the storage since the store was opened (chunk and shard bytes, as
+    /// stored: compressed).
+    pub fn storage_bytes_read(&self) -> u64 {
+        self.metrics.as_ref().map_or(0, |m| m.bytes_read() as u64)
+    }
+
+    /// Bytes of decoded foreign chunks held now (part of the host cache).
+    pub fn cached_chunk_bytes(&self) -> u64 {
+        self.chunk_cache.bytes()
     }
 
     /// Capacity of the host-side brick cache, bytes.

@@ -110,6 +110,9 @@ pub struct ViewArgs {
     /// Stores only: decode every level into RAM first (as `render --in-memory`).
     #[arg(long)]
     pub in_memory: bool,
+    /// Other tools' OME-Zarr images: normalise by this value range (as `render --value-range`).
+    #[arg(long, value_name = "LO,HI", value_parser = crate::store_open::parse_value_range, allow_hyphen_values = true)]
+    pub value_range: Option<[f64; 2]>,
     /// cpu: the CPU ray caster draws the frames; gpu: the GPU ray caster (wgpu on Vulkan, headless: the window
     /// only shows its image). The same flag and errors as `render --backend`.
     #[arg(long, value_enum, default_value_t = Backend::Cpu)]
@@ -277,6 +280,10 @@ pub struct RenderArgs {
     /// otherwise, and with --backend gpu, whose atlas is 16-bit) or 16 (always 16 bits, as before 8-bit bricks).
     #[arg(long, value_enum, default_value_t = BrickBits::Auto)]
     pub brick_bits: BrickBits,
+    /// Other tools' OME-Zarr images: normalise by this value range instead of level 0's (which is then not read
+    /// at open); samples beyond it are clipped, with a warning.
+    #[arg(long, value_name = "LO,HI", value_parser = crate::store_open::parse_value_range, allow_hyphen_values = true)]
+    pub value_range: Option<[f64; 2]>,
     /// Level-of-detail bias (positive = finer than one voxel per pixel).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub lod_bias: f64,
@@ -410,6 +417,9 @@ pub struct InfoArgs {
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
+    /// Other tools' OME-Zarr images: normalise by this value range (as `render --value-range`).
+    #[arg(long, value_name = "LO,HI", value_parser = crate::store_open::parse_value_range, allow_hyphen_values = true)]
+    pub value_range: Option<[f64; 2]>,
 }
 
 /// `voxstream bench`.

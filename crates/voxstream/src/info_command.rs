@@ -2,10 +2,10 @@
 
 use anyhow::Result;
 use serde::Serialize;
-use voxstream_store::StoreReader;
 
 use crate::cli::InfoArgs;
 use crate::source_path::{check_store_path, warn_about_leftovers};
+use crate::store_open::open_store;
 
 /// Bricks of one level.
 #[derive(Serialize)]
@@ -38,7 +38,7 @@ struct StoreInfo {
 /// Runs `voxstream info`.
 pub fn run(args: &InfoArgs) -> Result<()> {
     check_store_path(&args.store, "info")?;
-    let reader = StoreReader::open(&args.store)?;
+    let reader = open_store(&args.store, voxstream_store::store_reader::DEFAULT_CACHE_BYTES, args.value_range, false)?;
     warn_about_leftovers(&args.store);
     let layout = reader.layout();
     let attributes = reader.attributes();

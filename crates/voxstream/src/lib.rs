@@ -31,6 +31,7 @@ pub mod render_warnings;
 pub mod scenes;
 pub mod source_path;
 pub mod stats;
+pub mod store_open;
 pub mod trilinear_bound;
 #[cfg(feature = "viewer")]
 pub mod view_command;

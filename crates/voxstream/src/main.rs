@@ -100,6 +100,7 @@ fn unreachable_default() -> RenderArgs {
         step: 0.5,
         in_memory: false,
         brick_bits: voxstream::cli::BrickBits::Auto,
+        value_range: None,
         lod_bias: 0.0,
         colour_by_level: false,
         quiet: false,

@@ -29,6 +29,7 @@ use crate::render_warnings::{empty_image, transfer_function_mismatch};
 use crate::scenes::builtin;
 use crate::source_path::{check_store_path, missing_geometry_file, warn_about_leftovers};
 use crate::stats::RunStats;
+use crate::store_open::{clipped_warning, open_store};
 
 /// What `voxstream render` and `voxstream view` draw: a built-in scene, a store, or a mesh or particle file, with
 /// its defaults.
@@ -106,6 +107,10 @@ impl SourceUser for RenderToFiles {
 /// Opens `args.source` (a built-in scene, a mesh or particle file, or a store) with its defaults, and hands it to
 /// `user`.
 pub fn open_source(args: &RenderArgs, budget: &MemoryBudget, user: impl SourceUser) -> Result<()> {
+    let path = Path::new(&args.source);
+    if args.value_range.is_some() && (builtin(&args.source).is_some() || is_geometry_file_name(path)) {
+        bail!("--value-range applies to stores (other tools' OME-Zarr images); {} is not one", args.source);
+    }
     if let Some(scene) = builtin(&args.source) {
         let source = Source {
             name: scene.name.to_string(),
@@ -124,7 +129,6 @@ pub fn open_source(args: &RenderArgs, budget: &MemoryBudget, user: impl SourceUs
         check_geometry_flags(args, &source.name)?;
         return user.use_source(args, source, budget);
     }
-    let path = Path::new(&args.source);
     if path.is_file() && is_geometry_file_name(path) {
         let options = geometry_source::GeometryOptions {
             amplify: args.amplify,
@@ -163,7 +167,7 @@ pub fn open_source(args: &RenderArgs, budget: &MemoryBudget, user: impl SourceUs
     check_store_path(path, "render")?;
     check_geometry_flags(args, &args.source)?;
     let cache_bytes = budget.store_cache_bytes();
-    let reader = Arc::new(StoreReader::open_with_cache(path, cache_bytes)?);
+    let reader = Arc::new(open_store(path, cache_bytes, args.value_range, args.quiet)?);
     warn_about_leftovers(path);
     let attributes = reader.attributes().clone();
     let transfer_function = default_store_transfer_function(attributes.typical_range())?;
@@ -176,11 +180,19 @@ pub fn open_source(args: &RenderArgs, budget: &MemoryBudget, user: impl SourceUs
         let volume = Arc::new(InMemoryVolume::load(&reader)?);
         let producer = StoreProducer::new(volume)?.with_voxel_format(format);
         let source = store_source(args, &reader, producer, 0, transfer_function);
-        return user.use_source(args, source, budget);
+        let result = user.use_source(args, source, budget);
+        if let Some(warning) = clipped_warning(&reader) {
+            eprintln!("{warning}");
+        }
+        return result;
     }
     let producer = StoreProducer::new(reader.clone())?.with_voxel_format(format);
     let source = store_source(args, &reader, producer, cache_bytes, transfer_function);
-    user.use_source(args, source, budget)
+    let result = user.use_source(args, source, budget);
+    if let Some(warning) = clipped_warning(&reader) {
+        eprintln!("{warning}");
+    }
+    result
 }
 
 fn store_source<P>(

@@ -62,6 +62,7 @@ fn render_args(args: &ViewArgs) -> Result<RenderArgs> {
     render.smoothing_scale = args.smoothing_scale;
     render.particle_memory = args.particle_memory;
     render.in_memory = args.in_memory;
+    render.value_range = args.value_range;
     render.backend = args.backend;
     render.gpu_filter = args.gpu_filter;
     Ok(render)

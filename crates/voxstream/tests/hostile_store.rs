@@ -244,6 +244,33 @@ fn foreign_ome_zarr_metadata_is_checked_before_it_sizes_anything() {
     assert_refused(&dir, "chunks.zarr", &[]);
 }
 
+/// Foreign images take their value range from level 0 (issue 42 item 2); `--value-range` replaces it, and samples
+/// beyond it are clipped with a warning; the flag is refused where it cannot apply.
+#[test]
+fn foreign_value_range_comes_from_level_zero_or_the_flag() {
+    let dir = scratch("foreign-range");
+    import_ball(&dir, "base.zarr");
+    foreign_copy(&dir, "plain.zarr", |_, _| {});
+    let info = Command::new(env!("CARGO_BIN_EXE_voxstream")).args(["info", "plain.zarr"]).current_dir(&dir).output();
+    let info = String::from_utf8_lossy(&info.unwrap().stdout).into_owned();
+    assert!(info.contains("value range  0 to 3050"), "{info}");
+    let render = ["render", "plain.zarr", "--out", "p.png", "--width", "32", "--height", "32"];
+    let narrow = checked(&[&render[..], &["--value-range", "0,1000"]].concat(), &dir);
+    assert_eq!(narrow.code, 0, "{}", narrow.stderr);
+    assert!(narrow.stderr.contains("were clipped") && narrow.stderr.contains("--value-range"), "{}", narrow.stderr);
+    let wide = checked(&[&render[..], &["--value-range", "0,4000"]].concat(), &dir);
+    assert!(!wide.stderr.contains("clipped"), "{}", wide.stderr);
+    let reversed = checked(&[&render[..], &["--value-range", "1000,0"]].concat(), &dir);
+    assert!(reversed.code != 0 && reversed.stderr.contains("LO must be below HI"), "{}", reversed.stderr);
+    let beyond = checked(&["info", "plain.zarr", "--value-range", "0,70000"], &dir);
+    assert_eq!(beyond.code, 1, "{}", beyond.stderr);
+    assert!(beyond.stderr.contains("u16 samples hold"), "{}", beyond.stderr);
+    let native = checked(&["info", "base.zarr", "--value-range", "0,1000"], &dir);
+    assert_eq!(native.code, 1, "{}", native.stderr);
+    assert_eq!(native.stderr.trim_end().lines().count(), 1, "{}", native.stderr);
+    assert!(native.stderr.contains("voxstream store"), "{}", native.stderr);
+}
+
 #[test]
 fn missing_or_truncated_min_max_is_a_store_error_not_empty_space() {
     let dir = scratch("minmax");

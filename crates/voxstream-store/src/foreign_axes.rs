@@ -1,0 +1,94 @@
+//! A foreign OME-Zarr image's axes and coordinate transformations, checked before they are used: voxstream reads the
+//! last three array axes as z, y, x, so the `axes` metadata must say exactly that (leading axes being time or
+//! channel), and a `scale` or `translation` must hold one number per axis. Anything else is refused with one line
+//! naming what was found, never guessed (axes listed x, y, z were read transposed; a scale of strings became 1).
+
+use serde_json::Value;
+
+/// An axis' name from OME-NGFF 0.4+ (`{"name": "z", "type": "space"}`) or 0.3 (`"z"`), lower case.
+fn axis_name(axis: &Value) -> Option<String> {
+    axis.as_str().or_else(|| axis.get("name").and_then(Value::as_str)).map(str::to_ascii_lowercase)
+}
+
+/// Refuses `axes` (a multiscales entry's) unless they are `dimensions` axes, the last three z, y, x in that order and
+/// of type space (when typed), no leading one a space axis. Images without `axes` (OME-NGFF ≤ 0.2) read as before.
+pub(crate) fn check_axes(multiscale: &Value, dimensions: usize) -> Result<(), String> {
+    let Some(axes) = multiscale.get("axes") else {
+        return Ok(());
+    };
+    let Some(axes) = axes.as_array() else {
+        return Err(format!("multiscales 'axes' is {axes}, expected a list of axes"));
+    };
+    let names: Vec<String> = axes.iter().map(|a| axis_name(a).unwrap_or_else(|| format!("{a}"))).collect::<Vec<_>>();
+    let listed = names.join(", ");
+    if axes.len() != dimensions {
+        return Err(format!("multiscales axes [{listed}] are {} axes, but the arrays have {dimensions}", axes.len()));
+    }
+    let is_space = |a: &Value| a.get("type").and_then(Value::as_str).is_none_or(|t| t == "space");
+    let split = dimensions - 3;
+    let spatial_tail = names[split..] == ["z", "y", "x"] && axes[split..].iter().all(is_space);
+    let leading_space = names[..split].iter().zip(&axes[..split]).any(|(name, a)| {
+        ["x", "y", "z"].contains(&name.as_str()) || a.get("type").and_then(Value::as_str) == Some("space")
+    });
+    if !spatial_tail || leading_space {
+        return Err(format!(
+            "axes are [{listed}]: voxstream reads images whose last three axes are the space axes z, y, x in that \
+             order (leading axes time or channel); write the image with axes ordered z, y, x"
+        ));
+    }
+    Ok(())
+}
+
+/// The first `kind` ("scale" or "translation") transform of `dataset` as (x, y, z), `None` when it has none; a
+/// transform that is not `dimensions` numbers is refused.
+pub(crate) fn transform_xyz(dataset: &Value, kind: &str, dimensions: usize) -> Result<Option<[f64; 3]>, String> {
+    let Some(transforms) = dataset.get("coordinateTransformations") else {
+        return Ok(None);
+    };
+    let Some(transform) = transforms
+        .as_array()
+        .and_then(|list| list.iter().find(|t| t.get("type").and_then(Value::as_str) == Some(kind)))
+    else {
+        return Ok(None);
+    };
+    let values = transform.get(kind);
+    let numbers: Option<Vec<f64>> =
+        values.and_then(Value::as_array).and_then(|v| v.iter().map(Value::as_f64).collect());
+    match numbers {
+        Some(v) if v.len() == dimensions => Ok(Some([v[dimensions - 1], v[dimensions - 2], v[dimensions - 3]])),
+        _ => Err(format!(
+            "coordinateTransformations {kind} is {}, expected {dimensions} numbers (one per axis)",
+            values.map_or_else(|| "missing (a path to a file is not read)".to_string(), Value::to_string)
+        )),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    #[test]
+    fn axes_must_end_in_z_y_x() {
+        let ok = json!({"axes": [{"name": "c", "type": "channel"}, {"name": "z", "type": "space"},
+                                  {"name": "y", "type": "space"}, {"name": "x", "type": "space"}]});
+        assert_eq!(check_axes(&ok, 4), Ok(()));
+        assert_eq!(check_axes(&json!({"axes": ["t", "c", "z", "y", "x"]}), 5), Ok(()));
+        assert_eq!(check_axes(&json!({}), 3), Ok(()));
+        let transposed = check_axes(&json!({"axes": ["x", "y", "z"]}), 3).unwrap_err();
+        assert!(transposed.contains("[x, y, z]") && transposed.contains("z, y, x"), "{transposed}");
+        assert!(check_axes(&json!({"axes": ["z", "y", "x"]}), 4).unwrap_err().contains("3 axes"));
+        assert!(check_axes(&json!({"axes": ["z", "c", "y", "x"]}), 4).is_err());
+        assert!(check_axes(&json!({"axes": [{"name": "z", "type": "time"}, "y", "x"]}), 3).is_err());
+    }
+
+    #[test]
+    fn transforms_are_numbers_one_per_axis() {
+        let dataset = |scale: Value| json!({"coordinateTransformations": [{"type": "scale", "scale": scale}]});
+        assert_eq!(transform_xyz(&dataset(json!([3.0, 2.0, 1.0])), "scale", 3), Ok(Some([1.0, 2.0, 3.0])));
+        assert_eq!(transform_xyz(&dataset(json!([3.0, 2.0, 1.0])), "translation", 3), Ok(None));
+        let strings = transform_xyz(&dataset(json!(["a", "b", "c"])), "scale", 3).unwrap_err();
+        assert!(strings.contains("[\"a\",\"b\",\"c\"]") && strings.contains("3 numbers"), "{strings}");
+        assert!(transform_xyz(&dataset(json!([1.0, 1.0])), "scale", 3).is_err());
+    }
+}

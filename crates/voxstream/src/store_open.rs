@@ -1,0 +1,82 @@
+//! Opening a store for `render`, `view` and `info`: `--value-range` for other tools' OME-Zarr images, a progress bar
+//! while level 0 is scanned for its value range (when that takes a while), and the warning after a run that samples
+//! lay outside the range and were clipped.
+
+use std::path::Path;
+
+use anyhow::{bail, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use voxstream_store::foreign::ForeignOptions;
+use voxstream_store::StoreReader;
+
+/// Level-0 bricks above which the value-range scan shows a progress bar (2^15 bricks of 32³: 1 Gi samples).
+const SCAN_BAR_BRICKS: u64 = 1 << 15;
+
+/// Parses `--value-range LO,HI`: two finite numbers, LO below HI.
+pub fn parse_value_range(text: &str) -> Result<[f64; 2], String> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    let numbers: Option<Vec<f64>> = parts.iter().map(|p| p.parse::<f64>().ok().filter(|v| v.is_finite())).collect();
+    match numbers.as_deref() {
+        Some(&[lo, hi]) if lo < hi => Ok([lo, hi]),
+        Some(&[_, _]) => Err(format!("'{text}': LO must be below HI, e.g. --value-range 0,2000")),
+        _ => Err(format!("'{text}' is not LO,HI (two finite numbers, e.g. --value-range 0,2000)")),
+    }
+}
+
+/// Opens the store at `path` with a host cache of `cache_bytes`; `value_range` (`--value-range`) applies to foreign
+/// OME-Zarr images only (a voxstream store's range is exact). `quiet` hides the scan's progress bar.
+pub fn open_store(path: &Path, cache_bytes: u64, value_range: Option<[f64; 2]>, quiet: bool) -> Result<StoreReader> {
+    let bar = ProgressBar::hidden();
+    let show = |done: u64, total: u64| {
+        if done == 1 && total >= SCAN_BAR_BRICKS && !quiet {
+            bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
+            bar.set_style(
+                ProgressStyle::with_template("reading level 0 for its value range {bar:30} {pos}/{len} bricks ({eta})")
+                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
+            );
+            bar.set_length(total);
+        }
+        bar.set_position(done);
+    };
+    let options = ForeignOptions { value_range, progress: Some(&show) };
+    let reader = StoreReader::open_with_options(path, cache_bytes, &options)?;
+    bar.finish_and_clear();
+    if value_range.is_some() && reader.is_native() {
+        bail!(
+            "--value-range: {} is a voxstream store, whose value range is exact ({} to {}); the flag is for other \
+             tools' OME-Zarr images",
+            path.display(),
+            reader.attributes().value_range[0],
+            reader.attributes().value_range[1]
+        );
+    }
+    Ok(reader)
+}
+
+/// The warning after a run when samples read lay outside the value range (they saturated), else `None`.
+pub fn clipped_warning(reader: &StoreReader) -> Option<String> {
+    let clipped = reader.clipped_samples();
+    let [lo, hi] = reader.attributes().value_range;
+    (clipped > 0).then(|| {
+        format!(
+            "warning: {clipped} samples read from {} lay outside the value range {lo} to {hi} and were clipped; widen \
+             it with --value-range LO,HI",
+            reader.path().display()
+        )
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn value_ranges_parse_or_say_why_not() {
+        assert_eq!(parse_value_range("0,2000"), Ok([0.0, 2000.0]));
+        assert_eq!(parse_value_range("-1024, 3071.5"), Ok([-1024.0, 3071.5]));
+        assert!(parse_value_range("5,5").unwrap_err().contains("below"));
+        assert!(parse_value_range("0").unwrap_err().contains("LO,HI"));
+        assert!(parse_value_range("0,inf").is_err());
+        assert!(parse_value_range("a,b").is_err());
+    }
+}
