@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 use eframe::egui::{self, Color32, ColorImage, Key, TextureHandle, TextureOptions};
 use voxstream_render::{Camera, IsoSurface, RenderSettings, Shading, TransferFunction};
 
-use crate::files::{camera_json, load_transfer_function, save_png, transfer_function_json, write_atomically};
+use crate::files::{camera_json, load_transfer_function, save_png, transfer_function_json, write_output};
 use crate::histogram::SampledHistogram;
 use crate::orbit::OrbitCamera;
 use crate::render_worker::{RenderWorker, ShownFrame, ViewRequest, WorkerEvent};
@@ -439,7 +439,7 @@ impl ViewerApp {
             ui.add(egui::TextEdit::singleline(&mut self.camera_path).desired_width(150.0));
             if ui.button("camera").on_hover_text("for voxstream render --camera").clicked() {
                 let path = PathBuf::from(&self.camera_path);
-                if let Err(message) = write_atomically(&path, camera_json(&self.orbit.to_camera()).as_bytes()) {
+                if let Err(message) = write_output(&path, camera_json(&self.orbit.to_camera()).as_bytes()) {
                     self.message(message);
                 }
             }
@@ -605,9 +605,7 @@ impl ViewerApp {
     }
 
     fn save_tf(&mut self, path: &std::path::Path) {
-        if let Err(message) =
-            write_atomically(path, transfer_function_json(&self.editor.transfer_function()).as_bytes())
-        {
+        if let Err(message) = write_output(path, transfer_function_json(&self.editor.transfer_function()).as_bytes()) {
             self.message(message);
         }
     }
@@ -709,11 +707,10 @@ impl ViewerApp {
                 Err(message) => failure = Some(message),
             },
             ScriptCommand::SaveTf(path) => {
-                failure =
-                    write_atomically(&path, transfer_function_json(&self.editor.transfer_function()).as_bytes()).err()
+                failure = write_output(&path, transfer_function_json(&self.editor.transfer_function()).as_bytes()).err()
             }
             ScriptCommand::SaveCamera(path) => {
-                failure = write_atomically(&path, camera_json(&self.orbit.to_camera()).as_bytes()).err()
+                failure = write_output(&path, camera_json(&self.orbit.to_camera()).as_bytes()).err()
             }
             ScriptCommand::Phong(on) => self.settings.shading = if on { Shading::Phong } else { Shading::None },
             ScriptCommand::LodBias(bias) => self.settings.lod_bias = bias,
@@ -798,7 +795,7 @@ impl eframe::App for ViewerApp {
     fn on_exit(&mut self, _gl: Option<&eframe::glow::Context>) {
         if let Some(path) = &self.config.stats_path {
             let text = format!("{:#}\n", self.stats_json());
-            if let Err(message) = write_atomically(path, text.as_bytes()) {
+            if let Err(message) = write_output(path, text.as_bytes()) {
                 eprintln!("warning: {message}");
             }
         }

@@ -20,7 +20,7 @@ use crate::exit_status::IncompleteImage;
 use crate::geometry_source;
 use crate::iso_flags;
 use crate::memory::{bytes_read, peak_rss_bytes};
-use crate::output_file::write_atomically;
+use crate::output_file::{check_output, write_output};
 use crate::png_output::{numbered_path, write_png};
 use crate::popping_run::FrameRecorder;
 use crate::render_budget::{check_budget, plan_budget};
@@ -408,10 +408,10 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
         },
         None => vec![view],
     };
-    if let Some(parent) = args.out.parent().filter(|p| !p.as_os_str().is_empty()) {
-        if !parent.is_dir() {
-            bail!("output folder {} does not exist", parent.display());
-        }
+    // Before the work: a folder, a disk or a missing folder as an output is refused now, not after the render.
+    check_output(&if args.path.is_some() { numbered_path(&args.out, 0) } else { args.out.clone() }, "--out")?;
+    if let Some(path) = &args.stats {
+        check_output(path, "--stats")?;
     }
 
     let budget_bytes = budget.total_bytes();
@@ -533,7 +533,7 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
     }
     if let Some(path) = &args.stats {
         let text = serde_json::to_string_pretty(&stats)?;
-        write_atomically(path, |file| Ok(file.write_all(text.as_bytes())?))
+        write_output(path, |file| Ok(file.write_all(text.as_bytes())?))
             .with_context(|| format!("cannot write stats to {}", path.display()))?;
     }
     progress.finish(&summary_line(&written, args, &stats));

@@ -11,6 +11,7 @@ use voxstream_viewer::{run_viewer, Refinement, ViewerConfig};
 
 use crate::backend::open_renderer;
 use crate::cli::{Cli, Command, RefineArg, RenderArgs, Switch, ViewArgs};
+use crate::output_file::check_output;
 use crate::render_budget::{check_budget, plan_budget};
 use crate::render_command::{check_flags, open_source, prepare_view, Source, SourceUser};
 
@@ -19,10 +20,8 @@ pub fn run(args: &ViewArgs) -> Result<()> {
     let render_args = render_args(args)?;
     // `render`'s checks and messages (size, budget, requests per frame).
     check_flags(&render_args)?;
-    if let Some(parent) = args.stats.as_ref().and_then(|p| p.parent()).filter(|p| !p.as_os_str().is_empty()) {
-        if !parent.is_dir() {
-            bail!("--stats: folder {} does not exist", parent.display());
-        }
+    if let Some(path) = &args.stats {
+        check_output(path, "--stats")?;
     }
     // The script is checked before anything is opened: a typo on line 12 should not wait for a window.
     let script = match &args.script {
