@@ -22,6 +22,7 @@ pub mod store_producer;
 pub mod store_reader;
 pub mod value_histogram;
 pub mod volume;
+pub mod world_extent;
 
 pub use error::StoreError;
 pub use import::{import_volume, ImportOptions, ImportReport};

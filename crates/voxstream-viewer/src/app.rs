@@ -9,6 +9,7 @@
 
 use std::collections::VecDeque;
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
@@ -46,6 +47,9 @@ const WINDOW_SHOT_TIMEOUT: Duration = Duration::from_secs(30);
 
 /// Largest divisor of the render size while moving.
 const MAX_MOVING_DIVISOR: u32 = 8;
+
+/// Bricks that could not be read named on stderr, at most (as `render`; the count is in the stats and exit status).
+const MAX_REPORTED_FAILURES: usize = 20;
 
 /// Degrees of orbit per point dragged.
 const ORBIT_DEGREES_PER_POINT: f64 = 0.4;
@@ -120,6 +124,8 @@ pub struct ViewerApp {
     frame_times: VecDeque<(Instant, u64)>,
     script: Option<ScriptRun>,
     script_failure: Arc<Mutex<Option<String>>>,
+    /// Bricks that could not be read so far (the session reports each once), for the exit status.
+    failed_bricks: Arc<AtomicUsize>,
     opened: Instant,
     frame_log: Vec<FrameLog>,
     tf_path: String,
@@ -136,8 +142,14 @@ struct ScriptRun {
 }
 
 impl ViewerApp {
-    /// A window over `worker`; a failing script's message is left in `script_failure`.
-    pub fn new(worker: RenderWorker, config: ViewerConfig, script_failure: Arc<Mutex<Option<String>>>) -> ViewerApp {
+    /// A window over `worker`; a failing script's message is left in `script_failure`, the count of bricks that
+    /// could not be read in `failed_bricks`.
+    pub fn new(
+        worker: RenderWorker,
+        config: ViewerConfig,
+        script_failure: Arc<Mutex<Option<String>>>,
+        failed_bricks: Arc<AtomicUsize>,
+    ) -> ViewerApp {
         let script = config.script.clone().map(|script| ScriptRun {
             script,
             next: 0,
@@ -166,6 +178,7 @@ impl ViewerApp {
             frame_times: VecDeque::new(),
             script,
             script_failure,
+            failed_bricks,
             opened: Instant::now(),
             frame_log: Vec::new(),
             tf_path: "transfer-function.json".into(),
@@ -250,6 +263,13 @@ impl ViewerApp {
                             // Twice the edge is four times the pixels (and measured frames grow by more: a larger
                             // image also asks for finer data): grow only with room for twice that.
                             self.moving_divisor = (self.moving_divisor / 2).max(2);
+                        }
+                    }
+                    for failure in &frame.failures {
+                        // On stderr too, as `render` reports them (the first 20), since they set the exit status.
+                        let before = self.failed_bricks.fetch_add(1, Ordering::Relaxed);
+                        if before < MAX_REPORTED_FAILURES {
+                            eprintln!("warning: {failure}; drawing its coarser ancestor instead");
                         }
                     }
                     if !frame.failures.is_empty() {
@@ -780,6 +800,7 @@ impl ViewerApp {
             .collect();
         serde_json::json!({
             "renderer": self.config.renderer,
+            "producer_failures": self.failed_bricks.load(Ordering::Relaxed),
             "render_size": full,
             "first_image_ms": self.frame_log.first().map(|f| f.at_ms),
             "first_final_ms": self.frame_log.iter().find(|f| f.is_final).map(|f| f.at_ms),

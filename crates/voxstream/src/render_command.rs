@@ -204,16 +204,19 @@ fn store_source<P>(
     }
 }
 
-/// `--amplify` and `--resolution` shape the trees of mesh and particle files only.
+/// `--amplify`, `--resolution`, `--attribute`, `--smoothing-scale` and `--particle-memory` shape the trees of mesh
+/// and particle files only: given with a scene or a store, they are refused, not ignored.
 fn check_geometry_flags(args: &RenderArgs, source: &str) -> Result<()> {
     let flags = [
-        ("--amplify", args.amplify.is_some()),
-        ("--resolution", args.resolution.is_some()),
-        ("--attribute", args.attribute),
+        ("--amplify", args.amplify.is_some(), "mesh and particle files"),
+        ("--resolution", args.resolution.is_some(), "mesh and particle files"),
+        ("--attribute", args.attribute, "mesh and particle files"),
+        ("--smoothing-scale", args.smoothing_scale.is_some(), "particle files"),
+        ("--particle-memory", args.particle_memory.is_some(), "particle files"),
     ];
-    for (flag, given) in flags {
+    for (flag, given, files) in flags {
         if given {
-            bail!("{flag} applies to mesh and particle files; {source} is not one");
+            bail!("{flag} applies to {files}; {source} is not one");
         }
     }
     Ok(())
@@ -369,6 +372,7 @@ pub fn prepare_view<P>(args: &RenderArgs, source: &Source<P>) -> Result<Prepared
         placement: source.placement,
         ..RenderSettings::default()
     };
+    check_placement(&source.name, &source.placement)?;
     settings.validate().context("invalid flags")?;
     let mut view = match &args.camera {
         Some(path) => read_camera_file(path)?,
@@ -386,8 +390,56 @@ pub fn prepare_view<P>(args: &RenderArgs, source: &Source<P>) -> Result<Prepared
     if let Some(fov) = args.fov {
         view.fov = fov;
     }
-    view.frame(args.width, args.height).context("invalid camera")?;
+    view.frame(args.width, args.height).with_context(|| format!("invalid camera ({})", camera_origin(args, source)))?;
     Ok(PreparedView { transfer_function, settings, camera: view, drawing_surfaces })
+}
+
+/// Where the camera came from, for its error: the flags that set parts of it over `--camera FILE` or the source's
+/// default view (e.g. "--eye 1e308,0,0 over sponge's default view").
+fn camera_origin<P>(args: &RenderArgs, source: &Source<P>) -> String {
+    let vector = |v: [f64; 3]| v.map(shown_number).join(",");
+    let flags: Vec<String> = [
+        args.eye.map(|v| format!("--eye {}", vector(v))),
+        args.target.map(|v| format!("--target {}", vector(v))),
+        args.up.map(|v| format!("--up {}", vector(v))),
+        args.fov.map(|f| format!("--fov {}", shown_number(f))),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    let base = match &args.camera {
+        Some(path) => format!("--camera {}", path.display()),
+        None => format!("{}'s default view", source.name),
+    };
+    if flags.is_empty() {
+        base
+    } else {
+        format!("{} over {base}", flags.join(", "))
+    }
+}
+
+/// A number as a user would type it: `1500`, `0.25`, but `1e30` rather than thirty-one digits.
+pub fn shown_number(value: f64) -> String {
+    if value == 0.0 || (1e-4..1e15).contains(&value.abs()) || !value.is_finite() {
+        format!("{value}")
+    } else {
+        format!("{value:e}")
+    }
+}
+
+/// The volume's place in the world is the source's (a store's spacing and origin, a mesh's bounds), not the flags':
+/// a bad one is blamed on the source.
+fn check_placement(name: &str, placement: &VolumePlacement) -> Result<()> {
+    let finite = placement.origin.iter().chain(&placement.scale).all(|v| v.is_finite());
+    if !(finite && placement.scale.iter().all(|s| *s > 0.0)) {
+        bail!(
+            "{name}: its place in the world is not finite (origin {:?}, size {:?}): its coordinates are too large \
+             (for a store, its spacing and origin: see `voxstream info`)",
+            placement.origin,
+            placement.scale
+        );
+    }
+    Ok(())
 }
 
 /// Whether interactive frames blend arriving bricks in (Thiele et al.): `--blending on`, on either backend.
