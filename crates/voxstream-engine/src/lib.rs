@@ -9,6 +9,8 @@
 //! - [`FrameRenderer`]: what the loop needs from a renderer (one pass over a `TreeView`, writing the feedback);
 //!   [`CpuRenderer`] is the CPU ray caster of `voxstream-render`; a GPU backend implements the same trait.
 //! - [`MemoryBudget`] / [`MemoryPlan`]: one budget split among the image, a store's host cache and the pools.
+//! - [`OutputFile`] / [`write_output`]: outputs written through a temporary file and a rename, or straight into a
+//!   FIFO or character device, never over a folder or a disk ([`output_target`]).
 //! - [`PoppingSummary`]: how much an interactive sequence pops and shows seams against the exact images (Thiele
 //!   et al.'s evaluation made a number).
 //!
@@ -41,6 +43,7 @@ pub mod error;
 pub mod frame_renderer;
 pub mod level_pace;
 pub mod memory_budget;
+pub mod output_file;
 pub mod popping;
 pub mod session;
 
@@ -50,5 +53,6 @@ pub use level_pace::level_rate;
 pub use memory_budget::{
     machine_memory_bytes, BudgetError, MemoryBudget, MemoryPlan, MAX_BUDGET_MB, STORE_CACHE_SHARE,
 };
+pub use output_file::{output_target, write_output, OutputError, OutputFile, OutputTarget};
 pub use popping::{frame_popping, seam_error, PoppingSummary, Rgb8};
 pub use session::{FrameResult, LoopLimits, Mode, PassProgress, Session, CONVERGED_REQUESTS_PER_RAY};

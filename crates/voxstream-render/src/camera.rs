@@ -44,6 +44,11 @@ pub struct CameraFrame {
 impl Camera {
     /// Vertical field of view, degrees, when none is given.
     pub const DEFAULT_FOV: f64 = 40.0;
+    /// Largest magnitude of an eye, target or up coordinate: squares of differences stay finite in `f64`.
+    pub const MAX_COORDINATE: f64 = 1e150;
+    /// Smallest distance from the eye to the target, as a fraction of the positions' largest coordinate: the view
+    /// direction is then known to about 1e-7 radians.
+    pub const MIN_RELATIVE_DISTANCE: f64 = 1e-9;
     /// Checks the camera and builds its frame for a `width × height` image.
     pub fn frame(&self, width: u32, height: u32) -> Result<CameraFrame, RenderError> {
         let eye = DVec3::from(self.eye);
@@ -55,14 +60,42 @@ impl Camera {
         if !(self.fov > 0.0 && self.fov < 180.0) {
             return Err(RenderError::DegenerateCamera(format!("fov must be in (0, 180) degrees, got {}", self.fov)));
         }
+        // Each check names the cause: lengths are squared, so vectors past the bound overflow and would otherwise
+        // show up as a zero view direction ("up is parallel") instead.
+        for (name, vector) in [("eye", self.eye), ("target", self.target), ("up", self.up)] {
+            if vector.iter().any(|v| v.abs() > Self::MAX_COORDINATE) {
+                return Err(RenderError::DegenerateCamera(format!(
+                    "{name} {vector:?} lies beyond ±{:e}, where distances overflow",
+                    Self::MAX_COORDINATE
+                )));
+            }
+        }
         let view = target - eye;
-        if view.length() <= 1e-300 {
+        let distance = view.length();
+        // The view direction is known to `MIN_RELATIVE_DISTANCE` only if the eye is that far from the target,
+        // relative to the positions' magnitude (f64 rounds them to about 1e-16 of it).
+        let magnitude = eye.abs().max_element().max(target.abs().max_element());
+        if distance <= 1e-300 {
             return Err(RenderError::DegenerateCamera("eye and target are the same point".into()));
+        }
+        if distance < Self::MIN_RELATIVE_DISTANCE * magnitude {
+            return Err(RenderError::DegenerateCamera(format!(
+                "the eye is only {distance:e} from the target, too close for positions of magnitude {magnitude:e} to \
+                 give the view direction (move the eye at least {:e} away)",
+                Self::MIN_RELATIVE_DISTANCE * magnitude
+            )));
+        }
+        if up.length() == 0.0 {
+            return Err(RenderError::DegenerateCamera("up is zero".into()));
         }
         let forward = view.normalize();
         let side = forward.cross(up);
-        if side.length() <= 1e-9 * up.length().max(1e-300) || up.length() == 0.0 {
-            return Err(RenderError::DegenerateCamera("up is zero or parallel to the view direction".into()));
+        if side.length() <= 1e-9 * up.length() {
+            return Err(RenderError::DegenerateCamera(format!(
+                "up {:?} is parallel to the view direction (eye to target {:?}); give an up across it",
+                self.up,
+                view.to_array()
+            )));
         }
         if width == 0 || height == 0 {
             return Err(RenderError::InvalidSetting(format!("image size must be positive, got {width}x{height}")));
@@ -125,5 +158,34 @@ mod tests {
         c.eye[0] = f64::NAN;
         assert!(c.frame(8, 8).is_err());
         assert!(camera().frame(0, 8).is_err());
+    }
+
+    /// Issue 41 item 10: a far eye (whose squared distance overflows) or an eye a hair from the target used to be
+    /// reported as "up is zero or parallel to the view direction".
+    #[test]
+    fn each_degenerate_camera_names_its_cause() {
+        let message = |edit: &dyn Fn(&mut Camera)| {
+            let mut c = camera();
+            edit(&mut c);
+            c.frame(8, 8).unwrap_err().to_string()
+        };
+        let far = message(&|c| c.eye = [1e308, 0.0, 0.0]);
+        assert!(far.contains("eye [1e308, 0.0, 0.0] lies beyond"), "{far}");
+        let far_target = message(&|c| c.target = [0.0, -1e200, 0.0]);
+        assert!(far_target.contains("target") && far_target.contains("beyond"), "{far_target}");
+        let close = message(&|c| {
+            c.target = [0.5, 0.5, 0.5];
+            c.eye = [0.5, 0.5, 0.5 + 1e-10];
+        });
+        assert!(close.contains("too close") && close.contains("from the target"), "{close}");
+        let parallel = message(&|c| c.up = [0.0, 0.0, 2.0]);
+        assert!(parallel.contains("parallel") && parallel.contains("[0.0, 0.0, 2.0]"), "{parallel}");
+        assert!(message(&|c| c.up = [0.0; 3]).ends_with("up is zero"));
+        // Far but representable, and close but resolvable, are fine.
+        let mut c = camera();
+        c.eye = [1e100, 0.0, 0.0];
+        assert!(c.frame(8, 8).is_ok());
+        c.eye = [0.0, 0.0, 1e-6];
+        assert!(c.frame(8, 8).is_ok());
     }
 }

@@ -33,6 +33,7 @@ pub mod strict_codecs;
 pub mod value_histogram;
 pub mod value_range;
 pub mod volume;
+pub mod world_extent;
 
 pub use error::StoreError;
 pub use import::{import_volume, ImportOptions, ImportReport};

@@ -13,6 +13,7 @@ use crate::error::StoreError;
 use crate::layout::{PyramidLayout, MAX_BRICK_SIZE, MIN_BRICK_SIZE};
 use crate::metadata::{StoreAttributes, FORMAT_VERSION};
 use crate::volume::{DType, VolumeInfo};
+use crate::world_extent::check_world_extent;
 
 /// Largest samples per axis a store may have.
 pub const MAX_DIM: u64 = 1 << 20;
@@ -62,6 +63,9 @@ pub fn validate_attributes(
     }
     if attributes.origin.iter().any(|o| !o.is_finite()) {
         return bad("origin", format!("{:?} must be finite", attributes.origin));
+    }
+    if let Err((field, problem)) = check_world_extent(dims, attributes.spacing, attributes.origin) {
+        return bad(field, problem);
     }
     let brick_size = attributes.brick_size;
     if !(MIN_BRICK_SIZE..=MAX_BRICK_SIZE).contains(&brick_size) || !brick_size.is_multiple_of(2) {
@@ -192,6 +196,8 @@ mod tests {
             ("spacing", Box::new(|a| a.spacing = [f64::NAN, 1.0, 1.0])),
             ("spacing", Box::new(|a| a.spacing = [0.0, 1.0, 1.0])),
             ("origin", Box::new(|a| a.origin = [f64::INFINITY, 0.0, 0.0])),
+            ("spacing", Box::new(|a| a.spacing = [1.0, 1e308, 1.0])),
+            ("origin", Box::new(|a| a.origin = [0.0, 0.0, 1e308])),
             ("brick_size", Box::new(|a| a.brick_size = 0)),
             ("brick_size", Box::new(|a| a.brick_size = 7)),
             ("brick_size", Box::new(|a| a.brick_size = 1 << 40)),

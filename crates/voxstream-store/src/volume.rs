@@ -62,7 +62,7 @@ pub struct VolumeInfo {
 }
 
 impl VolumeInfo {
-    /// Checks dimensions and spacing.
+    /// Checks dimensions, spacing and origin (the box they make: [`crate::world_extent`]).
     pub fn validate(&self, path: &std::path::Path) -> Result<(), StoreError> {
         if self.dims.iter().any(|&d| d == 0) {
             return Err(StoreError::format(path, format!("dimensions must be positive, got {:?}", self.dims)));
@@ -75,6 +75,9 @@ impl VolumeInfo {
         }
         if self.origin.iter().any(|o| !o.is_finite()) {
             return Err(StoreError::format(path, "origin must be finite"));
+        }
+        if let Err((field, problem)) = crate::world_extent::check_world_extent(self.dims, self.spacing, self.origin) {
+            return Err(StoreError::format(path, format!("{field} {problem}")));
         }
         Ok(())
     }

@@ -9,13 +9,14 @@
 
 use std::collections::VecDeque;
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
 use eframe::egui::{self, Color32, ColorImage, Key, TextureHandle, TextureOptions};
 use voxstream_render::{Camera, IsoSurface, RenderSettings, Shading, TransferFunction};
 
-use crate::files::{camera_json, load_transfer_function, save_png, transfer_function_json, write_atomically};
+use crate::files::{camera_json, load_transfer_function, save_png, transfer_function_json, write_output};
 use crate::histogram::SampledHistogram;
 use crate::orbit::OrbitCamera;
 use crate::render_worker::{RenderWorker, ShownFrame, ViewRequest, WorkerEvent};
@@ -46,6 +47,9 @@ const WINDOW_SHOT_TIMEOUT: Duration = Duration::from_secs(30);
 
 /// Largest divisor of the render size while moving.
 const MAX_MOVING_DIVISOR: u32 = 8;
+
+/// Bricks that could not be read named on stderr, at most (as `render`; the count is in the stats and exit status).
+const MAX_REPORTED_FAILURES: usize = 20;
 
 /// Degrees of orbit per point dragged.
 const ORBIT_DEGREES_PER_POINT: f64 = 0.4;
@@ -120,6 +124,8 @@ pub struct ViewerApp {
     frame_times: VecDeque<(Instant, u64)>,
     script: Option<ScriptRun>,
     script_failure: Arc<Mutex<Option<String>>>,
+    /// Bricks that could not be read so far (the session reports each once), for the exit status.
+    failed_bricks: Arc<AtomicUsize>,
     opened: Instant,
     frame_log: Vec<FrameLog>,
     tf_path: String,
@@ -136,8 +142,14 @@ struct ScriptRun {
 }
 
 impl ViewerApp {
-    /// A window over `worker`; a failing script's message is left in `script_failure`.
-    pub fn new(worker: RenderWorker, config: ViewerConfig, script_failure: Arc<Mutex<Option<String>>>) -> ViewerApp {
+    /// A window over `worker`; a failing script's message is left in `script_failure`, the count of bricks that
+    /// could not be read in `failed_bricks`.
+    pub fn new(
+        worker: RenderWorker,
+        config: ViewerConfig,
+        script_failure: Arc<Mutex<Option<String>>>,
+        failed_bricks: Arc<AtomicUsize>,
+    ) -> ViewerApp {
         let script = config.script.clone().map(|script| ScriptRun {
             script,
             next: 0,
@@ -166,6 +178,7 @@ impl ViewerApp {
             frame_times: VecDeque::new(),
             script,
             script_failure,
+            failed_bricks,
             opened: Instant::now(),
             frame_log: Vec::new(),
             tf_path: "transfer-function.json".into(),
@@ -250,6 +263,13 @@ impl ViewerApp {
                             // Twice the edge is four times the pixels (and measured frames grow by more: a larger
                             // image also asks for finer data): grow only with room for twice that.
                             self.moving_divisor = (self.moving_divisor / 2).max(2);
+                        }
+                    }
+                    for failure in &frame.failures {
+                        // On stderr too, as `render` reports them (the first 20), since they set the exit status.
+                        let before = self.failed_bricks.fetch_add(1, Ordering::Relaxed);
+                        if before < MAX_REPORTED_FAILURES {
+                            eprintln!("warning: {failure}; drawing its coarser ancestor instead");
                         }
                     }
                     if !frame.failures.is_empty() {
@@ -439,7 +459,7 @@ impl ViewerApp {
             ui.add(egui::TextEdit::singleline(&mut self.camera_path).desired_width(150.0));
             if ui.button("camera").on_hover_text("for voxstream render --camera").clicked() {
                 let path = PathBuf::from(&self.camera_path);
-                if let Err(message) = write_atomically(&path, camera_json(&self.orbit.to_camera()).as_bytes()) {
+                if let Err(message) = write_output(&path, camera_json(&self.orbit.to_camera()).as_bytes()) {
                     self.message(message);
                 }
             }
@@ -605,9 +625,7 @@ impl ViewerApp {
     }
 
     fn save_tf(&mut self, path: &std::path::Path) {
-        if let Err(message) =
-            write_atomically(path, transfer_function_json(&self.editor.transfer_function()).as_bytes())
-        {
+        if let Err(message) = write_output(path, transfer_function_json(&self.editor.transfer_function()).as_bytes()) {
             self.message(message);
         }
     }
@@ -709,11 +727,10 @@ impl ViewerApp {
                 Err(message) => failure = Some(message),
             },
             ScriptCommand::SaveTf(path) => {
-                failure =
-                    write_atomically(&path, transfer_function_json(&self.editor.transfer_function()).as_bytes()).err()
+                failure = write_output(&path, transfer_function_json(&self.editor.transfer_function()).as_bytes()).err()
             }
             ScriptCommand::SaveCamera(path) => {
-                failure = write_atomically(&path, camera_json(&self.orbit.to_camera()).as_bytes()).err()
+                failure = write_output(&path, camera_json(&self.orbit.to_camera()).as_bytes()).err()
             }
             ScriptCommand::Phong(on) => self.settings.shading = if on { Shading::Phong } else { Shading::None },
             ScriptCommand::LodBias(bias) => self.settings.lod_bias = bias,
@@ -783,6 +800,7 @@ impl ViewerApp {
             .collect();
         serde_json::json!({
             "renderer": self.config.renderer,
+            "producer_failures": self.failed_bricks.load(Ordering::Relaxed),
             "render_size": full,
             "first_image_ms": self.frame_log.first().map(|f| f.at_ms),
             "first_final_ms": self.frame_log.iter().find(|f| f.is_final).map(|f| f.at_ms),
@@ -798,7 +816,7 @@ impl eframe::App for ViewerApp {
     fn on_exit(&mut self, _gl: Option<&eframe::glow::Context>) {
         if let Some(path) = &self.config.stats_path {
             let text = format!("{:#}\n", self.stats_json());
-            if let Err(message) = write_atomically(path, text.as_bytes()) {
+            if let Err(message) = write_output(path, text.as_bytes()) {
                 eprintln!("warning: {message}");
             }
         }

@@ -1,30 +1,19 @@
 //! What the viewer saves and loads: screenshots (PNG), the camera (the JSON `voxstream render --camera` reads) and
 //! the transfer function (the JSON `voxstream render --tf` reads). Files are written to a temporary name beside the
-//! target and renamed into place, so a failed save never leaves a half-written file over a good one.
+//! target and renamed into place, so a failed save never leaves a half-written file over a good one; a FIFO or
+//! `/dev/null` gets the bytes directly, and a folder is refused (`voxstream_engine::output_file`).
 
-use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use voxstream_render::{Camera, TransferFunction};
 
 /// Largest transfer-function file read (bytes).
 const MAX_TF_BYTES: u64 = 16 << 20;
 
-/// Writes `bytes` to `path` through a temporary file beside it.
-pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), String> {
-    let mut name = path.file_name().map(|n| n.to_os_string()).unwrap_or_default();
-    name.push(format!(".{}.partial", std::process::id()));
-    let temporary: PathBuf = path.with_file_name(name);
-    let result = (|| -> std::io::Result<()> {
-        let mut file = std::fs::File::create(&temporary)?;
-        file.write_all(bytes)?;
-        file.sync_all()?;
-        std::fs::rename(&temporary, path)
-    })();
-    result.map_err(|e| {
-        let _ = std::fs::remove_file(&temporary);
-        format!("cannot write {}: {e}", path.display())
-    })
+/// Writes `bytes` to `path` ([`voxstream_engine::OutputFile`]): through a temporary file beside a regular file,
+/// straight into a FIFO or character device, never over a folder or a disk.
+pub fn write_output(path: &Path, bytes: &[u8]) -> Result<(), String> {
+    voxstream_engine::write_output(path, bytes).map_err(|e| e.to_string())
 }
 
 /// Saves an RGB image as PNG.
@@ -37,7 +26,7 @@ pub fn save_png(path: &Path, size: [u32; 2], rgb: &[u8]) -> Result<(), String> {
         let mut writer = encoder.write_header().map_err(|e| format!("cannot encode {}: {e}", path.display()))?;
         writer.write_image_data(rgb).map_err(|e| format!("cannot encode {}: {e}", path.display()))?;
     }
-    write_atomically(path, &bytes)
+    write_output(path, &bytes)
 }
 
 /// The camera as `{"eye": …, "target": …, "up": …, "fov": …}`.
@@ -87,8 +76,8 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("voxstream-viewer-files-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let target = dir.join("a.json");
-        write_atomically(&target, b"old").unwrap();
-        assert!(write_atomically(&dir.join("missing/b.json"), b"x").is_err());
+        write_output(&target, b"old").unwrap();
+        assert!(write_output(&dir.join("missing/b.json"), b"x").is_err());
         assert_eq!(std::fs::read(&target).unwrap(), b"old");
         assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
         std::fs::remove_dir_all(&dir).unwrap();

@@ -24,6 +24,7 @@ pub mod render_worker;
 pub mod script;
 pub mod tf_editor;
 
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 
 pub use app::{ViewerApp, ViewerConfig};
@@ -40,9 +41,17 @@ pub fn has_display() -> bool {
     ["DISPLAY", "WAYLAND_DISPLAY"].iter().any(|v| std::env::var_os(v).is_some_and(|s| !s.is_empty()))
 }
 
+/// How a viewer session ended, when no error did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ViewerSummary {
+    /// Bricks that could not be read (each reported once on stderr; coarser data stood in): `voxstream view` then
+    /// exits as `render` does for an incomplete image.
+    pub failed_bricks: usize,
+}
+
 /// Opens the viewer's window on `session` and returns when it is closed: `Err` when no window could be opened or a
 /// script failed.
-pub fn run_viewer<P, R>(session: Session<P, R>, config: ViewerConfig) -> Result<(), ViewerError>
+pub fn run_viewer<P, R>(session: Session<P, R>, config: ViewerConfig) -> Result<ViewerSummary, ViewerError>
 where
     P: Producer + 'static,
     R: FrameRenderer + Send + 'static,
@@ -52,6 +61,8 @@ where
     }
     let failure = Arc::new(Mutex::new(None));
     let app_failure = failure.clone();
+    let failed_bricks = Arc::new(AtomicUsize::new(0));
+    let app_failed_bricks = failed_bricks.clone();
     let size = [
         (config.settings.width as f32).clamp(320.0, 1600.0) + CONTROLS_WIDTH,
         (config.settings.height as f32).clamp(240.0, 1000.0) + 60.0,
@@ -70,13 +81,13 @@ where
             let config = config.take().ok_or("the viewer was started twice")?;
             let worker =
                 render_worker::RenderWorker::start(session, config.refinement, move || context.request_repaint())?;
-            Ok(Box::new(ViewerApp::new(worker, config, app_failure)))
+            Ok(Box::new(ViewerApp::new(worker, config, app_failure, app_failed_bricks)))
         }),
     )
     .map_err(|e| ViewerError::Window(e.to_string()))?;
     let failure = failure.lock().unwrap_or_else(PoisonError::into_inner).take();
     match failure {
         Some(message) => Err(ViewerError::Script(message)),
-        None => Ok(()),
+        None => Ok(ViewerSummary { failed_bricks: failed_bricks.load(Ordering::Relaxed) }),
     }
 }

@@ -2,6 +2,7 @@
 //! warm frame time once resident (frames/s, rays/s, samples/s, ns per sample and core next to a scalar trilinear
 //! bound measured in the same run), and frame times along an interactive camera path.
 
+use std::io::Write;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
@@ -13,6 +14,7 @@ use voxstream_render::RenderSettings;
 use crate::camera_path::orbit;
 use crate::cli::{BenchArgs, Switch};
 use crate::memory::peak_rss_bytes;
+use crate::output_file::{check_output, write_output};
 use crate::render_budget::{check_budget, plan_budget};
 use crate::scenes::{builtin, Scene, SCENE_NAMES};
 use crate::trilinear_bound::{lanes_trilinear_ns_per_sample, scalar_trilinear_ns_per_sample, BoundVoxel};
@@ -72,6 +74,12 @@ pub struct SceneFigures {
 /// Runs the benchmark and prints a Markdown table.
 pub fn run(args: &BenchArgs) -> Result<()> {
     crate::render_command::check_fade_frames(args.fade_frames)?;
+    if let Some(path) = &args.json {
+        check_output(path, "--json")?;
+    }
+    if let Some(path) = &args.strip {
+        check_output(path, "--strip")?;
+    }
     if args.popping {
         return crate::popping_bench::run(args);
     }
@@ -125,8 +133,8 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         );
     }
     if let Some(path) = &args.json {
-        std::fs::write(path, serde_json::to_string_pretty(&figures)?)
-            .with_context(|| format!("cannot write {}", path.display()))?;
+        let text = serde_json::to_string_pretty(&figures)?;
+        write_output(path, |file| Ok(file.write_all(text.as_bytes())?)).context("--json")?;
     }
     Ok(())
 }

@@ -5,6 +5,7 @@ use anyhow::{bail, Result};
 use voxstream_render::{IsoSurface, MAX_SURFACES};
 
 use crate::cli::{NormalsArg, RenderArgs};
+use crate::render_command::shown_number;
 
 /// Colours of the surfaces when `--iso-color` is not given, in order (linear RGB).
 pub const PALETTE: [[f32; 3]; MAX_SURFACES] = [
@@ -17,6 +18,23 @@ pub const PALETTE: [[f32; 3]; MAX_SURFACES] = [
     [0.5, 0.9, 0.9],
     [0.9, 0.9, 0.9],
 ];
+
+/// Checks one isovalue against the data's `value_range`; `given` names where it came from (`--iso`, or a viewer
+/// script's line and command), so `render --iso` and `view --script`'s `iso` refuse the same values alike.
+pub fn check_isovalue(value: f64, value_range: [f64; 2], given: &str) -> Result<()> {
+    let [lower, upper] = value_range;
+    let value_text = shown_number(value);
+    if !value.is_finite() {
+        bail!("{given} {value_text} is not a finite number");
+    }
+    if value <= lower || value > upper {
+        bail!(
+            "{given} {value_text} lies outside the data's values ({lower} to {upper}): no surface can appear there; pick a \
+             value between them (see `voxstream info`)"
+        );
+    }
+    Ok(())
+}
 
 /// The surfaces the flags ask for (empty: volume rendering), checked against the data's `value_range`.
 pub fn surfaces(args: &RenderArgs, value_range: [f64; 2]) -> Result<Vec<IsoSurface>> {
@@ -33,17 +51,8 @@ pub fn surfaces(args: &RenderArgs, value_range: [f64; 2]) -> Result<Vec<IsoSurfa
     if args.iso.len() > MAX_SURFACES {
         bail!("--iso names {} values; at most {MAX_SURFACES} surfaces are drawn at once", args.iso.len());
     }
-    let [lower, upper] = value_range;
     for &value in &args.iso {
-        if !value.is_finite() {
-            bail!("--iso {value} is not a finite number");
-        }
-        if value <= lower || value > upper {
-            bail!(
-                "--iso {value} lies outside the data's values ({lower} to {upper}): no surface can appear there; pick \
-                 a value between them (see `voxstream info`)"
-            );
-        }
+        check_isovalue(value, value_range, "--iso")?;
     }
     let colors = match args.iso_color.len() {
         0 => PALETTE[..args.iso.len()].to_vec(),

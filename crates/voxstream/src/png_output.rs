@@ -1,12 +1,12 @@
-//! Writing frames as PNG, through a uniquely named temporary file that is then renamed ([`crate::output_file`]),
-//! so an interrupted run never leaves a truncated image under the final name.
+//! Writing frames as PNG through [`crate::output_file`]: a uniquely named temporary file then renamed, so an
+//! interrupted run never leaves a truncated image under the final name; a FIFO or `/dev/null` gets the bytes directly.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use voxstream_render::Image;
 
-use crate::output_file::write_atomically;
+use crate::output_file::write_output;
 
 /// Writes `image` as 8-bit RGB PNG at `path`.
 pub fn write_png(image: &Image, path: &Path) -> Result<()> {
@@ -15,7 +15,7 @@ pub fn write_png(image: &Image, path: &Path) -> Result<()> {
 
 /// Writes `width × height` 8-bit RGB pixels (row-major, top row first) as a PNG at `path`.
 pub fn write_rgb8_png(pixels: &[u8], width: u32, height: u32, path: &Path) -> Result<()> {
-    write_atomically(path, |file| {
+    write_output(path, |file| {
         let mut encoder = png::Encoder::new(file, width, height);
         encoder.set_color(png::ColorType::Rgb);
         encoder.set_depth(png::BitDepth::Eight);

@@ -4,6 +4,7 @@
 //! working set lifted, to show what it adds), against the converged images at the same cameras; with the frame
 //! times, so the cost of blending shows next to what it buys.
 
+use std::io::Write;
 use std::sync::Arc;
 
 use anyhow::{Context, Result};
@@ -15,6 +16,7 @@ use voxstream_store::{StoreProducer, StoreReader};
 
 use crate::camera_path::{generated_path, PathKind};
 use crate::cli::BenchArgs;
+use crate::output_file::write_output;
 use crate::popping_run::{write_strip, FrameRecorder};
 use crate::render_budget::{check_budget, plan_budget};
 use crate::render_command::{default_store_transfer_function, store_camera, store_placement};
@@ -134,8 +136,8 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         );
     }
     if let Some(path) = &args.json {
-        std::fs::write(path, serde_json::to_string_pretty(&figures)?)
-            .with_context(|| format!("cannot write {}", path.display()))?;
+        let text = serde_json::to_string_pretty(&figures)?;
+        write_output(path, |file| Ok(file.write_all(text.as_bytes())?)).context("--json")?;
     }
     Ok(())
 }

@@ -20,7 +20,7 @@ use crate::exit_status::IncompleteImage;
 use crate::geometry_source;
 use crate::iso_flags;
 use crate::memory::{bytes_read, peak_rss_bytes};
-use crate::output_file::write_atomically;
+use crate::output_file::{check_output, write_output};
 use crate::png_output::{numbered_path, write_png};
 use crate::popping_run::FrameRecorder;
 use crate::render_budget::{check_budget, plan_budget};
@@ -218,16 +218,19 @@ fn store_source<P>(
     }
 }
 
-/// `--amplify` and `--resolution` shape the trees of mesh and particle files only.
+/// `--amplify`, `--resolution`, `--attribute`, `--smoothing-scale` and `--particle-memory` shape the trees of mesh
+/// and particle files only: given with a scene or a store, they are refused, not ignored.
 fn check_geometry_flags(args: &RenderArgs, source: &str) -> Result<()> {
     let flags = [
-        ("--amplify", args.amplify.is_some()),
-        ("--resolution", args.resolution.is_some()),
-        ("--attribute", args.attribute),
+        ("--amplify", args.amplify.is_some(), "mesh and particle files"),
+        ("--resolution", args.resolution.is_some(), "mesh and particle files"),
+        ("--attribute", args.attribute, "mesh and particle files"),
+        ("--smoothing-scale", args.smoothing_scale.is_some(), "particle files"),
+        ("--particle-memory", args.particle_memory.is_some(), "particle files"),
     ];
-    for (flag, given) in flags {
+    for (flag, given, files) in flags {
         if given {
-            bail!("{flag} applies to mesh and particle files; {source} is not one");
+            bail!("{flag} applies to {files}; {source} is not one");
         }
     }
     Ok(())
@@ -384,6 +387,7 @@ pub fn prepare_view<P>(args: &RenderArgs, source: &Source<P>) -> Result<Prepared
         placement: source.placement,
         ..RenderSettings::default()
     };
+    check_placement(&source.name, &source.placement)?;
     settings.validate().context("invalid flags")?;
     let mut view = match &args.camera {
         Some(path) => read_camera_file(path)?,
@@ -401,8 +405,56 @@ pub fn prepare_view<P>(args: &RenderArgs, source: &Source<P>) -> Result<Prepared
     if let Some(fov) = args.fov {
         view.fov = fov;
     }
-    view.frame(args.width, args.height).context("invalid camera")?;
+    view.frame(args.width, args.height).with_context(|| format!("invalid camera ({})", camera_origin(args, source)))?;
     Ok(PreparedView { transfer_function, settings, camera: view, drawing_surfaces })
+}
+
+/// Where the camera came from, for its error: the flags that set parts of it over `--camera FILE` or the source's
+/// default view (e.g. "--eye 1e308,0,0 over sponge's default view").
+fn camera_origin<P>(args: &RenderArgs, source: &Source<P>) -> String {
+    let vector = |v: [f64; 3]| v.map(shown_number).join(",");
+    let flags: Vec<String> = [
+        args.eye.map(|v| format!("--eye {}", vector(v))),
+        args.target.map(|v| format!("--target {}", vector(v))),
+        args.up.map(|v| format!("--up {}", vector(v))),
+        args.fov.map(|f| format!("--fov {}", shown_number(f))),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    let base = match &args.camera {
+        Some(path) => format!("--camera {}", path.display()),
+        None => format!("{}'s default view", source.name),
+    };
+    if flags.is_empty() {
+        base
+    } else {
+        format!("{} over {base}", flags.join(", "))
+    }
+}
+
+/// A number as a user would type it: `1500`, `0.25`, but `1e30` rather than thirty-one digits.
+pub fn shown_number(value: f64) -> String {
+    if value == 0.0 || (1e-4..1e15).contains(&value.abs()) || !value.is_finite() {
+        format!("{value}")
+    } else {
+        format!("{value:e}")
+    }
+}
+
+/// The volume's place in the world is the source's (a store's spacing and origin, a mesh's bounds), not the flags':
+/// a bad one is blamed on the source.
+fn check_placement(name: &str, placement: &VolumePlacement) -> Result<()> {
+    let finite = placement.origin.iter().chain(&placement.scale).all(|v| v.is_finite());
+    if !(finite && placement.scale.iter().all(|s| *s > 0.0)) {
+        bail!(
+            "{name}: its place in the world is not finite (origin {:?}, size {:?}): its coordinates are too large \
+             (for a store, its spacing and origin: see `voxstream info`)",
+            placement.origin,
+            placement.scale
+        );
+    }
+    Ok(())
 }
 
 /// Whether interactive frames blend arriving bricks in (Thiele et al.): `--blending on`, on either backend.
@@ -423,10 +475,10 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
         },
         None => vec![view],
     };
-    if let Some(parent) = args.out.parent().filter(|p| !p.as_os_str().is_empty()) {
-        if !parent.is_dir() {
-            bail!("output folder {} does not exist", parent.display());
-        }
+    // Before the work: a folder, a disk or a missing folder as an output is refused now, not after the render.
+    check_output(&if args.path.is_some() { numbered_path(&args.out, 0) } else { args.out.clone() }, "--out")?;
+    if let Some(path) = &args.stats {
+        check_output(path, "--stats")?;
     }
 
     let budget_bytes = budget.total_bytes();
@@ -548,7 +600,7 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
     }
     if let Some(path) = &args.stats {
         let text = serde_json::to_string_pretty(&stats)?;
-        write_atomically(path, |file| Ok(file.write_all(text.as_bytes())?))
+        write_output(path, |file| Ok(file.write_all(text.as_bytes())?))
             .with_context(|| format!("cannot write stats to {}", path.display()))?;
     }
     progress.finish(&summary_line(&written, args, &stats));

@@ -6,11 +6,14 @@ use clap::Parser;
 use voxstream_core::Producer;
 use voxstream_engine::{LoopLimits, MemoryBudget, Session};
 use voxstream_render::TransferFunction;
-use voxstream_viewer::script::Script;
+use voxstream_viewer::script::{Script, ScriptCommand};
 use voxstream_viewer::{run_viewer, Refinement, ViewerConfig};
 
 use crate::backend::open_renderer;
 use crate::cli::{Cli, Command, RefineArg, RenderArgs, Switch, ViewArgs};
+use crate::exit_status::IncompleteImage;
+use crate::iso_flags::check_isovalue;
+use crate::output_file::check_output;
 use crate::render_budget::{check_budget, plan_budget};
 use crate::render_command::{check_flags, open_source, prepare_view, Source, SourceUser};
 
@@ -19,10 +22,8 @@ pub fn run(args: &ViewArgs) -> Result<()> {
     let render_args = render_args(args)?;
     // `render`'s checks and messages (size, budget, requests per frame).
     check_flags(&render_args)?;
-    if let Some(parent) = args.stats.as_ref().and_then(|p| p.parent()).filter(|p| !p.as_os_str().is_empty()) {
-        if !parent.is_dir() {
-            bail!("--stats: folder {} does not exist", parent.display());
-        }
+    if let Some(path) = &args.stats {
+        check_output(path, "--stats")?;
     }
     // The script is checked before anything is opened: a typo on line 12 should not wait for a window.
     let script = match &args.script {
@@ -82,6 +83,10 @@ impl SourceUser for ShowInWindow {
         budget: &MemoryBudget,
     ) -> Result<()> {
         let prepared = prepare_view(args, &source)?;
+        // The script's isovalues meet render's --iso checks, now that the data's range is known.
+        if let Some(script) = &self.script {
+            check_script_isovalues(script, source.value_range)?;
+        }
         // After the source and the flags (their errors are `render`'s), before the pools are allocated.
         if !voxstream_viewer::has_display() {
             bail!(voxstream_viewer::ViewerError::NoDisplay);
@@ -116,8 +121,23 @@ impl SourceUser for ShowInWindow {
             refinement: self.refinement,
             renderer: session.renderer().describe(),
         };
-        run_viewer(session, config).context("voxstream view")
+        let summary = run_viewer(session, config).context("voxstream view")?;
+        // As `render`: bricks that could not be read make the run incomplete (exit 3).
+        if summary.failed_bricks > 0 {
+            return Err(IncompleteImage { failed_bricks: summary.failed_bricks }.into());
+        }
+        Ok(())
     }
+}
+
+/// Refuses a script's `iso VALUE` that `render --iso VALUE` would refuse on the same data.
+fn check_script_isovalues(script: &Script, value_range: [f64; 2]) -> Result<()> {
+    for (line, command) in &script.commands {
+        if let ScriptCommand::Iso(Some(value)) = command {
+            check_isovalue(*value, value_range, &format!("{} line {line}: iso", script.name))?;
+        }
+    }
+    Ok(())
 }
 
 /// Presets over the bulk of the values: a grey ramp, a warm "bone" ramp, and a cool-to-warm map.
