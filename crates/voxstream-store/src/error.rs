@@ -72,6 +72,9 @@ pub enum StoreError {
         /// What is wrong with it, and the fix where there is one.
         problem: String,
     },
+    /// A JSON file (store metadata) over the size cap, or not a regular file.
+    #[error(transparent)]
+    JsonFile(#[from] voxstream_core::json_limits::JsonFileError),
 }
 
 impl StoreError {

@@ -77,6 +77,7 @@ pub(crate) fn open_foreign(
     let mut arrays = Vec::new();
     for dataset in datasets {
         let name = dataset.get("path").and_then(Value::as_str).ok_or_else(|| bad("a dataset has no path".into()))?;
+        crate::metadata_files::check_node_metadata(path, name)?;
         let array = Array::open(readable.clone(), &format!("/{}", name.trim_start_matches('/')))
             .map_err(|e| bad(format!("dataset '{name}': {e}")))?;
         let shape = array.shape().to_vec();

@@ -17,6 +17,7 @@ pub mod layout;
 pub mod level_source;
 pub mod metadata;
 pub mod metadata_check;
+pub mod metadata_files;
 pub mod non_finite;
 pub mod store_producer;
 pub mod store_reader;

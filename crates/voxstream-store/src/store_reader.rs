@@ -26,6 +26,7 @@ use crate::layout::PyramidLayout;
 use crate::level_source::{retrieve_f32, LevelSource};
 use crate::metadata::{StoreAttributes, MINMAX_GROUP};
 use crate::metadata_check::{check_chunk_sizes, validate_attributes};
+use crate::metadata_files::check_node_metadata;
 use crate::volume::VolumeInfo;
 
 /// Extends `data` (dims `have`, x fastest) to dims `want` by repeating its last samples.
@@ -175,6 +176,7 @@ impl StoreReader {
             return Err(StoreError::store(path, "no such store (expected a folder holding zarr.json)"));
         }
         let store = Arc::new(FilesystemStore::new(path).map_err(|e| StoreError::store(path, e.to_string()))?);
+        check_node_metadata(path, "")?;
         let group = Group::open(store.clone(), "/")
             .map_err(|e| StoreError::store(path, format!("missing or corrupt zarr.json: {e}")))?;
         let attributes: StoreAttributes = match group.attributes().get("voxstream") {
@@ -198,6 +200,9 @@ impl StoreReader {
         let mut minmax = Vec::new();
         for level in 0..layout.levels() {
             let readable: Arc<dyn ReadableStorageTraits> = store.clone();
+            for node in [level.to_string(), MINMAX_GROUP.to_string(), format!("{MINMAX_GROUP}/{level}")] {
+                check_node_metadata(path, &node)?;
+            }
             let array = Array::open(readable, &format!("/{level}"))
                 .map_err(|e| StoreError::store(path, format!("level {level}: {e}")))?;
             let [x, y, z] = layout.level_dims[level];
