@@ -148,6 +148,7 @@ pub(crate) fn open_foreign(
             None => levels.push(LevelSource::Synthesized),
         }
     }
+    crate::synthesis_limit::check_synthesis(path, &layout, &levels)?;
 
     // The value range, from the coarsest dataset (read whole when small, else a central block of it).
     let samples_of =
