@@ -53,8 +53,8 @@ pub enum JsonFileError {
 /// Checks, without reading it, that the file at `path` (a `what`) is a regular file of at most [`MAX_JSON_BYTES`];
 /// returns its size. For files another reader (zarrs) opens after this check.
 pub fn check_json_file(path: &Path, what: &str) -> Result<u64, JsonFileError> {
-    let metadata = std::fs::metadata(path)
-        .map_err(|error| JsonFileError::Io { path: path.into(), what: what.into(), error })?;
+    let metadata =
+        std::fs::metadata(path).map_err(|error| JsonFileError::Io { path: path.into(), what: what.into(), error })?;
     if !metadata.is_file() {
         return Err(JsonFileError::NotAFile { path: path.into(), what: what.into() });
     }

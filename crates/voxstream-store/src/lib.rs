@@ -21,6 +21,7 @@ pub mod metadata_files;
 pub mod non_finite;
 pub mod store_producer;
 pub mod store_reader;
+pub mod stored_chunks;
 pub mod synthesis_limit;
 pub mod value_histogram;
 pub mod volume;

@@ -370,6 +370,11 @@ impl StoreReader {
         Ok(brick)
     }
 
+    /// Where the samples of `level` come from (`None` past the coarsest level).
+    pub(crate) fn level_source(&self, level: usize) -> Option<&LevelSource> {
+        self.levels.get(level)
+    }
+
     /// Whether some level is averaged from the finer one when read (a foreign store that lacks it), so that its
     /// samples may be fractions even for an integer sample type.
     pub fn has_synthesized_levels(&self) -> bool {
