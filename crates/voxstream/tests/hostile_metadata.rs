@@ -176,3 +176,75 @@ fn a_pyramid_holding_only_a_large_level_0_is_refused_naming_the_fix() {
     let out = run(&render_args("small.zarr"), &dir);
     assert_eq!(out.code, 0, "{}", out.stderr);
 }
+
+/// Writes a foreign OME-Zarr 0.4 (Zarr v2) image of one 64³ u8 dataset at `dir/name`, its one chunk stored.
+fn foreign_v2(dir: &Path, name: &str) -> PathBuf {
+    let store = dir.join(name);
+    let _ = std::fs::remove_dir_all(&store);
+    write_json(&store.join(".zgroup"), &json!({"zarr_format": 2}));
+    let axes: Vec<Value> = ["z", "y", "x"].iter().map(|a| json!({"name": a, "type": "space"})).collect();
+    write_json(
+        &store.join(".zattrs"),
+        &json!({"multiscales": [{"version": "0.4", "axes": axes, "datasets": [{"path": "0",
+            "coordinateTransformations": [{"type": "scale", "scale": [1.0, 1.0, 1.0]}]}]}]}),
+    );
+    write_json(
+        &store.join("0/.zarray"),
+        &json!({"zarr_format": 2, "shape": [64, 64, 64], "chunks": [64, 64, 64], "dtype": "|u1",
+            "compressor": null, "fill_value": 0, "order": "C", "filters": null, "dimension_separator": "/"}),
+    );
+    std::fs::create_dir_all(store.join("0/0/0")).unwrap();
+    std::fs::write(store.join("0/0/0/0"), vec![100u8; 64 * 64 * 64]).unwrap();
+    store
+}
+
+/// Pads the JSON file at `path` with trailing spaces (still valid JSON) to one byte over the 4 MiB cap.
+fn pad_over_cap(path: &Path) {
+    let mut text = std::fs::read(path).unwrap();
+    text.resize((4 << 20) + 1, b' ');
+    std::fs::write(path, text).unwrap();
+}
+
+#[test]
+fn json_inputs_over_the_cap_are_refused_naming_the_file_and_the_cap() {
+    let dir = scratch("json");
+    // Each store opens and renders as written.
+    foreign_v3(&dir, "v3.zarr", &cube_pyramid(64, 2), 64);
+    foreign_v2(&dir, "v2.zarr");
+    for store in ["v3.zarr", "v2.zarr"] {
+        assert_eq!(run(&["info", store], &dir).code, 0, "{store}");
+    }
+    // Store metadata one byte over the cap, for every file zarrs reads: refused before zarrs reads it.
+    let cases =
+        [("v3.zarr", "zarr.json"), ("v3.zarr", "1/zarr.json"), ("v2.zarr", ".zattrs"), ("v2.zarr", "0/.zarray")];
+    for (index, (base, file)) in cases.into_iter().enumerate() {
+        let name = format!("big{index}.zarr");
+        match base {
+            "v3.zarr" => foreign_v3(&dir, &name, &cube_pyramid(64, 2), 64),
+            _ => foreign_v2(&dir, &name),
+        };
+        pad_over_cap(&dir.join(&name).join(file));
+        for args in [render_args(&name), vec!["info", &name]] {
+            assert_refused(&args, &dir, &[&format!("{name}/{file}"), "4 MiB", "cap"]);
+        }
+    }
+    // A FIFO in place of zarr.json would block zarrs forever: refused as not a regular file.
+    let fifo = foreign_v3(&dir, "fifo.zarr", &cube_pyramid(64, 2), 64);
+    std::fs::remove_file(fifo.join("1/zarr.json")).unwrap();
+    let made = Command::new("mkfifo").arg(fifo.join("1/zarr.json")).status().expect("mkfifo");
+    assert!(made.success(), "mkfifo failed");
+    assert_refused(&["info", "fifo.zarr"], &dir, &["fifo.zarr/1/zarr.json", "not a regular file"]);
+    // A transfer function and a camera path over the cap (a valid one, padded).
+    std::fs::write(dir.join("tf.json"), r#"{"points": [[0, 0, 0, 0, 0], [100, 1, 1, 1, 0.5]]}"#).unwrap();
+    let mut with_tf = render_args("v2.zarr");
+    with_tf.extend(["--tf", "tf.json"]);
+    assert_eq!(run(&with_tf, &dir).code, 0, "the transfer function as written renders");
+    pad_over_cap(&dir.join("tf.json"));
+    assert_refused(&with_tf, &dir, &["tf.json", "transfer function", "4 MiB"]);
+    std::fs::write(dir.join("path.json"), r#"[{"eye": [3, 3, 3], "target": [0, 0, 0], "up": [0, 0, 1], "fov": 40}]"#)
+        .unwrap();
+    pad_over_cap(&dir.join("path.json"));
+    let mut with_path = render_args("v2.zarr");
+    with_path.extend(["--path", "path.json"]);
+    assert_refused(&with_path, &dir, &["path.json", "camera path", "4 MiB"]);
+}
