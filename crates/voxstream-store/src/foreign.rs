@@ -106,6 +106,9 @@ pub(crate) fn open_foreign(
         path: path.into(),
         message: "sample type (uint8, uint16, int16, float32 only)".into(),
     })?;
+    for (name, array) in &arrays {
+        crate::level_probe::check_level_dtype(path, name, array, dtype)?;
+    }
     let last3 = |shape: &[u64]| -> [u64; 3] {
         let n = shape.len();
         [shape[n - 1], shape[n - 2], shape[n - 3]]

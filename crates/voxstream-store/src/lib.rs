@@ -14,6 +14,7 @@ pub mod foreign;
 pub mod formats;
 pub mod import;
 pub mod layout;
+pub mod level_probe;
 pub mod level_source;
 pub mod metadata;
 pub mod metadata_check;

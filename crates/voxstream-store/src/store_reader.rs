@@ -23,6 +23,7 @@ use zarrs::storage::ReadableStorageTraits;
 use crate::error::StoreError;
 use crate::import::{aside_paths, partial_path};
 use crate::layout::PyramidLayout;
+use crate::level_probe::check_level_dtype;
 use crate::level_source::{retrieve_f32, LevelSource};
 use crate::metadata::{StoreAttributes, MINMAX_GROUP};
 use crate::metadata_check::{check_chunk_sizes, validate_attributes};
@@ -189,13 +190,15 @@ impl StoreReader {
             })?,
             None => {
                 let (attributes, levels) = crate::foreign::open_foreign(path, &store, group.attributes())?;
-                return StoreReader::assemble(path, attributes, levels, None, cache_bytes);
+                let reader = StoreReader::assemble(path, attributes, levels, None, cache_bytes)?;
+                reader.probe_levels()?;
+                return Ok(reader);
             }
         };
         if !attributes.complete {
             return Err(StoreError::store(path, "incomplete store: its import was interrupted; run the import again"));
         }
-        let (_, layout) = validate_attributes(path, &attributes)?;
+        let (volume, layout) = validate_attributes(path, &attributes)?;
         let mut levels = Vec::new();
         let mut minmax = Vec::new();
         for level in 0..layout.levels() {
@@ -213,6 +216,7 @@ impl StoreReader {
                 ));
             }
             check_chunk_sizes(path, &level.to_string(), &metadata_json(&array))?;
+            check_level_dtype(path, &level.to_string(), &array, volume.dtype)?;
             levels.push(LevelSource::Array { array, leading: 0, shape: [x, y, z] });
             minmax.push(read_minmax(path, &store, &layout, level, attributes.value_range == [0.0, 0.0])?);
         }
@@ -229,7 +233,9 @@ impl StoreReader {
                 ),
             ));
         }
-        StoreReader::assemble(path, attributes, levels, Some(minmax), cache_bytes)
+        let reader = StoreReader::assemble(path, attributes, levels, Some(minmax), cache_bytes)?;
+        reader.probe_levels()?;
+        Ok(reader)
     }
 
     /// A reader over validated parts; `minmax` is `None` when the store has no per-brick ranges (foreign stores).

@@ -248,3 +248,102 @@ fn json_inputs_over_the_cap_are_refused_naming_the_file_and_the_cap() {
     with_path.extend(["--path", "path.json"]);
     assert_refused(&with_path, &dir, &["path.json", "camera path", "4 MiB"]);
 }
+
+/// Imports a 48×40×36 u16 ball (bricks of 16: levels of 48, 24 and 12 samples; shards one brick deep in z) into
+/// `dir/NAME`.
+fn import_ball(dir: &Path, name: &str) {
+    let (nx, ny, nz) = (48usize, 40usize, 36usize);
+    let mut bytes = format!(
+        "NRRD0004\ntype: ushort\ndimension: 3\nsizes: {nx} {ny} {nz}\nspacings: 1 1 1\nencoding: raw\nendian: little\n\n"
+    )
+    .into_bytes();
+    for k in 0..nz {
+        for j in 0..ny {
+            for i in 0..nx {
+                let d = (((i as f64 - 24.0) / 18.0).powi(2)
+                    + ((j as f64 - 20.0) / 16.0).powi(2)
+                    + ((k as f64 - 18.0) / 14.0).powi(2))
+                .sqrt();
+                let v = if d < 1.0 { (3000.0 * (1.0 - d * d)) as u16 + 50 } else { 0 };
+                bytes.extend(v.to_le_bytes());
+            }
+        }
+    }
+    std::fs::write(dir.join("ball.nrrd"), bytes).unwrap();
+    let out = run(&["import", "ball.nrrd", "--out", name, "--brick-size", "16", "--quiet"], dir);
+    assert_eq!(out.code, 0, "import: {}", out.stderr);
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    let _ = std::fs::remove_dir_all(to);
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap().flatten() {
+        let target = to.join(entry.file_name());
+        if entry.path().is_dir() {
+            copy_dir(&entry.path(), &target);
+        } else {
+            std::fs::copy(entry.path(), &target).unwrap();
+        }
+    }
+}
+
+/// Copies `dir/base.zarr` to `dir/name` and edits the metadata of its level `level`.
+fn edited_level(dir: &Path, name: &str, level: usize, edit: &dyn Fn(&mut Value)) {
+    copy_dir(&dir.join("base.zarr"), &dir.join(name));
+    let path = dir.join(name).join(format!("{level}/zarr.json"));
+    let mut metadata: Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    edit(&mut metadata);
+    std::fs::write(&path, metadata.to_string()).unwrap();
+}
+
+#[test]
+fn info_refuses_level_arrays_that_do_not_decode_with_renders_message() {
+    let dir = scratch("levels");
+    import_ball(&dir, "base.zarr");
+    type Edit = fn(&mut Value);
+    let edits: [(&str, Edit, &str); 5] = [
+        ("dtype", |m| m["data_type"] = json!("uint8"), "holds uint8"),
+        (
+            "endian",
+            |m| m["codecs"][0]["configuration"]["codecs"][0]["configuration"]["endian"] = json!("big"),
+            "min/max",
+        ),
+        (
+            "codec",
+            |m| m["codecs"][0]["configuration"]["codecs"][1] = json!({"name": "gzip", "configuration": {"level": 5}}),
+            "gzip",
+        ),
+        ("inner", |m| m["codecs"][0]["configuration"]["chunk_shape"] = json!([8, 8, 8]), "does not decode"),
+        ("outer", |m| m["chunk_grid"]["configuration"]["chunk_shape"] = json!([32, 128, 128]), "does not decode"),
+    ];
+    for (what, edit, needle) in edits {
+        for level in [0, 1, 2] {
+            let name = format!("{what}{level}.zarr");
+            edited_level(&dir, &name, level, &edit);
+            let level_name = if what == "dtype" { format!("'{level}'") } else { format!("level {level}") };
+            let info = run(&["info", &name], &dir);
+            let render = run(&render_args(&name), &dir);
+            for (out, command) in [(&info, "info"), (&render, "render")] {
+                assert_eq!(out.code, 1, "{name}: {command} exit {}: {}", out.code, out.stderr);
+                let line = out.stderr.trim_end();
+                assert_eq!(line.lines().count(), 1, "{name}: {command}: not one line:\n{line}");
+                for n in [&name, &level_name, needle, "import the volume again"] {
+                    assert!(line.contains(n), "{name}: {command}: '{line}' lacks '{n}'");
+                }
+            }
+            assert_eq!(info.stderr, render.stderr, "{name}: info and render differ");
+        }
+    }
+    assert!(!dir.join("x.png").exists(), "a refused store rendered an image");
+    // Unedited, it opens.
+    assert_eq!(run(&["info", "base.zarr"], &dir).code, 0);
+    // A foreign image whose coarse dataset holds another sample type than level 0: refused by both, naming it.
+    let store = foreign_v3(&dir, "mixed.zarr", &cube_pyramid(64, 2), 64);
+    let path = store.join("1/zarr.json");
+    let mut metadata: Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    metadata["data_type"] = json!("float32");
+    std::fs::write(&path, metadata.to_string()).unwrap();
+    for args in [render_args("mixed.zarr"), vec!["info", "mixed.zarr"]] {
+        assert_refused(&args, &dir, &["mixed.zarr", "'1' holds float32", "u8"]);
+    }
+}
