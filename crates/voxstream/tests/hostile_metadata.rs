@@ -335,8 +335,18 @@ fn info_refuses_level_arrays_that_do_not_decode_with_renders_message() {
         }
     }
     assert!(!dir.join("x.png").exists(), "a refused store rendered an image");
-    // Unedited, it opens.
+    // Unedited, it opens; with one damaged shard it still opens (the brick is reported when rendered, exit 3); with
+    // every shard of level 0 damaged, the level decodes nowhere and is refused like an edit.
     assert_eq!(run(&["info", "base.zarr"], &dir).code, 0);
+    let shards = ["0/c/0/0/0", "0/c/1/0/0"];
+    copy_dir(&dir.join("base.zarr"), &dir.join("one.zarr"));
+    std::fs::write(dir.join("one.zarr").join(shards[1]), b"not a shard").unwrap();
+    assert_eq!(run(&["info", "one.zarr"], &dir).code, 0);
+    copy_dir(&dir.join("base.zarr"), &dir.join("all.zarr"));
+    for shard in shards {
+        std::fs::write(dir.join("all.zarr").join(shard), b"not a shard").unwrap();
+    }
+    assert_refused(&["info", "all.zarr"], &dir, &["all.zarr", "level 0 does not decode"]);
     // A foreign image whose coarse dataset holds another sample type than level 0: refused by both, naming it.
     let store = foreign_v3(&dir, "mixed.zarr", &cube_pyramid(64, 2), 64);
     let path = store.join("1/zarr.json");
