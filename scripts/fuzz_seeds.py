@@ -146,6 +146,24 @@ put("store_metadata", "voxstream", json.dumps({"zarr_format": 3, "node_type": "g
 put("store_metadata", "foreign-ome", json.dumps({"zarr_format": 3, "node_type": "group", "attributes": {"ome": {
     "version": "0.5", "multiscales": [{"axes": [{"name": a, "type": "space"} for a in "zyx"], "datasets": [
         {"path": "0", "coordinateTransformations": [{"type": "scale", "scale": [1, 1, 1]}]}]}]}}}))
+# foreign_metadata: a selector byte (bit 0: Zarr v2), then the group's document, dataset 0's and dataset 1's,
+# separated by NUL bytes (voxstream_fuzz::foreign_files).
+OME_AXES = [{"name": a, "type": "space"} for a in "zyx"]
+OME_DATASETS = [{"path": str(i), "coordinateTransformations": [{"type": "scale", "scale": [2 ** i] * 3}]}
+                for i in range(2)]
+V3_ARRAY = lambda edge: json.dumps({"zarr_format": 3, "node_type": "array", "shape": [edge] * 3,
+                                    "data_type": "uint8", "chunk_grid": {"name": "regular", "configuration": {
+                                        "chunk_shape": [16] * 3}},
+                                    "chunk_key_encoding": {"name": "default", "configuration": {"separator": "/"}},
+                                    "fill_value": 0, "codecs": [{"name": "bytes"}]})
+V2_ARRAY = lambda edge: json.dumps({"zarr_format": 2, "shape": [edge] * 3, "chunks": [16] * 3, "dtype": "|u1",
+                                    "compressor": None, "fill_value": 0, "order": "C", "filters": None})
+put("foreign_metadata", "v3", b"\x00" + b"\x00".join(s.encode() for s in [
+    json.dumps({"zarr_format": 3, "node_type": "group", "attributes": {"ome": {"version": "0.5", "multiscales": [
+        {"axes": OME_AXES, "datasets": OME_DATASETS}]}}}), V3_ARRAY(64), V3_ARRAY(32)]))
+put("foreign_metadata", "v2", b"\x01" + b"\x00".join(s.encode() for s in [
+    json.dumps({"multiscales": [{"version": "0.4", "axes": OME_AXES, "datasets": OME_DATASETS}]}), V2_ARRAY(64),
+    V2_ARRAY(32)]))
 with open(os.path.join(os.path.dirname(__file__), "..", "docs", "examples", "frog-tf.json"), "rb") as f:
     put("transfer_function", "frog", f.read())
 put("transfer_function", "paraview", json.dumps([{"Name": "Cool to Warm", "ColorSpace": "Diverging",

@@ -42,3 +42,46 @@ pub use shard_input::{edited_shard, read_shard_input as read_shard_input_in};
 pub fn read_shard_input(data: &[u8]) {
     let _ = read_shard_input_in(&scratch(), data);
 }
+
+/// The metadata files of a foreign image made from fuzz input: the first byte's low bit picks Zarr v3 (`zarr.json`
+/// for the group and each dataset) or v2 (`.zgroup` + `.zattrs` for the group, `.zarray` for each dataset); the
+/// rest is split at NUL bytes into the group's document, then dataset `0`'s and dataset `1`'s (as
+/// `crates/voxstream/tests/fuzz_regressions.rs` replays them).
+pub fn foreign_files(data: &[u8]) -> Vec<(String, Vec<u8>)> {
+    let Some((&selector, rest)) = data.split_first() else { return Vec::new() };
+    let mut documents = rest.splitn(3, |&b| b == 0);
+    let is_v2 = selector & 1 == 1;
+    let mut files = Vec::new();
+    if let Some(group) = documents.next() {
+        if is_v2 {
+            files.push((".zgroup".to_string(), br#"{"zarr_format": 2}"#.to_vec()));
+            files.push((".zattrs".to_string(), group.to_vec()));
+        } else {
+            files.push(("zarr.json".to_string(), group.to_vec()));
+        }
+    }
+    for (index, document) in documents.enumerate() {
+        let name = if is_v2 { ".zarray" } else { "zarr.json" };
+        files.push((format!("{index}/{name}"), document.to_vec()));
+    }
+    files
+}
+
+/// Writes [`foreign_files`] of `data` into a fresh store and opens it as `voxstream info` and `render` do (which
+/// reads a brick of each level), then counts each level's stored chunks as `info` does.
+pub fn open_foreign_bytes(data: &[u8]) {
+    let store = scratch().join("foreign.zarr");
+    let _ = std::fs::remove_dir_all(&store);
+    for (name, bytes) in foreign_files(data) {
+        let path = store.join(name);
+        if path.parent().is_some_and(|p| std::fs::create_dir_all(p).is_err()) || std::fs::write(&path, bytes).is_err()
+        {
+            return;
+        }
+    }
+    if let Ok(reader) = voxstream_store::StoreReader::open(&store) {
+        for level in 0..reader.layout().levels() {
+            let _ = reader.stored_chunks(level);
+        }
+    }
+}

@@ -15,6 +15,7 @@
 //! - [`TreeView`]: the immutable flat view renderers read during a frame.
 //! - [`LevelBlending`]: Thiele et al.'s fade-in of arriving bricks and caps towards coarser neighbours.
 //! - [`restriction`]: Thiele et al.'s restricted working set (neighbouring data at most one level apart).
+//! - [`json_limits`]: the size cap on every JSON file read (store metadata, transfer functions, cameras).
 //!
 //! ```
 //! use voxstream_core::{CacheManager, NodeContent, NodeKey, Produced, Producer, ProduceError, ServeOptions, TreeShape};
@@ -45,6 +46,7 @@ pub mod budget;
 pub mod cache_manager;
 pub mod error;
 pub mod feedback;
+pub mod json_limits;
 pub mod key;
 pub mod level_blending;
 pub mod lru;

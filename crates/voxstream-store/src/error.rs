@@ -84,6 +84,9 @@ pub enum StoreError {
         /// The process holding the lock, as its lock file says.
         pid: Option<u32>,
     },
+    /// A JSON file (store metadata) over the size cap, or not a regular file.
+    #[error(transparent)]
+    JsonFile(#[from] voxstream_core::json_limits::JsonFileError),
 }
 
 impl StoreError {

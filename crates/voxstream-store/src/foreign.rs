@@ -81,6 +81,7 @@ pub(crate) fn open_foreign(
         if name.split(['/', '\\']).any(|part| part == "..") {
             return Err(bad(format!("dataset path '{name}' leaves the store (it holds '..')")));
         }
+        crate::metadata_files::check_node_metadata(path, name)?;
         let array = Array::open(readable.clone(), &format!("/{}", name.trim_start_matches('/')))
             .map_err(|e| bad(format!("dataset '{name}': {e}")))?;
         let shape = array.shape().to_vec();
@@ -116,6 +117,9 @@ pub(crate) fn open_foreign(
         path: path.into(),
         message: "sample type (uint8, uint16, int16, float32 only)".into(),
     })?;
+    for (name, array) in &arrays {
+        crate::level_probe::check_level_dtype(path, name, array, dtype)?;
+    }
     let last3 = |shape: &[u64]| -> [u64; 3] {
         let n = shape.len();
         [shape[n - 1], shape[n - 2], shape[n - 3]]
@@ -153,6 +157,7 @@ pub(crate) fn open_foreign(
             None => levels.push(LevelSource::Synthesized),
         }
     }
+    crate::synthesis_limit::check_synthesis(path, &layout, &levels)?;
 
     let (value_range, scan) = match options.value_range {
         Some([lo, hi]) if !(lo < hi && lo >= dtype_range(dtype)[0] && hi <= dtype_range(dtype)[1]) => {

@@ -30,9 +30,11 @@ use crate::error::StoreError;
 use crate::foreign::ForeignOptions;
 use crate::import::{aside_paths, partial_path};
 use crate::layout::PyramidLayout;
+use crate::level_probe::check_level_dtype;
 use crate::level_source::{retrieve_f32, LevelSource};
 use crate::metadata::{StoreAttributes, MINMAX_GROUP};
 use crate::metadata_check::{check_chunk_sizes, validate_attributes};
+use crate::metadata_files::check_node_metadata;
 use crate::value_range::{bricks_over_stored_chunks, fold_samples, unwritten_fill_value, ScanProgress, EMPTY_RANGE};
 use crate::volume::VolumeInfo;
 
@@ -207,6 +209,7 @@ impl StoreReader {
             CheckedStore::new(path, max_range_bytes).map_err(|e| StoreError::store(path, e.to_string()))
         };
         let store = Arc::new(checked(u64::MAX)?);
+        check_node_metadata(path, "")?;
         let group = Group::open(store.clone(), "/")
             .map_err(|e| StoreError::store(path, format!("missing or corrupt zarr.json: {e}")))?;
         let attributes: StoreAttributes = match group.attributes().get("voxstream") {
@@ -229,6 +232,7 @@ impl StoreReader {
                 if let Some(stored) = scan {
                     reader.scan_value_range(&stored, foreign.progress.unwrap_or(&|_, _| {}))?;
                 }
+                reader.probe_levels()?;
                 return Ok(reader);
             }
         };
@@ -244,6 +248,9 @@ impl StoreReader {
         let mut minmax = Vec::new();
         for level in 0..layout.levels() {
             let readable: Arc<dyn ReadableStorageTraits> = metrics.clone();
+            for node in [level.to_string(), MINMAX_GROUP.to_string(), format!("{MINMAX_GROUP}/{level}")] {
+                check_node_metadata(path, &node)?;
+            }
             let array = Array::open(readable, &format!("/{level}"))
                 .map_err(|e| StoreError::store(path, format!("level {level}: {e}")))?;
             let [x, y, z] = layout.level_dims[level];
@@ -254,6 +261,7 @@ impl StoreReader {
                 ));
             }
             check_chunk_sizes(path, &level.to_string(), &metadata_json(&array))?;
+            check_level_dtype(path, &level.to_string(), &array, info.dtype)?;
             levels.push(LevelSource::Array { array, leading: 0, shape: [x, y, z] });
             minmax.push(read_minmax(path, &store, &layout, level, attributes.value_range == [0.0, 0.0])?);
         }
@@ -272,6 +280,7 @@ impl StoreReader {
         }
         let mut reader = StoreReader::assemble(path, attributes, levels, Some(minmax), cache_bytes)?;
         reader.metrics = Some(metrics);
+        reader.probe_levels()?;
         Ok(reader)
     }
 
@@ -433,6 +442,11 @@ impl StoreReader {
         let brick = Arc::new(samples);
         self.brick_cache.lock().unwrap_or_else(|p| p.into_inner()).put(key, brick.clone());
         Ok(brick)
+    }
+
+    /// Where the samples of `level` come from (`None` past the coarsest level).
+    pub(crate) fn level_source(&self, level: usize) -> Option<&LevelSource> {
+        self.levels.get(level)
     }
 
     /// Whether some level is averaged from the finer one when read (a foreign store that lacks it), so that its

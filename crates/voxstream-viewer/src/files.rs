@@ -5,10 +5,8 @@
 
 use std::path::Path;
 
+use voxstream_core::json_limits::read_json_file;
 use voxstream_render::{Camera, TransferFunction};
-
-/// Largest transfer-function file read (bytes).
-const MAX_TF_BYTES: u64 = 16 << 20;
 
 /// Writes `bytes` to `path` ([`voxstream_engine::OutputFile`]): through a temporary file beside a regular file,
 /// straight into a FIFO or character device, never over a folder or a disk.
@@ -48,11 +46,7 @@ pub fn transfer_function_json(transfer_function: &TransferFunction) -> String {
 
 /// Reads a transfer-function file, with a message naming the file and the problem.
 pub fn load_transfer_function(path: &Path, value_range: [f64; 2]) -> Result<TransferFunction, String> {
-    let size = std::fs::metadata(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?.len();
-    if size > MAX_TF_BYTES {
-        return Err(format!("{}: {size} bytes is too large for a transfer function", path.display()));
-    }
-    let text = std::fs::read_to_string(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    let text = read_json_file(path, "transfer function").map_err(|e| e.to_string())?;
     TransferFunction::from_json_or_paraview(&text, value_range).map_err(|e| format!("{}: {e}", path.display()))
 }
 

@@ -6,18 +6,19 @@ use std::path::Path;
 
 use anyhow::{anyhow, bail, Context, Result};
 use serde_json::Value;
+use voxstream_core::json_limits::read_json_file;
 use voxstream_render::Camera;
 
 /// Reads and validates a camera path.
 pub fn read_camera_path(path: &Path) -> Result<Vec<Camera>> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read camera path {}", path.display()))?;
+    let text = read_json_file(path, "camera path")?;
     parse_camera_path(&text).with_context(|| format!("invalid camera path {}", path.display()))
 }
 
 /// Reads one camera (`render --camera`, as `voxstream view` saves it): an object `{"eye": …, "target": …, "up": …,
 /// "fov": …}`, or a path holding exactly one camera.
 pub fn read_camera_file(path: &Path) -> Result<Camera> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read camera {}", path.display()))?;
+    let text = read_json_file(path, "camera")?;
     parse_camera_file(&text).with_context(|| format!("invalid camera {}", path.display()))
 }
 

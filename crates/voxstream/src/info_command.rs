@@ -2,20 +2,81 @@
 
 use anyhow::Result;
 use serde::Serialize;
+use voxstream_store::StoreReader;
 
 use crate::cli::InfoArgs;
 use crate::source_path::{check_store_path, warn_about_leftovers};
 use crate::store_open::open_store;
 
-/// Bricks of one level.
+/// Bricks of one level: for native stores, what its per-brick min/max say of them; for foreign stores, the chunk
+/// files of the dataset behind it (counted on disk, never looped over as declared).
 #[derive(Serialize)]
 struct LevelInfo {
     level: usize,
     dims: [u64; 3],
     bricks: u64,
-    stored: u64,
-    constant: u64,
-    empty: u64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    stored: Option<u64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    constant: Option<u64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    empty: Option<u64>,
+    /// Foreign stores: the dataset read for this level (absent: averaged from the level below).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    dataset: Option<String>,
+    /// Foreign stores: chunks (or shards) the dataset declares.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    chunks: Option<u64>,
+    /// Foreign stores: chunk (or shard) files present.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    chunks_stored: Option<u64>,
+}
+
+/// What the per-brick min/max of a native store's `level` say: bricks stored, constant and empty.
+fn native_level(reader: &StoreReader, level: usize) -> LevelInfo {
+    let layout = reader.layout();
+    let b = layout.bricks(level);
+    let (mut stored, mut constant, mut empty) = (0, 0, 0);
+    // Bounded by the min/max arrays, whose files' sizes were checked against these counts at open.
+    for z in 0..b[2] {
+        for y in 0..b[1] {
+            for x in 0..b[0] {
+                match reader.brick_range(level, [x, y, z]) {
+                    Some([0.0, 0.0]) => empty += 1,
+                    Some([min, max]) if min == max => constant += 1,
+                    _ => stored += 1,
+                }
+            }
+        }
+    }
+    LevelInfo {
+        level,
+        dims: layout.level_dims[level],
+        bricks: b.iter().product(),
+        stored: Some(stored),
+        constant: Some(constant),
+        empty: Some(empty),
+        dataset: None,
+        chunks: None,
+        chunks_stored: None,
+    }
+}
+
+/// A foreign store's `level`: the dataset behind it and its chunk files, listed on disk.
+fn foreign_level(reader: &StoreReader, level: usize) -> Result<LevelInfo> {
+    let layout = reader.layout();
+    let chunks = reader.stored_chunks(level)?;
+    Ok(LevelInfo {
+        level,
+        dims: layout.level_dims[level],
+        bricks: layout.bricks(level).iter().product(),
+        stored: None,
+        constant: None,
+        empty: None,
+        dataset: chunks.as_ref().map(|c| c.dataset.clone()),
+        chunks: chunks.as_ref().map(|c| c.declared),
+        chunks_stored: chunks.as_ref().map(|c| c.stored),
+    })
 }
 
 /// The description printed.
@@ -43,23 +104,8 @@ pub fn run(args: &InfoArgs) -> Result<()> {
     let layout = reader.layout();
     let attributes = reader.attributes();
     let levels = (0..layout.levels())
-        .map(|level| {
-            let b = layout.bricks(level);
-            let (mut stored, mut constant, mut empty) = (0, 0, 0);
-            for z in 0..b[2] {
-                for y in 0..b[1] {
-                    for x in 0..b[0] {
-                        match reader.brick_range(level, [x, y, z]) {
-                            Some([0.0, 0.0]) => empty += 1,
-                            Some([min, max]) if min == max => constant += 1,
-                            _ => stored += 1,
-                        }
-                    }
-                }
-            }
-            LevelInfo { level, dims: layout.level_dims[level], bricks: b.iter().product(), stored, constant, empty }
-        })
-        .collect();
+        .map(|level| if reader.is_native() { Ok(native_level(&reader, level)) } else { foreign_level(&reader, level) })
+        .collect::<Result<Vec<_>>>()?;
     let info = StoreInfo {
         path: args.store.display().to_string(),
         dims: attributes.dims,
@@ -88,12 +134,34 @@ pub fn run(args: &InfoArgs) -> Result<()> {
     }
     println!("brick        {}^3", info.brick_size);
     println!("on disk      {:.2} MiB", info.bytes_on_disk as f64 / 1048576.0);
-    println!("level  dimensions          bricks   stored  constant  empty");
-    for l in &info.levels {
-        println!(
-            "{:>5}  {:>6}x{:>6}x{:>6}  {:>7}  {:>7}  {:>8}  {:>5}",
-            l.level, l.dims[0], l.dims[1], l.dims[2], l.bricks, l.stored, l.constant, l.empty
-        );
+    if reader.is_native() {
+        println!("level  dimensions          bricks   stored  constant  empty");
+        for l in &info.levels {
+            let count = |v: Option<u64>| v.unwrap_or(0);
+            println!(
+                "{:>5}  {:>6}x{:>6}x{:>6}  {:>7}  {:>7}  {:>8}  {:>5}",
+                l.level,
+                l.dims[0],
+                l.dims[1],
+                l.dims[2],
+                l.bricks,
+                count(l.stored),
+                count(l.constant),
+                count(l.empty)
+            );
+        }
+    } else {
+        println!("level  dimensions          bricks  dataset          chunks   stored");
+        for l in &info.levels {
+            let (dataset, chunks, stored) = match (&l.dataset, l.chunks, l.chunks_stored) {
+                (Some(d), Some(c), Some(s)) => (d.clone(), c.to_string(), s.to_string()),
+                _ => ("(averaged)".into(), "-".into(), "-".into()),
+            };
+            println!(
+                "{:>5}  {:>6}x{:>6}x{:>6}  {:>7}  {:<14}  {:>7}  {:>7}",
+                l.level, l.dims[0], l.dims[1], l.dims[2], l.bricks, dataset, chunks, stored
+            );
+        }
     }
     Ok(())
 }

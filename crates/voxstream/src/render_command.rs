@@ -5,6 +5,7 @@ use std::path::Path;
 use std::sync::Arc;
 
 use anyhow::{bail, Context, Result};
+use voxstream_core::json_limits::read_json_file;
 use voxstream_core::{Producer, VoxelFormat};
 use voxstream_engine::{FrameRenderer, LoopLimits, MemoryBudget, Mode, Session, MAX_BUDGET_MB};
 use voxstream_geometry::formats::is_geometry_file_name;
@@ -633,7 +634,6 @@ fn summary_line(written: &[std::path::PathBuf], args: &RenderArgs, stats: &RunSt
 
 /// Reads `--tf`: voxstream's JSON, or a ParaView colour-map preset rescaled onto `value_range`.
 fn read_transfer_function(path: &Path, value_range: [f64; 2]) -> Result<TransferFunction> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("cannot read transfer function {}", path.display()))?;
+    let text = read_json_file(path, "transfer function")?;
     TransferFunction::from_json_or_paraview(&text, value_range).with_context(|| format!("in {}", path.display()))
 }

@@ -69,6 +69,33 @@ fn replay(dir: &Path, target: &str, data: &[u8]) {
             let _ = voxstream_store::StoreReader::open(&store);
         }
         "store_shards" => assert!(shard_input::read_shard_input(dir, data), "the template store could not be made"),
+        "foreign_metadata" => {
+            // As `voxstream_fuzz::foreign_files`: a selector byte (bit 0: Zarr v2), then the group's document and
+            // two datasets', separated by NUL bytes.
+            let store = dir.join("foreign.zarr");
+            let _ = std::fs::remove_dir_all(&store);
+            let Some((&selector, rest)) = data.split_first() else { return };
+            let is_v2 = selector & 1 == 1;
+            let mut documents = rest.splitn(3, |&b| b == 0);
+            let group = documents.next().unwrap_or_default();
+            std::fs::create_dir_all(&store).unwrap();
+            if is_v2 {
+                std::fs::write(store.join(".zgroup"), br#"{"zarr_format": 2}"#).unwrap();
+                std::fs::write(store.join(".zattrs"), group).unwrap();
+            } else {
+                std::fs::write(store.join("zarr.json"), group).unwrap();
+            }
+            for (index, document) in documents.enumerate() {
+                std::fs::create_dir_all(store.join(index.to_string())).unwrap();
+                let name = if is_v2 { ".zarray" } else { "zarr.json" };
+                std::fs::write(store.join(format!("{index}/{name}")), document).unwrap();
+            }
+            if let Ok(reader) = voxstream_store::StoreReader::open(&store) {
+                for level in 0..reader.layout().levels() {
+                    let _ = reader.stored_chunks(level);
+                }
+            }
+        }
         "transfer_function" => {
             if let Some(Ok(tf)) = text.map(voxstream_render::transfer_function::TransferFunction::from_json) {
                 for value in [-1.0, 0.0, 0.5, 1.0, 1e9, f64::NAN] {
