@@ -43,7 +43,15 @@ pub struct ForeignOptions<'a> {
     pub value_range: Option<[f64; 2]>,
     /// Told `(chunks done, chunks in all)` while level 0 is scanned for its value range.
     pub progress: Option<ScanProgress<'a>>,
+    /// The most samples the value-range scan at open reads ([`MAX_SCAN_SAMPLES`] when `None`): the finest level
+    /// whose stored chunks hold no more is scanned (level 0 unless the image is large).
+    pub max_scan_samples: Option<u64>,
 }
+
+/// Default bound of the value-range scan at open: 2^28 samples (about a second of decoding here). A larger level 0
+/// is not read whole when the image is opened (a terabyte on object storage would take hours): the finest level
+/// within the bound is scanned instead, its range used, and samples beyond it are counted as clipped when read.
+pub const MAX_SCAN_SAMPLES: u64 = 1 << 28;
 
 fn multiscales(attributes: &serde_json::Map<String, Value>) -> Option<&Value> {
     attributes
@@ -53,11 +61,12 @@ fn multiscales(attributes: &serde_json::Map<String, Value>) -> Option<&Value> {
         .and_then(|m| m.get(0))
 }
 
-/// Level 0's chunks as stored on disk (their indices), to be scanned for the value range.
-pub(crate) type StoredChunks = Vec<Vec<u64>>;
+/// A level and its chunks as stored on disk (their indices), to be scanned for the value range.
+pub(crate) type StoredChunks = (usize, Vec<Vec<u64>>);
 
 /// Opens a foreign OME-Zarr image: voxstream's attributes for it, where each level's bricks come from, and, unless
-/// `options` gives the value range, level 0's stored chunks, whose range the attributes' `value_range` (then
+/// `options` gives the value range, the level to scan and its stored chunks (level 0's unless they hold more than
+/// the scan's bound of samples), whose range the attributes' `value_range` (then
 /// `[0, 1]`) must be replaced with.
 pub(crate) fn open_foreign(
     path: &Path,
@@ -75,7 +84,7 @@ pub(crate) fn open_foreign(
         .filter(|d| !d.is_empty())
         .ok_or_else(|| bad("multiscales has no datasets".into()))?;
     let mut arrays = Vec::new();
-    let mut level_zero_chunks = Vec::new();
+    let mut stored_per_dataset = Vec::new();
     for dataset in datasets {
         let name = dataset.get("path").and_then(Value::as_str).ok_or_else(|| bad("a dataset has no path".into()))?;
         if name.split(['/', '\\']).any(|part| part == "..") {
@@ -97,9 +106,7 @@ pub(crate) fn open_foreign(
         let folder = path.join(name.trim_start_matches('/'));
         let chunks =
             stored_chunks(&folder, &metadata, shape.len()).map_err(|m| bad(format!("dataset '{name}' {m}")))?;
-        if arrays.is_empty() {
-            level_zero_chunks = chunks;
-        }
+        stored_per_dataset.push(chunks);
         arrays.push((name.to_string(), array));
     }
     let (_, first) = &arrays[0];
@@ -137,6 +144,8 @@ pub(crate) fn open_foreign(
     let layout = PyramidLayout::new(dims, FOREIGN_BRICK_SIZE).map_err(|e| bad(e.to_string()))?;
     let mut levels = Vec::new();
     let mut used = vec![false; arrays.len()];
+    // Per level, the dataset read for it (None: synthesised).
+    let mut level_datasets = Vec::new();
     for level in 0..layout.levels() {
         let want = layout.level_dims[level];
         let found = arrays.iter().enumerate().find(|(i, (_, a))| {
@@ -146,6 +155,7 @@ pub(crate) fn open_foreign(
         match found {
             Some((i, (_, array))) => {
                 used[i] = true;
+                level_datasets.push(Some(i));
                 let leading = array.shape().len() - 3;
                 levels.push(LevelSource::Array {
                     array: Array::open(readable.clone(), array.path().as_str()).map_err(|e| bad(e.to_string()))?,
@@ -154,7 +164,10 @@ pub(crate) fn open_foreign(
                 });
             }
             None if level == 0 => return Err(bad("level 0 does not match its own shape".into())),
-            None => levels.push(LevelSource::Synthesized),
+            None => {
+                level_datasets.push(None);
+                levels.push(LevelSource::Synthesized)
+            }
         }
     }
     crate::synthesis_limit::check_synthesis(path, &layout, &levels)?;
@@ -172,7 +185,25 @@ pub(crate) fn open_foreign(
             });
         }
         Some(range) => (range, None),
-        None => ([0.0, 1.0], Some(level_zero_chunks)),
+        None => {
+            // The finest stored level whose chunks hold at most the bound (else the coarsest stored one).
+            let bound = options.max_scan_samples.unwrap_or(MAX_SCAN_SAMPLES);
+            let stored_samples = |i: usize| {
+                let array = &arrays[i].1;
+                let chunk = array.chunk_shape(&vec![0; array.dimensionality()]).ok();
+                let per_chunk = chunk.map_or(u64::MAX, |c| c.iter().fold(1u64, |n, d| n.saturating_mul(d.get())));
+                per_chunk.saturating_mul(stored_per_dataset[i].len() as u64)
+            };
+            let stored: Vec<(usize, usize)> =
+                level_datasets.iter().enumerate().filter_map(|(level, d)| d.map(|i| (level, i))).collect();
+            let (level, i) = stored
+                .iter()
+                .copied()
+                .find(|&(_, i)| stored_samples(i) <= bound)
+                .or_else(|| stored.last().copied())
+                .ok_or_else(|| bad("no level is stored".into()))?;
+            ([0.0, 1.0], Some((level, std::mem::take(&mut stored_per_dataset[i]))))
+        }
     };
     let attributes = StoreAttributes::new(&info, &layout, value_range, true);
     validate_attributes(path, &attributes)?;

@@ -158,6 +158,8 @@ pub struct StoreReader {
     metrics: Option<Arc<PerformanceMetricsStorageAdapter<CheckedStore>>>,
     /// Samples read from a foreign store that lay outside its value range (they saturate).
     clipped: std::sync::atomic::AtomicU64,
+    /// The level scanned for a foreign store's value range (see [`StoreReader::value_range_level`]).
+    value_range_level: usize,
     /// A background prefetch is running.
     prefetching: std::sync::atomic::AtomicBool,
     /// Per level, per brick (x fastest): `[min, max]` of the full-resolution samples below it; `None` for foreign
@@ -229,8 +231,8 @@ impl StoreReader {
                 let mut reader = StoreReader::assemble(path, attributes, levels, None, cache_bytes - cache_bytes / 4)?;
                 reader.cache_bytes = cache_bytes;
                 reader.metrics = Some(metrics);
-                if let Some(stored) = scan {
-                    reader.scan_value_range(&stored, foreign.progress.unwrap_or(&|_, _| {}))?;
+                if let Some((level, stored)) = scan {
+                    reader.scan_value_range(level, &stored, foreign.progress.unwrap_or(&|_, _| {}))?;
                 }
                 reader.probe_levels()?;
                 return Ok(reader);
@@ -313,6 +315,7 @@ impl StoreReader {
             chunk_cache,
             metrics: None,
             clipped: std::sync::atomic::AtomicU64::new(0),
+            value_range_level: 0,
             prefetching: std::sync::atomic::AtomicBool::new(false),
             minmax,
         })
@@ -542,14 +545,21 @@ impl StoreReader {
         });
     }
 
-    /// Foreign stores: sets the value range to level 0's, read brick by brick over the `stored` chunks, chunk by
-    /// chunk (through the caches, which keep what they can for the first frames), plus the fill value where a chunk
-    /// was never written; bricks that cannot be read are left out. A level 0 with no finite sample gets `[0, 1]`.
-    fn scan_value_range(&mut self, stored: &[Vec<u64>], progress: ScanProgress) -> Result<(), StoreError> {
-        let LevelSource::Array { array, leading, .. } = &self.levels[0] else {
-            return Err(StoreError::store(&self.path, "level 0 has no array"));
+    /// Foreign stores: sets the value range to that of `level` (level 0 unless it holds more than the scan's bound,
+    /// [`crate::foreign::MAX_SCAN_SAMPLES`]), read brick by brick over its `stored` chunks, chunk by chunk (through
+    /// the caches, which keep what they can for the first frames), plus the fill value where a chunk was never
+    /// written; bricks that cannot be read are left out. A level with no finite sample gets `[0, 1]`.
+    fn scan_value_range(
+        &mut self,
+        level: usize,
+        stored: &[Vec<u64>],
+        progress: ScanProgress,
+    ) -> Result<(), StoreError> {
+        let LevelSource::Array { array, leading, .. } = &self.levels[level] else {
+            return Err(StoreError::store(&self.path, format!("level {level} has no array")));
         };
-        let failed = |e: zarrs::array::ArrayError| StoreError::store(&self.path, format!("level 0: {e}"));
+        self.value_range_level = level;
+        let failed = |e: zarrs::array::ArrayError| StoreError::store(&self.path, format!("level {level}: {e}"));
         let leading = *leading;
         let bricks = bricks_over_stored_chunks(array, leading, stored, self.layout.brick_size).map_err(failed)?;
         let mut range = EMPTY_RANGE;
@@ -560,7 +570,7 @@ impl StoreReader {
         for (done, ijk) in bricks.into_iter().enumerate() {
             // A brick that cannot be read is left out here: reading it fails again when it is wanted, and is
             // reported then (its ancestor stands in), as for any unreadable brick.
-            if let Ok(samples) = self.brick(0, ijk) {
+            if let Ok(samples) = self.brick(level, ijk) {
                 fold_samples(&samples, &mut range);
             }
             progress(done as u64 + 1, total);
@@ -582,6 +592,12 @@ impl StoreReader {
         if outside > 0 {
             self.clipped.fetch_add(outside, std::sync::atomic::Ordering::Relaxed);
         }
+    }
+
+    /// The level whose stored samples gave a foreign store's value range at open (0 unless level 0 holds more than
+    /// the scan's bound; see [`crate::foreign::MAX_SCAN_SAMPLES`]; also 0 for native stores and `--value-range`).
+    pub fn value_range_level(&self) -> usize {
+        self.value_range_level
     }
 
     /// Samples read so far from a foreign store that lay outside its value range, so that they saturate (0 for a

@@ -156,6 +156,15 @@ fn pyramid(level0: Level) -> Vec<Level> {
     levels
 }
 
+/// Bytes of the files under `dir`.
+fn walk_bytes(dir: &Path) -> u64 {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .flatten()
+        .map(|e| if e.path().is_dir() { walk_bytes(&e.path()) } else { e.metadata().unwrap().len() })
+        .sum()
+}
+
 fn open_error(store: &Path) -> String {
     match StoreReader::open(store) {
         Ok(_) => panic!("{} opened, expected a refusal", store.display()),
@@ -179,13 +188,45 @@ fn a_bright_outlier_only_at_level_zero_keeps_its_value() {
     assert_eq!(reader.clipped_samples(), 0);
 
     // A range given by the caller is used as is (level 0 not scanned), and the samples beyond it are counted.
-    let options = ForeignOptions { value_range: Some([0.0, 1000.0]), progress: None };
+    let options = ForeignOptions { value_range: Some([0.0, 1000.0]), ..Default::default() };
     let narrow = StoreReader::open_with_options(&dir.join("stent.zarr"), 64 << 20, &options).unwrap();
     assert_eq!(narrow.attributes().value_range, [0.0, 1000.0]);
-    // Only the arrays' metadata was read.
-    assert!(narrow.storage_bytes_read() < 4096, "level 0 was scanned although the range was given");
+    // Level 0 was not scanned: besides the metadata, only the probe's one central brick per level was read (one of
+    // level 0's eight chunks), far less than level 0's chunks.
+    let level0_bytes: u64 = walk_bytes(&dir.join("stent.zarr/0"));
+    assert!(narrow.storage_bytes_read() < level0_bytes / 2, "level 0 was scanned although the range was given");
     narrow.read_region(0, [64, 32, 32], [32, 32, 32]).unwrap();
     assert_eq!(narrow.clipped_samples(), 1);
+}
+
+#[test]
+fn a_level_0_beyond_the_scan_bound_gives_the_range_of_the_finest_level_within_it() {
+    let dir = scratch("bound");
+    // Level 0 (128³, 8 chunks of 64³) ramps 0..=254 along x, plus one bright voxel; level 1 (64³, one chunk) holds
+    // 2x2x2 means, in which the bright voxel is diluted to a few hundred.
+    let levels =
+        pyramid(Level::filled([128, 128, 128], |x, y, z| if [x, y, z] == [3, 5, 7] { 3000 } else { 2 * x as u16 }));
+    write_v2(&dir.join("big.zarr"), &levels, &Layout::default());
+    let whole = StoreReader::open(&dir.join("big.zarr")).unwrap();
+    assert_eq!((whole.attributes().value_range, whole.value_range_level()), ([0.0, 3000.0], 0));
+
+    // A bound below level 0's 8 · 64³ stored samples, above level 1's 64³: level 1 is scanned, and only it.
+    let options = ForeignOptions { max_scan_samples: Some(64 * 64 * 64), ..Default::default() };
+    let bounded = StoreReader::open_with_options(&dir.join("big.zarr"), 64 << 20, &options).unwrap();
+    assert_eq!(bounded.value_range_level(), 1);
+    let [lo, hi] = bounded.attributes().value_range;
+    let level1 = &levels[1].samples;
+    let (want_lo, want_hi) = (*level1.iter().min().unwrap() as f64, *level1.iter().max().unwrap() as f64);
+    assert_eq!([lo, hi], [want_lo, want_hi]);
+    assert!(hi < 3000.0, "level 1 averages the bright voxel away");
+    // Level 0's bright voxel is then clipped, and counted.
+    bounded.read_region(0, [0, 0, 0], [32, 32, 32]).unwrap();
+    assert!(bounded.clipped_samples() >= 1);
+
+    // A bound below every level: the coarsest stored level is scanned.
+    let options = ForeignOptions { max_scan_samples: Some(1), ..Default::default() };
+    let tiny = StoreReader::open_with_options(&dir.join("big.zarr"), 64 << 20, &options).unwrap();
+    assert_eq!(tiny.value_range_level(), levels.len() - 1);
 }
 
 #[test]

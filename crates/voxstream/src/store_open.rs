@@ -31,14 +31,16 @@ pub fn open_store(path: &Path, cache_bytes: u64, value_range: Option<[f64; 2]>, 
         if done == 1 && total >= SCAN_BAR_BRICKS && !quiet {
             bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
             bar.set_style(
-                ProgressStyle::with_template("reading level 0 for its value range {bar:30} {pos}/{len} bricks ({eta})")
-                    .unwrap_or_else(|_| ProgressStyle::default_bar()),
+                ProgressStyle::with_template(
+                    "reading the image for its value range {bar:30} {pos}/{len} bricks ({eta})",
+                )
+                .unwrap_or_else(|_| ProgressStyle::default_bar()),
             );
             bar.set_length(total);
         }
         bar.set_position(done);
     };
-    let options = ForeignOptions { value_range, progress: Some(&show) };
+    let options = ForeignOptions { value_range, progress: Some(&show), ..Default::default() };
     let reader = StoreReader::open_with_options(path, cache_bytes, &options)?;
     bar.finish_and_clear();
     if value_range.is_some() && reader.is_native() {
@@ -48,6 +50,16 @@ pub fn open_store(path: &Path, cache_bytes: u64, value_range: Option<[f64; 2]>, 
             path.display(),
             reader.attributes().value_range[0],
             reader.attributes().value_range[1]
+        );
+    }
+    if reader.value_range_level() > 0 {
+        let [lo, hi] = reader.attributes().value_range;
+        eprintln!(
+            "note: {}: level 0 holds more samples than are read when a store is opened, so the value range ({lo} to \
+             {hi}) is level {}'s; samples beyond it saturate and are counted after the run. --value-range LO,HI sets \
+             it",
+            path.display(),
+            reader.value_range_level()
         );
     }
     Ok(reader)
