@@ -42,6 +42,13 @@ impl ImportLock {
     pub fn acquire(out: &Path) -> Result<ImportLock, StoreError> {
         let path = lock_path(out);
         if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+            // A file where a folder of the path should be (`--out notes.txt/v.zarr`): said as such, not as the
+            // "already exists" that creating the folders would report.
+            if let Some(file) = parent.ancestors().find(|a| !a.as_os_str().is_empty() && a.exists()) {
+                if !file.is_dir() {
+                    return Err(StoreError::store(file, "is a file, not a folder: name an --out inside a folder"));
+                }
+            }
             std::fs::create_dir_all(parent).map_err(|e| StoreError::io(parent, e))?;
         }
         for _ in 0..LOCK_ATTEMPTS {

@@ -270,7 +270,7 @@ fn sources_that_are_not_stores_are_explained() {
         ),
         (
             &["import", "tiny.raw", "--dims", "2,2,2", "--dtype", "u8", "--out", "notes.txt/v.zarr"],
-            "error: notes.txt/v.zarr.partial: Not a directory",
+            "error: notes.txt: is a file, not a folder: name an --out inside a folder",
         ),
     ];
     for (args, expected) in cases {
