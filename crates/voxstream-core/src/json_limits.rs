@@ -39,7 +39,7 @@ pub enum JsonFileError {
         what: String,
     },
     /// The file could not be read.
-    #[error("{path}: cannot read {what}: {error}")]
+    #[error("cannot read {what} {path}: {}", crate::io_message::describe_io(.error))]
     Io {
         /// The file.
         path: PathBuf,

@@ -46,6 +46,7 @@ pub mod budget;
 pub mod cache_manager;
 pub mod error;
 pub mod feedback;
+pub mod io_message;
 pub mod json_limits;
 pub mod key;
 pub mod level_blending;

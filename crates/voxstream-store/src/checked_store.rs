@@ -7,8 +7,9 @@
 //! - names something other than a regular file (a FIFO in place of a shard would block `open` forever, a device
 //!   would stream without end),
 //! - reaches past the end of the file (the file's real size, taken before the read), or
-//! - asks for more than `max_range_bytes` in one explicit range (the largest a brick can take encoded: an index
-//!   entry within the file can still claim more than any brick needs).
+//! - asks for more than `max_range_bytes` in one range of an offset and a length (the largest a brick can take
+//!   encoded: an index entry within the file can still claim more than any brick needs; the index itself is read
+//!   as a suffix, sized by the shard's shape, and held to the file's size only).
 //!
 //! Whole-value reads (`zarr.json`, unsharded chunks) are bounded by the file's real size. The checks hold for any
 //! store that knows its values' sizes, so the same adapter can wrap a remote store later.
@@ -57,7 +58,10 @@ impl CheckedStore {
             ByteRange::FromStart(start, Some(length)) => (start, length),
             ByteRange::Suffix(length) => (size.saturating_sub(length), length),
         };
-        let explicit = !matches!(range, ByteRange::FromStart(_, None));
+        // A brick is read by an offset and a length from the shard's index; the index itself by a suffix whose length
+        // zarrs computes from the shard's shape (64 bricks of 8³ bytes have a 1028-byte index, more than a brick), so
+        // only offset-and-length ranges are held to the brick bound. Every range is held to the file's size.
+        let explicit = matches!(range, ByteRange::FromStart(_, Some(_)));
         if start.checked_add(length).is_none_or(|end| end > size) {
             return Err(StorageError::Other(format!(
                 "{key}: {length} bytes at offset {start} reach past the end of the file ({size} bytes): the shard \
@@ -155,6 +159,8 @@ mod tests {
         let long = store.get_partial(&key, ByteRange::FromStart(0, Some(65))).unwrap_err().to_string();
         assert!(long.contains("more than the 64"), "{long}");
         assert!(store.get_partial(&key, ByteRange::Suffix(101)).is_err());
+        // A suffix (a shard's index, sized by the shard's shape) may be longer than a brick, within the file.
+        assert_eq!(store.get_partial(&key, ByteRange::Suffix(80)).unwrap().unwrap().len(), 80);
         let missing = StoreKey::new("absent").unwrap();
         assert!(store.get(&missing).unwrap().is_none(), "a missing file is a missing value, not an error");
         assert_eq!(store.size_key(&key).unwrap(), Some(100));

@@ -111,24 +111,7 @@ impl StoreError {
     }
 }
 
-/// An I/O error as a user reads it: "not found", "permission denied", … without the OS error number.
-pub fn describe_io(error: &std::io::Error) -> String {
-    use std::io::ErrorKind;
-    match error.kind() {
-        ErrorKind::NotFound => "not found".into(),
-        ErrorKind::PermissionDenied => "permission denied".into(),
-        ErrorKind::AlreadyExists => "already exists".into(),
-        ErrorKind::UnexpectedEof => "ends too early (truncated)".into(),
-        _ => {
-            let text = error.to_string();
-            // std appends " (os error N)" to OS errors: the number says nothing more to a user.
-            match text.find(" (os error ") {
-                Some(at) => text[..at].to_string(),
-                None => text,
-            }
-        }
-    }
-}
+pub use voxstream_core::io_message::describe_io;
 
 #[cfg(test)]
 mod tests {

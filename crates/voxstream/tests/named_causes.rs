@@ -137,7 +137,7 @@ fn a_script_isovalue_outside_the_data_is_refused_as_render_refuses_it() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// `view` on a store whose level-0 shards are corrupt exits 3 as `render` does (under Xvfb).
+/// `view` on a store with corrupt level-0 bricks exits 3 as `render` does (under Xvfb).
 #[test]
 fn view_exits_three_on_unreadable_bricks_as_render_does() {
     let has_xvfb =
@@ -145,11 +145,35 @@ fn view_exits_three_on_unreadable_bricks_as_render_does() {
     assert!(has_xvfb, "xvfb-run is needed (Debian: apt-get install xvfb xauth libgl1-mesa-dri)");
     let dir = scratch("named-causes", "view-exit");
     import_ball(&dir, "ball.zarr");
+    // Every other brick of level 0's shard gets a flipped byte (its CRC-32C then fails): a level none of whose
+    // bricks reads is refused at open (`level_probe`), so some are left whole, as damage usually leaves them.
+    let level: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("ball.zarr/0/zarr.json")).unwrap()).unwrap();
+    let edges = |shape: &serde_json::Value| -> Vec<u64> {
+        shape.as_array().unwrap().iter().map(|v| v.as_u64().unwrap()).collect()
+    };
+    let shard = edges(&level["chunk_grid"]["configuration"]["chunk_shape"]);
+    let brick = edges(&level["codecs"][0]["configuration"]["chunk_shape"]);
+    let bricks_per_shard = (0..3).map(|a| (shard[a] / brick[a]) as usize).product::<usize>();
     let mut corrupted = 0;
     for entry in walk(&dir.join("ball.zarr/0")) {
         if entry.file_name().is_some_and(|n| n != "zarr.json") {
-            std::fs::write(&entry, b"not a shard").unwrap();
-            corrupted += 1;
+            let mut bytes = std::fs::read(&entry).unwrap();
+            // The index at the end: one entry of (offset, length), u64 little-endian, per brick of the shard, then
+            // its CRC-32C.
+            let index_start = bytes.len() - (bricks_per_shard * 16 + 4);
+            let entries: Vec<(u64, u64)> = bytes[index_start..bytes.len() - 4]
+                .chunks_exact(16)
+                .map(|e| {
+                    (u64::from_le_bytes(e[..8].try_into().unwrap()), u64::from_le_bytes(e[8..].try_into().unwrap()))
+                })
+                .filter(|&(offset, _)| offset != u64::MAX)
+                .collect();
+            for (offset, length) in entries.into_iter().skip(1).step_by(2) {
+                bytes[(offset + length / 2) as usize] ^= 0xff;
+                corrupted += 1;
+            }
+            std::fs::write(&entry, bytes).unwrap();
         }
     }
     assert!(corrupted > 0);
