@@ -11,19 +11,32 @@
 //!   encoded: an index entry within the file can still claim more than any brick needs; the index itself is read
 //!   as a suffix, sized by the shard's shape, and held to the file's size only).
 //!
-//! Whole-value reads (`zarr.json`, unsharded chunks) are bounded by the file's real size. The checks hold for any
-//! store that knows its values' sizes, so the same adapter can wrap a remote store later.
+//! Whole-value reads (`zarr.json`, unsharded chunks) are bounded by the file's real size.
+//!
+//! A remote store ([`CheckedStore::remote`]) is held to the same brick bound before any request; it does not ask for
+//! sizes first (a round trip per read), but checks that every body is exactly the length asked for and bounds
+//! whole-value reads itself (see [`voxstream_remote::RemoteStore`]).
 
 use std::path::Path;
+use std::sync::Arc;
 
 use zarrs::filesystem::FilesystemStore;
 use zarrs::storage::byte_range::{ByteRange, ByteRangeIterator};
 use zarrs::storage::{MaybeBytesIterator, ReadableStorageTraits, StorageError, StoreKey};
 
-/// A [`FilesystemStore`] whose reads are checked against the files' real sizes and kinds.
+/// What a [`CheckedStore`] reads from.
+#[derive(Debug)]
+enum Inner {
+    /// A folder on disk.
+    Folder(FilesystemStore),
+    /// A remote store (HTTP, S3, GCS, Azure).
+    Remote(Arc<voxstream_remote::RemoteStore>),
+}
+
+/// A [`FilesystemStore`] (or a remote store) whose reads are checked against the files' real sizes and kinds.
 #[derive(Debug)]
 pub struct CheckedStore {
-    inner: FilesystemStore,
+    inner: Inner,
     /// The most bytes one explicit range may ask for; `u64::MAX` when unbounded (the file's size still bounds it).
     max_range_bytes: u64,
 }
@@ -32,12 +45,17 @@ impl CheckedStore {
     /// Reads from the folder `base`; each explicit byte range is at most `max_range_bytes` long.
     pub fn new(base: &Path, max_range_bytes: u64) -> Result<CheckedStore, StorageError> {
         let inner = FilesystemStore::new(base).map_err(|e| StorageError::Other(e.to_string()))?;
-        Ok(CheckedStore { inner, max_range_bytes })
+        Ok(CheckedStore { inner: Inner::Folder(inner), max_range_bytes })
+    }
+
+    /// Reads from `remote`; each explicit byte range is at most `max_range_bytes` long.
+    pub fn remote(remote: Arc<voxstream_remote::RemoteStore>, max_range_bytes: u64) -> CheckedStore {
+        CheckedStore { inner: Inner::Remote(remote), max_range_bytes }
     }
 
     /// The size of `key`'s file, `None` when it does not exist; an error when it is not a regular file.
-    fn regular_file_size(&self, key: &StoreKey) -> Result<Option<u64>, StorageError> {
-        let path = self.inner.key_to_fspath(key);
+    fn regular_file_size(&self, folder: &FilesystemStore, key: &StoreKey) -> Result<Option<u64>, StorageError> {
+        let path = folder.key_to_fspath(key);
         // `metadata` follows symbolic links: what counts is what a read would open.
         match std::fs::metadata(&path) {
             Ok(metadata) if metadata.is_file() => Ok(Some(metadata.len())),
@@ -85,18 +103,39 @@ impl ReadableStorageTraits for CheckedStore {
         key: &StoreKey,
         byte_ranges: ByteRangeIterator<'a>,
     ) -> Result<MaybeBytesIterator<'a>, StorageError> {
-        let Some(size) = self.regular_file_size(key)? else {
-            return Ok(None);
-        };
         let ranges: Vec<ByteRange> = byte_ranges.collect();
-        for &range in &ranges {
-            self.check_range(key, size, range)?;
+        match &self.inner {
+            Inner::Folder(folder) => {
+                let Some(size) = self.regular_file_size(folder, key)? else {
+                    return Ok(None);
+                };
+                for &range in &ranges {
+                    self.check_range(key, size, range)?;
+                }
+                folder.get_partial_many(key, Box::new(ranges.into_iter()))
+            }
+            Inner::Remote(remote) => {
+                for &range in &ranges {
+                    if let ByteRange::FromStart(_, Some(length)) = range {
+                        if length > self.max_range_bytes {
+                            return Err(StorageError::Other(format!(
+                                "{key}: the shard index claims a brick of {length} bytes, more than the {} any brick \
+                                 can take encoded: the index is corrupt",
+                                self.max_range_bytes
+                            )));
+                        }
+                    }
+                }
+                remote.get_partial_many(key, Box::new(ranges.into_iter()))
+            }
         }
-        self.inner.get_partial_many(key, Box::new(ranges.into_iter()))
     }
 
     fn size_key(&self, key: &StoreKey) -> Result<Option<u64>, StorageError> {
-        self.regular_file_size(key)
+        match &self.inner {
+            Inner::Folder(folder) => self.regular_file_size(folder, key),
+            Inner::Remote(remote) => remote.size_key(key),
+        }
     }
 
     fn supports_get_partial(&self) -> bool {

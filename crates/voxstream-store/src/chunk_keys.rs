@@ -91,8 +91,50 @@ fn files_below(folder: &Path, max_depth: usize) -> Vec<String> {
 /// The indices of the chunks of the array in `folder` (its metadata `metadata`, `dimensions` axes) that exist on
 /// disk, or a one-line refusal when none is named as declared while some are named with the other separator.
 pub(crate) fn stored_chunks(folder: &Path, metadata: &Value, dimensions: usize) -> Result<Vec<Vec<u64>>, String> {
+    chunks_named(&files_below(folder, dimensions + 1), metadata, dimensions)
+}
+
+/// Most keys listed below one remote array (beyond it, every chunk of the grid is taken as stored).
+const MAX_LISTED_KEYS: usize = 1 << 20;
+
+/// Where an array's chunks are looked for.
+pub(crate) enum ChunkSource<'a> {
+    /// The store's folder on disk.
+    Folder(&'a Path),
+    /// A remote store (listed where the service lists: object stores yes, plain HTTP no).
+    Remote(&'a voxstream_remote::RemoteStore),
+}
+
+/// The stored chunks of the array `name` (as [`stored_chunks`]), or `None` where they cannot be listed (a remote
+/// HTTP store, or more than [`MAX_LISTED_KEYS`]): then every chunk of the grid is to be taken as stored.
+pub(crate) fn stored_chunks_in(
+    source: &ChunkSource,
+    name: &str,
+    metadata: &Value,
+    dimensions: usize,
+) -> Result<Option<Vec<Vec<u64>>>, String> {
+    match source {
+        ChunkSource::Folder(store) => stored_chunks(&store.join(name.trim_start_matches('/')), metadata, dimensions).map(Some),
+        ChunkSource::Remote(remote) => {
+            let Some(keys) = remote.list(name, MAX_LISTED_KEYS).map_err(|e| e.to_string())? else {
+                return Ok(None);
+            };
+            let files: Vec<String> = keys
+                .into_iter()
+                .filter(|key| {
+                    let file = key.rsplit('/').next().unwrap_or(key);
+                    !file.starts_with('.') && file != "zarr.json"
+                })
+                .collect();
+            chunks_named(&files, metadata, dimensions).map(Some)
+        }
+    }
+}
+
+/// The chunk indices that `files` (paths relative to an array's folder) name under the array's declared key
+/// encoding, or a one-line refusal when none does while some follow the other separator.
+fn chunks_named(files: &[String], metadata: &Value, dimensions: usize) -> Result<Vec<Vec<u64>>, String> {
     let declared = KeyEncoding::of(metadata);
-    let files = files_below(folder, dimensions + 1);
     let decode_all = |encoding: KeyEncoding| -> Vec<Vec<u64>> {
         files.iter().filter_map(|key| encoding.decode(key, dimensions)).collect()
     };

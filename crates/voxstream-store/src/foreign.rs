@@ -23,7 +23,7 @@ use serde_json::Value;
 use zarrs::array::Array;
 use zarrs::storage::ReadableStorageTraits;
 
-use crate::chunk_keys::stored_chunks;
+use crate::chunk_keys::{stored_chunks_in, ChunkSource};
 use crate::error::StoreError;
 use crate::foreign_axes::{check_axes, transform_xyz};
 use crate::layout::PyramidLayout;
@@ -46,6 +46,9 @@ pub struct ForeignOptions<'a> {
     /// The most samples the value-range scan at open reads ([`MAX_SCAN_SAMPLES`] when `None`): the finest level
     /// whose stored chunks hold no more is scanned (level 0 unless the image is large).
     pub max_scan_samples: Option<u64>,
+    /// How a remote store (a URL) is read: timeouts, retries, the disk cache (defaults when `None`). Applies to
+    /// voxstream's own stores too.
+    pub remote: Option<&'a crate::remote_access::RemoteAccess>,
 }
 
 /// Default bound of the value-range scan at open: 2^28 samples (about a second of decoding here). A larger level 0
@@ -73,6 +76,7 @@ pub(crate) fn open_foreign(
     readable: Arc<dyn ReadableStorageTraits>,
     attributes: &serde_json::Map<String, Value>,
     options: &ForeignOptions,
+    chunk_source: &ChunkSource,
 ) -> Result<(StoreAttributes, Vec<LevelSource>, Option<StoredChunks>), StoreError> {
     let bad = |m: String| StoreError::store(path, m);
     let ms = multiscales(attributes).ok_or_else(|| {
@@ -90,7 +94,9 @@ pub(crate) fn open_foreign(
         if name.split(['/', '\\']).any(|part| part == "..") {
             return Err(bad(format!("dataset path '{name}' leaves the store (it holds '..')")));
         }
-        crate::metadata_files::check_node_metadata(path, name)?;
+        if let ChunkSource::Folder(_) = chunk_source {
+            crate::metadata_files::check_node_metadata(path, name)?;
+        }
         let array = Array::open(readable.clone(), &format!("/{}", name.trim_start_matches('/')))
             .map_err(|e| bad(format!("dataset '{name}': {e}")))?;
         let shape = array.shape().to_vec();
@@ -103,9 +109,8 @@ pub(crate) fn open_foreign(
         let metadata = serde_json::to_value(array.metadata()).unwrap_or(Value::Null);
         check_chunk_sizes(path, name, &metadata)?;
         check_axes(ms, shape.len()).map_err(|m| bad(format!("dataset '{name}': {m}")))?;
-        let folder = path.join(name.trim_start_matches('/'));
-        let chunks =
-            stored_chunks(&folder, &metadata, shape.len()).map_err(|m| bad(format!("dataset '{name}' {m}")))?;
+        let chunks = stored_chunks_in(chunk_source, name, &metadata, shape.len())
+            .map_err(|m| bad(format!("dataset '{name}' {m}")))?;
         stored_per_dataset.push(chunks);
         arrays.push((name.to_string(), array));
     }
@@ -188,11 +193,16 @@ pub(crate) fn open_foreign(
         None => {
             // The finest stored level whose chunks hold at most the bound (else the coarsest stored one).
             let bound = options.max_scan_samples.unwrap_or(MAX_SCAN_SAMPLES);
+            // A store that cannot be listed (plain HTTP) counts every chunk of the grid as stored.
+            let chunk_count = |i: usize| match &stored_per_dataset[i] {
+                Some(chunks) => chunks.len() as u64,
+                None => arrays[i].1.chunk_grid_shape().iter().fold(1u64, |n, &d| n.saturating_mul(d)),
+            };
             let stored_samples = |i: usize| {
                 let array = &arrays[i].1;
                 let chunk = array.chunk_shape(&vec![0; array.dimensionality()]).ok();
                 let per_chunk = chunk.map_or(u64::MAX, |c| c.iter().fold(1u64, |n, d| n.saturating_mul(d.get())));
-                per_chunk.saturating_mul(stored_per_dataset[i].len() as u64)
+                per_chunk.saturating_mul(chunk_count(i))
             };
             let stored: Vec<(usize, usize)> =
                 level_datasets.iter().enumerate().filter_map(|(level, d)| d.map(|i| (level, i))).collect();
@@ -202,10 +212,35 @@ pub(crate) fn open_foreign(
                 .find(|&(_, i)| stored_samples(i) <= bound)
                 .or_else(|| stored.last().copied())
                 .ok_or_else(|| bad("no level is stored".into()))?;
-            ([0.0, 1.0], Some((level, std::mem::take(&mut stored_per_dataset[i]))))
+            let chunks = match stored_per_dataset[i].take() {
+                Some(chunks) => chunks,
+                None => every_chunk(&arrays[i].1).map_err(|m| bad(format!("dataset '{}': {m}", arrays[i].0)))?,
+            };
+            ([0.0, 1.0], Some((level, chunks)))
         }
     };
     let attributes = StoreAttributes::new(&info, &layout, value_range, true);
     validate_attributes(path, &attributes)?;
     Ok((attributes, levels, scan))
+}
+
+/// Most chunks of a grid taken as stored when a remote store cannot be listed (the level scanned holds at most
+/// [`MAX_SCAN_SAMPLES`] samples unless no level does; the coarsest level of a pyramid has a handful of chunks).
+const MAX_GRID_CHUNKS: u64 = 1 << 22;
+
+/// Every chunk index of `array`'s grid (for a store that cannot be listed: absent chunks read as the fill value).
+fn every_chunk(array: &Array<dyn ReadableStorageTraits>) -> Result<Vec<Vec<u64>>, String> {
+    let grid = array.chunk_grid_shape().to_vec();
+    let count = grid.iter().fold(1u64, |n, &d| n.saturating_mul(d));
+    if count > MAX_GRID_CHUNKS {
+        return Err(format!(
+            "{count} chunks and no level small enough to scan for the value range over a server that cannot list \
+             them; give the range with --value-range LO,HI"
+        ));
+    }
+    let mut all = vec![Vec::new()];
+    for &extent in &grid {
+        all = all.into_iter().flat_map(|prefix| (0..extent).map(move |i| [prefix.clone(), vec![i]].concat())).collect();
+    }
+    Ok(all)
 }

@@ -23,7 +23,11 @@ use zarrs::group::Group;
 use zarrs::storage::storage_adapter::performance_metrics::PerformanceMetricsStorageAdapter;
 use zarrs::storage::ReadableStorageTraits;
 
+use voxstream_remote::{DiskCache, RemoteLocation, RemoteStore};
+
 use crate::checked_store::{zstd_encoded_bound, CheckedStore};
+use crate::chunk_keys::ChunkSource;
+use crate::remote_access::RemoteAccess;
 use crate::chunk_cache::ChunkCache;
 use crate::encoded_cache::EncodedCache;
 use crate::error::StoreError;
@@ -165,6 +169,41 @@ pub struct StoreReader {
     /// Per level, per brick (x fastest): `[min, max]` of the full-resolution samples below it; `None` for foreign
     /// stores, whose bricks' ranges are unknown until read (the brick pool computes them on upload).
     minmax: Option<Vec<Vec<[f32; 2]>>>,
+    /// The remote store the bricks come from, `None` for a local folder.
+    remote: Option<Arc<RemoteStore>>,
+}
+
+/// Opens the remote store at `location`, with `access`'s timeouts, retries and disk cache.
+fn open_remote(location: RemoteLocation, access: Option<&RemoteAccess>) -> Result<Arc<RemoteStore>, StoreError> {
+    let shown = PathBuf::from(location.shown());
+    let access = access.cloned().unwrap_or_default();
+    let cache = match &access.cache_dir {
+        Some(dir) => Some(DiskCache::open(dir, access.cache_limit_bytes).map_err(|e| StoreError::store(&shown, e.to_string()))?),
+        None => None,
+    };
+    let store = RemoteStore::open(location, access.options, cache).map_err(|e| StoreError::store(&shown, e.to_string()))?;
+    Ok(Arc::new(store))
+}
+
+/// Checks that the local `path` is a store's folder, naming an interrupted import or swap where there was one.
+fn check_local_folder(path: &Path) -> Result<(), StoreError> {
+    if path.is_dir() {
+        return Ok(());
+    }
+    if let Some(aside) = aside_paths(path).first() {
+        return Err(StoreError::store(
+            path,
+            format!(
+                "missing: an `import --overwrite` was interrupted while swapping stores; the previous store is whole \
+                 at {} (rename it back), or run the import again",
+                aside.display()
+            ),
+        ));
+    }
+    if partial_path(path).is_dir() {
+        return Err(StoreError::store(path, "incomplete store: its import was interrupted; run the import again"));
+    }
+    Err(StoreError::store(path, "no such store (expected a folder holding zarr.json)"))
 }
 
 impl StoreReader {
@@ -185,33 +224,33 @@ impl StoreReader {
         cache_bytes: u64,
         foreign: &ForeignOptions,
     ) -> Result<StoreReader, StoreError> {
-        if !path.is_dir() {
-            if let Some(aside) = aside_paths(path).first() {
-                return Err(StoreError::store(
-                    path,
-                    format!(
-                        "missing: an `import --overwrite` was interrupted while swapping stores; the previous store \
-                         is whole at {} (rename it back), or run the import again",
-                        aside.display()
-                    ),
-                ));
+        // A URL names a remote store: it is read through the same checks, its bytes fetched by ranges.
+        let location = voxstream_remote::RemoteLocation::parse(path.to_str().unwrap_or(""))
+            .map_err(|e| StoreError::store(voxstream_remote::redact(&path.to_string_lossy()), e.to_string()))?;
+        let remote = match location {
+            Some(location) => Some(open_remote(location, foreign.remote)?),
+            None => {
+                check_local_folder(path)?;
+                None
             }
-            if partial_path(path).is_dir() {
-                return Err(StoreError::store(
-                    path,
-                    "incomplete store: its import was interrupted; run the import again",
-                ));
-            }
-            return Err(StoreError::store(path, "no such store (expected a folder holding zarr.json)"));
-        }
+        };
+        // From here on, `path` is what messages show: for a remote store its URL without credentials.
+        let shown = remote.as_ref().map_or_else(|| path.to_path_buf(), |r| PathBuf::from(r.location().shown()));
+        let path = shown.as_path();
+        let check_metadata = |node: &str| match remote {
+            // A remote store holds metadata reads to the JSON cap itself (see voxstream_remote::RemoteStore).
+            Some(_) => Ok(()),
+            None => check_node_metadata(path, node),
+        };
         // Every read goes through checks of its byte range and file kind, and every decoder stops at the chunk's
         // size (see `checked_store` and `strict_codecs`): a forged shard index or a decompression bomb is an error.
         crate::strict_codecs::register();
-        let checked = |max_range_bytes| {
-            CheckedStore::new(path, max_range_bytes).map_err(|e| StoreError::store(path, e.to_string()))
+        let checked = |max_range_bytes| match &remote {
+            Some(remote) => Ok(CheckedStore::remote(remote.clone(), max_range_bytes)),
+            None => CheckedStore::new(path, max_range_bytes).map_err(|e| StoreError::store(path, e.to_string())),
         };
         let store = Arc::new(checked(u64::MAX)?);
-        check_node_metadata(path, "")?;
+        check_metadata("")?;
         let group = Group::open(store.clone(), "/")
             .map_err(|e| StoreError::store(path, format!("missing or corrupt zarr.json: {e}")))?;
         let attributes: StoreAttributes = match group.attributes().get("voxstream") {
@@ -226,11 +265,16 @@ impl StoreReader {
                 // A quarter of the host cache keeps chunks as stored, the rest decoded chunks and bricks.
                 let metrics = Arc::new(PerformanceMetricsStorageAdapter::new(store.clone()));
                 let encoded = Arc::new(EncodedCache::new(metrics.clone(), cache_bytes / 4));
+                let chunk_source = match &remote {
+                    Some(remote) => ChunkSource::Remote(remote),
+                    None => ChunkSource::Folder(path),
+                };
                 let (attributes, levels, scan) =
-                    crate::foreign::open_foreign(path, encoded, group.attributes(), foreign)?;
+                    crate::foreign::open_foreign(path, encoded, group.attributes(), foreign, &chunk_source)?;
                 let mut reader = StoreReader::assemble(path, attributes, levels, None, cache_bytes - cache_bytes / 4)?;
                 reader.cache_bytes = cache_bytes;
                 reader.metrics = Some(metrics);
+                reader.remote = remote;
                 if let Some((level, stored)) = scan {
                     reader.scan_value_range(level, &stored, foreign.progress.unwrap_or(&|_, _| {}))?;
                 }
@@ -251,7 +295,7 @@ impl StoreReader {
         for level in 0..layout.levels() {
             let readable: Arc<dyn ReadableStorageTraits> = metrics.clone();
             for node in [level.to_string(), MINMAX_GROUP.to_string(), format!("{MINMAX_GROUP}/{level}")] {
-                check_node_metadata(path, &node)?;
+                check_metadata(&node)?;
             }
             let array = Array::open(readable, &format!("/{level}"))
                 .map_err(|e| StoreError::store(path, format!("level {level}: {e}")))?;
@@ -282,6 +326,7 @@ impl StoreReader {
         }
         let mut reader = StoreReader::assemble(path, attributes, levels, Some(minmax), cache_bytes)?;
         reader.metrics = Some(metrics);
+        reader.remote = remote;
         reader.probe_levels()?;
         Ok(reader)
     }
@@ -318,6 +363,7 @@ impl StoreReader {
             value_range_level: 0,
             prefetching: std::sync::atomic::AtomicBool::new(false),
             minmax,
+            remote: None,
         })
     }
 
@@ -627,8 +673,16 @@ impl StoreReader {
         self.brick_cache.lock().unwrap_or_else(|p| p.into_inner()).len()
     }
 
-    /// Bytes the store occupies on disk.
+    /// The remote store the bricks come from (its counts of requests, bytes and retries), `None` for a folder.
+    pub fn remote(&self) -> Option<&Arc<RemoteStore>> {
+        self.remote.as_ref()
+    }
+
+    /// Bytes the store occupies on disk (0 for a remote store).
     pub fn bytes_on_disk(&self) -> u64 {
+        if self.remote.is_some() {
+            return 0;
+        }
         fn walk(path: &Path) -> u64 {
             std::fs::read_dir(path)
                 .map(|entries| {

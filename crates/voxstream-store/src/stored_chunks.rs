@@ -18,8 +18,8 @@ pub struct LevelChunks {
     pub dataset: String,
     /// Chunks (or shards) its chunk grid declares, saturating at `u64::MAX`.
     pub declared: u64,
-    /// Chunk (or shard) files present in its folder.
-    pub stored: u64,
+    /// Chunk (or shard) files present in its folder; `None` for a remote store that cannot be listed (HTTP).
+    pub stored: Option<u64>,
 }
 
 /// Whether `folder` holds a Zarr node of its own (a nested array or group, whose files are not this array's).
@@ -65,7 +65,19 @@ impl StoreReader {
         };
         let dataset = array.path().as_str().trim_start_matches('/').to_string();
         let declared = array.chunk_grid_shape().iter().fold(1u64, |n, &d| n.saturating_mul(d));
-        let stored = count_chunk_files(&self.path().join(&dataset))?;
+        let stored = match self.remote() {
+            Some(remote) => remote
+                .list(&dataset, usize::MAX)
+                .map_err(|e| StoreError::store(self.path(), e.to_string()))?
+                .map(|keys| {
+                    let is_chunk = |key: &&String| {
+                        let file = key.rsplit('/').next().unwrap_or(key);
+                        !METADATA_FILE_NAMES.contains(&file)
+                    };
+                    keys.iter().filter(is_chunk).count() as u64
+                }),
+            None => Some(count_chunk_files(&self.path().join(&dataset))?),
+        };
         Ok(Some(LevelChunks { dataset, declared, stored }))
     }
 }

@@ -113,6 +113,9 @@ pub struct ViewArgs {
     /// Other tools' OME-Zarr images: normalise by this value range (as `render --value-range`).
     #[arg(long, value_name = "LO,HI", value_parser = crate::store_open::parse_value_range, allow_hyphen_values = true)]
     pub value_range: Option<[f64; 2]>,
+    /// Remote stores: the on-disk cache and the client's patience.
+    #[command(flatten)]
+    pub remote: RemoteArgs,
     /// cpu: the CPU ray caster draws the frames; gpu: the GPU ray caster (wgpu on Vulkan, headless: the window
     /// only shows its image). The same flag and errors as `render --backend`.
     #[arg(long, value_enum, default_value_t = Backend::Cpu)]
@@ -144,7 +147,8 @@ pub enum NormalsArg {
 /// `voxstream render`.
 #[derive(Args, Debug, Clone)]
 pub struct RenderArgs {
-    /// A built-in scene (sponge, hypertexture, shell), a store folder made by `voxstream import`, or a mesh (.ply,
+    /// A built-in scene (sponge, hypertexture, shell), a store (a folder made by `voxstream import` or another
+    /// tool's OME-Zarr image, or its URL: https://…, s3://BUCKET/PREFIX, gs://…, az://…), or a mesh (.ply,
     /// .obj, .off, .stl) or particle file (.ply points, .xyz/.csv, .gro, .pdb, .vtk, .vtp, .vtu; any of them .gz).
     #[arg(default_value = crate::scenes::DEFAULT_SCENE)]
     pub source: String,
@@ -284,6 +288,9 @@ pub struct RenderArgs {
     /// at open); samples beyond it are clipped, with a warning.
     #[arg(long, value_name = "LO,HI", value_parser = crate::store_open::parse_value_range, allow_hyphen_values = true)]
     pub value_range: Option<[f64; 2]>,
+    /// Remote stores: the on-disk cache and the client's patience.
+    #[command(flatten)]
+    pub remote: RemoteArgs,
     /// Level-of-detail bias (positive = finer than one voxel per pixel).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub lod_bias: f64,
@@ -412,7 +419,7 @@ pub struct ImportArgs {
 /// `voxstream info`.
 #[derive(Args, Debug, Clone)]
 pub struct InfoArgs {
-    /// The store folder.
+    /// The store: a folder, or a URL (https://…, s3://BUCKET/PREFIX, gs://…, az://…).
     pub store: PathBuf,
     /// Print JSON instead of text.
     #[arg(long)]
@@ -420,6 +427,9 @@ pub struct InfoArgs {
     /// Other tools' OME-Zarr images: normalise by this value range (as `render --value-range`).
     #[arg(long, value_name = "LO,HI", value_parser = crate::store_open::parse_value_range, allow_hyphen_values = true)]
     pub value_range: Option<[f64; 2]>,
+    /// Remote stores: the on-disk cache and the client's patience.
+    #[command(flatten)]
+    pub remote: RemoteArgs,
 }
 
 /// `voxstream bench`.
@@ -543,5 +553,42 @@ mod tests {
     fn cli_definition_is_consistent() {
         use clap::CommandFactory;
         Cli::command().debug_assert();
+    }
+}
+
+/// How remote stores (`https://…`, `s3://…`, `gs://…`, `az://…`) are read: `render`, `view` and `info`.
+#[derive(Args, Debug, Clone)]
+pub struct RemoteArgs {
+    /// Remote stores: keep fetched bricks in this folder (created if missing), so that the next run over the same
+    /// store starts warm; none by default. Safe to share between processes.
+    #[arg(long, value_name = "DIR")]
+    pub cache_dir: Option<PathBuf>,
+    /// The most MiB --cache-dir holds; the least recently used bricks leave first.
+    #[arg(long, value_name = "MIB", default_value_t = 4096, value_parser = clap::value_parser!(u64).range(1..))]
+    pub cache_mb: u64,
+    /// Remote stores: seconds one request may take, body included, before it is retried.
+    #[arg(long, value_name = "SECONDS", default_value_t = 30, value_parser = clap::value_parser!(u64).range(1..=3600))]
+    pub request_timeout: u64,
+    /// Remote stores: retries of a request that failed (5xx, 429, reset, timeout, short body), with backoff.
+    #[arg(long, value_name = "N", default_value_t = 5, value_parser = clap::value_parser!(u64).range(0..=20))]
+    pub retries: u64,
+}
+
+impl Default for RemoteArgs {
+    /// The flags' defaults.
+    fn default() -> Self {
+        RemoteArgs { cache_dir: None, cache_mb: 4096, request_timeout: 30, retries: 5 }
+    }
+}
+
+impl RemoteArgs {
+    /// The store reader's settings for these flags.
+    pub fn access(&self) -> voxstream_store::remote_access::RemoteAccess {
+        let mut access = voxstream_store::remote_access::RemoteAccess::default();
+        access.options.request_timeout = std::time::Duration::from_secs(self.request_timeout);
+        access.options.retries = self.retries as usize;
+        access.cache_dir = self.cache_dir.clone();
+        access.cache_limit_bytes = self.cache_mb.saturating_mul(1 << 20);
+        access
     }
 }

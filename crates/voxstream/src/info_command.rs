@@ -75,7 +75,7 @@ fn foreign_level(reader: &StoreReader, level: usize) -> Result<LevelInfo> {
         empty: None,
         dataset: chunks.as_ref().map(|c| c.dataset.clone()),
         chunks: chunks.as_ref().map(|c| c.declared),
-        chunks_stored: chunks.as_ref().map(|c| c.stored),
+        chunks_stored: chunks.as_ref().and_then(|c| c.stored),
     })
 }
 
@@ -99,7 +99,8 @@ struct StoreInfo {
 /// Runs `voxstream info`.
 pub fn run(args: &InfoArgs) -> Result<()> {
     check_store_path(&args.store, "info")?;
-    let reader = open_store(&args.store, voxstream_store::store_reader::DEFAULT_CACHE_BYTES, args.value_range, false)?;
+    let cache_bytes = voxstream_store::store_reader::DEFAULT_CACHE_BYTES;
+    let reader = open_store(&args.store, cache_bytes, args.value_range, &args.remote, false)?;
     warn_about_leftovers(&args.store);
     let layout = reader.layout();
     let attributes = reader.attributes();
@@ -107,7 +108,8 @@ pub fn run(args: &InfoArgs) -> Result<()> {
         .map(|level| if reader.is_native() { Ok(native_level(&reader, level)) } else { foreign_level(&reader, level) })
         .collect::<Result<Vec<_>>>()?;
     let info = StoreInfo {
-        path: args.store.display().to_string(),
+        // The store as the reader shows it: a remote store's URL without credentials.
+        path: reader.path().display().to_string(),
         dims: attributes.dims,
         dtype: attributes.dtype.clone(),
         spacing: attributes.spacing,
@@ -133,7 +135,13 @@ pub fn run(args: &InfoArgs) -> Result<()> {
         println!("percentiles  {}", text.join(", "));
     }
     println!("brick        {}^3", info.brick_size);
-    println!("on disk      {:.2} MiB", info.bytes_on_disk as f64 / 1048576.0);
+    match reader.remote() {
+        Some(remote) => {
+            let counts = remote.counts();
+            println!("remote       {} requests, {:.2} MiB fetched to open it", counts.requests, counts.bytes as f64 / 1048576.0);
+        }
+        None => println!("on disk      {:.2} MiB", info.bytes_on_disk as f64 / 1048576.0),
+    }
     if reader.is_native() {
         println!("level  dimensions          bricks   stored  constant  empty");
         for l in &info.levels {
@@ -154,7 +162,8 @@ pub fn run(args: &InfoArgs) -> Result<()> {
         println!("level  dimensions          bricks  dataset          chunks   stored");
         for l in &info.levels {
             let (dataset, chunks, stored) = match (&l.dataset, l.chunks, l.chunks_stored) {
-                (Some(d), Some(c), Some(s)) => (d.clone(), c.to_string(), s.to_string()),
+                // A remote HTTP store cannot be listed: its stored chunks are unknown.
+                (Some(d), Some(c), s) => (d.clone(), c.to_string(), s.map_or("?".into(), |s| s.to_string())),
                 _ => ("(averaged)".into(), "-".into(), "-".into()),
             };
             println!(

@@ -64,6 +64,7 @@ fn main() -> ExitCode {
 fn unreachable_default() -> RenderArgs {
     RenderArgs {
         source: scenes::DEFAULT_SCENE.into(),
+        remote: voxstream::cli::RemoteArgs::default(),
         amplify: None,
         resolution: None,
         attribute: false,

@@ -166,9 +166,9 @@ pub fn open_source(args: &RenderArgs, budget: &MemoryBudget, user: impl SourceUs
         return Err(missing_geometry_file(path));
     }
     check_store_path(path, "render")?;
-    check_geometry_flags(args, &args.source)?;
+    check_geometry_flags(args, &voxstream_store::remote::redact(&args.source))?;
     let cache_bytes = budget.store_cache_bytes();
-    let reader = Arc::new(open_store(path, cache_bytes, args.value_range, args.quiet)?);
+    let reader = Arc::new(open_store(path, cache_bytes, args.value_range, &args.remote, args.quiet)?);
     warn_about_leftovers(path);
     let attributes = reader.attributes().clone();
     let transfer_function = default_store_transfer_function(attributes.typical_range())?;
@@ -204,7 +204,8 @@ fn store_source<P>(
     transfer_function: TransferFunction,
 ) -> Source<P> {
     Source {
-        name: args.source.clone(),
+        // The store as the reader shows it (a remote store's URL without credentials).
+        name: reader.path().display().to_string(),
         producer,
         transfer_function,
         shading: Shading::None,

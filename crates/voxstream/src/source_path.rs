@@ -37,6 +37,10 @@ const MAX_METADATA_BYTES: u64 = 1 << 20;
 /// folder, which the store reader then reports as such), or explains what it is instead. `command` is `render` or
 /// `info`.
 pub fn check_store_path(path: &Path, command: &str) -> Result<()> {
+    // A URL names a remote store: the store reader opens and checks it.
+    if voxstream_store::remote::is_remote(&path.to_string_lossy()) {
+        return Ok(());
+    }
     let shown = path.display();
     if path.is_dir() && !is_store(path) {
         if let Some(store) = enclosing_store(path) {
@@ -122,6 +126,9 @@ pub fn check_store_path(path: &Path, command: &str) -> Result<()> {
 /// interrupted `import --overwrite`. Only named: `info` and `render` read and take no lock, and deleting a folder
 /// the user did not name is the import's job (it holds the lock, so it knows no other import is swapping).
 pub fn warn_about_leftovers(path: &Path) {
+    if voxstream_store::remote::is_remote(&path.to_string_lossy()) {
+        return;
+    }
     for aside in leftover_aside_paths(path) {
         eprintln!(
             "warning: {} is left over from an interrupted `voxstream import --overwrite` ({} is complete): delete it \

@@ -9,6 +9,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use voxstream_store::foreign::ForeignOptions;
 use voxstream_store::StoreReader;
 
+use crate::cli::RemoteArgs;
+
 /// Level-0 bricks above which the value-range scan shows a progress bar (2^15 bricks of 32³: 1 Gi samples).
 const SCAN_BAR_BRICKS: u64 = 1 << 15;
 
@@ -25,7 +27,14 @@ pub fn parse_value_range(text: &str) -> Result<[f64; 2], String> {
 
 /// Opens the store at `path` with a host cache of `cache_bytes`; `value_range` (`--value-range`) applies to foreign
 /// OME-Zarr images only (a voxstream store's range is exact). `quiet` hides the scan's progress bar.
-pub fn open_store(path: &Path, cache_bytes: u64, value_range: Option<[f64; 2]>, quiet: bool) -> Result<StoreReader> {
+pub fn open_store(
+    path: &Path,
+    cache_bytes: u64,
+    value_range: Option<[f64; 2]>,
+    remote: &RemoteArgs,
+    quiet: bool,
+) -> Result<StoreReader> {
+    let access = remote.access();
     let bar = ProgressBar::hidden();
     let show = |done: u64, total: u64| {
         if done == 1 && total >= SCAN_BAR_BRICKS && !quiet {
@@ -40,14 +49,14 @@ pub fn open_store(path: &Path, cache_bytes: u64, value_range: Option<[f64; 2]>, 
         }
         bar.set_position(done);
     };
-    let options = ForeignOptions { value_range, progress: Some(&show), ..Default::default() };
+    let options = ForeignOptions { value_range, progress: Some(&show), remote: Some(&access), ..Default::default() };
     let reader = StoreReader::open_with_options(path, cache_bytes, &options)?;
     bar.finish_and_clear();
     if value_range.is_some() && reader.is_native() {
         bail!(
             "--value-range: {} is a voxstream store, whose value range is exact ({} to {}); the flag is for other \
              tools' OME-Zarr images",
-            path.display(),
+            reader.path().display(),
             reader.attributes().value_range[0],
             reader.attributes().value_range[1]
         );
@@ -58,7 +67,7 @@ pub fn open_store(path: &Path, cache_bytes: u64, value_range: Option<[f64; 2]>, 
             "note: {}: level 0 holds more samples than are read when a store is opened, so the value range ({lo} to \
              {hi}) is level {}'s; samples beyond it saturate and are counted after the run. --value-range LO,HI sets \
              it",
-            path.display(),
+            reader.path().display(),
             reader.value_range_level()
         );
     }

@@ -45,6 +45,7 @@ fn render_args(args: &ViewArgs) -> Result<RenderArgs> {
         _ => bail!("internal error: the default render arguments did not parse"),
     };
     render.source = args.source.clone();
+    render.remote = args.remote.clone();
     render.camera = args.camera.clone();
     render.tf = args.tf.clone();
     render.width = args.width;

@@ -1,0 +1,413 @@
+//! A read-only Zarr store over HTTP(S), S3, GCS or Azure: zarrs's synchronous storage traits on top of
+//! `object_store`'s asynchronous clients, with every byte checked before it reaches a decoder.
+//!
+//! - **No request but the read.** A brick is one ranged GET (a shard's inner chunk by its offset and length, a shard
+//!   index by a suffix range); no size request goes before it (zarrs's own `object_store` adapter sends a HEAD per
+//!   read). Several ranges of one call are fetched concurrently. Callers that want many bricks at once call from many
+//!   threads: each call blocks only its own thread.
+//! - **Faults are retried, then reported.** 5xx, 429, connection resets and timeouts are retried with exponential
+//!   backoff by the client (`RetryConfig`), a body cut short mid-stream is resumed when the server sends an ETag, and a
+//!   body whose length is not the length asked for (a proxy that truncates, a `Content-Length` lie) is fetched again
+//!   here, up to `retries` times, then reported as an error: never handed to the decoder. Each request has a
+//!   timeout, and the whole read a deadline, so a server that stops answering ends in an error, never a hang.
+//! - **Bounded.** An explicit range is never longer than the caller's bound (checked before the request); a whole
+//!   value (metadata, unsharded chunks) is read as a stream and stops one byte past its cap (Zarr metadata files:
+//!   `max_metadata_bytes`; others `max_value_bytes`).
+//! - **Cached on disk** where a [`crate::DiskCache`] is given: a second run over the same store reads there first.
+//! - **No secrets out.** Errors and statistics name [`RemoteLocation::shown`]; HTTP credentials go in a header
+//!   marked sensitive.
+
+use std::ops::Range;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+use bytes::Bytes;
+use futures::StreamExt;
+use object_store::path::Path as ObjectPath;
+use object_store::{GetOptions, GetRange, ObjectStore, ObjectStoreExt};
+use zarrs_storage::byte_range::{ByteRange, ByteRangeIterator};
+use zarrs_storage::{MaybeBytesIterator, ReadableStorageTraits, StorageError, StoreKey};
+
+use crate::client::build_client;
+use crate::disk_cache::DiskCache;
+use crate::error::RemoteError;
+use crate::location::RemoteLocation;
+
+/// How a remote store is read.
+#[derive(Clone, Debug)]
+pub struct RemoteOptions {
+    /// The longest one request may take, body included, before it is retried.
+    pub request_timeout: Duration,
+    /// The longest a connection may take to open.
+    pub connect_timeout: Duration,
+    /// Retries of a failed or truncated request (5xx, 429, resets, timeouts, short bodies).
+    pub retries: usize,
+    /// The most bytes a whole-value read of a Zarr metadata file (`zarr.json`, `.zattrs`, `.zarray`, `.zgroup`)
+    /// takes.
+    pub max_metadata_bytes: u64,
+    /// The most bytes any other whole-value read takes (an unsharded chunk).
+    pub max_value_bytes: u64,
+}
+
+impl Default for RemoteOptions {
+    fn default() -> Self {
+        RemoteOptions {
+            request_timeout: Duration::from_secs(30),
+            connect_timeout: Duration::from_secs(10),
+            retries: 5,
+            max_metadata_bytes: 4 << 20,
+            max_value_bytes: 1 << 30,
+        }
+    }
+}
+
+/// What a remote store has done so far (for `--stats`).
+#[derive(Debug, Default)]
+pub struct RemoteStats {
+    /// Requests that returned bytes or a definite "not found".
+    pub requests: AtomicU64,
+    /// Bytes received in bodies that were used.
+    pub bytes: AtomicU64,
+    /// Requests sent again here after a short body or a transport error.
+    pub retries: AtomicU64,
+    /// Reads that failed after every retry.
+    pub failures: AtomicU64,
+    /// Reads answered from the disk cache.
+    pub cache_hits: AtomicU64,
+}
+
+/// A snapshot of [`RemoteStats`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RemoteCounts {
+    /// See [`RemoteStats::requests`].
+    pub requests: u64,
+    /// See [`RemoteStats::bytes`].
+    pub bytes: u64,
+    /// See [`RemoteStats::retries`].
+    pub retries: u64,
+    /// See [`RemoteStats::failures`].
+    pub failures: u64,
+    /// See [`RemoteStats::cache_hits`].
+    pub cache_hits: u64,
+}
+
+/// A remote Zarr store, read through zarrs's [`ReadableStorageTraits`].
+pub struct RemoteStore {
+    store: Arc<dyn ObjectStore>,
+    location: RemoteLocation,
+    options: RemoteOptions,
+    runtime: tokio::runtime::Runtime,
+    stats: RemoteStats,
+    cache: Option<DiskCache>,
+}
+
+impl std::fmt::Debug for RemoteStore {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RemoteStore").field("location", &self.location.shown()).finish()
+    }
+}
+
+/// Whether a key names Zarr metadata (held to `max_metadata_bytes`).
+fn is_metadata_key(key: &str) -> bool {
+    let name = key.rsplit('/').next().unwrap_or(key);
+    matches!(name, "zarr.json" | ".zattrs" | ".zarray" | ".zgroup")
+}
+
+/// The outcome of one fetch: bytes, or "there is no such value".
+enum Fetched {
+    Bytes(Bytes),
+    Missing,
+}
+
+impl RemoteStore {
+    /// A store reading `location` with `options`, its fetched bytes kept in `cache` where given.
+    pub fn open(
+        location: RemoteLocation,
+        options: RemoteOptions,
+        cache: Option<DiskCache>,
+    ) -> Result<RemoteStore, RemoteError> {
+        let store = build_client(&location, &options)?;
+        let runtime = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .thread_name("voxstream-remote")
+            .enable_all()
+            .build()
+            .map_err(|e| RemoteError::Client { url: location.shown().into(), problem: e.to_string() })?;
+        Ok(RemoteStore { store, location, options, runtime, stats: RemoteStats::default(), cache })
+    }
+
+    /// Where the store is (as shown: no credentials).
+    pub fn location(&self) -> &RemoteLocation {
+        &self.location
+    }
+
+    /// Counts so far.
+    pub fn counts(&self) -> RemoteCounts {
+        let s = &self.stats;
+        RemoteCounts {
+            requests: s.requests.load(Ordering::Relaxed),
+            bytes: s.bytes.load(Ordering::Relaxed),
+            retries: s.retries.load(Ordering::Relaxed),
+            failures: s.failures.load(Ordering::Relaxed),
+            cache_hits: s.cache_hits.load(Ordering::Relaxed),
+        }
+    }
+
+    fn object_path(&self, key: &str) -> ObjectPath {
+        if self.location.prefix.is_empty() {
+            ObjectPath::from(key)
+        } else {
+            ObjectPath::from(format!("{}/{key}", self.location.prefix))
+        }
+    }
+
+    fn error(&self, key: &str, problem: impl std::fmt::Display) -> StorageError {
+        StorageError::Other(format!("{}/{key}: {problem}", self.location.shown()))
+    }
+
+    /// The message for a client error, with the fix where one is likely.
+    fn describe(&self, key: &str, error: &object_store::Error) -> StorageError {
+        let hint = match error {
+            object_store::Error::PermissionDenied { .. } | object_store::Error::Unauthenticated { .. } => {
+                match self.location.service {
+                    crate::Service::S3 => {
+                        "access denied: set AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY (or AWS_PROFILE), or check \
+                         the bucket's policy"
+                    }
+                    crate::Service::Http => "access denied: put the user and password in the URL (https://USER:PASSWORD@host/…)",
+                    _ => "access denied: set the service's credentials in the environment",
+                }
+            }
+            _ => "",
+        };
+        // object_store's messages name the request's URL, which never holds credentials here (see `location`).
+        let text = error.to_string();
+        if hint.is_empty() {
+            self.error(key, text)
+        } else {
+            self.error(key, format!("{hint} ({text})"))
+        }
+    }
+
+    /// Fetches `range` of `key` (whole value when `None`), from the disk cache where it is, checked for length,
+    /// retried on short bodies and transport errors.
+    async fn fetch(&self, key: &str, range: Option<GetRange>) -> Result<Fetched, StorageError> {
+        let cache_key = self.cache.as_ref().map(|_| format!("{}/{key}#{range:?}", self.location.shown()));
+        if let (Some(cache), Some(cache_key)) = (&self.cache, &cache_key) {
+            if let Some(bytes) = cache.get(cache_key) {
+                self.stats.cache_hits.fetch_add(1, Ordering::Relaxed);
+                return Ok(Fetched::Bytes(bytes));
+            }
+        }
+        let path = self.object_path(key);
+        let cap = if is_metadata_key(key) { self.options.max_metadata_bytes } else { self.options.max_value_bytes };
+        let expected = match &range {
+            Some(GetRange::Bounded(r)) => Some(r.end - r.start),
+            Some(GetRange::Suffix(n)) => Some(*n),
+            _ => None,
+        };
+        let mut last_problem = String::new();
+        for attempt in 0..=self.options.retries {
+            if attempt > 0 {
+                self.stats.retries.fetch_add(1, Ordering::Relaxed);
+                let backoff = Duration::from_millis(100u64 << attempt.min(6));
+                tokio::time::sleep(backoff).await;
+            }
+            let options = GetOptions { range: range.clone(), ..GetOptions::default() };
+            let result = match self.store.get_opts(&path, options).await {
+                Ok(result) => result,
+                Err(object_store::Error::NotFound { .. }) => {
+                    self.stats.requests.fetch_add(1, Ordering::Relaxed);
+                    return Ok(Fetched::Missing);
+                }
+                Err(e @ (object_store::Error::PermissionDenied { .. } | object_store::Error::Unauthenticated { .. })) => {
+                    self.stats.failures.fetch_add(1, Ordering::Relaxed);
+                    return Err(self.describe(key, &e));
+                }
+                Err(e) => {
+                    // The client has retried what it retries (5xx, 429, timeouts); one more round here covers
+                    // errors it does not (a reset mid-body without an ETag to resume by).
+                    last_problem = self.describe(key, &e).to_string();
+                    continue;
+                }
+            };
+            if result.meta.size > cap && expected.is_none() {
+                self.stats.failures.fetch_add(1, Ordering::Relaxed);
+                return Err(self.error(key, format!("{} bytes, over the {cap} bytes such a value may take", result.meta.size)));
+            }
+            let mut body = Vec::new();
+            let mut stream = result.into_stream();
+            let mut failed = None;
+            while let Some(part) = stream.next().await {
+                match part {
+                    Ok(part) => {
+                        body.extend_from_slice(&part);
+                        if body.len() as u64 > expected.unwrap_or(cap) {
+                            break;
+                        }
+                    }
+                    Err(e) => {
+                        failed = Some(self.describe(key, &e).to_string());
+                        break;
+                    }
+                }
+            }
+            if let Some(problem) = failed {
+                last_problem = problem;
+                continue;
+            }
+            let got = body.len() as u64;
+            match expected {
+                Some(want) if got != want => {
+                    last_problem = format!("the server sent {got} bytes for a range of {want}");
+                    continue;
+                }
+                None if got > cap => {
+                    self.stats.failures.fetch_add(1, Ordering::Relaxed);
+                    return Err(self.error(key, format!("more than the {cap} bytes such a value may take")));
+                }
+                _ => {}
+            }
+            self.stats.requests.fetch_add(1, Ordering::Relaxed);
+            self.stats.bytes.fetch_add(got, Ordering::Relaxed);
+            let bytes = Bytes::from(body);
+            if let (Some(cache), Some(cache_key)) = (&self.cache, &cache_key) {
+                // Metadata is always read fresh (it says what the bytes mean); bricks and chunks are cached.
+                if !is_metadata_key(key) {
+                    cache.put(cache_key, &bytes);
+                }
+            }
+            return Ok(Fetched::Bytes(bytes));
+        }
+        self.stats.failures.fetch_add(1, Ordering::Relaxed);
+        Err(self.error(key, format!("failed after {} retries: {last_problem}", self.options.retries)))
+    }
+
+    /// The deadline of one read: every attempt's timeout and backoff, and a margin.
+    fn deadline(&self) -> Duration {
+        let attempts = self.options.retries as u32 + 1;
+        (self.options.request_timeout + Duration::from_secs(7)) * attempts
+    }
+
+    fn block_on<T>(&self, key: &str, work: impl std::future::Future<Output = Result<T, StorageError>>) -> Result<T, StorageError> {
+        let deadline = self.deadline();
+        self.runtime.block_on(async move {
+            match tokio::time::timeout(deadline, work).await {
+                Ok(result) => result,
+                Err(_) => Err(self.error(key, format!("no answer within {} s", deadline.as_secs()))),
+            }
+        })
+    }
+
+    /// The keys below `folder` (relative to it, `/`-separated), or `None` where the service cannot list (HTTP) or
+    /// more than `limit` keys are there.
+    pub fn list(&self, folder: &str, limit: usize) -> Result<Option<Vec<String>>, StorageError> {
+        if !self.location.can_list() {
+            return Ok(None);
+        }
+        let folder = folder.trim_matches('/');
+        let prefix = self.object_path(folder);
+        let strip = format!("{}/", prefix.as_ref());
+        self.block_on(folder, async {
+            let mut listing = self.store.list(Some(&prefix));
+            let mut keys = Vec::new();
+            while let Some(item) = listing.next().await {
+                let meta = item.map_err(|e| self.describe(folder, &e))?;
+                if keys.len() >= limit {
+                    return Ok(None);
+                }
+                let full = meta.location.as_ref();
+                keys.push(full.strip_prefix(&strip).unwrap_or(full).to_string());
+            }
+            Ok(Some(keys))
+        })
+    }
+}
+
+fn to_get_range(range: ByteRange) -> Option<GetRange> {
+    match range {
+        ByteRange::FromStart(0, None) => None,
+        ByteRange::FromStart(start, None) => Some(GetRange::Offset(start)),
+        ByteRange::FromStart(start, Some(length)) => Some(GetRange::Bounded(Range { start, end: start + length })),
+        ByteRange::Suffix(length) => Some(GetRange::Suffix(length)),
+    }
+}
+
+impl ReadableStorageTraits for RemoteStore {
+    fn get_partial_many<'a>(
+        &'a self,
+        key: &StoreKey,
+        byte_ranges: ByteRangeIterator<'a>,
+    ) -> Result<MaybeBytesIterator<'a>, StorageError> {
+        let name = key.as_str();
+        let ranges: Vec<ByteRange> = byte_ranges.collect();
+        for range in &ranges {
+            match *range {
+                ByteRange::FromStart(start, Some(length)) if start.checked_add(length).is_none() => {
+                    return Err(self.error(name, format!("{length} bytes at offset {start} overflow")));
+                }
+                // An empty range: nothing to fetch (an HTTP range cannot be empty).
+                _ => {}
+            }
+        }
+        let fetched = self.block_on(name, async {
+            let requests = ranges.iter().map(|&range| async move {
+                match range {
+                    ByteRange::FromStart(_, Some(0)) | ByteRange::Suffix(0) => Ok(Fetched::Bytes(Bytes::new())),
+                    range => self.fetch(name, to_get_range(range)).await,
+                }
+            });
+            futures::future::try_join_all(requests).await
+        })?;
+        if fetched.iter().any(|f| matches!(f, Fetched::Missing)) {
+            return Ok(None);
+        }
+        let bytes: Vec<Result<Bytes, StorageError>> = fetched
+            .into_iter()
+            .map(|f| match f {
+                Fetched::Bytes(b) => Ok(b),
+                Fetched::Missing => unreachable!("checked above"),
+            })
+            .collect();
+        Ok(Some(Box::new(bytes.into_iter())))
+    }
+
+    fn size_key(&self, key: &StoreKey) -> Result<Option<u64>, StorageError> {
+        let name = key.as_str();
+        let path = self.object_path(name);
+        self.block_on(name, async {
+            match self.store.head(&path).await {
+                Ok(meta) => Ok(Some(meta.size)),
+                Err(object_store::Error::NotFound { .. }) => Ok(None),
+                Err(e) => Err(self.describe(name, &e)),
+            }
+        })
+    }
+
+    fn supports_get_partial(&self) -> bool {
+        true
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn metadata_keys_are_told_apart_from_chunks() {
+        assert!(is_metadata_key("zarr.json"));
+        assert!(is_metadata_key("0/.zarray"));
+        assert!(is_metadata_key("a/b/.zattrs"));
+        assert!(!is_metadata_key("0/c/0/0/0"));
+        assert!(!is_metadata_key("0/0.0.0"));
+    }
+
+    #[test]
+    fn ranges_map_onto_requests() {
+        assert_eq!(to_get_range(ByteRange::FromStart(0, None)), None);
+        assert_eq!(to_get_range(ByteRange::FromStart(5, Some(10))), Some(GetRange::Bounded(5..15)));
+        assert_eq!(to_get_range(ByteRange::Suffix(8)), Some(GetRange::Suffix(8)));
+        assert_eq!(to_get_range(ByteRange::FromStart(3, None)), Some(GetRange::Offset(3)));
+    }
+}
