@@ -143,6 +143,8 @@ pub struct CacheManager<P: Producer> {
     blending: Option<LevelBlending>,
     /// Whether the working set is kept restricted ([`CacheManager::set_restricted`]).
     restricted: bool,
+    /// Threads that produce batches for a producer that waits on a network ([`Producer::concurrency`]).
+    io_pool: Option<rayon::ThreadPool>,
 }
 
 /// Pools of `capacities` holding only the root, and the feedback buffer sized for them.
@@ -175,6 +177,16 @@ impl<P: Producer> CacheManager<P> {
         let shape = producer.shape();
         let capacities = PoolCapacities::plan_for(&shape, format, budget_bytes)?;
         let (node_pool, brick_pool, feedback) = empty_pools(&shape, &capacities, format);
+        // A producer that waits on a network gets threads of its own, as many as it wants requests in flight (a
+        // pool that cannot be made leaves it on the shared one).
+        let io_pool = match producer.concurrency() {
+            0 | 1 => None,
+            threads => rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .thread_name(|i| format!("voxstream-fetch-{i}"))
+                .build()
+                .ok(),
+        };
         Ok(CacheManager {
             producer,
             shape,
@@ -186,6 +198,7 @@ impl<P: Producer> CacheManager<P> {
             failed: HashSet::new(),
             blending: None,
             restricted: false,
+            io_pool,
         })
     }
 
@@ -442,11 +455,8 @@ impl<P: Producer> CacheManager<P> {
             let premature: Vec<bool> = batch.iter().map(|item| self.is_premature(item.request, item.key)).collect();
             let producer = &self.producer;
             let (shape, format) = (self.shape, self.brick_pool.format());
-            let results: Vec<WorkResult> = in_space_order(
-                batch,
-                |item| item.key,
-                &shape,
-                |index| {
+            let produce_batch = || {
+                in_space_order(batch, |item| item.key, &shape, |index| {
                     let item = &batch[index];
                     match item.request.kind {
                         _ if premature[index] => WorkResult::Premature,
@@ -457,8 +467,12 @@ impl<P: Producer> CacheManager<P> {
                             (0..shape.nodes_per_tile()).map(|c| producer.oracle(item.key.child(c, shape.n))).collect(),
                         ),
                     }
-                },
-            );
+                })
+            };
+            let results: Vec<WorkResult> = match &self.io_pool {
+                Some(pool) => pool.install(produce_batch),
+                None => produce_batch(),
+            };
             for (item, result) in batch.iter().zip(results) {
                 let (request, key) = (item.request, item.key);
                 // A forced step served earlier in the batch, or a recycled tile, may have made it moot; under the
@@ -660,12 +674,15 @@ impl<P: Producer> CacheManager<P> {
             remaining = rest;
             let producer = &self.producer;
             let (shape, format) = (self.shape, self.brick_pool.format());
-            let results: Vec<Result<AnalysedBrick, ProduceError>> = in_space_order(
-                batch,
-                |&(_, key)| key,
-                &shape,
-                |index| produce_analysed(producer, batch[index].1, &shape, format),
-            );
+            let produce_batch = || {
+                in_space_order(batch, |&(_, key)| key, &shape, |index| {
+                    produce_analysed(producer, batch[index].1, &shape, format)
+                })
+            };
+            let results: Vec<Result<AnalysedBrick, ProduceError>> = match &self.io_pool {
+                Some(pool) => pool.install(produce_batch),
+                None => produce_batch(),
+            };
             for (&(node_id, _), result) in batch.iter().zip(results) {
                 let Ok(brick) = result else {
                     report.children_left_missing += 1;

@@ -67,4 +67,10 @@ pub trait Producer: Send + Sync {
     fn prefetch(&self, keys: &[NodeKey]) {
         let _ = keys;
     }
+    /// How many nodes this producer should be asked for at once: a producer whose reads wait on a network (a remote
+    /// store) serves a batch fastest with that many requests in flight, so the cache manager produces its batches on
+    /// a pool of that many threads of its own. The default, 0, uses the shared worker pool (one thread per core).
+    fn concurrency(&self) -> usize {
+        0
+    }
 }

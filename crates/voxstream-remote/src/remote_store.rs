@@ -34,6 +34,10 @@ use crate::disk_cache::DiskCache;
 use crate::error::RemoteError;
 use crate::location::RemoteLocation;
 
+/// Requests in flight by default: tensorstore's default is 32, Neuroglancer allows 100 (see BENCHMARKS.md for the
+/// measured effect).
+pub const DEFAULT_CONCURRENCY: usize = 32;
+
 /// How a remote store is read.
 #[derive(Clone, Debug)]
 pub struct RemoteOptions {
@@ -48,6 +52,8 @@ pub struct RemoteOptions {
     pub max_metadata_bytes: u64,
     /// The most bytes any other whole-value read takes (an unsharded chunk).
     pub max_value_bytes: u64,
+    /// Requests a reader keeps in flight at once (its fetching threads; see `Producer::concurrency`).
+    pub concurrency: usize,
 }
 
 impl Default for RemoteOptions {
@@ -58,6 +64,7 @@ impl Default for RemoteOptions {
             retries: 5,
             max_metadata_bytes: 4 << 20,
             max_value_bytes: 1 << 30,
+            concurrency: DEFAULT_CONCURRENCY,
         }
     }
 }
@@ -140,6 +147,11 @@ impl RemoteStore {
     /// Where the store is (as shown: no credentials).
     pub fn location(&self) -> &RemoteLocation {
         &self.location
+    }
+
+    /// Requests to keep in flight at once.
+    pub fn concurrency(&self) -> usize {
+        self.options.concurrency
     }
 
     /// Counts so far.

@@ -33,10 +33,21 @@ enum Inner {
     Remote(Arc<voxstream_remote::RemoteStore>),
 }
 
+/// Bytes of shard indexes kept ([`CheckedStore`]'s suffix reads): 16 MiB, the indexes of 16,000 shards of 64
+/// bricks.
+const INDEX_CACHE_BYTES: usize = 16 << 20;
+
 /// A [`FilesystemStore`] (or a remote store) whose reads are checked against the files' real sizes and kinds.
+///
+/// Suffix reads (zarrs reads a shard's index as its last bytes, before every brick of the shard) are kept in a
+/// small LRU cache: a shard's index is fetched once, not once per brick (over a network, a round trip each).
 #[derive(Debug)]
 pub struct CheckedStore {
     inner: Inner,
+    /// Shard indexes read, by key and suffix length, least recently used first out, within [`INDEX_CACHE_BYTES`].
+    indexes: std::sync::Mutex<lru::LruCache<(String, u64), Option<zarrs::storage::Bytes>>>,
+    /// Shard indexes being read now (one read per index however many threads want it).
+    reading: crate::single_flight::SingleFlight<(String, u64)>,
     /// The most bytes one explicit range may ask for; `u64::MAX` when unbounded (the file's size still bounds it).
     max_range_bytes: u64,
 }
@@ -45,12 +56,12 @@ impl CheckedStore {
     /// Reads from the folder `base`; each explicit byte range is at most `max_range_bytes` long.
     pub fn new(base: &Path, max_range_bytes: u64) -> Result<CheckedStore, StorageError> {
         let inner = FilesystemStore::new(base).map_err(|e| StorageError::Other(e.to_string()))?;
-        Ok(CheckedStore { inner: Inner::Folder(inner), max_range_bytes })
+        Ok(CheckedStore { inner: Inner::Folder(inner), indexes: index_cache(), reading: Default::default(), max_range_bytes })
     }
 
     /// Reads from `remote`; each explicit byte range is at most `max_range_bytes` long.
     pub fn remote(remote: Arc<voxstream_remote::RemoteStore>, max_range_bytes: u64) -> CheckedStore {
-        CheckedStore { inner: Inner::Remote(remote), max_range_bytes }
+        CheckedStore { inner: Inner::Remote(remote), indexes: index_cache(), reading: Default::default(), max_range_bytes }
     }
 
     /// The size of `key`'s file, `None` when it does not exist; an error when it is not a regular file.
@@ -97,6 +108,46 @@ impl CheckedStore {
     }
 }
 
+fn index_cache() -> std::sync::Mutex<lru::LruCache<(String, u64), Option<zarrs::storage::Bytes>>> {
+    std::sync::Mutex::new(lru::LruCache::unbounded())
+}
+
+impl CheckedStore {
+    /// The shard index `key`'s last `length` bytes, read once and then kept.
+    fn suffix(&self, key: &StoreKey, length: u64) -> Result<MaybeBytesIterator<'_>, StorageError> {
+        let cache_key = (key.as_str().to_string(), length);
+        let lock = || self.indexes.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(bytes) = lock().get(&cache_key) {
+            return Ok(bytes.clone().map(|b| Box::new(std::iter::once(Ok(b))) as _));
+        }
+        self.reading.run(&cache_key.clone(), || self.read_suffix(key, cache_key, length))
+    }
+
+    fn read_suffix(&self, key: &StoreKey, cache_key: (String, u64), length: u64) -> Result<MaybeBytesIterator<'_>, StorageError> {
+        let lock = || self.indexes.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(bytes) = lock().get(&cache_key) {
+            return Ok(bytes.clone().map(|b| Box::new(std::iter::once(Ok(b))) as _));
+        }
+        let Some(mut parts) = self.read_checked(key, vec![ByteRange::Suffix(length)])? else {
+            // A shard that is not there (all its bricks empty) is remembered as such.
+            lock().put(cache_key, None);
+            return Ok(None);
+        };
+        let bytes = parts.next().unwrap_or_else(|| Err(StorageError::Other(format!("{key}: no bytes for the suffix"))))?;
+        let mut cache = lock();
+        cache.put(cache_key, Some(bytes.clone()));
+        let size = |b: &Option<zarrs::storage::Bytes>| b.as_ref().map_or(0, |b| b.len()) + 64;
+        let mut held: usize = cache.iter().map(|(_, b)| size(b)).sum();
+        while held > INDEX_CACHE_BYTES {
+            match cache.pop_lru() {
+                Some((_, b)) => held -= size(&b),
+                None => break,
+            }
+        }
+        Ok(Some(Box::new(std::iter::once(Ok(bytes)))))
+    }
+}
+
 impl ReadableStorageTraits for CheckedStore {
     fn get_partial_many<'a>(
         &'a self,
@@ -104,6 +155,27 @@ impl ReadableStorageTraits for CheckedStore {
         byte_ranges: ByteRangeIterator<'a>,
     ) -> Result<MaybeBytesIterator<'a>, StorageError> {
         let ranges: Vec<ByteRange> = byte_ranges.collect();
+        if let [ByteRange::Suffix(length)] = ranges[..] {
+            return self.suffix(key, length);
+        }
+        self.read_checked(key, ranges)
+    }
+
+    fn size_key(&self, key: &StoreKey) -> Result<Option<u64>, StorageError> {
+        match &self.inner {
+            Inner::Folder(folder) => self.regular_file_size(folder, key),
+            Inner::Remote(remote) => remote.size_key(key),
+        }
+    }
+
+    fn supports_get_partial(&self) -> bool {
+        true
+    }
+}
+
+impl CheckedStore {
+    /// Reads `ranges` of `key` after checking them.
+    fn read_checked(&self, key: &StoreKey, ranges: Vec<ByteRange>) -> Result<MaybeBytesIterator<'_>, StorageError> {
         match &self.inner {
             Inner::Folder(folder) => {
                 let Some(size) = self.regular_file_size(folder, key)? else {
@@ -129,17 +201,6 @@ impl ReadableStorageTraits for CheckedStore {
                 remote.get_partial_many(key, Box::new(ranges.into_iter()))
             }
         }
-    }
-
-    fn size_key(&self, key: &StoreKey) -> Result<Option<u64>, StorageError> {
-        match &self.inner {
-            Inner::Folder(folder) => self.regular_file_size(folder, key),
-            Inner::Remote(remote) => remote.size_key(key),
-        }
-    }
-
-    fn supports_get_partial(&self) -> bool {
-        true
     }
 }
 

@@ -28,6 +28,7 @@ pub mod metadata;
 pub mod metadata_check;
 pub mod metadata_files;
 pub mod remote_access;
+pub mod single_flight;
 pub mod non_finite;
 pub mod store_lock;
 pub mod store_producer;

@@ -39,6 +39,11 @@ pub trait BrickSource: Send + Sync {
     fn prefetch(self: &Arc<Self>, bricks: Vec<(usize, [u64; 3])>) {
         let _ = bricks;
     }
+
+    /// Reads to keep in flight at once (see [`Producer::concurrency`]); 0 for local sources.
+    fn concurrency(&self) -> usize {
+        0
+    }
 }
 
 impl BrickSource for StoreReader {
@@ -63,6 +68,9 @@ impl BrickSource for StoreReader {
     }
     fn prefetch(self: &Arc<Self>, bricks: Vec<(usize, [u64; 3])>) {
         StoreReader::prefetch(self, bricks);
+    }
+    fn concurrency(&self) -> usize {
+        StoreReader::remote(self).map_or(0, |remote| remote.concurrency())
     }
 }
 
@@ -269,6 +277,10 @@ impl<S: BrickSource> Producer for StoreProducer<S> {
     fn prefetch(&self, keys: &[NodeKey]) {
         let bricks = keys.iter().map(|key| (self.store_level(key), key.ijk)).collect();
         self.reader.prefetch(bricks);
+    }
+
+    fn concurrency(&self) -> usize {
+        self.reader.concurrency()
     }
 
     fn produce(&self, key: NodeKey, voxels: &mut [u16]) -> Result<Produced, ProduceError> {

@@ -171,6 +171,8 @@ pub struct StoreReader {
     minmax: Option<Vec<Vec<[f32; 2]>>>,
     /// The remote store the bricks come from, `None` for a local folder.
     remote: Option<Arc<RemoteStore>>,
+    /// Bricks being read now, so that a brick wanted by several threads is read once.
+    reading: crate::single_flight::SingleFlight<(usize, [u64; 3])>,
 }
 
 /// Opens the remote store at `location`, with `access`'s timeouts, retries and disk cache.
@@ -364,6 +366,7 @@ impl StoreReader {
             prefetching: std::sync::atomic::AtomicBool::new(false),
             minmax,
             remote: None,
+            reading: crate::single_flight::SingleFlight::new(),
         })
     }
 
@@ -416,11 +419,25 @@ impl StoreReader {
         let mut out = vec![0f32; (size[0] * size[1] * size[2]) as usize];
         let first = lower.map(|v| v / b);
         let last = [0, 1, 2].map(|a| (upper[a] - 1) / b);
+        let mut ijks = Vec::new();
         for bz in first[2]..=last[2] {
             for by in first[1]..=last[1] {
                 for bx in first[0]..=last[0] {
-                    let ijk = [bx, by, bz];
-                    let brick = self.brick(level, ijk)?;
+                    ijks.push([bx, by, bz]);
+                }
+            }
+        }
+        // A remote store's bricks (a node's and its neighbours', for the border) are fetched at once, each a round
+        // trip; a local folder's one after another.
+        let bricks: Vec<Arc<Vec<f32>>> = if self.remote.is_some() && ijks.len() > 1 {
+            use rayon::prelude::*;
+            ijks.par_iter().map(|&ijk| self.brick(level, ijk)).collect::<Result<_, _>>()?
+        } else {
+            ijks.iter().map(|&ijk| self.brick(level, ijk)).collect::<Result<_, _>>()?
+        };
+        for (&ijk, brick) in ijks.iter().zip(&bricks) {
+            {
+                {
                     let origin = ijk.map(|v| v * b);
                     let extent = [0, 1, 2].map(|a| (origin[a] + b).min(dims[a]) - origin[a]);
                     let from = [0, 1, 2].map(|a| origin[a].max(lower[a]));
@@ -446,6 +463,30 @@ impl StoreReader {
         let key = (level, ijk);
         if let Some(brick) = self.brick_cache.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {
             return Ok(brick.clone());
+        }
+        // Threads after the same brick wait for one read (see `single_flight`).
+        self.reading.run(&key, || {
+            if let Some(brick) = self.brick_cache.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {
+                return Ok(brick.clone());
+            }
+            self.read_brick(level, ijk)
+        })
+    }
+
+    /// Reads brick `ijk` of `level` from the store into the brick cache.
+    fn read_brick(&self, level: usize, ijk: [u64; 3]) -> Result<Arc<Vec<f32>>, StoreError> {
+        let key = (level, ijk);
+        // A brick whose min/max is [0, 0] holds only the fill value: nothing to read (its shard may not exist).
+        if let Some(minmax) = &self.minmax {
+            let b = self.layout.bricks(level);
+            if (0..3).all(|a| ijk[a] < b[a]) && minmax[level][((ijk[2] * b[1] + ijk[1]) * b[0] + ijk[0]) as usize] == [0.0, 0.0] {
+                let dims = self.layout.level_dims[level];
+                let size = self.layout.brick_size;
+                let extent: u64 = (0..3).map(|a| (ijk[a] * size + size).min(dims[a]) - ijk[a] * size).product();
+                let brick = Arc::new(vec![0.0; extent as usize]);
+                self.brick_cache.lock().unwrap_or_else(|p| p.into_inner()).put(key, brick.clone());
+                return Ok(brick);
+            }
         }
         let b = self.layout.brick_size;
         let dims = self.layout.level_dims[level];
@@ -522,7 +563,10 @@ impl StoreReader {
         let [min, max] = minmax[level][((ijk[2] * b[1] + ijk[1]) * b[0] + ijk[0]) as usize];
         let failure =
             |problem: String| StoreError::store(&self.path, format!("level {level}, brick {ijk:?}: {problem}"));
-        if [min, max] != [0.0, 0.0] {
+        let (lo, hi) = samples.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+        // A missing shard reads as the fill value, 0, throughout: only a brick that read as all 0 while its min/max
+        // says otherwise needs its shard looked for (a size request, a round trip on a remote store).
+        if [min, max] != [0.0, 0.0] && [lo, hi] == [0.0, 0.0] {
             let lower = ijk.map(|v| v * self.layout.brick_size);
             let shard = array.chunk_shape(&[0, 0, 0]).map_err(|e| failure(e.to_string()))?;
             let indices = [lower[2] / shard[0].get(), lower[1] / shard[1].get(), lower[0] / shard[2].get()];
@@ -537,7 +581,6 @@ impl StoreReader {
                 Err(e) => return Err(failure(e.to_string())),
             }
         }
-        let (lo, hi) = samples.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
         let agrees = if level == 0 { lo == min && hi == max } else { lo >= min && hi <= max };
         if !agrees {
             return Err(failure(format!(

@@ -572,12 +572,15 @@ pub struct RemoteArgs {
     /// Remote stores: retries of a request that failed (5xx, 429, reset, timeout, short body), with backoff.
     #[arg(long, value_name = "N", default_value_t = 5, value_parser = clap::value_parser!(u64).range(0..=20))]
     pub retries: u64,
+    /// Remote stores: requests kept in flight at once (bricks fetched in parallel).
+    #[arg(long, value_name = "N", default_value_t = 32, value_parser = clap::value_parser!(u64).range(1..=256))]
+    pub concurrent_requests: u64,
 }
 
 impl Default for RemoteArgs {
     /// The flags' defaults.
     fn default() -> Self {
-        RemoteArgs { cache_dir: None, cache_mb: 4096, request_timeout: 30, retries: 5 }
+        RemoteArgs { cache_dir: None, cache_mb: 4096, request_timeout: 30, retries: 5, concurrent_requests: 32 }
     }
 }
 
@@ -587,6 +590,7 @@ impl RemoteArgs {
         let mut access = voxstream_store::remote_access::RemoteAccess::default();
         access.options.request_timeout = std::time::Duration::from_secs(self.request_timeout);
         access.options.retries = self.retries as usize;
+        access.options.concurrency = self.concurrent_requests as usize;
         access.cache_dir = self.cache_dir.clone();
         access.cache_limit_bytes = self.cache_mb.saturating_mul(1 << 20);
         access
