@@ -69,12 +69,14 @@ run \`sudo apt-get update\` and run this script again"
     fi
 }
 
-# Python packages for the references and the zarr-python checks, in the project's own virtual environment.
+# Python packages for the references and the zarr-python checks, in the project's own virtual environment; moto's
+# S3 server and boto3 for the remote-store tests (crates/voxstream/tests/remote_stores.rs).
 if [ ! -x "$venv/bin/python" ]; then
     python3 -m venv "$venv" || fail "cannot create the virtual environment $venv (above: python's reason)"
 fi
-"$venv/bin/python" -m pip install --quiet --disable-pip-version-check numpy==2.1.3 nibabel==5.3.2 zarr==3.0.8 \
-    || fail "cannot install numpy==2.1.3 nibabel==5.3.2 zarr==3.0.8 into $venv from PyPI (above: pip's reason)"
+python_packages=(numpy==2.1.3 nibabel==5.3.2 zarr==3.0.8 "moto[server]==5.2.6" boto3==1.44.18)
+"$venv/bin/python" -m pip install --quiet --disable-pip-version-check "${python_packages[@]}" \
+    || fail "cannot install ${python_packages[*]} into $venv from PyPI (above: pip's reason)"
 
 pip_download() { # requirement
     "$venv/bin/python" -m pip download --quiet --disable-pip-version-check --no-deps --only-binary=:all: -d "$work" "$1" \

@@ -253,8 +253,14 @@ impl StoreReader {
         };
         let store = Arc::new(checked(u64::MAX)?);
         check_metadata("")?;
-        let group = Group::open(store.clone(), "/")
-            .map_err(|e| StoreError::store(path, format!("missing or corrupt zarr.json: {e}")))?;
+        let group = Group::open(store.clone(), "/").map_err(|e| match (&remote, &e) {
+            (Some(_), zarrs::group::GroupCreateError::MissingMetadata) => StoreError::store(
+                path,
+                "no zarr.json (nor .zattrs) there: check that the URL names the store's root folder, the one holding \
+                 zarr.json",
+            ),
+            _ => StoreError::store(path, format!("missing or corrupt zarr.json: {e}")),
+        })?;
         let attributes: StoreAttributes = match group.attributes().get("voxstream") {
             Some(value) => serde_json::from_value(value.clone()).map_err(|e| match null_field(value) {
                 // serde_json writes a non-finite number as null: name the field.

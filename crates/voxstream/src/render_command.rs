@@ -21,6 +21,7 @@ use crate::exit_status::IncompleteImage;
 use crate::geometry_source;
 use crate::iso_flags;
 use crate::memory::{bytes_read, peak_rss_bytes};
+use crate::stats::RemoteStats;
 use crate::output_file::{check_output, write_output};
 use crate::png_output::{numbered_path, write_png};
 use crate::popping_run::FrameRecorder;
@@ -59,6 +60,8 @@ pub struct Source<P> {
     pub light: Option<[f64; 3]>,
     /// Surfaces drawn when neither `--iso` nor `--tf` is given (empty: the volume).
     pub default_surfaces: Vec<IsoSurface>,
+    /// The remote store the bricks come from (its requests, bytes and retries go into the statistics).
+    pub remote: Option<Arc<voxstream_store::remote::RemoteStore>>,
 }
 
 /// The transfer function, settings and camera the flags make of a source's defaults.
@@ -126,6 +129,7 @@ pub fn open_source(args: &RenderArgs, budget: &MemoryBudget, user: impl SourceUs
             producer_cache_bytes: 0,
             sample_bytes: 2,
             default_surfaces: Vec::new(),
+            remote: None,
         };
         check_geometry_flags(args, &source.name)?;
         return user.use_source(args, source, budget);
@@ -159,6 +163,7 @@ pub fn open_source(args: &RenderArgs, budget: &MemoryBudget, user: impl SourceUs
             sample_bytes: 2,
             light: None,
             default_surfaces: geometry.default_surfaces,
+            remote: None,
         };
         return user.use_source(args, source, budget);
     }
@@ -217,6 +222,7 @@ fn store_source<P>(
         sample_bytes: reader.info().dtype.size() as u64,
         light: None,
         default_surfaces: Vec::new(),
+        remote: reader.remote().cloned(),
     }
 }
 
@@ -590,6 +596,7 @@ fn render_source<P: Producer>(args: &RenderArgs, source: Source<P>, budget: &Mem
             stats.brick_bytes_used = Some(residency.bricks as u64 * m * m * m * source.sample_bytes);
         }
     }
+    stats.remote = source.remote.as_ref().map(|remote| RemoteStats::from(remote.counts()));
     if !stats.converged && args.mode == Mode::Converged {
         progress.warn(&format!(
             "the last frame did not converge: the budget of {} MiB cannot hold what the view needs; coarser data \

@@ -50,6 +50,9 @@ pub struct RunStats {
     pub bytes_uploaded: u64,
     /// Bytes read from files while rendering (stores only: compressed shards and metadata).
     pub file_bytes_read: Option<u64>,
+    /// A remote store's requests, bytes, retries and failures since it was opened (absent for local sources).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub remote: Option<RemoteStats>,
     /// Bytes of the bricks resident at the end (borders excluded, in the source's sample type): what the frame used.
     pub brick_bytes_used: Option<u64>,
     /// Milliseconds until the first image was complete enough to write (the first frame).
@@ -62,4 +65,26 @@ pub struct RunStats {
     /// Interactive mode: popping and seams of the frames against the converged images at the same cameras (8-bit
     /// levels; see `voxstream_engine::popping`).
     pub popping: Option<voxstream_engine::PoppingSummary>,
+}
+
+/// What a remote store did (`--stats`'s `remote`).
+#[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]
+pub struct RemoteStats {
+    /// Requests answered (bytes, or a definite "not found").
+    pub requests: u64,
+    /// Bytes received in bodies used.
+    pub bytes: u64,
+    /// Requests sent again after a short body or a transport error (the client's own retries of 5xx, 429 and
+    /// timeouts come on top).
+    pub retries: u64,
+    /// Reads that failed after every retry (their bricks are reported as failed; ancestors stand in).
+    pub failures: u64,
+    /// Reads answered from `--cache-dir`.
+    pub cache_hits: u64,
+}
+
+impl From<voxstream_store::remote::RemoteCounts> for RemoteStats {
+    fn from(c: voxstream_store::remote::RemoteCounts) -> Self {
+        RemoteStats { requests: c.requests, bytes: c.bytes, retries: c.retries, failures: c.failures, cache_hits: c.cache_hits }
+    }
 }

@@ -1,0 +1,371 @@
+//! Remote stores over real servers (issue 43): nginx serving a folder over HTTP with byte ranges and ETags (Debian's
+//! `nginx-light`, run unprivileged from a config in a scratch folder), moto's S3 server (`moto_server`, from PyPI,
+//! in `data/venv`), and `scripts/fault_proxy.py` between them and voxstream for latency, 503s, truncated bodies and
+//! stalls. The images from HTTP and S3 must be the local folder's, byte for byte, faults or not; a dead server must
+//! end the run with one clear line, never a hang; credentials never reach what voxstream prints.
+//!
+//! `.ci/run` installs nginx-light; `scripts/fetch-real-data.sh` installs moto, boto3 and zarr into `data/venv`.
+
+mod common;
+
+use std::net::TcpListener;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use common::{scratch, stderr, voxstream};
+
+const NGINX: &str = "/usr/sbin/nginx";
+
+fn repository_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").canonicalize().unwrap()
+}
+
+/// The project's Python environment (moto, boto3, zarr), made by `scripts/fetch-real-data.sh`.
+fn venv_python() -> PathBuf {
+    let python = repository_root().join("data/venv/bin/python");
+    assert!(
+        python.exists(),
+        "data/venv is missing: run scripts/fetch-real-data.sh (it installs moto, boto3 and zarr there)"
+    );
+    python
+}
+
+fn free_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+}
+
+/// Waits until something listens on `port` (at most 30 s).
+fn wait_for_port(port: u16, child: &mut Child, what: &str) {
+    let start = Instant::now();
+    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+        if let Ok(Some(status)) = child.try_wait() {
+            panic!("{what} exited before listening ({status})");
+        }
+        assert!(start.elapsed() < Duration::from_secs(30), "{what} did not listen on {port} within 30 s");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// A server process, killed when dropped.
+struct Server {
+    child: Child,
+    port: u16,
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// nginx serving `root` on a free port, its access log at `dir/access.log`.
+fn nginx(dir: &Path, root: &Path) -> Server {
+    assert!(Path::new(NGINX).exists(), "nginx is missing: sudo apt-get install nginx-light (.ci/run installs it)");
+    let port = free_port();
+    let prefix = dir.join("nginx");
+    std::fs::create_dir_all(&prefix).unwrap();
+    let p = prefix.display();
+    let config = format!(
+        "daemon off;\nmaster_process off;\npid {p}/nginx.pid;\nerror_log {p}/error.log;\nevents {{ worker_connections \
+         512; }}\nhttp {{\n  log_format ranges '$request \"$http_range\" $status';\n  access_log {p}/access.log ranges;\n  client_body_temp_path {p}/body;\n  proxy_temp_path \
+         {p}/proxy;\n  fastcgi_temp_path {p}/fastcgi;\n  uwsgi_temp_path {p}/uwsgi;\n  scgi_temp_path {p}/scgi;\n  \
+         server {{ listen 127.0.0.1:{port}; root {}; location / {{ }} }}\n}}\n",
+        root.display()
+    );
+    std::fs::write(prefix.join("nginx.conf"), config).unwrap();
+    let mut child = Command::new(NGINX)
+        .args(["-p", &p.to_string(), "-c", &format!("{p}/nginx.conf"), "-e", &format!("{p}/error.log")])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("start nginx");
+    wait_for_port(port, &mut child, "nginx");
+    Server { child, port }
+}
+
+/// moto's S3 server on a free port.
+fn moto() -> Server {
+    let python = venv_python();
+    let port = free_port();
+    let mut child = Command::new(python.with_file_name("moto_server"))
+        .args(["-H", "127.0.0.1", "-p", &port.to_string()])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("start moto_server (data/venv: scripts/fetch-real-data.sh installs it)");
+    wait_for_port(port, &mut child, "moto_server");
+    Server { child, port }
+}
+
+/// The fault proxy in front of `upstream`, with `flags`, logging to `log`.
+fn proxy(upstream: u16, flags: &[&str], log: &Path) -> Server {
+    let port = free_port();
+    let mut child = Command::new("python3")
+        .arg(repository_root().join("scripts/fault_proxy.py"))
+        .args(["--listen", &port.to_string(), "--upstream", &format!("127.0.0.1:{upstream}")])
+        .args(["--log", &log.display().to_string()])
+        .args(flags)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("start scripts/fault_proxy.py");
+    wait_for_port(port, &mut child, "fault_proxy.py");
+    Server { child, port }
+}
+
+/// Uploads the folder `root` to `s3://bucket/prefix` on moto at `port` with boto3 (an independent S3 client).
+fn upload(port: u16, root: &Path, bucket: &str, prefix: &str) {
+    let script = r#"
+import boto3, os, sys
+root, bucket, prefix, endpoint = sys.argv[1:5]
+s3 = boto3.client("s3", endpoint_url=endpoint, aws_access_key_id="test", aws_secret_access_key="test",
+                  region_name="us-east-1")
+s3.create_bucket(Bucket=bucket)
+for folder, _, files in os.walk(root):
+    for name in files:
+        path = os.path.join(folder, name)
+        s3.upload_file(path, bucket, prefix + "/" + os.path.relpath(path, root).replace(os.sep, "/"))
+"#;
+    let status = Command::new(venv_python())
+        .args(["-c", script, &root.display().to_string(), bucket, prefix, &format!("http://127.0.0.1:{port}")])
+        .status()
+        .unwrap();
+    assert!(status.success(), "uploading to moto failed");
+}
+
+/// A 48×40×36 ball of 16-bit values imported with 16³ bricks (several shards, empty ones among them).
+fn import_ball(dir: &Path, name: &str) {
+    let (nx, ny, nz) = (48usize, 40usize, 36usize);
+    let mut bytes = format!(
+        "NRRD0004\ntype: ushort\ndimension: 3\nsizes: {nx} {ny} {nz}\nspacings: 1 1 1\nencoding: raw\nendian: little\n\n"
+    )
+    .into_bytes();
+    for k in 0..nz {
+        for j in 0..ny {
+            for i in 0..nx {
+                let d = (((i as f64 - 24.0) / 18.0).powi(2)
+                    + ((j as f64 - 20.0) / 16.0).powi(2)
+                    + ((k as f64 - 18.0) / 14.0).powi(2))
+                .sqrt();
+                let v = if d < 1.0 { (3000.0 * (1.0 - d * d)) as u16 + 50 } else { 0 };
+                bytes.extend(v.to_le_bytes());
+            }
+        }
+    }
+    std::fs::write(dir.join("ball.nrrd"), bytes).unwrap();
+    let out = voxstream(&["import", "ball.nrrd", "--out", name, "--brick-size", "16", "--quiet"], dir);
+    assert!(out.status.success(), "import: {}", stderr(&out));
+}
+
+/// Renders `source` converged at 96² into `dir/out`, returning the PNG's bytes and the run's output.
+fn render(dir: &Path, source: &str, out: &str, extra: &[&str], env: &[(&str, &str)]) -> (Vec<u8>, std::process::Output) {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_voxstream"));
+    command.args(["render", source, "--out", out, "--width", "96", "--height", "96", "--quiet"]).args(extra);
+    for (k, v) in env {
+        command.env(k, v);
+    }
+    let output = command.current_dir(dir).output().unwrap();
+    let png = std::fs::read(dir.join(out)).unwrap_or_default();
+    (png, output)
+}
+
+fn s3_env(port: u16) -> Vec<(&'static str, String)> {
+    vec![
+        ("AWS_ACCESS_KEY_ID", "test".into()),
+        ("AWS_SECRET_ACCESS_KEY", "s3cretValue".into()),
+        ("AWS_ENDPOINT_URL", format!("http://127.0.0.1:{port}")),
+        ("AWS_REGION", "us-east-1".into()),
+    ]
+}
+
+#[test]
+fn http_and_s3_give_the_local_image_byte_for_byte() {
+    let dir = scratch("remote_stores", "identical");
+    import_ball(&dir, "www/ball.zarr");
+    let (local, out) = render(&dir, "www/ball.zarr", "local.png", &[], &[]);
+    assert!(out.status.success() && !local.is_empty(), "local render: {}", stderr(&out));
+
+    let server = nginx(&dir, &dir.join("www"));
+    let url = format!("http://127.0.0.1:{}/ball.zarr", server.port);
+    let (http, out) = render(&dir, &url, "http.png", &["--stats", "http.json"], &[]);
+    assert!(out.status.success(), "HTTP render: {}", stderr(&out));
+    assert!(http == local, "the image over HTTP differs from the local folder's");
+    let stats: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("http.json")).unwrap()).unwrap();
+    let requests = stats["remote"]["requests"].as_u64().expect("remote requests in --stats");
+    assert!(requests > 0 && stats["remote"]["failures"] == 0, "{}", stats["remote"]);
+    // Each shard index is fetched once, and no brick twice: every (chunk, range) is requested once.
+    let log = std::fs::read_to_string(dir.join("nginx/access.log")).unwrap();
+    let lines: Vec<&str> = log.lines().filter(|l| l.starts_with("GET") && l.contains("/c/")).collect();
+    let distinct: std::collections::HashSet<&str> = lines.iter().copied().collect();
+    assert!(!lines.is_empty(), "no chunk was fetched: {log}");
+
+    let s3 = moto();
+    upload(s3.port, &dir.join("www/ball.zarr"), "scans", "volumes/ball.zarr");
+    let env = s3_env(s3.port);
+    let env: Vec<(&str, &str)> = env.iter().map(|(k, v)| (*k, v.as_str())).collect();
+    let (from_s3, out) = render(&dir, "s3://scans/volumes/ball.zarr", "s3.png", &[], &env);
+    assert!(out.status.success(), "S3 render: {}", stderr(&out));
+    assert!(from_s3 == local, "the image from S3 differs from the local folder's");
+    // `info` lists the chunks over S3 (HTTP cannot list) and shows no secret.
+    let info = Command::new(env!("CARGO_BIN_EXE_voxstream"))
+        .args(["info", "s3://scans/volumes/ball.zarr"])
+        .envs(env.iter().copied())
+        .output()
+        .unwrap();
+    assert!(info.status.success(), "info over S3: {}", stderr(&info));
+    let text = String::from_utf8_lossy(&info.stdout);
+    assert!(text.contains("s3://scans/volumes/ball.zarr") && text.contains("48 x 40 x 36"), "{text}");
+    assert!(!text.contains("s3cretValue") && !stderr(&info).contains("s3cretValue"));
+    assert_eq!(lines.len(), distinct.len(), "a chunk range was fetched twice:\n{log}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn faults_are_retried_and_the_image_stays_identical() {
+    let dir = scratch("remote_stores", "faults");
+    import_ball(&dir, "www/ball.zarr");
+    let (local, _) = render(&dir, "www/ball.zarr", "local.png", &[], &[]);
+    let server = nginx(&dir, &dir.join("www"));
+    let log = dir.join("proxy.log");
+    let faulty = proxy(server.port, &["--fail-rate", "0.2", "--truncate-rate", "0.05", "--seed", "7"], &log);
+    let url = format!("http://127.0.0.1:{}/ball.zarr", faulty.port);
+    let (image, out) = render(&dir, &url, "faults.png", &["--stats", "faults.json"], &[]);
+    assert!(out.status.success(), "render through faults: {}", stderr(&out));
+    assert!(image == local, "faults changed the image");
+    let actions = std::fs::read_to_string(&log).unwrap();
+    let count = |what: &str| actions.lines().filter(|l| l.split('\t').nth(2).is_some_and(|a| a.starts_with(what))).count();
+    assert!(count("503") > 0 && count("truncated") > 0, "the proxy injected no faults:\n{actions}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn a_server_that_stops_answering_ends_the_run_with_one_line() {
+    let dir = scratch("remote_stores", "stall");
+    import_ball(&dir, "www/ball.zarr");
+    let server = nginx(&dir, &dir.join("www"));
+    // The metadata is read, then nothing more is answered.
+    let stalled = proxy(server.port, &["--stall-after", "6"], &dir.join("proxy.log"));
+    let url = format!("http://127.0.0.1:{}/ball.zarr", stalled.port);
+    let mut child = Command::new(env!("CARGO_BIN_EXE_voxstream"))
+        .args(["render", &url, "--out", "stall.png", "--width", "64", "--height", "64", "--quiet"])
+        .args(["--request-timeout", "1", "--retries", "1"])
+        .current_dir(&dir)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        if start.elapsed() > Duration::from_secs(120) {
+            let _ = child.kill();
+            panic!("voxstream still waited on a stalled server after 120 s");
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    let output = child.wait_with_output().unwrap();
+    let message = stderr(&output);
+    assert!(!status.success(), "a run against a dead server succeeded: {message}");
+    assert!(message.contains(&format!("127.0.0.1:{}", stalled.port)), "the message names no URL: {message}");
+    assert!(!dir.join("stall.png").exists() || status.code() == Some(3), "an image was written as if complete");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn missing_stores_and_credentials_in_urls_are_reported_without_secrets() {
+    let dir = scratch("remote_stores", "missing");
+    std::fs::create_dir_all(dir.join("www")).unwrap();
+    let server = nginx(&dir, &dir.join("www"));
+    let url = format!("http://alice:hunter2@127.0.0.1:{}/nothere.zarr?token=abc", server.port);
+    let out = voxstream(&["info", &url], &dir);
+    let message = stderr(&out);
+    assert!(!out.status.success());
+    assert!(message.contains(&format!("http://127.0.0.1:{}/nothere.zarr", server.port)), "{message}");
+    assert!(!message.contains("hunter2") && !message.contains("token=abc"), "a secret was printed: {message}");
+    assert_eq!(message.trim().lines().count(), 1, "{message}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn the_disk_cache_makes_a_second_run_fetch_no_brick_and_survives_damage() {
+    let dir = scratch("remote_stores", "cache");
+    import_ball(&dir, "www/ball.zarr");
+    let (local, _) = render(&dir, "www/ball.zarr", "local.png", &[], &[]);
+    let server = nginx(&dir, &dir.join("www"));
+    let url = format!("http://127.0.0.1:{}/ball.zarr", server.port);
+    let cache = dir.join("cache");
+    let flags = ["--cache-dir", cache.to_str().unwrap(), "--stats", "run.json"];
+    let (first, out) = render(&dir, &url, "first.png", &flags, &[]);
+    assert!(out.status.success() && first == local, "{}", stderr(&out));
+    let chunk_gets = || {
+        std::fs::read_to_string(dir.join("nginx/access.log"))
+            .unwrap()
+            .lines()
+            .filter(|l| l.contains("GET") && l.contains("/c/"))
+            .count()
+    };
+    let after_first = chunk_gets();
+    assert!(after_first > 0);
+    let (second, out) = render(&dir, &url, "second.png", &flags, &[]);
+    assert!(out.status.success() && second == local, "{}", stderr(&out));
+    assert_eq!(chunk_gets(), after_first, "the second run fetched bricks the cache held");
+    let stats: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("run.json")).unwrap()).unwrap();
+    assert!(stats["remote"]["cache_hits"].as_u64().unwrap() > 0, "{}", stats["remote"]);
+    // Damage every entry: each is detected, refetched, and the image is unchanged.
+    let mut damaged = 0;
+    for fan in std::fs::read_dir(&cache).unwrap().flatten() {
+        for entry in std::fs::read_dir(fan.path()).unwrap().flatten() {
+            let mut bytes = std::fs::read(entry.path()).unwrap();
+            let middle = bytes.len() / 2;
+            bytes[middle] ^= 0x40;
+            std::fs::write(entry.path(), bytes).unwrap();
+            damaged += 1;
+        }
+    }
+    assert!(damaged > 0);
+    let (third, out) = render(&dir, &url, "third.png", &flags, &[]);
+    assert!(out.status.success() && third == local, "damaged cache entries changed the image: {}", stderr(&out));
+    assert!(chunk_gets() > after_first, "damaged entries were not fetched again");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn other_tools_ome_zarr_over_http_reads_as_from_the_folder() {
+    // zarr-python (pinned in data/venv) writes OME-Zarr 0.5 (Zarr v3, sharded) and 0.4 (Zarr v2) images.
+    let dir = scratch("remote_stores", "foreign");
+    let script = r#"
+import sys, json, numpy as np, zarr
+root = sys.argv[1]
+z, y, x = np.mgrid[0:40, 0:48, 0:56].astype(np.float64)
+data = (1000 * np.exp(-((x - 28) ** 2 + (y - 24) ** 2 + (z - 20) ** 2) / 200.0)).astype(np.uint16)
+for version, name in ((3, "v3.zarr"), (2, "v2.zarr")):
+    group = zarr.open_group(f"{root}/{name}", mode="w", zarr_format=version)
+    datasets = []
+    for level in range(2):
+        level_data = data[:: 2 ** level, :: 2 ** level, :: 2 ** level]
+        kwargs = dict(shards=(32, 32, 32)) if version == 3 else {}
+        array = group.create_array(str(level), shape=level_data.shape, dtype="uint16", chunks=(16, 16, 16), **kwargs)
+        array[...] = level_data
+        datasets.append({"path": str(level), "coordinateTransformations": [{"type": "scale", "scale": [2.0 ** level] * 3}]})
+    multiscales = [{"version": "0.4" if version == 2 else "0.5", "axes": [{"name": a, "type": "space"} for a in "zyx"], "datasets": datasets}]
+    if version == 3:
+        group.attrs["ome"] = {"version": "0.5", "multiscales": multiscales}
+    else:
+        group.attrs["multiscales"] = multiscales
+"#;
+    let status = Command::new(venv_python()).args(["-c", script, &dir.join("www").display().to_string()]).status();
+    assert!(status.unwrap().success(), "zarr-python could not write the images");
+    let server = nginx(&dir, &dir.join("www"));
+    for name in ["v3.zarr", "v2.zarr"] {
+        let (local, out) = render(&dir, &format!("www/{name}"), "local.png", &[], &[]);
+        assert!(out.status.success(), "{name} local: {}", stderr(&out));
+        let url = format!("http://127.0.0.1:{}/{name}", server.port);
+        let (remote, out) = render(&dir, &url, "remote.png", &[], &[]);
+        assert!(out.status.success(), "{name} over HTTP: {}", stderr(&out));
+        assert!(remote == local, "{name}: the image over HTTP differs from the folder's");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
