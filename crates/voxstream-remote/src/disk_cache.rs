@@ -166,8 +166,9 @@ fn encode(key: &str, bytes: &[u8]) -> Vec<u8> {
     entry
 }
 
-/// The bytes of an entry for `key`, or `None` when it is for another key or damaged.
-fn decode<'a>(entry: &'a [u8], key: &str) -> Option<&'a [u8]> {
+/// The bytes of an entry for `key`, or `None` when it is for another key or damaged (public for the fuzz target
+/// `remote_inputs`: entries are read back from a folder other processes write too).
+pub fn decode<'a>(entry: &'a [u8], key: &str) -> Option<&'a [u8]> {
     let body = entry.strip_prefix(MAGIC)?;
     let (body, crc) = body.split_at_checked(body.len().checked_sub(4)?)?;
     if crc32fast::hash(body).to_le_bytes() != crc {

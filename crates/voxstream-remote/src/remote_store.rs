@@ -122,6 +122,10 @@ fn is_metadata_key(key: &str) -> bool {
 }
 
 /// The outcome of one fetch: bytes, or "there is no such value".
+///
+/// Retries: the client retries failed requests (5xx, 429, timeouts, resets before a response) with backoff, and
+/// resumes a body cut mid-stream where the server sends an ETag; [`RemoteStore::fetch`] retries what is left, a
+/// body that ended early or is not the length asked for.
 enum Fetched {
     Bytes(Bytes),
     Missing,
@@ -238,10 +242,10 @@ impl RemoteStore {
                     return Err(self.describe(key, &e));
                 }
                 Err(e) => {
-                    // The client has retried what it retries (5xx, 429, timeouts); one more round here covers
-                    // errors it does not (a reset mid-body without an ETag to resume by).
-                    last_problem = self.describe(key, &e).to_string();
-                    continue;
+                    // The client has already retried what it retries (5xx, 429, timeouts, refused connections):
+                    // retrying here too would multiply the attempts and the wait.
+                    self.stats.failures.fetch_add(1, Ordering::Relaxed);
+                    return Err(self.describe(key, &e));
                 }
             };
             if result.meta.size > cap && expected.is_none() {

@@ -298,9 +298,7 @@ impl StoreReader {
         let brick_bytes = layout.brick_size.pow(3) * info.dtype.size() as u64;
         let bricks_store = Arc::new(checked(zstd_encoded_bound(brick_bytes, BRICK_CHECKSUM_BYTES))?);
         let metrics = Arc::new(PerformanceMetricsStorageAdapter::new(bricks_store));
-        let mut levels = Vec::new();
-        let mut minmax = Vec::new();
-        for level in 0..layout.levels() {
+        let open_level = |level: usize| -> Result<(LevelSource, Vec<[f32; 2]>), StoreError> {
             let readable: Arc<dyn ReadableStorageTraits> = metrics.clone();
             for node in [level.to_string(), MINMAX_GROUP.to_string(), format!("{MINMAX_GROUP}/{level}")] {
                 check_metadata(&node)?;
@@ -316,8 +314,30 @@ impl StoreReader {
             }
             check_chunk_sizes(path, &level.to_string(), &metadata_json(&array))?;
             check_level_dtype(path, &level.to_string(), &array, info.dtype)?;
-            levels.push(LevelSource::Array { array, leading: 0, shape: [x, y, z] });
-            minmax.push(read_minmax(path, &store, &layout, level, attributes.value_range == [0.0, 0.0])?);
+            let ranges = read_minmax(path, &store, &layout, level, attributes.value_range == [0.0, 0.0])?;
+            Ok((LevelSource::Array { array, leading: 0, shape: [x, y, z] }, ranges))
+        };
+        // A remote store's levels are opened at once (each a few round trips); a folder's in turn. Either way the
+        // first level that fails, in level order, is the one reported.
+        let opened: Vec<Result<(LevelSource, Vec<[f32; 2]>), StoreError>> = if remote.is_some() {
+            let open_level = &open_level;
+            std::thread::scope(|scope| {
+                let handles: Vec<_> =
+                    (0..layout.levels()).map(|level| scope.spawn(move || open_level(level))).collect();
+                handles
+                    .into_iter()
+                    .map(|h| h.join().unwrap_or_else(|_| Err(StoreError::store(path, "opening a level panicked"))))
+                    .collect()
+            })
+        } else {
+            (0..layout.levels()).map(open_level).collect()
+        };
+        let mut levels = Vec::new();
+        let mut minmax = Vec::new();
+        for result in opened {
+            let (level, ranges) = result?;
+            levels.push(level);
+            minmax.push(ranges);
         }
         // The coarsest level's one brick covers every sample: its range is the volume's.
         let root = minmax.last().and_then(|m| m.first()).copied().unwrap_or([0.0, 0.0]);
