@@ -2,7 +2,7 @@
 # Remote stores over emulated round trips (issue 43; not part of CI): one store served by nginx (byte ranges, ETags),
 # scripts/fault_proxy.py adding a fixed delay before every answer, and voxstream rendering it:
 #   - the converged image must be the local folder's, byte for byte;
-#   - time to the first image (`--mode interactive --frames 1`) and to the complete view (`--mode converged`),
+#   - time to the first image with data (`--mode interactive --frames 2`: the root brick arrives after the first frame) and to the complete view (`--mode converged`),
 #     wall clock, opening included;
 #   - requests and bytes fetched (`--stats`'s remote) against the store's bytes on disk, and how many (chunk, range)
 #     pairs were fetched more than once.
@@ -48,7 +48,7 @@ for rtt in "${rtts[@]}"; do
     wait_port "$pport"
     url="http://127.0.0.1:$pport/$name"
     start=$(date +%s.%N)
-    "$bin" render "$url" --out "$work/first.png" --quiet --mode interactive --frames 1 "${flags[@]}"
+    "$bin" render "$url" --out "$work/first.png" --quiet --mode interactive --frames 2 "${flags[@]}"
     end=$(date +%s.%N); first=$(echo "$end - $start" | bc)
     : > "$work/nginx/access.log"
     start=$(date +%s.%N)
