@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """An HTTP/1.1 proxy in front of one server that adds round-trip latency and faults, for voxstream's remote-store
 tests and benchmarks (issue 43): a fixed delay before every answer (an emulated round trip), answers of 503, bodies
-cut short (the Content-Length of the whole body, half of it sent, then the connection closed), and a stall (from the
-Nth request on, nothing is answered).
+cut short (the Content-Length of the whole body, half of it sent, then the connection closed), and stalls (from the
+Nth request on, or for paths matching a regular expression, nothing is answered).
 
     python3 scripts/fault_proxy.py --listen 18090 --upstream 127.0.0.1:18080 --latency-ms 50 \
         --fail-rate 0.2 --truncate-rate 0.05 --seed 1 --log requests.log
@@ -16,6 +16,7 @@ what was done, when it was answered (seconds, monotonic). Standard library only.
 import argparse
 import asyncio
 import random
+import re
 import sys
 
 
@@ -27,6 +28,8 @@ def parse_args():
     parser.add_argument("--fail-rate", type=float, default=0.0, help="share of requests answered 503")
     parser.add_argument("--truncate-rate", type=float, default=0.0, help="share of bodies cut to half")
     parser.add_argument("--stall-after", type=int, default=None, help="answer nothing from this request on")
+    parser.add_argument("--stall-match", default=None, help="never answer requests whose path matches this regex")
+    parser.add_argument("--stall-match-after", type=int, default=0, help="...except the first N of them")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--log", default=None, help="file to log requests to")
     return parser.parse_args()
@@ -74,7 +77,12 @@ class Proxy:
             length = int(header(head, "content-length") or 0)
             body = await client_reader.readexactly(length) if length else b""
             self.count += 1
-            if self.args.stall_after is not None and self.count >= self.args.stall_after:
+            path = head.split(b"\r\n", 1)[0].decode("latin-1").split(" ")[1:2]
+            stall_path = False
+            if self.args.stall_match and path and re.search(self.args.stall_match, path[0]):
+                self.matched = getattr(self, "matched", 0) + 1
+                stall_path = self.matched > self.args.stall_match_after
+            if stall_path or (self.args.stall_after is not None and self.count >= self.args.stall_after):
                 self.note(head, "stall")
                 await asyncio.sleep(3600)
                 return

@@ -460,6 +460,8 @@ impl<P: Producer> CacheManager<P> {
                     let item = &batch[index];
                     match item.request.kind {
                         _ if premature[index] => WorkResult::Premature,
+                        // Data still on its way: asked again next frame, the frame does not wait for it.
+                        RequestKind::Produce if !producer.ready(item.key) => WorkResult::Premature,
                         RequestKind::Produce => {
                             WorkResult::Produced(produce_analysed(producer, item.key, &shape, format))
                         }
@@ -674,17 +676,23 @@ impl<P: Producer> CacheManager<P> {
             remaining = rest;
             let producer = &self.producer;
             let (shape, format) = (self.shape, self.brick_pool.format());
+            // A child whose data is still on its way is left missing (its parent stands in; the rays ask for it).
             let produce_batch = || {
                 in_space_order(batch, |&(_, key)| key, &shape, |index| {
-                    produce_analysed(producer, batch[index].1, &shape, format)
+                    let key = batch[index].1;
+                    if producer.ready(key) {
+                        Some(produce_analysed(producer, key, &shape, format))
+                    } else {
+                        None
+                    }
                 })
             };
-            let results: Vec<Result<AnalysedBrick, ProduceError>> = match &self.io_pool {
+            let results: Vec<Option<Result<AnalysedBrick, ProduceError>>> = match &self.io_pool {
                 Some(pool) => pool.install(produce_batch),
                 None => produce_batch(),
             };
             for (&(node_id, _), result) in batch.iter().zip(results) {
-                let Ok(brick) = result else {
+                let Some(Ok(brick)) = result else {
                     report.children_left_missing += 1;
                     continue;
                 };

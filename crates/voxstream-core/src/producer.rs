@@ -73,4 +73,13 @@ pub trait Producer: Send + Sync {
     fn concurrency(&self) -> usize {
         0
     }
+    /// Whether producing `key` now would return without waiting on slow storage. A producer that fetches in the
+    /// background (a remote store in interactive mode) answers `false` while the node's data is on its way, and
+    /// starts fetching it; the cache manager then leaves the request to a later frame (the rays ask again, ancestors
+    /// stand in) instead of holding the frame until it arrives. Producing a node that is not ready must still work
+    /// (it waits). The default: always ready.
+    fn ready(&self, key: NodeKey) -> bool {
+        let _ = key;
+        true
+    }
 }

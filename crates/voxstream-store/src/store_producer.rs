@@ -44,6 +44,13 @@ pub trait BrickSource: Send + Sync {
     fn concurrency(&self) -> usize {
         0
     }
+
+    /// Whether `[lower, lower + size)` of `level` can be read without waiting on slow storage; if not, its reading
+    /// starts in the background (see [`Producer::ready`]). The default: always.
+    fn region_ready(self: &Arc<Self>, level: usize, lower: [u64; 3], size: [u64; 3]) -> bool {
+        let _ = (level, lower, size);
+        true
+    }
 }
 
 impl BrickSource for StoreReader {
@@ -71,6 +78,9 @@ impl BrickSource for StoreReader {
     }
     fn concurrency(&self) -> usize {
         StoreReader::remote(self).map_or(0, |remote| remote.concurrency())
+    }
+    fn region_ready(self: &Arc<Self>, level: usize, lower: [u64; 3], size: [u64; 3]) -> bool {
+        StoreReader::region_ready(self, level, lower, size)
     }
 }
 
@@ -222,6 +232,22 @@ impl<S: BrickSource> StoreProducer<S> {
     fn store_level(&self, key: &NodeKey) -> usize {
         (self.shape.max_level - key.level) as usize
     }
+
+    /// The level and the region `[lower, lower + size)` of it that `key`'s brick and its one-voxel border read
+    /// (clamped to the level); `None` for a node wholly outside the volume (empty).
+    fn region(&self, key: &NodeKey) -> Option<(usize, [u64; 3], [u64; 3])> {
+        let level = self.store_level(key);
+        let dims = self.reader.layout().level_dims[level];
+        let m = self.shape.brick_size as i64;
+        let b = m + 2;
+        let start = key.ijk.map(|v| v as i64 * m - 1);
+        if (0..3).any(|a| start[a] + 1 >= dims[a] as i64) {
+            return None;
+        }
+        let lower = [0, 1, 2].map(|a| start[a].max(0) as u64);
+        let upper = [0, 1, 2].map(|a| ((start[a] + b) as u64).min(dims[a]));
+        Some((level, lower, [0, 1, 2].map(|a| upper[a] - lower[a])))
+    }
 }
 
 impl<S: BrickSource> Producer for StoreProducer<S> {
@@ -283,20 +309,22 @@ impl<S: BrickSource> Producer for StoreProducer<S> {
         self.reader.concurrency()
     }
 
+    fn ready(&self, key: NodeKey) -> bool {
+        match self.region(&key) {
+            Some((level, lower, size)) => self.reader.region_ready(level, lower, size),
+            None => true,
+        }
+    }
+
     fn produce(&self, key: NodeKey, voxels: &mut [u16]) -> Result<Produced, ProduceError> {
-        let level = self.store_level(&key);
+        let Some((level, lower, size)) = self.region(&key) else {
+            return Ok(Produced { content: NodeContent::Empty, is_terminal: true });
+        };
         let is_terminal = level == 0;
-        let dims = self.reader.layout().level_dims[level];
         let m = self.shape.brick_size as i64;
         let b = m as usize + 2;
         let start = key.ijk.map(|v| v as i64 * m - 1);
-        if (0..3).any(|a| start[a] + 1 >= dims[a] as i64) {
-            return Ok(Produced { content: NodeContent::Empty, is_terminal: true });
-        }
-        // The region the brick and its border need, clamped to the level.
-        let lower = [0, 1, 2].map(|a| start[a].max(0) as u64);
-        let upper = [0, 1, 2].map(|a| ((start[a] + b as i64) as u64).min(dims[a]));
-        let size = [0, 1, 2].map(|a| upper[a] - lower[a]);
+        let upper = [0, 1, 2].map(|a| lower[a] + size[a]);
         let samples = self.reader.read_region(level, lower, size).map_err(|e| ProduceError {
             level: key.level,
             ijk: key.ijk,

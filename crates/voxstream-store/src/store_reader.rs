@@ -173,6 +173,21 @@ pub struct StoreReader {
     remote: Option<Arc<RemoteStore>>,
     /// Bricks being read now, so that a brick wanted by several threads is read once.
     reading: crate::single_flight::SingleFlight<(usize, [u64; 3])>,
+    /// Background fetching for frames that must not wait (see [`StoreReader::set_nonblocking`]).
+    background: Background,
+}
+
+/// Bricks fetched behind the frames of an interactive session over a remote store.
+#[derive(Default)]
+struct Background {
+    /// Whether [`StoreReader::region_ready`] fetches in the background instead of answering "ready".
+    on: std::sync::atomic::AtomicBool,
+    /// Threads fetching (as many as the remote store's concurrency).
+    pool: std::sync::OnceLock<Option<rayon::ThreadPool>>,
+    /// Bricks being fetched.
+    fetching: Mutex<std::collections::HashSet<(usize, [u64; 3])>>,
+    /// Bricks whose background fetch failed: produced in the foreground, which reports the failure.
+    failed: Mutex<std::collections::HashSet<(usize, [u64; 3])>>,
 }
 
 /// Opens the remote store at `location`, with `access`'s timeouts, retries and disk cache.
@@ -393,6 +408,7 @@ impl StoreReader {
             minmax,
             remote: None,
             reading: crate::single_flight::SingleFlight::new(),
+            background: Background::default(),
         })
     }
 
@@ -482,6 +498,87 @@ impl StoreReader {
             }
         }
         Ok(out)
+    }
+
+    /// Interactive sessions over a remote store: with `on`, [`StoreReader::region_ready`] starts fetching what is
+    /// missing in the background and answers "not yet", so that frames never wait on the network (converged
+    /// renders leave it off and wait for their bricks). No effect on local stores.
+    pub fn set_nonblocking(&self, on: bool) {
+        self.background.on.store(on && self.remote.is_some(), std::sync::atomic::Ordering::Relaxed);
+    }
+
+    /// Whether the bricks of `[lower, lower + size)` of `level` can be read without waiting on the network: always
+    /// for local stores and unless [`StoreReader::set_nonblocking`] is on; otherwise whether they are all in the
+    /// cache (or known to hold only 0), the missing ones being fetched in the background when not.
+    pub fn region_ready(self: &Arc<Self>, level: usize, lower: [u64; 3], size: [u64; 3]) -> bool {
+        use std::sync::atomic::Ordering;
+        if !self.background.on.load(Ordering::Relaxed) {
+            return true;
+        }
+        let b = self.layout.brick_size;
+        let first = lower.map(|v| v / b);
+        let last = [0, 1, 2].map(|a| (lower[a] + size[a]).saturating_sub(1) / b);
+        let mut missing = Vec::new();
+        {
+            let cache = self.brick_cache.lock().unwrap_or_else(|p| p.into_inner());
+            for z in first[2]..=last[2] {
+                for y in first[1]..=last[1] {
+                    for x in first[0]..=last[0] {
+                        let ijk = [x, y, z];
+                        if !cache.contains(&(level, ijk)) && !self.holds_only_zero(level, ijk) {
+                            missing.push(ijk);
+                        }
+                    }
+                }
+            }
+        }
+        if missing.is_empty() {
+            return true;
+        }
+        let failed = self.background.failed.lock().unwrap_or_else(|p| p.into_inner());
+        if missing.iter().any(|&ijk| failed.contains(&(level, ijk))) {
+            return true;
+        }
+        drop(failed);
+        self.fetch_in_background(missing.into_iter().map(|ijk| (level, ijk)));
+        false
+    }
+
+    /// Starts reading `bricks` on the remote store's fetch threads (each at most once at a time), so that no worker
+    /// of the shared pool, which draws the frames, waits on the network. Failures are remembered (see
+    /// [`StoreReader::region_ready`]). Returns `false` when no thread could be made (nothing started).
+    fn fetch_in_background(self: &Arc<Self>, bricks: impl Iterator<Item = (usize, [u64; 3])>) -> bool {
+        let threads = self.remote.as_ref().map_or(1, |r| r.concurrency()).max(1);
+        let pool = self.background.pool.get_or_init(|| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .thread_name(|i| format!("voxstream-prefetch-{i}"))
+                .build()
+                .ok()
+        });
+        let Some(pool) = pool.as_ref() else {
+            return false;
+        };
+        let mut fetching = self.background.fetching.lock().unwrap_or_else(|p| p.into_inner());
+        for key in bricks {
+            if fetching.insert(key) {
+                let reader = Arc::clone(self);
+                pool.spawn(move || {
+                    if reader.brick(key.0, key.1).is_err() {
+                        reader.background.failed.lock().unwrap_or_else(|p| p.into_inner()).insert(key);
+                    }
+                    reader.background.fetching.lock().unwrap_or_else(|p| p.into_inner()).remove(&key);
+                });
+            }
+        }
+        true
+    }
+
+    /// Whether brick `ijk` of `level` holds only 0 by its min/max (nothing to read).
+    fn holds_only_zero(&self, level: usize, ijk: [u64; 3]) -> bool {
+        let Some(minmax) = &self.minmax else { return false };
+        let b = self.layout.bricks(level);
+        (0..3).all(|a| ijk[a] < b[a]) && minmax[level][((ijk[2] * b[1] + ijk[1]) * b[0] + ijk[0]) as usize] == [0.0, 0.0]
     }
 
     /// The samples of brick `ijk` of `level` (clipped to the level), x fastest, from the cache or the disk.
@@ -644,6 +741,23 @@ impl StoreReader {
     /// level), at most one prefetch batch at a time; errors are left for `produce` to report.
     pub fn prefetch(self: &Arc<Self>, bricks: Vec<(usize, [u64; 3])>) {
         use std::sync::atomic::Ordering;
+        // A remote store's bricks are fetched on its own threads, many at once: a worker of the shared pool waiting
+        // on the network would hold up the frames drawn on it.
+        if self.remote.is_some() {
+            let cache = self.brick_cache.lock().unwrap_or_else(|p| p.into_inner());
+            let wanted: Vec<(usize, [u64; 3])> = bricks
+                .into_iter()
+                .filter(|&(level, ijk)| {
+                    let b = self.layout.bricks(level);
+                    (0..3).all(|a| ijk[a] < b[a]) && !cache.contains(&(level, ijk)) && !self.holds_only_zero(level, ijk)
+                })
+                .collect();
+            drop(cache);
+            if self.fetch_in_background(wanted.into_iter()) {
+                return;
+            }
+            return;
+        }
         if self.prefetching.swap(true, Ordering::AcqRel) {
             return;
         }

@@ -275,6 +275,43 @@ fn a_server_that_stops_answering_ends_the_run_with_one_line() {
 }
 
 #[test]
+fn interactive_frames_never_wait_on_the_network() {
+    let dir = scratch("remote_stores", "nonblocking");
+    import_ball(&dir, "www/ball.zarr");
+    let server = nginx(&dir, &dir.join("www"));
+    // Metadata and per-brick ranges are answered, and the 6 requests of the bricks read when the store is opened
+    // (one brick per level, an index and a brick each: the open checks that every level decodes); no brick after.
+    let log = dir.join("proxy.log");
+    let stalled = proxy(server.port, &["--stall-match", r"^/[^/]+/[0-9]+/c/", "--stall-match-after", "6"], &log);
+    let url = format!("http://127.0.0.1:{}/ball.zarr", stalled.port);
+    // A frame that waited for a brick would wait the request timeout, 100 s, at least.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_voxstream"))
+        .args(["render", &url, "--out", "frames.png", "--width", "64", "--height", "64", "--quiet"])
+        .args(["--mode", "interactive", "--frames", "4", "--stats", "frames.json", "--request-timeout", "100"])
+        .current_dir(&dir)
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if start.elapsed() > Duration::from_secs(60) {
+            let _ = child.kill();
+            panic!("interactive frames waited on bricks the server never sends");
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let output = child.wait_with_output().unwrap();
+    let stats: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("frames.json")).unwrap())
+        .unwrap_or_else(|e| panic!("no stats ({e}): {}", stderr(&output)));
+    assert_eq!(stats["frame_ms"].as_array().map(Vec::len), Some(4), "{stats}");
+    let stalls = std::fs::read_to_string(&log).unwrap().lines().filter(|l| l.contains("\tstall")).count();
+    assert!(stalls > 0, "the frames asked for no brick, so nothing was shown about waiting");
+    let total_bricks = 3 * 3 * 3 + 2 * 2 * 2 + 1;
+    assert!(stats["bricks_resident"].as_u64().unwrap() < total_bricks, "{stats}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
 fn missing_stores_and_credentials_in_urls_are_reported_without_secrets() {
     let dir = scratch("remote_stores", "missing");
     std::fs::create_dir_all(dir.join("www")).unwrap();
