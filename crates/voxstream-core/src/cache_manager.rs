@@ -66,11 +66,14 @@ pub struct ServeOptions {
     pub limit: Option<usize>,
     /// Also produce the children of each new tile into free brick slots, never evicting (see the module docs).
     pub prefetch_new_children: bool,
+    /// Produce nodes whose data is still on its way ([`Producer::ready`] says no), waiting for it: converged frames
+    /// do; interactive frames leave them to a later frame, so that a frame never waits on slow storage.
+    pub wait_for_data: bool,
 }
 
 impl ServeOptions {
     /// Serve every request, nothing more.
-    pub const ALL: ServeOptions = ServeOptions { limit: None, prefetch_new_children: false };
+    pub const ALL: ServeOptions = ServeOptions { limit: None, prefetch_new_children: false, wait_for_data: true };
 }
 
 /// What serving one frame's requests did.
@@ -145,6 +148,8 @@ pub struct CacheManager<P: Producer> {
     restricted: bool,
     /// Threads that produce batches for a producer that waits on a network ([`Producer::concurrency`]).
     io_pool: Option<rayon::ThreadPool>,
+    /// This frame's [`ServeOptions::wait_for_data`].
+    wait_for_data: bool,
 }
 
 /// Pools of `capacities` holding only the root, and the feedback buffer sized for them.
@@ -199,6 +204,7 @@ impl<P: Producer> CacheManager<P> {
             blending: None,
             restricted: false,
             io_pool,
+            wait_for_data: true,
         })
     }
 
@@ -345,6 +351,7 @@ impl<P: Producer> CacheManager<P> {
     /// Ends the frame: refreshes what the rays used, then serves their requests as `options` say.
     pub fn end_frame(&mut self, options: ServeOptions) -> ServeReport {
         let limit = options.limit;
+        self.wait_for_data = options.wait_for_data;
         let frame = self.frame;
         for tile in self.feedback.used_tiles().collect::<Vec<_>>() {
             self.node_pool.touch(tile, frame);
@@ -454,6 +461,7 @@ impl<P: Producer> CacheManager<P> {
             // Under the restriction, what is premature already is not produced at all.
             let premature: Vec<bool> = batch.iter().map(|item| self.is_premature(item.request, item.key)).collect();
             let producer = &self.producer;
+            let wait = self.wait_for_data;
             let (shape, format) = (self.shape, self.brick_pool.format());
             let produce_batch = || {
                 in_space_order(batch, |item| item.key, &shape, |index| {
@@ -461,7 +469,7 @@ impl<P: Producer> CacheManager<P> {
                     match item.request.kind {
                         _ if premature[index] => WorkResult::Premature,
                         // Data still on its way: asked again next frame, the frame does not wait for it.
-                        RequestKind::Produce if !producer.ready(item.key) => WorkResult::Premature,
+                        RequestKind::Produce if !wait && !producer.ready(item.key) => WorkResult::Premature,
                         RequestKind::Produce => {
                             WorkResult::Produced(produce_analysed(producer, item.key, &shape, format))
                         }
@@ -675,12 +683,13 @@ impl<P: Producer> CacheManager<P> {
             let (batch, rest) = remaining.split_at(room);
             remaining = rest;
             let producer = &self.producer;
+            let wait = self.wait_for_data;
             let (shape, format) = (self.shape, self.brick_pool.format());
             // A child whose data is still on its way is left missing (its parent stands in; the rays ask for it).
             let produce_batch = || {
                 in_space_order(batch, |&(_, key)| key, &shape, |index| {
                     let key = batch[index].1;
-                    if producer.ready(key) {
+                    if wait || producer.ready(key) {
                         Some(produce_analysed(producer, key, &shape, format))
                     } else {
                         None
@@ -1059,7 +1068,7 @@ mod tests {
     fn request(cache: &mut CacheManager<Ramp>, node: NodeId, kind: RequestKind, prefetch: bool) -> ServeReport {
         cache.begin_frame();
         cache.feedback().push_requests(&[Request { node, kind, deficit: 1 }]);
-        let report = cache.end_frame(ServeOptions { limit: None, prefetch_new_children: prefetch });
+        let report = cache.end_frame(ServeOptions { limit: None, prefetch_new_children: prefetch, wait_for_data: true });
         assert_eq!(cache.check_invariants(), Ok(()));
         report
     }
@@ -1192,7 +1201,7 @@ mod tests {
             Request { node: NodeId::ROOT, kind: RequestKind::Subdivide, deficit: 1 },
             Request { node: NodeId::ROOT, kind: RequestKind::Subdivide, deficit: 3 },
         ]);
-        let report = cache.end_frame(ServeOptions { limit: None, prefetch_new_children: true });
+        let report = cache.end_frame(ServeOptions { limit: None, prefetch_new_children: true, wait_for_data: true });
         assert_eq!((report.largest_deficit, report.children_left_missing), (3, 0));
         // Ramp's oracle knows the first child constant; the other seven are produced with the tile.
         assert_eq!(report.bricks_prefetched, 7);
@@ -1333,7 +1342,7 @@ mod tests {
             Request { node: children[1], kind: RequestKind::Produce, deficit: 1 },
             Request { node: children[3], kind: RequestKind::Produce, deficit: 1 },
         ]);
-        cache.end_frame(ServeOptions { limit: Some(1), prefetch_new_children: false });
+        cache.end_frame(ServeOptions { limit: Some(1), prefetch_new_children: false, wait_for_data: true });
         let first_served = cache.node_pool().node(children[1]).brick().is_some();
         let (served, waiting) = if first_served { (children[1], children[3]) } else { (children[3], children[1]) };
         // Corner c has y = (c >> 1) & 1; the shared face is y = 1 of child 1, y = 0 of child 3.
@@ -1346,7 +1355,7 @@ mod tests {
             }
             // The other child is still wanted: asked for again, served never.
             cache.feedback().push_requests(&[Request { node: waiting, kind: RequestKind::Produce, deficit: 1 }]);
-            cache.end_frame(ServeOptions { limit: Some(0), prefetch_new_children: false });
+            cache.end_frame(ServeOptions { limit: Some(0), prefetch_new_children: false, wait_for_data: true });
         }
         let corners = caps_of(&cache, served).corners();
         assert!((0..8).filter(|&c| !touches(c)).all(|c| corners[c] == 1.0), "the other corners are in: {corners:?}");
@@ -1357,14 +1366,14 @@ mod tests {
         cache.begin_frame();
         assert!((0..8).filter(|&c| touches(c)).all(|c| caps_of(&cache, served).corners()[c] == 0.0));
         cache.feedback().push_requests(&[Request { node: waiting, kind: RequestKind::Produce, deficit: 1 }]);
-        cache.end_frame(ServeOptions { limit: Some(0), prefetch_new_children: false });
+        cache.end_frame(ServeOptions { limit: Some(0), prefetch_new_children: false, wait_for_data: true });
         // One so fast that a fade ends within the frame (FADES_PER_LEVEL fades in the frames it takes to want the
         // next level): the region still waiting caps nothing, and the served brick is drawn in full.
         cache.set_blending_level_rate(outpacing);
         cache.begin_frame();
         assert_eq!(caps_of(&cache, served), crate::BrickBlend::FULL);
         cache.feedback().push_requests(&[Request { node: waiting, kind: RequestKind::Produce, deficit: 1 }]);
-        cache.end_frame(ServeOptions { limit: Some(0), prefetch_new_children: false });
+        cache.end_frame(ServeOptions { limit: Some(0), prefetch_new_children: false, wait_for_data: true });
         // At rest again the waiting region does not take it back (it left the transitions, drawn in full).
         cache.set_blending_level_rate(0.0);
         cache.begin_frame();

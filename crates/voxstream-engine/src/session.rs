@@ -409,7 +409,11 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
             }
         }
         if mode == Mode::Converged && settings.pixel_stride > 1 {
-            let options = ServeOptions { limit: None, prefetch_new_children: self.limits.prefetch_new_children };
+            let options = ServeOptions {
+                limit: None,
+                prefetch_new_children: self.limits.prefetch_new_children,
+                wait_for_data: true,
+            };
             if let Some(report) = self.cache.serve_root(options) {
                 result.add_report(&report);
             }
@@ -440,13 +444,20 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
             let options = match mode {
                 // The last pass of a frame whose view the pools cannot hold: its image is final, so nothing is
                 // produced for it (usage is still recorded).
-                Mode::Converged if final_pass => ServeOptions { limit: Some(0), prefetch_new_children: false },
-                Mode::Converged => {
-                    ServeOptions { limit: None, prefetch_new_children: self.limits.prefetch_new_children }
+                Mode::Converged if final_pass => {
+                    ServeOptions { limit: Some(0), prefetch_new_children: false, wait_for_data: true }
                 }
-                Mode::Interactive => {
-                    ServeOptions { limit: Some(self.limits.requests_per_frame), prefetch_new_children: false }
-                }
+                // A converged frame waits for its data; an interactive one never does (ancestors stand in).
+                Mode::Converged => ServeOptions {
+                    limit: None,
+                    prefetch_new_children: self.limits.prefetch_new_children,
+                    wait_for_data: true,
+                },
+                Mode::Interactive => ServeOptions {
+                    limit: Some(self.limits.requests_per_frame),
+                    prefetch_new_children: false,
+                    wait_for_data: false,
+                },
             };
             let report = self.cache.end_frame(options);
             self.peak_resident_bytes = self.peak_resident_bytes.max(self.cache.residency().bytes);

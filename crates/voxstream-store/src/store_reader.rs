@@ -500,9 +500,9 @@ impl StoreReader {
         Ok(out)
     }
 
-    /// Interactive sessions over a remote store: with `on`, [`StoreReader::region_ready`] starts fetching what is
-    /// missing in the background and answers "not yet", so that frames never wait on the network (converged
-    /// renders leave it off and wait for their bricks). No effect on local stores.
+    /// Sessions over a remote store: with `on`, [`StoreReader::region_ready`] starts fetching what is missing in
+    /// the background and answers "not yet", so that interactive frames never wait on the network (converged
+    /// frames do not ask: `ServeOptions::wait_for_data`). No effect on local stores.
     pub fn set_nonblocking(&self, on: bool) {
         self.background.on.store(on && self.remote.is_some(), std::sync::atomic::Ordering::Relaxed);
     }

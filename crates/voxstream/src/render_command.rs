@@ -193,8 +193,9 @@ pub fn open_source(args: &RenderArgs, budget: &MemoryBudget, user: impl SourceUs
         return result;
     }
     // Interactive frames over a remote store never wait on the network: missing bricks are fetched behind them
-    // while their ancestors stand in (converged renders wait for their bricks).
-    reader.set_nonblocking(args.mode == Mode::Interactive);
+    // while their ancestors stand in (converged frames, `render`'s default and the viewer's at rest, wait: see
+    // `ServeOptions::wait_for_data`).
+    reader.set_nonblocking(true);
     let producer = StoreProducer::new(reader.clone())?.with_voxel_format(format);
     let source = store_source(args, &reader, producer, cache_bytes, transfer_function);
     let result = user.use_source(args, source, budget);
