@@ -65,44 +65,63 @@ impl StoreReader {
     /// Reads bricks of every stored level (see the module docs); a level none of whose probed bricks reads is the
     /// error, naming the level and the first failure.
     pub(crate) fn probe_levels(&self) -> Result<(), StoreError> {
-        let layout = self.layout().clone();
-        for level in 0..layout.levels() {
-            if !matches!(self.level_source(level), Some(LevelSource::Array { .. })) {
-                continue;
-            }
-            let probes =
-                if self.is_native() { self.bricks_with_data(level) } else { vec![layout.bricks(level).map(|b| b / 2)] };
-            let mut first_error = None;
-            for ijk in probes {
-                let b = layout.brick_size;
-                let dims = layout.level_dims[level];
-                let lower = ijk.map(|v| v * b);
-                let size = [0, 1, 2].map(|a| (lower[a] + b).min(dims[a]) - lower[a]);
-                match self.read_region(level, lower, size) {
-                    Ok(_) => {
-                        first_error = None;
-                        break;
-                    }
-                    Err(e) => {
-                        first_error.get_or_insert(e);
-                    }
+        let levels = self.layout().levels();
+        // A remote store's levels are probed at once (a round trip or two each); a folder's in turn. The first
+        // level that fails, in level order, is reported either way.
+        let results: Vec<Result<(), StoreError>> = if self.remote().is_some() {
+            std::thread::scope(|scope| {
+                let handles: Vec<_> = (0..levels).map(|level| scope.spawn(move || self.probe_level(level))).collect();
+                handles
+                    .into_iter()
+                    .map(|h| h.join().unwrap_or_else(|_| Err(StoreError::store(self.path(), "a level probe panicked"))))
+                    .collect()
+            })
+        } else {
+            (0..levels).map(|level| self.probe_level(level)).collect()
+        };
+        results.into_iter().collect()
+    }
+
+    /// Probes one level (see [`StoreReader::probe_levels`]).
+    fn probe_level(&self, level: usize) -> Result<(), StoreError> {
+        let layout = self.layout();
+        if !matches!(self.level_source(level), Some(LevelSource::Array { .. })) {
+            return Ok(());
+        }
+        let probes =
+            if self.is_native() { self.bricks_with_data(level) } else { vec![layout.bricks(level).map(|b| b / 2)] };
+        let mut first_error = None;
+        for ijk in probes {
+            let b = layout.brick_size;
+            let dims = layout.level_dims[level];
+            let lower = ijk.map(|v| v * b);
+            let size = [0, 1, 2].map(|a| (lower[a] + b).min(dims[a]) - lower[a]);
+            match self.read_region(level, lower, size) {
+                Ok(_) => {
+                    first_error = None;
+                    break;
+                }
+                Err(e) => {
+                    first_error.get_or_insert(e);
                 }
             }
-            if let Some(e) = first_error {
+        }
+        match first_error {
+            Some(e) => {
                 let problem = match e {
                     StoreError::Store { message, .. } => message,
                     other => other.to_string(),
                 };
-                return Err(StoreError::store(
+                Err(StoreError::store(
                     self.path(),
                     format!(
                         "level {level} does not decode as its zarr.json describes ({problem}); import the volume \
                          again"
                     ),
-                ));
+                ))
             }
+            None => Ok(()),
         }
-        Ok(())
     }
 
     /// Up to [`PROBES_PER_LEVEL`] bricks of a native `level` whose min/max is not `[0, 0]` (so their bytes are on
