@@ -137,6 +137,15 @@ put("vdb_converter_header", "fog", json.dumps({"name": "density", "class": "fog 
                                                "spacing": [0.5, 0.5, 0.5], "origin": [0, 0, 0], "background": 0.0}))
 attributes = {"format_version": 1, "dims": [40, 30, 20], "dtype": "u8", "spacing": [1, 1, 2], "origin": [0, 0, 0],
               "brick_size": 32, "levels": 2, "value_range": [0, 255], "complete": True}
+# remote_inputs: store locations as users type them, and a disk-cache entry (magic, key, length, bytes, CRC-32).
+for name, url in [("https", b"https://example.org/data/brain.zarr/"), ("s3", b"s3://bucket/scans/ct.zarr"),
+                  ("credentials", b"https://alice:s3cr%40t@example.org:8443/s.zarr?sig=abc#x"),
+                  ("gs", b"gs://bucket/x"), ("az", b"az://container/a/b"), ("no_bucket", b"s3:///x")]:
+    put("remote_inputs", name, url)
+entry_key = b"s3://b/x/0/c/0/0/0#None"
+entry_body = struct.pack("<I", len(entry_key)) + entry_key + struct.pack("<Q", 5) + b"brick"
+put("remote_inputs", "cache_entry", b"VXC1" + entry_body + struct.pack("<I", zlib.crc32(entry_body)))
+
 # store_shards: the first byte picks what the rest replaces in the template store's shard (0: the file, 1: the
 # index's (offset, nbytes) pairs, 2: brick 0's bytes, a zstd frame); here a small index and an empty zstd frame.
 put("store_shards", "index", b"\x01" + struct.pack("<QQ", 0, 64))
