@@ -559,8 +559,15 @@ impl StoreReader {
         let Some(pool) = pool.as_ref() else {
             return false;
         };
+        // At most a quarter of the brick cache is fetched at a time: bricks fetched faster than frames use them
+        // would push one another out of the cache before they are drawn.
+        let capacity = self.brick_cache.lock().unwrap_or_else(|p| p.into_inner()).cap().get();
+        let limit = (capacity / 4).max(1);
         let mut fetching = self.background.fetching.lock().unwrap_or_else(|p| p.into_inner());
         for key in bricks {
+            if fetching.len() >= limit {
+                break;
+            }
             if fetching.insert(key) {
                 let reader = Arc::clone(self);
                 pool.spawn(move || {

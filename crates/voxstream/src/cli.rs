@@ -573,14 +573,14 @@ pub struct RemoteArgs {
     #[arg(long, value_name = "N", default_value_t = 5, value_parser = clap::value_parser!(u64).range(0..=20))]
     pub retries: u64,
     /// Remote stores: requests kept in flight at once (bricks fetched in parallel).
-    #[arg(long, value_name = "N", default_value_t = 32, value_parser = clap::value_parser!(u64).range(1..=256))]
+    #[arg(long, value_name = "N", default_value_t = 128, value_parser = clap::value_parser!(u64).range(1..=256))]
     pub concurrent_requests: u64,
 }
 
 impl Default for RemoteArgs {
     /// The flags' defaults.
     fn default() -> Self {
-        RemoteArgs { cache_dir: None, cache_mb: 4096, request_timeout: 30, retries: 5, concurrent_requests: 32 }
+        RemoteArgs { cache_dir: None, cache_mb: 4096, request_timeout: 30, retries: 5, concurrent_requests: 128 }
     }
 }
 
