@@ -48,6 +48,10 @@ pub struct CheckedStore {
     indexes: std::sync::Mutex<lru::LruCache<(String, u64), Option<zarrs::storage::Bytes>>>,
     /// Shard indexes being read now (one read per index however many threads want it).
     reading: crate::single_flight::SingleFlight<(String, u64)>,
+    /// Remote stores: bricks as fetched (compressed), by key, offset and length, within a byte bound
+    /// ([`CheckedStore::with_range_cache`]), so that a brick the decoded-brick cache let go is decoded again from
+    /// memory instead of fetched again.
+    ranges: Option<std::sync::Mutex<RangeCache>>,
     /// The most bytes one explicit range may ask for; `u64::MAX` when unbounded (the file's size still bounds it).
     max_range_bytes: u64,
 }
@@ -56,12 +60,32 @@ impl CheckedStore {
     /// Reads from the folder `base`; each explicit byte range is at most `max_range_bytes` long.
     pub fn new(base: &Path, max_range_bytes: u64) -> Result<CheckedStore, StorageError> {
         let inner = FilesystemStore::new(base).map_err(|e| StorageError::Other(e.to_string()))?;
-        Ok(CheckedStore { inner: Inner::Folder(inner), indexes: index_cache(), reading: Default::default(), max_range_bytes })
+        Ok(CheckedStore {
+            inner: Inner::Folder(inner),
+            indexes: index_cache(),
+            reading: Default::default(),
+            ranges: None,
+            max_range_bytes,
+        })
     }
 
     /// Reads from `remote`; each explicit byte range is at most `max_range_bytes` long.
     pub fn remote(remote: Arc<voxstream_remote::RemoteStore>, max_range_bytes: u64) -> CheckedStore {
-        CheckedStore { inner: Inner::Remote(remote), indexes: index_cache(), reading: Default::default(), max_range_bytes }
+        CheckedStore {
+            inner: Inner::Remote(remote),
+            indexes: index_cache(),
+            reading: Default::default(),
+            ranges: None,
+            max_range_bytes,
+        }
+    }
+
+    /// The same store keeping up to `bytes` of fetched brick ranges (remote stores only; a folder's reads are cheap).
+    pub fn with_range_cache(mut self, bytes: u64) -> CheckedStore {
+        if matches!(self.inner, Inner::Remote(_)) && bytes > 0 {
+            self.ranges = Some(std::sync::Mutex::new(RangeCache { lru: lru::LruCache::unbounded(), held: 0, capacity: bytes }));
+        }
+        self
     }
 
     /// The size of `key`'s file, `None` when it does not exist; an error when it is not a regular file.
@@ -105,6 +129,33 @@ impl CheckedStore {
             )));
         }
         Ok(())
+    }
+}
+
+/// Fetched brick ranges, least recently used first out within `capacity` bytes.
+#[derive(Debug)]
+struct RangeCache {
+    lru: lru::LruCache<(String, u64, u64), zarrs::storage::Bytes>,
+    held: u64,
+    capacity: u64,
+}
+
+impl RangeCache {
+    fn keep(&mut self, id: (String, u64, u64), bytes: zarrs::storage::Bytes) {
+        let size = bytes.len() as u64;
+        if size > self.capacity / 4 {
+            return;
+        }
+        if let Some(old) = self.lru.put(id, bytes) {
+            self.held -= old.len() as u64;
+        }
+        self.held += size;
+        while self.held > self.capacity {
+            match self.lru.pop_lru() {
+                Some((_, b)) => self.held -= b.len() as u64,
+                None => break,
+            }
+        }
     }
 }
 
@@ -157,6 +208,18 @@ impl ReadableStorageTraits for CheckedStore {
         let ranges: Vec<ByteRange> = byte_ranges.collect();
         if let [ByteRange::Suffix(length)] = ranges[..] {
             return self.suffix(key, length);
+        }
+        if let (Some(cache), [ByteRange::FromStart(offset, Some(length))]) = (&self.ranges, &ranges[..]) {
+            let id = (key.as_str().to_string(), *offset, *length);
+            if let Some(bytes) = cache.lock().unwrap_or_else(|p| p.into_inner()).lru.get(&id).cloned() {
+                return Ok(Some(Box::new(std::iter::once(Ok(bytes)))));
+            }
+            let Some(parts) = self.read_checked(key, ranges)? else { return Ok(None) };
+            let parts: Vec<Result<zarrs::storage::Bytes, StorageError>> = parts.collect();
+            if let [Ok(bytes)] = &parts[..] {
+                cache.lock().unwrap_or_else(|p| p.into_inner()).keep(id, bytes.clone());
+            }
+            return Ok(Some(Box::new(parts.into_iter())));
         }
         self.read_checked(key, ranges)
     }

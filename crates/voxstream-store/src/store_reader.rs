@@ -311,7 +311,12 @@ impl StoreReader {
         let (info, layout) = validate_attributes(path, &attributes)?;
         // A brick read from a shard is at most one zstd frame of brick_size³ samples and its CRC32C.
         let brick_bytes = layout.brick_size.pow(3) * info.dtype.size() as u64;
-        let bricks_store = Arc::new(checked(zstd_encoded_bound(brick_bytes, BRICK_CHECKSUM_BYTES))?);
+        // A remote store keeps a quarter of the host cache for bricks as fetched (compressed: many more fit), so
+        // that a border brick the decoded cache let go is not fetched again.
+        let range_cache_bytes = if remote.is_some() { cache_bytes / 4 } else { 0 };
+        let bricks_store = Arc::new(
+            checked(zstd_encoded_bound(brick_bytes, BRICK_CHECKSUM_BYTES))?.with_range_cache(range_cache_bytes),
+        );
         let metrics = Arc::new(PerformanceMetricsStorageAdapter::new(bricks_store));
         let open_level = |level: usize| -> Result<(LevelSource, Vec<[f32; 2]>), StoreError> {
             let readable: Arc<dyn ReadableStorageTraits> = metrics.clone();
@@ -367,7 +372,9 @@ impl StoreReader {
                 ),
             ));
         }
-        let mut reader = StoreReader::assemble(path, attributes, levels, Some(minmax), cache_bytes)?;
+        let mut reader =
+            StoreReader::assemble(path, attributes, levels, Some(minmax), cache_bytes - range_cache_bytes)?;
+        reader.cache_bytes = cache_bytes;
         reader.metrics = Some(metrics);
         reader.remote = remote;
         reader.probe_levels()?;
