@@ -547,14 +547,19 @@ impl StoreReader {
             return true;
         }
         drop(failed);
-        self.fetch_in_background(missing.into_iter().map(|ijk| (level, ijk)));
+        // A region is fetched whole or not yet: started in the rays' order, regions complete one after another,
+        // rather than every region of the frame getting a few of its bricks, which the cache would let go before the
+        // rest arrive.
+        let keys: Vec<(usize, [u64; 3])> = missing.into_iter().map(|ijk| (level, ijk)).collect();
+        self.fetch_in_background(keys, true);
         false
     }
 
     /// Starts reading `bricks` on the remote store's fetch threads (each at most once at a time), so that no worker
-    /// of the shared pool, which draws the frames, waits on the network. Failures are remembered (see
+    /// of the shared pool, which draws the frames, waits on the network; with `whole`, all of them or (when they
+    /// would not fit under the bound of bricks in flight) none. Failures are remembered (see
     /// [`StoreReader::region_ready`]). Returns `false` when no thread could be made (nothing started).
-    fn fetch_in_background(self: &Arc<Self>, bricks: impl Iterator<Item = (usize, [u64; 3])>) -> bool {
+    fn fetch_in_background(self: &Arc<Self>, bricks: Vec<(usize, [u64; 3])>, whole: bool) -> bool {
         let threads = self.remote.as_ref().map_or(1, |r| r.concurrency()).max(1);
         let pool = self.background.pool.get_or_init(|| {
             rayon::ThreadPoolBuilder::new()
@@ -571,6 +576,10 @@ impl StoreReader {
         let capacity = self.brick_cache.lock().unwrap_or_else(|p| p.into_inner()).cap().get();
         let limit = (capacity / 4).max(1);
         let mut fetching = self.background.fetching.lock().unwrap_or_else(|p| p.into_inner());
+        let new = bricks.iter().filter(|key| !fetching.contains(key)).count();
+        if whole && !fetching.is_empty() && fetching.len() + new > limit {
+            return true;
+        }
         for key in bricks {
             if fetching.len() >= limit {
                 break;
@@ -767,9 +776,7 @@ impl StoreReader {
                 })
                 .collect();
             drop(cache);
-            if self.fetch_in_background(wanted.into_iter()) {
-                return;
-            }
+            self.fetch_in_background(wanted, false);
             return;
         }
         if self.prefetching.swap(true, Ordering::AcqRel) {
