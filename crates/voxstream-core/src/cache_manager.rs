@@ -464,20 +464,27 @@ impl<P: Producer> CacheManager<P> {
             let wait = self.wait_for_data;
             let (shape, format) = (self.shape, self.brick_pool.format());
             let produce_batch = || {
-                in_space_order(batch, |item| item.key, &shape, |index| {
-                    let item = &batch[index];
-                    match item.request.kind {
-                        _ if premature[index] => WorkResult::Premature,
-                        // Data still on its way: asked again next frame, the frame does not wait for it.
-                        RequestKind::Produce if !wait && !producer.ready(item.key) => WorkResult::Premature,
-                        RequestKind::Produce => {
-                            WorkResult::Produced(produce_analysed(producer, item.key, &shape, format))
+                in_space_order(
+                    batch,
+                    |item| item.key,
+                    &shape,
+                    |index| {
+                        let item = &batch[index];
+                        match item.request.kind {
+                            _ if premature[index] => WorkResult::Premature,
+                            // Data still on its way: asked again next frame, the frame does not wait for it.
+                            RequestKind::Produce if !wait && !producer.ready(item.key) => WorkResult::Premature,
+                            RequestKind::Produce => {
+                                WorkResult::Produced(produce_analysed(producer, item.key, &shape, format))
+                            }
+                            RequestKind::Subdivide => WorkResult::Children(
+                                (0..shape.nodes_per_tile())
+                                    .map(|c| producer.oracle(item.key.child(c, shape.n)))
+                                    .collect(),
+                            ),
                         }
-                        RequestKind::Subdivide => WorkResult::Children(
-                            (0..shape.nodes_per_tile()).map(|c| producer.oracle(item.key.child(c, shape.n))).collect(),
-                        ),
-                    }
-                })
+                    },
+                )
             };
             let results: Vec<WorkResult> = match &self.io_pool {
                 Some(pool) => pool.install(produce_batch),
@@ -687,14 +694,19 @@ impl<P: Producer> CacheManager<P> {
             let (shape, format) = (self.shape, self.brick_pool.format());
             // A child whose data is still on its way is left missing (its parent stands in; the rays ask for it).
             let produce_batch = || {
-                in_space_order(batch, |&(_, key)| key, &shape, |index| {
-                    let key = batch[index].1;
-                    if wait || producer.ready(key) {
-                        Some(produce_analysed(producer, key, &shape, format))
-                    } else {
-                        None
-                    }
-                })
+                in_space_order(
+                    batch,
+                    |&(_, key)| key,
+                    &shape,
+                    |index| {
+                        let key = batch[index].1;
+                        if wait || producer.ready(key) {
+                            Some(produce_analysed(producer, key, &shape, format))
+                        } else {
+                            None
+                        }
+                    },
+                )
             };
             let results: Vec<Option<Result<AnalysedBrick, ProduceError>>> = match &self.io_pool {
                 Some(pool) => pool.install(produce_batch),
@@ -1068,7 +1080,8 @@ mod tests {
     fn request(cache: &mut CacheManager<Ramp>, node: NodeId, kind: RequestKind, prefetch: bool) -> ServeReport {
         cache.begin_frame();
         cache.feedback().push_requests(&[Request { node, kind, deficit: 1 }]);
-        let report = cache.end_frame(ServeOptions { limit: None, prefetch_new_children: prefetch, wait_for_data: true });
+        let report =
+            cache.end_frame(ServeOptions { limit: None, prefetch_new_children: prefetch, wait_for_data: true });
         assert_eq!(cache.check_invariants(), Ok(()));
         report
     }

@@ -46,7 +46,9 @@ fn read_capped(path: &Path) -> Result<Option<String>, RemoteError> {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
         Err(e) => Err(bad(e.to_string())),
         Ok(m) if !m.is_file() => Err(bad("not a regular file".into())),
-        Ok(m) if m.len() > MAX_PROFILE_BYTES => Err(bad(format!("{} bytes, over the 1 MiB a profile file may take", m.len()))),
+        Ok(m) if m.len() > MAX_PROFILE_BYTES => {
+            Err(bad(format!("{} bytes, over the 1 MiB a profile file may take", m.len())))
+        }
         Ok(_) => std::fs::read_to_string(path).map(Some).map_err(|e| bad(e.to_string())),
     }
 }
@@ -60,7 +62,9 @@ pub fn load_profile() -> Result<Profile, RemoteError> {
     };
     let name = std::env::var("AWS_PROFILE").unwrap_or_else(|_| "default".into());
     let mut profile = Profile::new();
-    for path in [file("AWS_CONFIG_FILE", "config"), file("AWS_SHARED_CREDENTIALS_FILE", "credentials")].into_iter().flatten() {
+    for path in
+        [file("AWS_CONFIG_FILE", "config"), file("AWS_SHARED_CREDENTIALS_FILE", "credentials")].into_iter().flatten()
+    {
         if let Some(text) = read_capped(&path)? {
             profile.extend(parse_section(&text, &name));
         }
@@ -74,7 +78,8 @@ mod tests {
 
     #[test]
     fn sections_are_read_by_name_in_both_files_styles() {
-        let credentials = "[default]\naws_access_key_id = A\n\n[work]\naws_access_key_id=B\naws_secret_access_key = S\n";
+        let credentials =
+            "[default]\naws_access_key_id = A\n\n[work]\naws_access_key_id=B\naws_secret_access_key = S\n";
         assert_eq!(parse_section(credentials, "work").get("aws_access_key_id").map(String::as_str), Some("B"));
         assert_eq!(parse_section(credentials, "default").len(), 1);
         let config = "# comment\n[profile work]\nregion = eu-west-1\nendpoint_url = http://127.0.0.1:9000\n";

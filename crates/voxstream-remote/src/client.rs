@@ -37,7 +37,11 @@ pub(crate) fn build_client(
 ) -> Result<Arc<dyn ObjectStore>, RemoteError> {
     let failed = |e: object_store::Error| RemoteError::Client { url: location.shown().into(), problem: e.to_string() };
     let retry = RetryConfig {
-        backoff: BackoffConfig { init_backoff: Duration::from_millis(100), max_backoff: Duration::from_secs(5), base: 2.0 },
+        backoff: BackoffConfig {
+            init_backoff: Duration::from_millis(100),
+            max_backoff: Duration::from_secs(5),
+            base: 2.0,
+        },
         max_retries: options.retries,
         retry_timeout: (options.request_timeout + Duration::from_secs(5)) * (options.retries as u32 + 1),
     };
@@ -53,24 +57,33 @@ pub(crate) fn build_client(
             if let Some((user, password)) = &location.basic_auth {
                 use base64::Engine;
                 let token = base64::engine::general_purpose::STANDARD.encode(format!("{user}:{password}"));
-                let mut value = http::HeaderValue::from_str(&format!("Basic {token}")).map_err(|_| RemoteError::BadUrl {
-                    url: location.shown().into(),
-                    problem: "the user or password holds characters a header cannot carry".into(),
-                })?;
+                let mut value =
+                    http::HeaderValue::from_str(&format!("Basic {token}")).map_err(|_| RemoteError::BadUrl {
+                        url: location.shown().into(),
+                        problem: "the user or password holds characters a header cannot carry".into(),
+                    })?;
                 value.set_sensitive(true);
                 let mut headers = http::HeaderMap::new();
                 headers.insert(http::header::AUTHORIZATION, value);
                 client = client.with_default_headers(headers);
             }
             let url = location.base.trim_end_matches('/');
-            Arc::new(HttpBuilder::new().with_url(url).with_client_options(client).with_retry(retry).build().map_err(failed)?)
+            Arc::new(
+                HttpBuilder::new()
+                    .with_url(url)
+                    .with_client_options(client)
+                    .with_retry(retry)
+                    .build()
+                    .map_err(failed)?,
+            )
         }
         Service::S3 => {
             let mut builder = AmazonS3Builder::from_env().with_bucket_name(&bucket).with_retry(retry);
             let has_key = env("AWS_ACCESS_KEY_ID").is_some();
             let profile = if has_key { Default::default() } else { load_profile()? };
             let from_profile = |key: &str| profile.get(key).filter(|v| !v.is_empty()).cloned();
-            if let (Some(id), Some(secret)) = (from_profile("aws_access_key_id"), from_profile("aws_secret_access_key")) {
+            if let (Some(id), Some(secret)) = (from_profile("aws_access_key_id"), from_profile("aws_secret_access_key"))
+            {
                 builder = builder.with_access_key_id(id).with_secret_access_key(secret);
                 if let Some(token) = from_profile("aws_session_token") {
                     builder = builder.with_token(token);
@@ -78,7 +91,8 @@ pub(crate) fn build_client(
             }
             let region = env("AWS_REGION").or_else(|| env("AWS_DEFAULT_REGION")).or_else(|| from_profile("region"));
             builder = builder.with_region(region.unwrap_or_else(|| "us-east-1".into()));
-            let endpoint = env("AWS_ENDPOINT_URL").or_else(|| env("AWS_ENDPOINT")).or_else(|| from_profile("endpoint_url"));
+            let endpoint =
+                env("AWS_ENDPOINT_URL").or_else(|| env("AWS_ENDPOINT")).or_else(|| from_profile("endpoint_url"));
             if let Some(endpoint) = &endpoint {
                 builder = builder.with_endpoint(endpoint);
             }
@@ -96,9 +110,14 @@ pub(crate) fn build_client(
         }
         Service::Gcs => {
             let mut builder = GoogleCloudStorageBuilder::from_env().with_bucket_name(&bucket).with_retry(retry);
-            let has_credentials = ["GOOGLE_SERVICE_ACCOUNT", "GOOGLE_SERVICE_ACCOUNT_PATH", "GOOGLE_SERVICE_ACCOUNT_KEY", "GOOGLE_APPLICATION_CREDENTIALS"]
-                .iter()
-                .any(|v| env(v).is_some());
+            let has_credentials = [
+                "GOOGLE_SERVICE_ACCOUNT",
+                "GOOGLE_SERVICE_ACCOUNT_PATH",
+                "GOOGLE_SERVICE_ACCOUNT_KEY",
+                "GOOGLE_APPLICATION_CREDENTIALS",
+            ]
+            .iter()
+            .any(|v| env(v).is_some());
             if !has_credentials {
                 builder = builder.with_skip_signature(true);
             }

@@ -80,9 +80,8 @@ impl RemoteLocation {
         let basic_auth = if user.is_empty() && url.password().is_none() {
             None
         } else if service == Service::Http {
-            let decode = |s: &str| {
-                url::form_urlencoded::parse(format!("x={s}").as_bytes()).next().map(|(_, v)| v.into_owned())
-            };
+            let decode =
+                |s: &str| url::form_urlencoded::parse(format!("x={s}").as_bytes()).next().map(|(_, v)| v.into_owned());
             Some((decode(user).unwrap_or_default(), decode(url.password().unwrap_or("")).unwrap_or_default()))
         } else {
             return Err(bad(
@@ -152,11 +151,10 @@ mod tests {
     #[test]
     fn urls_parse_into_services_bases_and_prefixes() {
         let http = RemoteLocation::parse("https://example.org/data/brain.zarr/").unwrap().unwrap();
-        assert_eq!((http.service, http.base.as_str(), http.prefix.as_str()), (
-            Service::Http,
-            "https://example.org/data/brain.zarr/",
-            ""
-        ));
+        assert_eq!(
+            (http.service, http.base.as_str(), http.prefix.as_str()),
+            (Service::Http, "https://example.org/data/brain.zarr/", "")
+        );
         assert_eq!(http.shown(), "https://example.org/data/brain.zarr");
         let s3 = RemoteLocation::parse("s3://bucket/scans/ct.zarr").unwrap().unwrap();
         assert_eq!((s3.service, s3.base.as_str(), s3.prefix.as_str()), (Service::S3, "s3://bucket", "scans/ct.zarr"));
@@ -184,11 +182,13 @@ mod tests {
     fn malformed_locations_name_the_problem() {
         let no_bucket = RemoteLocation::parse("s3:///x").unwrap_err().to_string();
         assert!(no_bucket.contains("no bucket"), "{no_bucket}");
-        assert!(RemoteLocation::parse("https://example.org/a/../b").is_err() || {
-            // The URL parser resolves '..' itself: what remains must not leave the host's root.
-            let parsed = RemoteLocation::parse("https://example.org/a/../b").unwrap().unwrap();
-            parsed.base == "https://example.org/b/"
-        });
+        assert!(
+            RemoteLocation::parse("https://example.org/a/../b").is_err() || {
+                // The URL parser resolves '..' itself: what remains must not leave the host's root.
+                let parsed = RemoteLocation::parse("https://example.org/a/../b").unwrap().unwrap();
+                parsed.base == "https://example.org/b/"
+            }
+        );
         assert!(RemoteLocation::parse("http://").is_err());
     }
 }

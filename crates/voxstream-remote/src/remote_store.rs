@@ -192,7 +192,9 @@ impl RemoteStore {
                         "access denied: set AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY (or AWS_PROFILE), or check \
                          the bucket's policy"
                     }
-                    crate::Service::Http => "access denied: put the user and password in the URL (https://USER:PASSWORD@host/…)",
+                    crate::Service::Http => {
+                        "access denied: put the user and password in the URL (https://USER:PASSWORD@host/…)"
+                    }
                     _ => "access denied: set the service's credentials in the environment",
                 }
             }
@@ -238,7 +240,9 @@ impl RemoteStore {
                     self.stats.requests.fetch_add(1, Ordering::Relaxed);
                     return Ok(Fetched::Missing);
                 }
-                Err(e @ (object_store::Error::PermissionDenied { .. } | object_store::Error::Unauthenticated { .. })) => {
+                Err(
+                    e @ (object_store::Error::PermissionDenied { .. } | object_store::Error::Unauthenticated { .. }),
+                ) => {
                     self.stats.failures.fetch_add(1, Ordering::Relaxed);
                     return Err(self.describe(key, &e));
                 }
@@ -251,7 +255,9 @@ impl RemoteStore {
             };
             if result.meta.size > cap && expected.is_none() {
                 self.stats.failures.fetch_add(1, Ordering::Relaxed);
-                return Err(self.error(key, format!("{} bytes, over the {cap} bytes such a value may take", result.meta.size)));
+                return Err(
+                    self.error(key, format!("{} bytes, over the {cap} bytes such a value may take", result.meta.size))
+                );
             }
             let mut body = Vec::new();
             let mut stream = result.into_stream();
@@ -307,7 +313,11 @@ impl RemoteStore {
         (self.options.request_timeout + Duration::from_secs(7)) * attempts
     }
 
-    fn block_on<T>(&self, key: &str, work: impl std::future::Future<Output = Result<T, StorageError>>) -> Result<T, StorageError> {
+    fn block_on<T>(
+        &self,
+        key: &str,
+        work: impl std::future::Future<Output = Result<T, StorageError>>,
+    ) -> Result<T, StorageError> {
         let deadline = self.deadline();
         self.runtime.block_on(async move {
             match tokio::time::timeout(deadline, work).await {

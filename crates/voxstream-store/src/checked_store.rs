@@ -83,7 +83,8 @@ impl CheckedStore {
     /// The same store keeping up to `bytes` of fetched brick ranges (remote stores only; a folder's reads are cheap).
     pub fn with_range_cache(mut self, bytes: u64) -> CheckedStore {
         if matches!(self.inner, Inner::Remote(_)) && bytes > 0 {
-            self.ranges = Some(std::sync::Mutex::new(RangeCache { lru: lru::LruCache::unbounded(), held: 0, capacity: bytes }));
+            self.ranges =
+                Some(std::sync::Mutex::new(RangeCache { lru: lru::LruCache::unbounded(), held: 0, capacity: bytes }));
         }
         self
     }
@@ -174,7 +175,12 @@ impl CheckedStore {
         self.reading.run(&cache_key.clone(), || self.read_suffix(key, cache_key, length))
     }
 
-    fn read_suffix(&self, key: &StoreKey, cache_key: (String, u64), length: u64) -> Result<MaybeBytesIterator<'_>, StorageError> {
+    fn read_suffix(
+        &self,
+        key: &StoreKey,
+        cache_key: (String, u64),
+        length: u64,
+    ) -> Result<MaybeBytesIterator<'_>, StorageError> {
         let lock = || self.indexes.lock().unwrap_or_else(|p| p.into_inner());
         if let Some(bytes) = lock().get(&cache_key) {
             return Ok(bytes.clone().map(|b| Box::new(std::iter::once(Ok(b))) as _));
@@ -184,7 +190,8 @@ impl CheckedStore {
             lock().put(cache_key, None);
             return Ok(None);
         };
-        let bytes = parts.next().unwrap_or_else(|| Err(StorageError::Other(format!("{key}: no bytes for the suffix"))))?;
+        let bytes =
+            parts.next().unwrap_or_else(|| Err(StorageError::Other(format!("{key}: no bytes for the suffix"))))?;
         let mut cache = lock();
         cache.put(cache_key, Some(bytes.clone()));
         let size = |b: &Option<zarrs::storage::Bytes>| b.as_ref().map_or(0, |b| b.len()) + 64;

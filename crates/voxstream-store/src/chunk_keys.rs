@@ -114,7 +114,9 @@ pub(crate) fn stored_chunks_in(
     dimensions: usize,
 ) -> Result<Option<Vec<Vec<u64>>>, String> {
     match source {
-        ChunkSource::Folder(store) => stored_chunks(&store.join(name.trim_start_matches('/')), metadata, dimensions).map(Some),
+        ChunkSource::Folder(store) => {
+            stored_chunks(&store.join(name.trim_start_matches('/')), metadata, dimensions).map(Some)
+        }
         ChunkSource::Remote(remote) => {
             let Some(keys) = remote.list(name, MAX_LISTED_KEYS).map_err(|e| e.to_string())? else {
                 return Ok(None);

@@ -26,9 +26,8 @@ use zarrs::storage::ReadableStorageTraits;
 use voxstream_remote::{DiskCache, RemoteLocation, RemoteStore};
 
 use crate::checked_store::{zstd_encoded_bound, CheckedStore};
-use crate::chunk_keys::ChunkSource;
-use crate::remote_access::RemoteAccess;
 use crate::chunk_cache::ChunkCache;
+use crate::chunk_keys::ChunkSource;
 use crate::encoded_cache::EncodedCache;
 use crate::error::StoreError;
 use crate::foreign::ForeignOptions;
@@ -39,6 +38,7 @@ use crate::level_source::{retrieve_f32, LevelSource};
 use crate::metadata::{StoreAttributes, MINMAX_GROUP};
 use crate::metadata_check::{check_chunk_sizes, validate_attributes};
 use crate::metadata_files::check_node_metadata;
+use crate::remote_access::RemoteAccess;
 use crate::value_range::{bricks_over_stored_chunks, fold_samples, unwritten_fill_value, ScanProgress, EMPTY_RANGE};
 use crate::volume::VolumeInfo;
 
@@ -195,10 +195,13 @@ fn open_remote(location: RemoteLocation, access: Option<&RemoteAccess>) -> Resul
     let shown = PathBuf::from(location.shown());
     let access = access.cloned().unwrap_or_default();
     let cache = match &access.cache_dir {
-        Some(dir) => Some(DiskCache::open(dir, access.cache_limit_bytes).map_err(|e| StoreError::store(&shown, e.to_string()))?),
+        Some(dir) => {
+            Some(DiskCache::open(dir, access.cache_limit_bytes).map_err(|e| StoreError::store(&shown, e.to_string()))?)
+        }
         None => None,
     };
-    let store = RemoteStore::open(location, access.options, cache).map_err(|e| StoreError::store(&shown, e.to_string()))?;
+    let store =
+        RemoteStore::open(location, access.options, cache).map_err(|e| StoreError::store(&shown, e.to_string()))?;
     Ok(Arc::new(store))
 }
 
@@ -601,7 +604,8 @@ impl StoreReader {
     fn holds_only_zero(&self, level: usize, ijk: [u64; 3]) -> bool {
         let Some(minmax) = &self.minmax else { return false };
         let b = self.layout.bricks(level);
-        (0..3).all(|a| ijk[a] < b[a]) && minmax[level][((ijk[2] * b[1] + ijk[1]) * b[0] + ijk[0]) as usize] == [0.0, 0.0]
+        (0..3).all(|a| ijk[a] < b[a])
+            && minmax[level][((ijk[2] * b[1] + ijk[1]) * b[0] + ijk[0]) as usize] == [0.0, 0.0]
     }
 
     /// The samples of brick `ijk` of `level` (clipped to the level), x fastest, from the cache or the disk.
@@ -625,7 +629,9 @@ impl StoreReader {
         // A brick whose min/max is [0, 0] holds only the fill value: nothing to read (its shard may not exist).
         if let Some(minmax) = &self.minmax {
             let b = self.layout.bricks(level);
-            if (0..3).all(|a| ijk[a] < b[a]) && minmax[level][((ijk[2] * b[1] + ijk[1]) * b[0] + ijk[0]) as usize] == [0.0, 0.0] {
+            if (0..3).all(|a| ijk[a] < b[a])
+                && minmax[level][((ijk[2] * b[1] + ijk[1]) * b[0] + ijk[0]) as usize] == [0.0, 0.0]
+            {
                 let dims = self.layout.level_dims[level];
                 let size = self.layout.brick_size;
                 let extent: u64 = (0..3).map(|a| (ijk[a] * size + size).min(dims[a]) - ijk[a] * size).product();

@@ -138,7 +138,11 @@ pub fn run(args: &InfoArgs) -> Result<()> {
     match reader.remote() {
         Some(remote) => {
             let counts = remote.counts();
-            println!("remote       {} requests, {:.2} MiB fetched to open it", counts.requests, counts.bytes as f64 / 1048576.0);
+            println!(
+                "remote       {} requests, {:.2} MiB fetched to open it",
+                counts.requests,
+                counts.bytes as f64 / 1048576.0
+            );
         }
         None => println!("on disk      {:.2} MiB", info.bytes_on_disk as f64 / 1048576.0),
     }

@@ -21,7 +21,6 @@ use crate::exit_status::IncompleteImage;
 use crate::geometry_source;
 use crate::iso_flags;
 use crate::memory::{bytes_read, peak_rss_bytes};
-use crate::stats::RemoteStats;
 use crate::output_file::{check_output, write_output};
 use crate::png_output::{numbered_path, write_png};
 use crate::popping_run::FrameRecorder;
@@ -30,6 +29,7 @@ use crate::render_progress::RenderProgress;
 use crate::render_warnings::{empty_image, transfer_function_mismatch};
 use crate::scenes::builtin;
 use crate::source_path::{check_store_path, missing_geometry_file, warn_about_leftovers};
+use crate::stats::RemoteStats;
 use crate::stats::RunStats;
 use crate::store_open::{clipped_warning, open_store};
 

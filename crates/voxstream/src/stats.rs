@@ -85,6 +85,12 @@ pub struct RemoteStats {
 
 impl From<voxstream_store::remote::RemoteCounts> for RemoteStats {
     fn from(c: voxstream_store::remote::RemoteCounts) -> Self {
-        RemoteStats { requests: c.requests, bytes: c.bytes, retries: c.retries, failures: c.failures, cache_hits: c.cache_hits }
+        RemoteStats {
+            requests: c.requests,
+            bytes: c.bytes,
+            retries: c.retries,
+            failures: c.failures,
+            cache_hits: c.cache_hits,
+        }
     }
 }

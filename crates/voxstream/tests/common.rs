@@ -94,3 +94,28 @@ pub fn scratch(file: &str, name: &str) -> PathBuf {
 pub fn stderr(output: &Output) -> String {
     String::from_utf8_lossy(&output.stderr).into_owned()
 }
+
+/// Imports a 48×40×36 u16 ball into the store `name` in `dir`, with bricks of 16 (levels of 48, 24 and 12 samples:
+/// several shards, empty bricks among them); the ball's samples fall from 3050 at its centre to 50 at its surface.
+pub fn import_ball(dir: &Path, name: &str) {
+    let (nx, ny, nz) = (48usize, 40usize, 36usize);
+    let mut bytes = format!(
+        "NRRD0004\ntype: ushort\ndimension: 3\nsizes: {nx} {ny} {nz}\nspacings: 1 1 1\nencoding: raw\nendian: little\n\n"
+    )
+    .into_bytes();
+    for k in 0..nz {
+        for j in 0..ny {
+            for i in 0..nx {
+                let d = (((i as f64 - 24.0) / 18.0).powi(2)
+                    + ((j as f64 - 20.0) / 16.0).powi(2)
+                    + ((k as f64 - 18.0) / 14.0).powi(2))
+                .sqrt();
+                let v = if d < 1.0 { (3000.0 * (1.0 - d * d)) as u16 + 50 } else { 0 };
+                bytes.extend(v.to_le_bytes());
+            }
+        }
+    }
+    std::fs::write(dir.join("ball.nrrd"), bytes).unwrap();
+    let out = voxstream(&["import", "ball.nrrd", "--out", name, "--brick-size", "16", "--quiet"], dir);
+    assert!(out.status.success(), "import: {}", stderr(&out));
+}

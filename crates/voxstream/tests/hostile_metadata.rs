@@ -6,6 +6,10 @@
 //! milliseconds. Every case runs the binary in a child killed past [`TIME_BOUND`] (the test then fails): a case that
 //! would run for hours cannot pass, and none is asserted as a speed limit.
 
+mod common;
+
+use common::import_ball;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -247,31 +251,6 @@ fn json_inputs_over_the_cap_are_refused_naming_the_file_and_the_cap() {
     let mut with_path = render_args("v2.zarr");
     with_path.extend(["--path", "path.json"]);
     assert_refused(&with_path, &dir, &["path.json", "camera path", "4 MiB"]);
-}
-
-/// Imports a 48×40×36 u16 ball (bricks of 16: levels of 48, 24 and 12 samples; shards one brick deep in z) into
-/// `dir/NAME`.
-fn import_ball(dir: &Path, name: &str) {
-    let (nx, ny, nz) = (48usize, 40usize, 36usize);
-    let mut bytes = format!(
-        "NRRD0004\ntype: ushort\ndimension: 3\nsizes: {nx} {ny} {nz}\nspacings: 1 1 1\nencoding: raw\nendian: little\n\n"
-    )
-    .into_bytes();
-    for k in 0..nz {
-        for j in 0..ny {
-            for i in 0..nx {
-                let d = (((i as f64 - 24.0) / 18.0).powi(2)
-                    + ((j as f64 - 20.0) / 16.0).powi(2)
-                    + ((k as f64 - 18.0) / 14.0).powi(2))
-                .sqrt();
-                let v = if d < 1.0 { (3000.0 * (1.0 - d * d)) as u16 + 50 } else { 0 };
-                bytes.extend(v.to_le_bytes());
-            }
-        }
-    }
-    std::fs::write(dir.join("ball.nrrd"), bytes).unwrap();
-    let out = run(&["import", "ball.nrrd", "--out", name, "--brick-size", "16", "--quiet"], dir);
-    assert_eq!(out.code, 0, "import: {}", out.stderr);
 }
 
 fn copy_dir(from: &Path, to: &Path) {

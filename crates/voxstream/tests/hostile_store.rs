@@ -8,6 +8,10 @@
 //! An invalid store gives one line naming the store and the field, exit 1; a brick the store says exists but cannot
 //! be read gives warnings, the image, and exit 3.
 
+mod common;
+
+use common::import_ball;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -106,30 +110,6 @@ fn scratch(name: &str) -> PathBuf {
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir
-}
-
-/// Imports a 48×40×36 u16 ball (bricks of 16: levels of 48, 24 and 12 samples) into `dir/NAME`.
-fn import_ball(dir: &Path, name: &str) {
-    let (nx, ny, nz) = (48usize, 40usize, 36usize);
-    let mut bytes = format!(
-        "NRRD0004\ntype: ushort\ndimension: 3\nsizes: {nx} {ny} {nz}\nspacings: 1 1 1\nencoding: raw\nendian: little\n\n"
-    )
-    .into_bytes();
-    for k in 0..nz {
-        for j in 0..ny {
-            for i in 0..nx {
-                let d = (((i as f64 - 24.0) / 18.0).powi(2)
-                    + ((j as f64 - 20.0) / 16.0).powi(2)
-                    + ((k as f64 - 18.0) / 14.0).powi(2))
-                .sqrt();
-                let v = if d < 1.0 { (3000.0 * (1.0 - d * d)) as u16 + 50 } else { 0 };
-                bytes.extend(v.to_le_bytes());
-            }
-        }
-    }
-    std::fs::write(dir.join("ball.nrrd"), bytes).unwrap();
-    let out = run(&["import", "ball.nrrd", "--out", name, "--brick-size", "16", "--quiet"], dir);
-    assert_eq!(out.code, 0, "import: {}", out.stderr);
 }
 
 /// Rewrites `attributes.voxstream.FIELD` of the store's root zarr.json as raw JSON text.

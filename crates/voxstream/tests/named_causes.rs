@@ -9,31 +9,7 @@ mod common;
 use std::path::Path;
 use std::process::Output;
 
-use common::{scratch, stderr, voxstream};
-
-/// Imports a 48×40×36 u16 ball (bricks of 16: levels of 48, 24 and 12 samples) into `dir/NAME`.
-fn import_ball(dir: &Path, name: &str) {
-    let (nx, ny, nz) = (48usize, 40usize, 36usize);
-    let mut bytes = format!(
-        "NRRD0004\ntype: ushort\ndimension: 3\nsizes: {nx} {ny} {nz}\nspacings: 1 1 1\nencoding: raw\nendian: little\n\n"
-    )
-    .into_bytes();
-    for k in 0..nz {
-        for j in 0..ny {
-            for i in 0..nx {
-                let d = (((i as f64 - 24.0) / 18.0).powi(2)
-                    + ((j as f64 - 20.0) / 16.0).powi(2)
-                    + ((k as f64 - 18.0) / 14.0).powi(2))
-                .sqrt();
-                let v = if d < 1.0 { (3000.0 * (1.0 - d * d)) as u16 + 50 } else { 0 };
-                bytes.extend(v.to_le_bytes());
-            }
-        }
-    }
-    std::fs::write(dir.join("ball.nrrd"), bytes).unwrap();
-    let out = voxstream(&["import", "ball.nrrd", "--out", name, "--brick-size", "16", "--quiet"], dir);
-    assert!(out.status.success(), "import: {}", stderr(&out));
-}
+use common::{import_ball, scratch, stderr, voxstream};
 
 /// Rewrites `attributes.voxstream.FIELD` of the store's root zarr.json.
 fn set_attribute(store: &Path, field: &str, value: serde_json::Value) {

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{scratch, stderr, voxstream};
+use common::{import_ball, scratch, stderr, voxstream};
 
 const NGINX: &str = "/usr/sbin/nginx";
 
@@ -135,32 +135,14 @@ for folder, _, files in os.walk(root):
     assert!(status.success(), "uploading to moto failed");
 }
 
-/// A 48×40×36 ball of 16-bit values imported with 16³ bricks (several shards, empty ones among them).
-fn import_ball(dir: &Path, name: &str) {
-    let (nx, ny, nz) = (48usize, 40usize, 36usize);
-    let mut bytes = format!(
-        "NRRD0004\ntype: ushort\ndimension: 3\nsizes: {nx} {ny} {nz}\nspacings: 1 1 1\nencoding: raw\nendian: little\n\n"
-    )
-    .into_bytes();
-    for k in 0..nz {
-        for j in 0..ny {
-            for i in 0..nx {
-                let d = (((i as f64 - 24.0) / 18.0).powi(2)
-                    + ((j as f64 - 20.0) / 16.0).powi(2)
-                    + ((k as f64 - 18.0) / 14.0).powi(2))
-                .sqrt();
-                let v = if d < 1.0 { (3000.0 * (1.0 - d * d)) as u16 + 50 } else { 0 };
-                bytes.extend(v.to_le_bytes());
-            }
-        }
-    }
-    std::fs::write(dir.join("ball.nrrd"), bytes).unwrap();
-    let out = voxstream(&["import", "ball.nrrd", "--out", name, "--brick-size", "16", "--quiet"], dir);
-    assert!(out.status.success(), "import: {}", stderr(&out));
-}
-
 /// Renders `source` converged at 96² into `dir/out`, returning the PNG's bytes and the run's output.
-fn render(dir: &Path, source: &str, out: &str, extra: &[&str], env: &[(&str, &str)]) -> (Vec<u8>, std::process::Output) {
+fn render(
+    dir: &Path,
+    source: &str,
+    out: &str,
+    extra: &[&str],
+    env: &[(&str, &str)],
+) -> (Vec<u8>, std::process::Output) {
     let mut command = Command::new(env!("CARGO_BIN_EXE_voxstream"));
     command.args(["render", source, "--out", out, "--width", "96", "--height", "96", "--quiet"]).args(extra);
     for (k, v) in env {
@@ -235,7 +217,8 @@ fn faults_are_retried_and_the_image_stays_identical() {
     assert!(out.status.success(), "render through faults: {}", stderr(&out));
     assert!(image == local, "faults changed the image");
     let actions = std::fs::read_to_string(&log).unwrap();
-    let count = |what: &str| actions.lines().filter(|l| l.split('\t').nth(2).is_some_and(|a| a.starts_with(what))).count();
+    let count =
+        |what: &str| actions.lines().filter(|l| l.split('\t').nth(2).is_some_and(|a| a.starts_with(what))).count();
     assert!(count("503") > 0 && count("truncated") > 0, "the proxy injected no faults:\n{actions}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
