@@ -83,3 +83,32 @@ pub trait Producer: Send + Sync {
         true
     }
 }
+
+/// A boxed producer is a producer: front ends that open sources of several kinds (a scene, a store, a mesh) hold
+/// them as `Box<dyn Producer>`. Every method forwards, so the inner producer's overrides stay in force.
+impl<P: Producer + ?Sized> Producer for Box<P> {
+    fn shape(&self) -> TreeShape {
+        (**self).shape()
+    }
+    fn oracle(&self, key: NodeKey) -> Option<f32> {
+        (**self).oracle(key)
+    }
+    fn produce(&self, key: NodeKey, voxels: &mut [u16]) -> Result<Produced, ProduceError> {
+        (**self).produce(key, voxels)
+    }
+    fn voxel_format(&self) -> VoxelFormat {
+        (**self).voxel_format()
+    }
+    fn subtree_range(&self, key: NodeKey) -> Option<[f32; 2]> {
+        (**self).subtree_range(key)
+    }
+    fn prefetch(&self, keys: &[NodeKey]) {
+        (**self).prefetch(keys)
+    }
+    fn concurrency(&self) -> usize {
+        (**self).concurrency()
+    }
+    fn ready(&self, key: NodeKey) -> bool {
+        (**self).ready(key)
+    }
+}

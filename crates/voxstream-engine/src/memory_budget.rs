@@ -119,6 +119,11 @@ impl MemoryBudget {
         Ok(MemoryBudget { budget_mb, total_bytes, image_bytes })
     }
 
+    /// The whole budget, MiB, as asked for.
+    pub fn budget_mb(&self) -> u64 {
+        self.budget_mb
+    }
+
     /// The whole budget, bytes.
     pub fn total_bytes(&self) -> u64 {
         self.total_bytes

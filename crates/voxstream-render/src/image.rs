@@ -26,6 +26,11 @@ impl Image {
     pub fn to_rgb8(&self) -> Vec<u8> {
         self.pixels.iter().flat_map(|p| [to_u8(p[0]), to_u8(p[1]), to_u8(p[2])]).collect()
     }
+
+    /// 8-bit RGBA: [`Image::to_rgb8`]'s colours and the coverage as alpha.
+    pub fn to_rgba8(&self) -> Vec<u8> {
+        self.pixels.iter().flat_map(|p| p.map(to_u8)).collect()
+    }
 }
 
 /// Quantises a linear value in `[0, 1]` to 8 bits, rounding to nearest.

@@ -312,35 +312,7 @@ pub enum RefineArg {
     Blended,
 }
 
-/// Which renderer draws the passes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum Backend {
-    /// The CPU ray caster (the reference).
-    Cpu,
-    /// The GPU ray caster (wgpu, Vulkan).
-    Gpu,
-}
-
-/// How the GPU renderer filters brick samples (`voxstream_gpu::BrickFiltering`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum GpuFilter {
-    /// The texture units where the adapter can filter 16-bit bricks, else exact.
-    Auto,
-    /// The texture units' trilinear filtering (one fetch per sample; weights at the GPU's precision).
-    Hardware,
-    /// Trilinear filtering in the shader from eight texel loads: the CPU's arithmetic.
-    Exact,
-}
-
-/// How the brick pool keeps a store's voxels (`voxstream_core::VoxelFormat`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum BrickBits {
-    /// 8 bits for 8-bit volumes (half the memory), 16 bits otherwise.
-    Auto,
-    /// Always 16 bits.
-    #[value(name = "16")]
-    Sixteen,
-}
+pub use voxstream_api::{Backend, BrickBits, GpuFilter};
 
 /// On or off.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]

@@ -100,7 +100,7 @@ struct StoreInfo {
 pub fn run(args: &InfoArgs) -> Result<()> {
     check_store_path(&args.store, "info")?;
     let cache_bytes = voxstream_store::store_reader::DEFAULT_CACHE_BYTES;
-    let reader = open_store(&args.store, cache_bytes, args.value_range, &args.remote, false)?;
+    let reader = open_store(&args.store, cache_bytes, args.value_range, &args.remote.access(), false)?;
     warn_about_leftovers(&args.store);
     let layout = reader.layout();
     let attributes = reader.attributes();

@@ -2,26 +2,29 @@
 //! to the viewer's window ([`voxstream_viewer::run_viewer`]).
 
 use anyhow::{bail, Context, Result};
-use clap::Parser;
-use voxstream_core::Producer;
-use voxstream_engine::{LoopLimits, MemoryBudget, Session};
-use voxstream_render::TransferFunction;
+use voxstream_api::{
+    CameraOptions, IsoOptions, SessionOptions, Source, SourceOptions, TransferFunctionChoice, ViewOptions,
+};
+use voxstream_render::{Shading, TransferFunction};
 use voxstream_viewer::script::{Script, ScriptCommand};
 use voxstream_viewer::{run_viewer, Refinement, ViewerConfig};
 
-use crate::backend::open_renderer;
-use crate::cli::{Cli, Command, RefineArg, RenderArgs, Switch, ViewArgs};
+use crate::cli::{RefineArg, ShadingArg, Switch, ViewArgs};
 use crate::exit_status::IncompleteImage;
 use crate::iso_flags::check_isovalue;
 use crate::output_file::check_output;
-use crate::render_budget::{check_budget, plan_budget};
-use crate::render_command::{check_flags, open_source, prepare_view, Source, SourceUser};
+use crate::render_budget::check_budget;
 
 /// Runs `voxstream view`.
 pub fn run(args: &ViewArgs) -> Result<()> {
-    let render_args = render_args(args)?;
-    // `render`'s checks and messages (size, budget, requests per frame).
-    check_flags(&render_args)?;
+    // `render`'s checks and messages (size, budget, requests per frame, backend flags).
+    crate::backend::check_backend_flags(args.backend, args.gpu_filter)?;
+    if args.width == 0 || args.height == 0 {
+        bail!("image size must be positive, got {}x{}", args.width, args.height);
+    }
+    if args.requests_per_frame == 0 {
+        bail!("--requests-per-frame must be at least 1");
+    }
     if let Some(path) = &args.stats {
         check_output(path, "--stats")?;
     }
@@ -35,99 +38,92 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         RefineArg::Converged => Refinement::Converged,
         RefineArg::Blended => Refinement::Blended,
     };
-    open_source(&render_args, &budget, ShowInWindow { script, stats: args.stats.clone(), refinement })
-}
-
-/// `render`'s arguments with `view`'s values, so that the source, the flags and their errors are `render`'s.
-fn render_args(args: &ViewArgs) -> Result<RenderArgs> {
-    let mut render = match Cli::try_parse_from(["voxstream", "render", "--quiet"]) {
-        Ok(Cli { command: Some(Command::Render(render)) }) => render,
-        _ => bail!("internal error: the default render arguments did not parse"),
+    let Source { producer, meta } = voxstream_api::open(&args.source, &source_options(args), &budget)?;
+    let prepared = voxstream_api::prepare_view(&view_options(args), &meta)?;
+    // The script's isovalues meet render's --iso checks, now that the data's range is known.
+    if let Some(script) = &script {
+        check_script_isovalues(script, meta.value_range)?;
+    }
+    // After the source and the flags (their errors are `render`'s), before the pools are allocated and before a GPU
+    // is opened for a window that cannot open.
+    if !voxstream_viewer::has_display() {
+        bail!(voxstream_viewer::ViewerError::NoDisplay);
+    }
+    let (session, plan) = voxstream_api::start_session(producer, &meta, &prepared, &session_options(args), &budget)?;
+    let config = ViewerConfig {
+        title: format!("voxstream view {}", meta.name),
+        camera: prepared.camera,
+        transfer_function: prepared.transfer_function,
+        settings: prepared.settings,
+        value_range: meta.value_range,
+        presets: presets(meta.typical_range),
+        script,
+        pool_budget_bytes: plan.pool_bytes,
+        stats_path: args.stats.clone(),
+        refinement,
+        renderer: session.renderer().describe(),
     };
-    render.source = args.source.clone();
-    render.remote = args.remote.clone();
-    render.camera = args.camera.clone();
-    render.tf = args.tf.clone();
-    render.width = args.width;
-    render.height = args.height;
-    render.budget_mb = args.budget_mb;
-    render.requests_per_frame = args.requests_per_frame;
-    render.blending = args.blending;
-    render.shading = args.shading;
-    render.light = args.light;
-    render.iso = args.iso.clone();
-    render.step = args.step;
-    render.lod_bias = args.lod_bias;
-    render.amplify = args.amplify;
-    render.resolution = args.resolution;
-    render.attribute = args.attribute;
-    render.smoothing_scale = args.smoothing_scale;
-    render.particle_memory = args.particle_memory;
-    render.in_memory = args.in_memory;
-    render.value_range = args.value_range;
-    render.backend = args.backend;
-    render.gpu_filter = args.gpu_filter;
-    Ok(render)
+    let summary = run_viewer(session, config).context("voxstream view");
+    if let Some(warning) = meta.clipped_warning() {
+        eprintln!("{warning}");
+    }
+    // As `render`: bricks that could not be read make the run incomplete (exit 3).
+    let failed_bricks = summary?.failed_bricks;
+    if failed_bricks > 0 {
+        return Err(IncompleteImage { failed_bricks }.into());
+    }
+    Ok(())
 }
 
-struct ShowInWindow {
-    script: Option<Script>,
-    stats: Option<std::path::PathBuf>,
-    refinement: Refinement,
+/// The source options `view`'s flags give (as `render`'s).
+fn source_options(args: &ViewArgs) -> SourceOptions {
+    SourceOptions {
+        value_range: args.value_range,
+        in_memory: args.in_memory,
+        amplify: args.amplify,
+        resolution: args.resolution,
+        attribute: args.attribute,
+        smoothing_scale: args.smoothing_scale,
+        particle_memory: args.particle_memory,
+        remote: args.remote.access(),
+        width: args.width,
+        height: args.height,
+        quiet: true,
+        ..SourceOptions::default()
+    }
 }
 
-impl SourceUser for ShowInWindow {
-    fn use_source<P: Producer + 'static>(
-        self,
-        args: &RenderArgs,
-        source: Source<P>,
-        budget: &MemoryBudget,
-    ) -> Result<()> {
-        let prepared = prepare_view(args, &source)?;
-        // The script's isovalues meet render's --iso checks, now that the data's range is known.
-        if let Some(script) = &self.script {
-            check_script_isovalues(script, source.value_range)?;
-        }
-        // After the source and the flags (their errors are `render`'s), before the pools are allocated.
-        if !voxstream_viewer::has_display() {
-            bail!(voxstream_viewer::ViewerError::NoDisplay);
-        }
-        let plan = plan_budget(budget, &source.producer.shape(), source.producer_cache_bytes)?;
-        let limits = LoopLimits {
-            requests_per_frame: args.requests_per_frame,
-            blending_fade_frames: (args.blending == Switch::On).then_some(args.fade_frames),
-            ..LoopLimits::default()
-        };
-        // After the display check (no GPU is opened for a window that cannot open), before the pools.
-        let renderer = open_renderer(args.backend, args.gpu_filter)?;
-        let session = Session::with_renderer(
-            renderer,
-            source.producer,
-            &prepared.transfer_function,
-            prepared.settings.clone(),
-            plan.pool_bytes,
-            limits,
-            source.value_range,
-        )?;
-        let config = ViewerConfig {
-            title: format!("voxstream view {}", source.name),
-            camera: prepared.camera,
-            transfer_function: prepared.transfer_function,
-            settings: prepared.settings,
-            value_range: source.value_range,
-            presets: presets(source.typical_range),
-            script: self.script,
-            pool_budget_bytes: plan.pool_bytes,
-            stats_path: self.stats,
-            refinement: self.refinement,
-            renderer: session.renderer().describe(),
-        };
-        let summary = run_viewer(session, config).context("voxstream view")?;
-        // As `render`: bricks that could not be read make the run incomplete (exit 3).
-        if summary.failed_bricks > 0 {
-            return Err(IncompleteImage { failed_bricks: summary.failed_bricks }.into());
-        }
-        Ok(())
+/// The view options `view`'s flags give (as `render`'s).
+fn view_options(args: &ViewArgs) -> ViewOptions {
+    ViewOptions {
+        width: args.width,
+        height: args.height,
+        transfer_function: match &args.tf {
+            Some(path) => TransferFunctionChoice::File(path.clone()),
+            None => TransferFunctionChoice::Default,
+        },
+        iso: IsoOptions { values: args.iso.clone(), ..IsoOptions::default() },
+        shading: args.shading.map(|shading| match shading {
+            ShadingArg::None => Shading::None,
+            ShadingArg::Phong => Shading::Phong,
+        }),
+        light: args.light,
+        step: args.step,
+        lod_bias: args.lod_bias,
+        camera: CameraOptions { file: args.camera.clone(), ..CameraOptions::default() },
+        ..ViewOptions::default()
+    }
+}
+
+/// The session options `view`'s flags give.
+fn session_options(args: &ViewArgs) -> SessionOptions {
+    SessionOptions {
+        budget_mb: args.budget_mb,
+        backend: args.backend,
+        gpu_filter: args.gpu_filter,
+        requests_per_frame: args.requests_per_frame,
+        blending: args.blending == Switch::On,
+        ..SessionOptions::default()
     }
 }
 

@@ -4,7 +4,40 @@
 use anyhow::Result;
 use voxstream_engine::{CpuRenderer, FrameRenderer};
 
-use crate::cli::{Backend, GpuFilter};
+/// Which renderer draws the passes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+pub enum Backend {
+    /// The CPU ray caster (the reference).
+    #[default]
+    Cpu,
+    /// The GPU ray caster (wgpu, Vulkan).
+    Gpu,
+}
+
+/// How the GPU renderer filters brick samples (`voxstream_gpu::BrickFiltering`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+pub enum GpuFilter {
+    /// The texture units where the adapter can filter 16-bit bricks, else exact.
+    #[default]
+    Auto,
+    /// The texture units' trilinear filtering (one fetch per sample; weights at the GPU's precision).
+    Hardware,
+    /// Trilinear filtering in the shader from eight texel loads: the CPU's arithmetic.
+    Exact,
+}
+
+impl Backend {
+    /// The backend a name means (`"cpu"`, `"gpu"`), for front ends that take strings.
+    pub fn from_name(name: &str) -> Result<Backend> {
+        match name {
+            "cpu" => Ok(Backend::Cpu),
+            "gpu" => Ok(Backend::Gpu),
+            other => anyhow::bail!("backend '{other}' is not one of cpu, gpu"),
+        }
+    }
+}
 
 /// Opens the renderer `backend` names (`Send`: the viewer draws on its own thread).
 /// `filter` is `--gpu-filter`, which only the GPU renderer takes ([`check_backend_flags`]).

@@ -22,7 +22,7 @@ use voxstream_geometry::{
 };
 use voxstream_render::{Camera, IsoSurface, TransferFunction, VolumePlacement, FRAME_BYTES_PER_PIXEL};
 
-use crate::render_command::frame_box;
+use crate::defaults::frame_box;
 
 /// The flags that shape a geometry file's tree (from `render` or `import`).
 #[derive(Clone, Copy, Debug)]

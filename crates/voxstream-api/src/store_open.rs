@@ -9,7 +9,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use voxstream_store::foreign::ForeignOptions;
 use voxstream_store::StoreReader;
 
-use crate::cli::RemoteArgs;
+use voxstream_store::remote_access::RemoteAccess;
 
 /// Level-0 bricks above which the value-range scan shows a progress bar (2^15 bricks of 32³: 1 Gi samples).
 const SCAN_BAR_BRICKS: u64 = 1 << 15;
@@ -31,10 +31,9 @@ pub fn open_store(
     path: &Path,
     cache_bytes: u64,
     value_range: Option<[f64; 2]>,
-    remote: &RemoteArgs,
+    remote: &RemoteAccess,
     quiet: bool,
 ) -> Result<StoreReader> {
-    let access = remote.access();
     let bar = ProgressBar::hidden();
     let show = |done: u64, total: u64| {
         if done == 1 && total >= SCAN_BAR_BRICKS && !quiet {
@@ -49,7 +48,7 @@ pub fn open_store(
         }
         bar.set_position(done);
     };
-    let options = ForeignOptions { value_range, progress: Some(&show), remote: Some(&access), ..Default::default() };
+    let options = ForeignOptions { value_range, progress: Some(&show), remote: Some(remote), ..Default::default() };
     let reader = StoreReader::open_with_options(path, cache_bytes, &options)?;
     bar.finish_and_clear();
     if value_range.is_some() && reader.is_native() {

@@ -1,0 +1,113 @@
+//! A source's defaults: where a store's volume sits in the world, the camera that frames it, the transfer function
+//! that shows it, and the checks and number formats shared by every front end's messages.
+
+use anyhow::{bail, Result};
+use voxstream_render::{Camera, TransferFunction, VolumePlacement};
+use voxstream_store::StoreReader;
+
+/// Where a store's tree cube sits in the world: sample `(i, j, k)` at `origin + spacing·(i, j, k)` (VTK/ITK), the
+/// rays clipped to the box of the sample centres, as VTK's ray casters do.
+pub fn store_placement(reader: &StoreReader) -> VolumePlacement {
+    let info = reader.info();
+    let layout = reader.layout();
+    let span = (layout.brick_size << layout.max_tree_level()) as f64;
+    VolumePlacement {
+        origin: [0, 1, 2].map(|a| info.origin[a] - 0.5 * info.spacing[a]),
+        scale: [0, 1, 2].map(|a| info.spacing[a] * span),
+        clip_lower: [0.5 / span; 3],
+        clip_upper: [0, 1, 2].map(|a| ((info.dims[a] as f64 - 0.5) / span).max(0.5 / span + 1e-9)),
+    }
+}
+
+/// Direction from a store's centre towards the default eye: a three-quarter view from the front (−y), right (+x)
+/// and above (+z).
+pub const STORE_VIEW_DIRECTION: [f64; 3] = [0.55, -0.65, 0.52];
+
+/// Fraction of the image's half-width and half-height the volume's box may fill in the default store view.
+const STORE_FRAME_FILL: f64 = 0.95;
+
+/// A three-quarter view of the volume's centre, `+z` up, 30° vertical field of view, just far enough that all eight
+/// corners of the volume's box (the sample centres) fall inside a `width × height` image.
+pub fn store_camera(info: &voxstream_store::VolumeInfo, width: u32, height: u32) -> Camera {
+    let lower = info.origin;
+    let upper = [0, 1, 2].map(|a| info.origin[a] + (info.dims[a] as f64 - 1.0) * info.spacing[a]);
+    frame_box(lower, upper, width, height, STORE_VIEW_DIRECTION, [0.0, 0.0, 1.0])
+}
+
+/// A view of the box `lower..upper` from its centre's side `towards_eye`, `up` up, 30° vertical field of view, just
+/// far enough that all eight corners fall inside a `width × height` image.
+pub fn frame_box(
+    lower: [f64; 3],
+    upper: [f64; 3],
+    width: u32,
+    height: u32,
+    towards_eye: [f64; 3],
+    up: [f64; 3],
+) -> Camera {
+    use glam::DVec3;
+    let lower = DVec3::from(lower);
+    let upper = DVec3::from(upper);
+    let centre = (lower + upper) * 0.5;
+    let fov: f64 = 30.0;
+    let up_hint = DVec3::from(up);
+    let towards_eye = DVec3::from(towards_eye).normalize();
+    // The camera's basis (as `Camera::frame` builds it): forward = −towards_eye, right = forward × up.
+    let forward = -towards_eye;
+    let right = forward.cross(up_hint).normalize();
+    let up = right.cross(forward);
+    let tan_vertical = (fov.to_radians() * 0.5).tan() * STORE_FRAME_FILL;
+    let tan_horizontal = tan_vertical * width.max(1) as f64 / height.max(1) as f64;
+    // A corner at offset r from the centre lies at depth D − r·towards_eye from an eye at distance D; it is inside
+    // the image when |r·right| ≤ tan_h·depth and |r·up| ≤ tan_v·depth.
+    let mut distance: f64 = 1e-9;
+    for corner in 0..8 {
+        let pick = |axis: usize| if corner >> axis & 1 == 1 { upper[axis] } else { lower[axis] };
+        let r = DVec3::new(pick(0), pick(1), pick(2)) - centre;
+        let along = r.dot(towards_eye);
+        distance =
+            distance.max(r.dot(right).abs() / tan_horizontal + along).max(r.dot(up).abs() / tan_vertical + along);
+    }
+    let eye = centre + towards_eye * distance;
+    Camera { eye: eye.to_array(), target: centre.to_array(), up: up_hint.to_array(), fov }
+}
+
+/// A soft ramp over the upper 80% of `range` (the data's 0.5th to 99.5th percentile), reaching opacity 0.12 per
+/// sample spacing at its top.
+pub fn default_store_transfer_function(range: [f64; 2]) -> Result<TransferFunction> {
+    let [lo, hi] = range;
+    let hi = if hi > lo { hi } else { lo + 1.0 };
+    let at = |f: f64| lo + (hi - lo) * f;
+    Ok(TransferFunction::new(
+        vec![
+            [lo, 0.0, 0.0, 0.0, 0.0],
+            [at(0.2), 0.55, 0.35, 0.25, 0.0],
+            [at(0.6), 0.95, 0.8, 0.6, 0.05],
+            [hi, 1.0, 1.0, 1.0, 0.12],
+        ],
+        None,
+    )?)
+}
+
+/// A number as a user would type it: `1500`, `0.25`, but `1e30` rather than thirty-one digits.
+pub fn shown_number(value: f64) -> String {
+    if value == 0.0 || (1e-4..1e15).contains(&value.abs()) || !value.is_finite() {
+        format!("{value}")
+    } else {
+        format!("{value:e}")
+    }
+}
+
+/// The volume's place in the world is the source's (a store's spacing and origin, a mesh's bounds), not the flags':
+/// a bad one is blamed on the source.
+pub fn check_placement(name: &str, placement: &VolumePlacement) -> Result<()> {
+    let finite = placement.origin.iter().chain(&placement.scale).all(|v| v.is_finite());
+    if !(finite && placement.scale.iter().all(|s| *s > 0.0)) {
+        bail!(
+            "{name}: its place in the world is not finite (origin {:?}, size {:?}): its coordinates are too large \
+             (for a store, its spacing and origin: see `voxstream info`)",
+            placement.origin,
+            placement.scale
+        );
+    }
+    Ok(())
+}

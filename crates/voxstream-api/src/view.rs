@@ -1,0 +1,290 @@
+//! What a view asks of a source: the transfer function, isosurfaces, shading, light, sampling and camera, as typed
+//! options, checked and applied over the source's defaults ([`prepare_view`]). The CLI's flags and the Python
+//! module's keyword arguments are turned into [`ViewOptions`]; their mistakes get the same one-line messages, which
+//! name the CLI's flags.
+//!
+//! Isosurfaces are Knoll et al.'s exact ray–isosurface intersections over min/max hierarchies (`voxstream-render`).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use voxstream_core::json_limits::read_json_file;
+use voxstream_render::{Camera, IsoSurface, RenderSettings, Shading, SurfaceNormals, TransferFunction, MAX_SURFACES};
+
+use crate::camera_path::read_camera_file;
+use crate::defaults::{check_placement, shown_number};
+use crate::source::SourceMeta;
+
+/// Colours of the surfaces when none are given, in order (linear RGB).
+pub const PALETTE: [[f32; 3]; MAX_SURFACES] = [
+    [0.9, 0.75, 0.65],
+    [0.55, 0.7, 0.95],
+    [0.95, 0.9, 0.5],
+    [0.6, 0.9, 0.6],
+    [0.95, 0.55, 0.55],
+    [0.75, 0.6, 0.95],
+    [0.5, 0.9, 0.9],
+    [0.9, 0.9, 0.9],
+];
+
+/// Where the transfer function comes from.
+#[derive(Clone, Debug, Default)]
+pub enum TransferFunctionChoice {
+    /// The source's default.
+    #[default]
+    Default,
+    /// A file: voxstream's JSON, or a ParaView colour-map preset rescaled onto the data's value range (`--tf FILE`).
+    File(PathBuf),
+    /// One built by the caller (control points in data values).
+    Given(TransferFunction),
+}
+
+/// The isosurfaces a view draws (empty `values`: none, the volume).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct IsoOptions {
+    /// Isovalues in data values (`--iso`).
+    pub values: Vec<f64>,
+    /// One linear-RGB colour per value, or none for the palette (`--iso-color`).
+    pub colors: Vec<[f64; 3]>,
+    /// One opacity in (0, 1] per value, or none for opaque surfaces (`--iso-opacity`).
+    pub opacities: Vec<f32>,
+    /// Shadows cast towards the light (`--shadows`; needs a light).
+    pub shadows: bool,
+    /// Normals from central differences instead of the trilinear cell's gradient (`--normals central`).
+    pub central_normals: bool,
+}
+
+/// A camera: a file's, or the source's default, with parts set over it.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CameraOptions {
+    /// A camera file (`--camera FILE`); `None`: the source's default view.
+    pub file: Option<PathBuf>,
+    /// A whole camera given by the caller, over the file or the default.
+    pub camera: Option<Camera>,
+    /// The eye's position over it (`--eye`).
+    pub eye: Option<[f64; 3]>,
+    /// The point looked at (`--target`).
+    pub target: Option<[f64; 3]>,
+    /// The up direction (`--up`).
+    pub up: Option<[f64; 3]>,
+    /// The vertical field of view, degrees (`--fov`).
+    pub fov: Option<f64>,
+}
+
+/// What a view asks of a source; the defaults are `voxstream render`'s.
+#[derive(Clone, Debug)]
+pub struct ViewOptions {
+    /// Image width, pixels.
+    pub width: u32,
+    /// Image height, pixels.
+    pub height: u32,
+    /// The transfer function.
+    pub transfer_function: TransferFunctionChoice,
+    /// The isosurfaces.
+    pub iso: IsoOptions,
+    /// Shading (`None`: Phong for surfaces, else the source's).
+    pub shading: Option<Shading>,
+    /// Direction towards the light (`None`: the source's, else a headlight).
+    pub light: Option<[f64; 3]>,
+    /// Background colour, linear RGB.
+    pub background: [f64; 3],
+    /// Sample spacing as a fraction of the voxel size (`--step`).
+    pub step: f64,
+    /// Level-of-detail bias, levels (`--lod-bias`; positive is coarser).
+    pub lod_bias: f64,
+    /// Colour each brick by its level (`--colour-by-level`).
+    pub colour_by_level: bool,
+    /// The camera.
+    pub camera: CameraOptions,
+}
+
+impl Default for ViewOptions {
+    fn default() -> Self {
+        ViewOptions {
+            width: 512,
+            height: 512,
+            transfer_function: TransferFunctionChoice::Default,
+            iso: IsoOptions::default(),
+            shading: None,
+            light: None,
+            background: [0.0; 3],
+            step: RenderSettings::default().step_factor,
+            lod_bias: RenderSettings::default().lod_bias,
+            colour_by_level: false,
+            camera: CameraOptions::default(),
+        }
+    }
+}
+
+/// The transfer function, settings and camera a view makes of a source's defaults.
+#[derive(Clone, Debug)]
+pub struct PreparedView {
+    /// The view's transfer function, or the source's.
+    pub transfer_function: TransferFunction,
+    /// The render settings.
+    pub settings: RenderSettings,
+    /// The camera.
+    pub camera: Camera,
+    /// Whether isosurfaces are drawn (instead of the volume, or inside it with a transfer function).
+    pub drawing_surfaces: bool,
+}
+
+/// Checks one isovalue against the data's `value_range`; `given` names where it came from (`--iso`, or a viewer
+/// script's line and command), so every front end refuses the same values alike.
+pub fn check_isovalue(value: f64, value_range: [f64; 2], given: &str) -> Result<()> {
+    let [lower, upper] = value_range;
+    let value_text = shown_number(value);
+    if !value.is_finite() {
+        bail!("{given} {value_text} is not a finite number");
+    }
+    if value <= lower || value > upper {
+        bail!(
+            "{given} {value_text} lies outside the data's values ({lower} to {upper}): no surface can appear there; pick a \
+             value between them (see `voxstream info`)"
+        );
+    }
+    Ok(())
+}
+
+/// The surfaces `iso` asks for (empty: volume rendering), checked against the data's `value_range`; `light` is the
+/// view's light (shadows need one).
+pub fn surfaces(iso: &IsoOptions, light: Option<[f64; 3]>, value_range: [f64; 2]) -> Result<Vec<IsoSurface>> {
+    if iso.values.is_empty() {
+        if !iso.colors.is_empty() || !iso.opacities.is_empty() || iso.shadows || iso.central_normals {
+            bail!("--iso-color, --iso-opacity, --shadows and --normals apply to isosurfaces: add --iso VALUE");
+        }
+        return Ok(Vec::new());
+    }
+    if iso.values.len() > MAX_SURFACES {
+        bail!("--iso names {} values; at most {MAX_SURFACES} surfaces are drawn at once", iso.values.len());
+    }
+    for &value in &iso.values {
+        check_isovalue(value, value_range, "--iso")?;
+    }
+    let colors = match iso.colors.len() {
+        0 => PALETTE[..iso.values.len()].to_vec(),
+        n if n != iso.values.len() => {
+            bail!("--iso-color gives {n} colours for {} isovalues: give one per value", iso.values.len())
+        }
+        _ => iso.colors.iter().map(|c| c.map(|v| v as f32)).collect(),
+    };
+    let opacities = match iso.opacities.len() {
+        0 => vec![1.0; iso.values.len()],
+        n if n != iso.values.len() => {
+            bail!("--iso-opacity gives {n} opacities for {} isovalues: give one per value", iso.values.len())
+        }
+        _ => iso.opacities.clone(),
+    };
+    if let Some(bad) = opacities.iter().find(|a| !(**a > 0.0 && **a <= 1.0)) {
+        bail!("--iso-opacity {bad} is not in (0, 1]");
+    }
+    if iso.shadows && light.is_none() {
+        bail!("--shadows needs a light that is not at the eye: add --light x,y,z (the direction towards the light)");
+    }
+    Ok(iso
+        .values
+        .iter()
+        .zip(colors)
+        .zip(opacities)
+        .map(|((&value, color), opacity)| IsoSurface { value, color, opacity })
+        .collect())
+}
+
+/// Applies `view` to `source`'s defaults.
+pub fn prepare_view(view: &ViewOptions, source: &SourceMeta) -> Result<PreparedView> {
+    if view.width == 0 || view.height == 0 {
+        bail!("image size must be positive, got {}x{}", view.width, view.height);
+    }
+    let (transfer_function, tf_given) = match &view.transfer_function {
+        TransferFunctionChoice::Default => (source.transfer_function.clone(), false),
+        TransferFunctionChoice::File(path) => (read_transfer_function(path, source.value_range)?, true),
+        TransferFunctionChoice::Given(tf) => (tf.clone(), true),
+    };
+    let mut surfaces = surfaces(&view.iso, view.light, source.value_range)?;
+    if surfaces.is_empty() && !tf_given {
+        surfaces = source.default_surfaces.clone();
+    }
+    let drawing_surfaces = !surfaces.is_empty();
+    let settings = RenderSettings {
+        width: view.width,
+        height: view.height,
+        shading: match view.shading {
+            Some(shading) => shading,
+            None if drawing_surfaces => Shading::Phong,
+            None => source.shading,
+        },
+        surfaces,
+        shadows: view.iso.shadows,
+        surface_normals: if view.iso.central_normals {
+            SurfaceNormals::CentralDifferences
+        } else {
+            SurfaceNormals::Cell
+        },
+        // Isosurfaces with a transfer function: the surfaces inside the volume.
+        surfaces_in_volume: drawing_surfaces && tf_given,
+        light_direction: view.light.or(source.light),
+        background: view.background.map(|c| c as f32),
+        step_factor: view.step,
+        lod_bias: view.lod_bias,
+        colour_by_level: view.colour_by_level,
+        placement: source.placement,
+        ..RenderSettings::default()
+    };
+    check_placement(&source.name, &source.placement)?;
+    settings.validate().context("invalid flags")?;
+    let mut camera = match &view.camera.file {
+        Some(path) => read_camera_file(path)?,
+        None => source.camera,
+    };
+    let options = &view.camera;
+    if let Some(given) = options.camera {
+        camera = given;
+    }
+    if let Some(eye) = options.eye {
+        camera.eye = eye;
+    }
+    if let Some(target) = options.target {
+        camera.target = target;
+    }
+    if let Some(up) = options.up {
+        camera.up = up;
+    }
+    if let Some(fov) = options.fov {
+        camera.fov = fov;
+    }
+    camera
+        .frame(view.width, view.height)
+        .with_context(|| format!("invalid camera ({})", camera_origin(options, source)))?;
+    Ok(PreparedView { transfer_function, settings, camera, drawing_surfaces })
+}
+
+/// Where the camera came from, for its error: the options that set parts of it over a camera file or the source's
+/// default view (e.g. "--eye 1e308,0,0 over sponge's default view").
+fn camera_origin(options: &CameraOptions, source: &SourceMeta) -> String {
+    let vector = |v: [f64; 3]| v.map(shown_number).join(",");
+    let flags: Vec<String> = [
+        options.camera.map(|c| format!("camera eye {} target {}", vector(c.eye), vector(c.target))),
+        options.eye.map(|v| format!("--eye {}", vector(v))),
+        options.target.map(|v| format!("--target {}", vector(v))),
+        options.up.map(|v| format!("--up {}", vector(v))),
+        options.fov.map(|f| format!("--fov {}", shown_number(f))),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    let base = match &options.file {
+        Some(path) => format!("--camera {}", path.display()),
+        None => format!("{}'s default view", source.name),
+    };
+    if flags.is_empty() {
+        base
+    } else {
+        format!("{} over {base}", flags.join(", "))
+    }
+}
+
+/// Reads a transfer function file: voxstream's JSON, or a ParaView colour-map preset rescaled onto `value_range`.
+pub fn read_transfer_function(path: &Path, value_range: [f64; 2]) -> Result<TransferFunction> {
+    let text = read_json_file(path, "transfer function")?;
+    TransferFunction::from_json_or_paraview(&text, value_range).with_context(|| format!("in {}", path.display()))
+}

@@ -1,0 +1,28 @@
+"""Importing volumes into voxstream stores from Python."""
+
+from __future__ import annotations
+
+import os
+from typing import Any, Callable, Dict, Optional, Sequence
+
+from . import _native
+
+
+def import_volume(source, out, *, spacing: Optional[Sequence[float]] = None,
+                  origin: Optional[Sequence[float]] = None, brick_size: int = 32, overwrite: bool = False,
+                  nan_as: Optional[float] = None,
+                  progress: Optional[Callable[[int, int], Any]] = None) -> Dict[str, Any]:
+    """Writes ``source`` as a voxstream store at ``out``: a file's path (any format ``voxstream import`` reads:
+    NumPy, NIfTI, NRRD, MetaImage, TIFF stacks, …) or a 3-D numpy array indexed ``[z, y, x]`` of uint8, uint16,
+    int16 or float32. ``progress(done, total)`` is called with z slices read (tqdm-friendly:
+    ``lambda done, total: bar.update(done - bar.n)``). An existing store is replaced only with ``overwrite=True``,
+    and only once the new one is complete; Ctrl-C or an exception raised by ``progress`` stops the import and
+    removes what was written. Returns dims, dtype, levels, bricks written and empty, and the value range."""
+    if not isinstance(source, (str, os.PathLike)) and not hasattr(source, "__array_interface__"):
+        raise ValueError("source must be a file's path or a 3-D numpy array")
+    if isinstance(source, (str, os.PathLike)):
+        source = os.fspath(source)
+    return dict(_native.import_volume(
+        source, os.fspath(out), spacing=None if spacing is None else tuple(float(v) for v in spacing),
+        origin=None if origin is None else tuple(float(v) for v in origin), brick_size=int(brick_size),
+        overwrite=bool(overwrite), nan_as=nan_as, progress=progress))

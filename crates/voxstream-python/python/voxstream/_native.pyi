@@ -1,0 +1,38 @@
+"""Type stubs of the native module (Rust, PyO3); use the wrappers in ``voxstream`` instead."""
+
+from os import PathLike
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
+
+import numpy as np
+
+__version__: str
+
+_Vec3 = Tuple[float, float, float]
+_CameraTuple = Tuple[_Vec3, _Vec3, _Vec3, float]
+
+class Volume:
+    def __init__(self, source: Union[str, PathLike], *, width: int = 512, height: int = 512, budget_mb: int = 256,
+                 value_range: Optional[Tuple[float, float]] = None, in_memory: bool = False,
+                 cache_dir: Optional[str] = None, cache_mb: Optional[int] = None,
+                 request_timeout: Optional[float] = None, retries: Optional[int] = None,
+                 concurrent_requests: Optional[int] = None) -> None: ...
+    @property
+    def name(self) -> str: ...
+    @property
+    def info(self) -> Dict[str, Any]: ...
+    @property
+    def default_camera(self) -> _CameraTuple: ...
+    def render(self, *, width: int = 512, height: int = 512, budget_mb: int = 256, backend: str = "cpu",
+               mode: str = "converged", camera: Optional[_CameraTuple] = None,
+               tf_points: Optional[List[List[float]]] = None, tf_file: Optional[str] = None,
+               iso: Sequence[float] = ..., iso_colors: Sequence[_Vec3] = ..., iso_opacities: Sequence[float] = ...,
+               shadows: bool = False, light: Optional[_Vec3] = None, background: _Vec3 = ..., step: float = 0.5,
+               lod_bias: float = 0.0, shading: Optional[str] = None, blending: bool = True,
+               float32: bool = False) -> Tuple[np.ndarray, Dict[str, Any]]: ...
+
+def import_volume(source: Union[str, np.ndarray], out: str, *, spacing: Optional[_Vec3] = None,
+                  origin: Optional[_Vec3] = None, brick_size: int = 32, overwrite: bool = False,
+                  nan_as: Optional[float] = None,
+                  progress: Optional[Callable[[int, int], Any]] = None) -> Dict[str, Any]: ...
+
+def scene_names() -> List[str]: ...

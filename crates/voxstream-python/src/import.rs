@@ -1,0 +1,197 @@
+//! `voxstream._native.import_volume`: a volume file (any format `voxstream import` reads) or a 3-D numpy array into
+//! a voxstream store, with a progress callback and Ctrl-C.
+//!
+//! The import runs with the GIL released; the callback and Python's signal handlers run between slabs of z slices
+//! (the GIL taken for each). Ctrl-C (or an exception in the callback) stops the import at the next slab: the
+//! partial store is removed and an existing store at `out` is left as it was (`voxstream_store::import_volume`).
+
+use std::path::PathBuf;
+
+use numpy::PyReadonlyArray3;
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use voxstream_store::formats::{open_volume, WithGeometry};
+use voxstream_store::{DType, ImportOptions, StoreError, VolumeInfo, VolumeSource};
+
+use crate::errors::to_py_err;
+
+/// Samples of a numpy array, x fastest (the array is indexed `[z, y, x]`).
+enum Samples {
+    U8(Vec<u8>),
+    U16(Vec<u16>),
+    I16(Vec<i16>),
+    F32(Vec<f32>),
+}
+
+/// A numpy array's samples, read a few z slices at a time as the importer asks.
+struct ArraySource {
+    info: VolumeInfo,
+    samples: Samples,
+    /// The next z slice to hand out.
+    next_slice: usize,
+}
+
+impl VolumeSource for ArraySource {
+    fn info(&self) -> &VolumeInfo {
+        &self.info
+    }
+
+    fn read_slices(&mut self, count: usize, out: &mut Vec<f32>) -> Result<(), StoreError> {
+        let slice = (self.info.dims[0] * self.info.dims[1]) as usize;
+        let from = self.next_slice * slice;
+        let to = ((self.next_slice + count) * slice).min(slice * self.info.dims[2] as usize);
+        match &self.samples {
+            Samples::U8(v) => out.extend(v[from..to].iter().map(|&s| f32::from(s))),
+            Samples::U16(v) => out.extend(v[from..to].iter().map(|&s| f32::from(s))),
+            Samples::I16(v) => out.extend(v[from..to].iter().map(|&s| f32::from(s))),
+            Samples::F32(v) => out.extend_from_slice(&v[from..to]),
+        }
+        self.next_slice += count;
+        Ok(())
+    }
+}
+
+/// A source whose reads stop once Python asks to (Ctrl-C, or the progress callback raised).
+struct Interruptible<'a> {
+    inner: &'a mut dyn VolumeSource,
+    out: PathBuf,
+    callback: Option<Py<PyAny>>,
+    done_slices: u64,
+    /// What Python raised, to re-raise after the importer has cleaned up.
+    raised: Option<PyErr>,
+}
+
+impl VolumeSource for Interruptible<'_> {
+    fn info(&self) -> &VolumeInfo {
+        self.inner.info()
+    }
+
+    fn read_slices(&mut self, count: usize, out: &mut Vec<f32>) -> Result<(), StoreError> {
+        let total = self.inner.info().dims[2];
+        let done = self.done_slices;
+        let callback = self.callback.as_ref();
+        let answer = Python::attach(|py| -> PyResult<()> {
+            py.check_signals()?;
+            if let Some(callback) = callback {
+                callback.call1(py, (done, total))?;
+            }
+            Ok(())
+        });
+        if let Err(error) = answer {
+            self.raised = Some(error);
+            return Err(StoreError::Io {
+                path: self.out.clone(),
+                error: std::io::Error::new(std::io::ErrorKind::Interrupted, "interrupted from Python"),
+            });
+        }
+        self.done_slices += count as u64;
+        self.inner.read_slices(count, out)
+    }
+}
+
+/// Imports `source` (a file's path, or a 3-D numpy array indexed `[z, y, x]` of uint8, uint16, int16 or float32)
+/// into the store `out`; returns what was written.
+#[pyfunction]
+#[pyo3(signature = (source, out, *, spacing=None, origin=None, brick_size=32, overwrite=false, nan_as=None,
+    progress=None))]
+#[allow(clippy::too_many_arguments)]
+pub fn import_volume<'py>(
+    py: Python<'py>,
+    source: &Bound<'py, PyAny>,
+    out: PathBuf,
+    spacing: Option<[f64; 3]>,
+    origin: Option<[f64; 3]>,
+    brick_size: u64,
+    overwrite: bool,
+    nan_as: Option<f32>,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    if let Some(s) = spacing.filter(|s| s.iter().any(|v| !(v.is_finite() && *v > 0.0))) {
+        return Err(PyValueError::new_err(format!("spacing must be positive, got {s:?}")));
+    }
+    if let Some(v) = nan_as.filter(|v| !v.is_finite()) {
+        return Err(PyValueError::new_err(format!("nan_as must be a finite number, got {v}")));
+    }
+    let mut volume: Box<dyn VolumeSource> = match array_source(source, spacing, origin)? {
+        Some(array) => Box::new(array),
+        None => {
+            let path: PathBuf = source.extract().map_err(|_| {
+                PyValueError::new_err(
+                    "source must be a file's path or a 3-D numpy array of uint8, uint16, int16 or float32",
+                )
+            })?;
+            let opened = py.detach(|| open_volume(&path, None)).map_err(|e| to_py_err(e.into()))?;
+            Box::new(WithGeometry::new(opened, spacing, origin))
+        }
+    };
+    let info = volume.info().clone();
+    let options = ImportOptions { brick_size, overwrite, nan_as, ..ImportOptions::default() };
+    let mut interruptible =
+        Interruptible { inner: volume.as_mut(), out: out.clone(), callback: progress, done_slices: 0, raised: None };
+    let report = py.detach(|| voxstream_store::import_volume(&mut interruptible, &out, &options, &mut |_, _| {}));
+    if let Some(raised) = interruptible.raised.take() {
+        return Err(raised);
+    }
+    let report = report.map_err(|e| to_py_err(e.into()))?;
+    if let Some(callback) = &interruptible.callback {
+        callback.call1(py, (info.dims[2], info.dims[2]))?;
+    }
+    let result = PyDict::new(py);
+    result.set_item("out", &out)?;
+    result.set_item("dims", info.dims)?;
+    result.set_item("dtype", info.dtype.name())?;
+    result.set_item("levels", report.levels)?;
+    result.set_item("bricks_written", report.bricks_written.iter().sum::<u64>())?;
+    result.set_item("bricks_empty", report.bricks_empty.iter().sum::<u64>())?;
+    result.set_item("value_range", report.value_range)?;
+    Ok(result)
+}
+
+/// The array's samples as a source, if `source` is a numpy array (copied once, in x-fastest order).
+fn array_source(
+    source: &Bound<'_, PyAny>,
+    spacing: Option<[f64; 3]>,
+    origin: Option<[f64; 3]>,
+) -> PyResult<Option<ArraySource>> {
+    if !source.hasattr("__array_interface__")? {
+        return Ok(None);
+    }
+    let shape: Vec<usize> = source.getattr("shape")?.extract()?;
+    let &[z, y, x] = shape.as_slice() else {
+        return Err(PyValueError::new_err(format!(
+            "the array has shape {shape:?}: a volume is a 3-D array indexed [z, y, x]"
+        )));
+    };
+    if x == 0 || y == 0 || z == 0 {
+        return Err(PyValueError::new_err(format!("the array has shape {shape:?}: a volume needs samples")));
+    }
+    fn samples<T: numpy::Element + Copy>(source: &Bound<'_, PyAny>) -> Option<Vec<T>> {
+        let array: PyReadonlyArray3<T> = source.extract().ok()?;
+        let view = array.as_array();
+        // `iter` walks the logical order ([z, y, x], x fastest) whatever the strides.
+        Some(view.iter().copied().collect())
+    }
+    let (dtype, samples) = if let Some(v) = samples::<u8>(source) {
+        (DType::U8, Samples::U8(v))
+    } else if let Some(v) = samples::<u16>(source) {
+        (DType::U16, Samples::U16(v))
+    } else if let Some(v) = samples::<i16>(source) {
+        (DType::I16, Samples::I16(v))
+    } else if let Some(v) = samples::<f32>(source) {
+        (DType::F32, Samples::F32(v))
+    } else {
+        let dtype = source.getattr("dtype")?.str()?.to_string();
+        return Err(PyValueError::new_err(format!(
+            "arrays of {dtype} cannot be imported: convert to uint8, uint16, int16 or float32 (e.g. \
+             array.astype(numpy.float32))"
+        )));
+    };
+    let info = VolumeInfo {
+        dims: [x as u64, y as u64, z as u64],
+        dtype,
+        spacing: spacing.unwrap_or([1.0; 3]),
+        origin: origin.unwrap_or([0.0; 3]),
+    };
+    Ok(Some(ArraySource { info, samples, next_slice: 0 }))
+}

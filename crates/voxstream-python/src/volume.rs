@@ -1,0 +1,326 @@
+//! `voxstream._native.Volume`: one source, opened through the facade, rendered into numpy arrays.
+//!
+//! A render runs on a thread of its own while the calling thread waits with the GIL released, waking every 50 ms to
+//! let Python run its signal handlers: Ctrl-C raises `KeyboardInterrupt` at once and stops the frame after its
+//! current pass (the session stays usable). The pixels are moved into the array (`PyArray::from_vec`), not copied.
+
+use std::ops::ControlFlow;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{self, RecvTimeoutError};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use numpy::{PyArray1, PyArrayMethods};
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use voxstream_api::scenes::SCENE_NAMES;
+use voxstream_api::{
+    Backend, Camera, CameraOptions, IsoOptions, Mode, SessionOptions, Shading, SourceMeta, SourceOptions,
+    TransferFunction, TransferFunctionChoice, ViewOptions, Volume,
+};
+use voxstream_store::remote_access::RemoteAccess;
+
+use crate::errors::{incomplete, to_py_err};
+
+/// How often a waiting render lets Python handle signals (Ctrl-C).
+const SIGNAL_POLL: Duration = Duration::from_millis(50);
+
+/// A camera as Python passes it: eye, target, up, vertical field of view in degrees.
+type CameraTuple = ([f64; 3], [f64; 3], [f64; 3], f64);
+
+/// A source opened for rendering.
+#[pyclass(name = "Volume", module = "voxstream._native")]
+pub struct PyVolume {
+    volume: Arc<Mutex<Volume>>,
+    meta: SourceMeta,
+}
+
+/// What the render thread hands back.
+struct Rendered {
+    width: u32,
+    height: u32,
+    rgba8: Option<Vec<u8>>,
+    rgba32: Option<Vec<f32>>,
+    stats: Vec<(&'static str, f64)>,
+    converged: bool,
+    interrupted: bool,
+    failures: Vec<String>,
+}
+
+#[pymethods]
+impl PyVolume {
+    /// Opens `source`: a built-in scene, a mesh or particle file, or a store's folder or URL.
+    #[new]
+    #[pyo3(signature = (source, *, width=512, height=512, budget_mb=256, value_range=None, in_memory=false,
+        cache_dir=None, cache_mb=None, request_timeout=None, retries=None, concurrent_requests=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        py: Python<'_>,
+        source: PathBuf,
+        width: u32,
+        height: u32,
+        budget_mb: u64,
+        value_range: Option<[f64; 2]>,
+        in_memory: bool,
+        cache_dir: Option<PathBuf>,
+        cache_mb: Option<u64>,
+        request_timeout: Option<f64>,
+        retries: Option<usize>,
+        concurrent_requests: Option<usize>,
+    ) -> PyResult<Self> {
+        let name = source.to_str().ok_or_else(|| PyValueError::new_err("the source's name is not valid UTF-8"))?;
+        let mut remote = RemoteAccess { cache_dir, ..RemoteAccess::default() };
+        if let Some(mb) = cache_mb {
+            remote.cache_limit_bytes = mb.saturating_mul(1 << 20);
+        }
+        if let Some(seconds) = request_timeout {
+            if !(seconds.is_finite() && seconds > 0.0 && seconds < 1e6) {
+                return Err(PyValueError::new_err(format!(
+                    "request_timeout {seconds} is not a positive number of seconds"
+                )));
+            }
+            remote.options.request_timeout = Duration::from_secs_f64(seconds);
+        }
+        if let Some(retries) = retries {
+            remote.options.retries = retries;
+        }
+        if let Some(concurrency) = concurrent_requests {
+            if concurrency == 0 {
+                return Err(PyValueError::new_err("concurrent_requests must be at least 1"));
+            }
+            remote.options.concurrency = concurrency;
+        }
+        let options = SourceOptions { value_range, in_memory, remote, width, height, ..SourceOptions::default() };
+        let name = name.to_string();
+        let volume = py.detach(|| Volume::open(&name, &options, budget_mb)).map_err(to_py_err)?;
+        let meta = volume.meta().clone();
+        Ok(PyVolume { volume: Arc::new(Mutex::new(volume)), meta })
+    }
+
+    /// The name the source was opened by (a URL without credentials).
+    #[getter]
+    fn name(&self) -> String {
+        self.meta.name.clone()
+    }
+
+    /// What the source is: its kind, size, sample type, spacing, levels and values.
+    #[getter]
+    fn info<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let meta = &self.meta;
+        let info = PyDict::new(py);
+        info.set_item("name", &meta.name)?;
+        info.set_item("value_range", meta.value_range)?;
+        info.set_item("typical_range", meta.typical_range)?;
+        match &meta.store {
+            Some(store) => {
+                let attributes = store.attributes();
+                let volume = store.info();
+                info.set_item("kind", "store")?;
+                info.set_item("dims", volume.dims)?;
+                info.set_item("dtype", volume.dtype.name())?;
+                info.set_item("spacing", volume.spacing)?;
+                info.set_item("origin", volume.origin)?;
+                info.set_item("levels", store.layout().levels())?;
+                info.set_item("brick_size", store.layout().brick_size)?;
+                info.set_item("native", store.is_native())?;
+                info.set_item("remote", store.remote().is_some())?;
+                let percentiles: Vec<[f64; 2]> = attributes.value_percentiles.clone().unwrap_or_default();
+                info.set_item("percentiles", percentiles)?;
+            }
+            None if meta.description.is_some() => info.set_item("kind", "geometry")?,
+            None => info.set_item("kind", "scene")?,
+        }
+        if let Some(description) = &meta.description {
+            info.set_item("description", description)?;
+        }
+        Ok(info)
+    }
+
+    /// The source's default camera for the size it was opened with: (eye, target, up, fov).
+    #[getter]
+    fn default_camera(&self) -> CameraTuple {
+        let c = self.meta.camera;
+        (c.eye, c.target, c.up, c.fov)
+    }
+
+    /// Renders one frame; returns (pixels, stats). See the Python wrapper `voxstream.Volume.render`.
+    #[pyo3(signature = (*, width=512, height=512, budget_mb=256, backend="cpu", mode="converged", camera=None,
+        tf_points=None, tf_file=None, iso=Vec::new(), iso_colors=Vec::new(), iso_opacities=Vec::new(),
+        shadows=false, light=None, background=[0.0; 3], step=0.5, lod_bias=0.0, shading=None, blending=true,
+        float32=false))]
+    #[allow(clippy::too_many_arguments)]
+    fn render<'py>(
+        &self,
+        py: Python<'py>,
+        width: u32,
+        height: u32,
+        budget_mb: u64,
+        backend: &str,
+        mode: &str,
+        camera: Option<CameraTuple>,
+        tf_points: Option<Vec<[f64; 5]>>,
+        tf_file: Option<PathBuf>,
+        iso: Vec<f64>,
+        iso_colors: Vec<[f64; 3]>,
+        iso_opacities: Vec<f32>,
+        shadows: bool,
+        light: Option<[f64; 3]>,
+        background: [f64; 3],
+        step: f64,
+        lod_bias: f64,
+        shading: Option<&str>,
+        blending: bool,
+        float32: bool,
+    ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyDict>)> {
+        let mode = match mode {
+            "converged" => Mode::Converged,
+            "interactive" => Mode::Interactive,
+            other => return Err(PyValueError::new_err(format!("mode '{other}' is not one of converged, interactive"))),
+        };
+        let backend = Backend::from_name(backend).map_err(to_py_err)?;
+        let transfer_function = match (tf_points, tf_file) {
+            (Some(_), Some(_)) => {
+                return Err(PyValueError::new_err("give a transfer function's points or its file, not both"))
+            }
+            (Some(points), None) => {
+                TransferFunctionChoice::Given(TransferFunction::new(points, None).map_err(|e| to_py_err(e.into()))?)
+            }
+            (None, Some(file)) => TransferFunctionChoice::File(file),
+            (None, None) => TransferFunctionChoice::Default,
+        };
+        let shading = match shading {
+            None => None,
+            Some("none") => Some(Shading::None),
+            Some("phong") => Some(Shading::Phong),
+            Some(other) => return Err(PyValueError::new_err(format!("shading '{other}' is not one of none, phong"))),
+        };
+        let view = ViewOptions {
+            width,
+            height,
+            transfer_function,
+            iso: IsoOptions {
+                values: iso,
+                colors: iso_colors,
+                opacities: iso_opacities,
+                shadows,
+                central_normals: false,
+            },
+            shading,
+            light,
+            background,
+            step,
+            lod_bias,
+            colour_by_level: false,
+            camera: CameraOptions {
+                camera: camera.map(|(eye, target, up, fov)| Camera { eye, target, up, fov }),
+                ..CameraOptions::default()
+            },
+        };
+        let session = SessionOptions { budget_mb, backend, blending, ..SessionOptions::default() };
+        let rendered = self.render_on_thread(py, view, session, mode, float32)?;
+        if !rendered.failures.is_empty() && mode == Mode::Converged {
+            return Err(incomplete(rendered.failures.len(), &rendered.failures[0]));
+        }
+        let (h, w) = (rendered.height as usize, rendered.width as usize);
+        let pixels = match (rendered.rgba8, rendered.rgba32) {
+            (Some(bytes), _) => PyArray1::from_vec(py, bytes).reshape([h, w, 4])?.into_any(),
+            (None, Some(floats)) => PyArray1::from_vec(py, floats).reshape([h, w, 4])?.into_any(),
+            (None, None) => return Err(PyRuntimeError::new_err("the render thread returned no pixels (a bug)")),
+        };
+        let stats = PyDict::new(py);
+        for (key, value) in rendered.stats {
+            stats.set_item(key, value)?;
+        }
+        stats.set_item("converged", rendered.converged)?;
+        stats.set_item("interrupted", rendered.interrupted)?;
+        stats.set_item("failures", rendered.failures)?;
+        Ok((pixels, stats))
+    }
+}
+
+impl PyVolume {
+    /// Renders on a thread of its own; the caller waits without the GIL and answers Ctrl-C within [`SIGNAL_POLL`].
+    fn render_on_thread(
+        &self,
+        py: Python<'_>,
+        view: ViewOptions,
+        session: SessionOptions,
+        mode: Mode,
+        float32: bool,
+    ) -> PyResult<Rendered> {
+        let volume = self.volume.clone();
+        let cancel = Arc::new(AtomicBool::new(false));
+        let cancelled = cancel.clone();
+        let (sender, receiver) = mpsc::channel();
+        std::thread::Builder::new()
+            .name("voxstream-render".into())
+            .spawn(move || {
+                // A render interrupted earlier may still hold the volume until its pass ends; a poisoned lock only
+                // means such a thread panicked, and the session is rebuilt by the next render's checks.
+                let mut volume = volume.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+                let mut observe = |_: &voxstream_api::PassProgress| {
+                    if cancelled.load(Ordering::Relaxed) {
+                        ControlFlow::Break(())
+                    } else {
+                        ControlFlow::Continue(())
+                    }
+                };
+                let result = volume.render(&view, &session, mode, &mut observe).map(|(frame, _)| {
+                    let remote = volume.meta().remote.as_ref().map(|remote| remote.counts());
+                    let mut stats = vec![
+                        ("passes", f64::from(frame.passes)),
+                        ("elapsed_ms", frame.elapsed_ms),
+                        ("render_ms", frame.render_ms),
+                        ("rays", frame.rays as f64),
+                        ("samples", frame.samples as f64),
+                        ("requests", frame.requests as f64),
+                        ("bricks_produced", frame.bricks_produced as f64),
+                        ("pending", frame.pending as f64),
+                    ];
+                    if let Some(counts) = remote {
+                        stats.push(("remote_requests", counts.requests as f64));
+                        stats.push(("remote_bytes", counts.bytes as f64));
+                    }
+                    let image = frame.image;
+                    Rendered {
+                        width: image.width,
+                        height: image.height,
+                        rgba8: (!float32).then(|| image.to_rgba8()),
+                        rgba32: float32.then(|| image.pixels.into_flattened()),
+                        stats,
+                        converged: frame.pending == 0 && !frame.interrupted,
+                        interrupted: frame.interrupted,
+                        failures: frame.failures.iter().map(ToString::to_string).collect(),
+                    }
+                });
+                let _ = sender.send(result);
+            })
+            .map_err(|e| PyRuntimeError::new_err(format!("cannot start a render thread: {e}")))?;
+        let mut receiver = receiver;
+        loop {
+            // (The receiver travels into the GIL-free closure and back: it is `Send`, not `Sync`.)
+            let (answer, back) = py.detach(move || (receiver.recv_timeout(SIGNAL_POLL), receiver));
+            receiver = back;
+            match answer {
+                Ok(result) => return result.map_err(to_py_err),
+                Err(RecvTimeoutError::Timeout) => {
+                    if let Err(error) = py.check_signals() {
+                        cancel.store(true, Ordering::Relaxed);
+                        return Err(error);
+                    }
+                }
+                Err(RecvTimeoutError::Disconnected) => {
+                    return Err(PyRuntimeError::new_err("the render thread stopped without an answer (a bug)"))
+                }
+            }
+        }
+    }
+}
+
+/// The names of the built-in scenes.
+#[pyfunction]
+pub fn scene_names() -> Vec<&'static str> {
+    SCENE_NAMES.to_vec()
+}

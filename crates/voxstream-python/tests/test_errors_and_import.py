@@ -1,0 +1,96 @@
+"""Bad arguments raise Python's exceptions with the CLI's one-line messages; imports from numpy and files."""
+
+import numpy as np
+import pytest
+
+import voxstream as vs
+from conftest import ball, run_cli
+
+
+def cli_error(cli, *args):
+    result = run_cli(cli, *args)
+    assert result.returncode != 0
+    line = result.stderr.strip().splitlines()[-1]
+    assert line.startswith("error: "), result.stderr
+    return line[len("error: "):]
+
+
+def test_a_missing_store_is_file_not_found_with_the_clis_message(cli, tmp_path):
+    missing = str(tmp_path / "nothing.zarr")
+    message = cli_error(cli, "render", missing, "--quiet", "--out", str(tmp_path / "x.png"))
+    with pytest.raises(OSError) as raised:
+        vs.open(missing)
+    assert str(raised.value) == message
+
+
+def test_an_isovalue_outside_the_data_is_a_value_error_with_the_clis_message(cli, tmp_path, ball_store):
+    message = cli_error(cli, "render", str(ball_store), "--iso", "300", "--quiet", "--out", str(tmp_path / "x.png"))
+    with pytest.raises(ValueError) as raised:
+        vs.open(ball_store).render(iso=[300])
+    assert str(raised.value) == message
+
+
+def test_bad_sizes_budgets_modes_and_backends_are_value_errors(ball_store):
+    volume = vs.open(ball_store)
+    with pytest.raises(ValueError, match="image size must be positive"):
+        volume.render(size=(0, 10))
+    with pytest.raises(ValueError, match="budget"):
+        volume.render(budget_mb=0)
+    with pytest.raises(ValueError, match="mode 'fast'"):
+        volume.render(mode="fast")
+    with pytest.raises(ValueError, match="backend 'tpu'"):
+        volume.render(backend="tpu")
+    with pytest.raises(ValueError, match="lies outside the data's values"):
+        vs.open("sponge").render(iso=[2.0])
+    with pytest.raises(ValueError, match="value-range applies to stores"):
+        vs.open("sponge", value_range=(0, 1))
+
+
+def test_info_describes_an_imported_array(ball_store):
+    info = vs.open(ball_store).info
+    assert info["kind"] == "store" and info["native"] and not info["remote"]
+    assert tuple(info["dims"]) == (56, 48, 40)
+    assert info["dtype"] == "u8"
+    assert tuple(info["spacing"]) == (1.0, 1.0, 1.5)
+    data = ball()
+    assert tuple(info["value_range"]) == (float(data.min()), float(data.max()))
+    assert info["levels"] >= 2
+    assert vs.open("sponge").info["kind"] == "scene"
+    assert "sponge" in vs.scenes()
+
+
+def test_import_reports_progress_and_an_exception_in_it_removes_the_partial_store(tmp_path):
+    calls = []
+    out = tmp_path / "a.zarr"
+    report = vs.import_volume(ball(32), out, progress=lambda done, total: calls.append((done, total)))
+    assert tuple(report["dims"]) == (40, 32, 24)
+    assert calls[-1] == (24, 24) and all(a[0] <= b[0] for a, b in zip(calls, calls[1:]))
+    # A second import over it is refused without overwrite, and allowed with it.
+    with pytest.raises(Exception, match="overwrite"):
+        vs.import_volume(ball(32), out)
+
+    def stop(done, total):
+        if done > 0:
+            raise RuntimeError("stop here")
+
+    with pytest.raises(RuntimeError, match="stop here"):
+        vs.import_volume(ball(32), tmp_path / "b.zarr", progress=stop)
+    assert not (tmp_path / "b.zarr").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.zarr"]
+
+
+def test_arrays_of_other_types_and_shapes_are_refused_with_the_fix(tmp_path):
+    with pytest.raises(ValueError, match="astype"):
+        vs.import_volume(np.zeros((4, 4, 4), dtype=np.float64), tmp_path / "x.zarr")
+    with pytest.raises(ValueError, match="3-D array"):
+        vs.import_volume(np.zeros((4, 4), dtype=np.uint8), tmp_path / "x.zarr")
+
+
+def test_a_strided_array_imports_in_its_logical_order(tmp_path):
+    volume = ball(32)
+    flipped = volume[:, :, ::-1]
+    vs.import_volume(np.ascontiguousarray(flipped), tmp_path / "c.zarr")
+    vs.import_volume(flipped, tmp_path / "s.zarr")
+    a = vs.open(tmp_path / "c.zarr", size=(64, 64)).render()
+    b = vs.open(tmp_path / "s.zarr", size=(64, 64)).render()
+    assert np.array_equal(a, b)

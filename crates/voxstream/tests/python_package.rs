@@ -1,0 +1,34 @@
+//! The Python package (`crates/voxstream-python`) builds as a wheel, installs into the project's virtual environment
+//! and passes its pytest suite: `scripts/python-tests.sh`, run here so that the README's test command covers
+//! Python too. The suite compares Python's images with this build's `voxstream` binary byte for byte, checks that
+//! the arrays own Rust's buffers, that the GIL is released while rendering and that Ctrl-C stops a render within
+//! half a second.
+//!
+//! The wheel builds into this build's `target/` (maturin runs cargo in the same workspace and environment), so only
+//! the module itself and the few crates whose features differ for it are compiled again.
+
+use std::path::Path;
+use std::process::Command;
+
+#[test]
+fn the_python_package_builds_installs_and_passes_pytest() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    // This test binary is target/<profile>/deps/python_package-…: its build's target folder is three levels up.
+    let exe = std::env::current_exe().expect("test binary path");
+    let target = exe.ancestors().nth(3).expect("target folder").to_path_buf();
+    let output = Command::new("bash")
+        .arg("scripts/python-tests.sh")
+        .current_dir(&root)
+        .env("CARGO_TARGET_DIR", &target)
+        .env("VOXSTREAM_BIN", env!("CARGO_BIN_EXE_voxstream"))
+        .output()
+        .expect("bash runs");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    println!("{stdout}");
+    assert!(output.status.success(), "scripts/python-tests.sh failed:\n{stdout}\n{stderr}");
+    let summary = stdout.lines().rev().find(|l| l.contains(" passed")).unwrap_or_default();
+    assert!(!summary.contains("failed") && !summary.contains("error"), "pytest: {summary}");
+    let passed: u32 = summary.trim_start_matches('=').trim().split(' ').next().unwrap_or("0").parse().unwrap_or(0);
+    assert!(passed >= 15, "pytest ran only {passed} tests: {summary}");
+}
