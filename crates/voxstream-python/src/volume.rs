@@ -145,6 +145,43 @@ impl PyVolume {
         (c.eye, c.target, c.up, c.fov)
     }
 
+    /// A store's levels' sizes, finest first, each (x, y, z); empty for scenes and geometry.
+    #[getter]
+    fn level_dims(&self) -> Vec<[u64; 3]> {
+        self.meta.store.as_ref().map(|store| store.layout().level_dims.clone()).unwrap_or_default()
+    }
+
+    /// Samples `[lower, lower + size)` (x, y, z) of a store's `level` in data values, as a float32 array indexed
+    /// [z, y, x] (what napari's multiscale layers read). At most 2^28 samples at once.
+    fn read_region<'py>(
+        &self,
+        py: Python<'py>,
+        level: usize,
+        lower: [u64; 3],
+        size: [u64; 3],
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let Some(store) = self.meta.store.clone() else {
+            return Err(PyValueError::new_err(format!("{} is not a store: it has no samples to read", self.meta.name)));
+        };
+        let levels = &store.layout().level_dims;
+        let Some(dims) = levels.get(level) else {
+            return Err(PyValueError::new_err(format!("level {level} does not exist: the store has {}", levels.len())));
+        };
+        let inside = (0..3).all(|a| size[a] > 0 && lower[a].checked_add(size[a]).is_some_and(|u| u <= dims[a]));
+        if !inside {
+            return Err(PyValueError::new_err(format!(
+                "region {lower:?} + {size:?} is not inside level {level} ({dims:?}, x, y, z)"
+            )));
+        }
+        let samples = size.iter().try_fold(1u64, |n, s| n.checked_mul(*s)).filter(|n| *n <= 1 << 28);
+        if samples.is_none() {
+            return Err(PyValueError::new_err(format!("region {size:?} is too large to read at once (2^28 samples)")));
+        }
+        let values = py.detach(|| store.read_region(level, lower, size)).map_err(|e| to_py_err(e.into()))?;
+        let shape = [size[2] as usize, size[1] as usize, size[0] as usize];
+        Ok(PyArray1::from_vec(py, values).reshape(shape)?.into_any())
+    }
+
     /// Renders one frame; returns (pixels, stats). See the Python wrapper `voxstream.Volume.render`.
     #[pyo3(signature = (*, width=512, height=512, budget_mb=256, backend="cpu", mode="converged", camera=None,
         tf_points=None, tf_file=None, iso=Vec::new(), iso_colors=Vec::new(), iso_opacities=Vec::new(),
