@@ -47,6 +47,8 @@ struct Rendered {
     converged: bool,
     interrupted: bool,
     failures: Vec<String>,
+    /// The renderer that drew it (`cpu…`, `gpu: adapter, filtering`).
+    renderer: String,
 }
 
 #[pymethods]
@@ -273,6 +275,7 @@ impl PyVolume {
         stats.set_item("converged", rendered.converged)?;
         stats.set_item("interrupted", rendered.interrupted)?;
         stats.set_item("failures", rendered.failures)?;
+        stats.set_item("renderer", rendered.renderer)?;
         Ok((pixels, stats))
     }
 }
@@ -320,6 +323,7 @@ impl PyVolume {
                         stats.push(("remote_requests", counts.requests as f64));
                         stats.push(("remote_bytes", counts.bytes as f64));
                     }
+                    let renderer = volume.session().map(|s| s.renderer().describe()).unwrap_or_default();
                     let image = frame.image;
                     Rendered {
                         width: image.width,
@@ -330,6 +334,7 @@ impl PyVolume {
                         converged: frame.pending == 0 && !frame.interrupted,
                         interrupted: frame.interrupted,
                         failures: frame.failures.iter().map(ToString::to_string).collect(),
+                        renderer,
                     }
                 });
                 let _ = sender.send(result);

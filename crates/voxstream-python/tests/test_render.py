@@ -160,3 +160,14 @@ def test_jupyter_shows_the_default_view_as_png(ball_store):
 
     shown = Image.open(io.BytesIO(data))
     assert shown.size == (256, 128)
+
+
+def test_the_gpu_backend_renders_as_the_clis_gpu_backend(cli, tmp_path, ball_store):
+    """`backend="gpu"` (wgpu; Mesa's lavapipe where there is no GPU) gives the CLI's `--backend gpu` image."""
+    expected = cli_png(cli, tmp_path, str(ball_store), "--width", "96", "--height", "72", "--backend", "gpu",
+                       "--iso", "100")
+    volume = vs.open(ball_store)
+    image = volume.render(size=(96, 72), backend="gpu", iso=[100])
+    assert np.array_equal(image[..., :3], expected)
+    assert volume.last_stats["renderer"].startswith("gpu")
+    assert (image[..., :3].reshape(-1, 3) != 0).any(axis=1).mean() > 0.03
