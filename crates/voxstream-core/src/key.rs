@@ -121,6 +121,15 @@ impl NodeKey {
         let size = 1.0 / shape.nodes_per_axis(self.level) as f64;
         ([self.ijk[0] as f64 * size, self.ijk[1] as f64 * size, self.ijk[2] as f64 * size], size)
     }
+
+    /// Centre of stored voxel `(i, j, k)` of this node's brick (border included: index 0 is the border voxel below
+    /// the node), in volume units: what every producer samples its field at.
+    #[inline]
+    pub fn voxel_centre(&self, shape: &TreeShape, i: u32, j: u32, k: u32) -> [f64; 3] {
+        let (lower, size) = self.bounds(shape);
+        let voxel = size / shape.brick_size as f64;
+        [lower[0] + (i as f64 - 0.5) * voxel, lower[1] + (j as f64 - 0.5) * voxel, lower[2] + (k as f64 - 0.5) * voxel]
+    }
 }
 
 #[cfg(test)]

@@ -53,6 +53,7 @@ pub mod level_blending;
 pub mod lru;
 pub mod node;
 pub mod node_pool;
+pub mod noise;
 pub mod producer;
 pub mod request_queue;
 pub mod restriction;

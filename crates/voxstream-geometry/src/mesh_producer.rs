@@ -22,9 +22,8 @@
 use std::sync::Arc;
 
 use glam::DVec3;
+use voxstream_core::noise::{fbm, fbm_bound};
 use voxstream_core::{quantize, NodeContent, NodeKey, ProduceError, Produced, Producer, TreeShape};
-use voxstream_procedural::brick_fill::voxel_centre;
-use voxstream_procedural::noise::{fbm, fbm_bound};
 
 use crate::error::GeometryError;
 use crate::mesh_distance::{MeshDistance, UnitCubeFit};
@@ -200,7 +199,7 @@ impl Producer for MeshProducer {
         for k in 0..b {
             for j in 0..b {
                 for i in 0..b {
-                    let p = voxel_centre(&self.shape, &key, i as u32, j as u32, k as u32);
+                    let p = DVec3::from(key.voxel_centre(&self.shape, i as u32, j as u32, k as u32));
                     match self.field.signed_distance_within(p, slack) {
                         Some(distance) => {
                             let value = (0.5 - self.displaced(p, distance, key.level) / band).clamp(0.0, 1.0);
@@ -218,7 +217,7 @@ impl Producer for MeshProducer {
                 continue;
             }
             let (i, j, k) = (seed % b, seed / b % b, seed / (b * b));
-            let p = voxel_centre(&self.shape, &key, i as u32, j as u32, k as u32);
+            let p = DVec3::from(key.voxel_centre(&self.shape, i as u32, j as u32, k as u32));
             let value = quantize(if self.field.is_inside(p) { 1.0 } else { 0.0 });
             // Flood the seed's group: each far voxel is written once and leaves the group.
             far[seed] = false;
@@ -343,7 +342,7 @@ mod tests {
                 let b = shape.stored_brick_size();
                 for (n, &v) in voxels.iter().enumerate() {
                     let (i, j, k) = (n as u32 % b, n as u32 / b % b, n as u32 / b / b);
-                    let p = voxel_centre(&shape, &key, i, j, k);
+                    let p = DVec3::from(key.voxel_centre(&shape, i, j, k));
                     let exact = (p - centre).length() - radius;
                     let value = f64::from(v) / 65535.0;
                     if let Some(constant) = oracle {

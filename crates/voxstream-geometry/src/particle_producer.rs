@@ -38,7 +38,6 @@ use std::num::NonZero;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 use voxstream_core::{quantize, NodeContent, NodeKey, ProduceError, Produced, Producer, TreeShape};
-use voxstream_procedural::brick_fill::voxel_centre;
 
 use crate::error::GeometryError;
 use crate::mesh_distance::UnitCubeFit;
@@ -438,7 +437,7 @@ impl Producer for ParticleProducer {
         let voxel = size / f64::from(self.shape.brick_size);
         let min_support = MIN_SUPPORT_VOXELS * voxel;
         // Stored voxel (i, j, k) is centred at first + (i, j, k)·voxel.
-        let first = voxel_centre(&self.shape, &key, 0, 0, 0);
+        let first = DVec3::from(key.voxel_centre(&self.shape, 0, 0, 0));
         let mut density = vec![0.0f64; b * b * b];
         let reached = self.index.splat(|i| self.weight(i), first, voxel, b, min_support, &mut density);
         Ok(self.scale.brick(reached, &density, voxels, key.level >= self.shape.max_level))
@@ -597,7 +596,7 @@ mod tests {
         producer.produce(key, &mut voxels).unwrap();
         let b = shape.stored_brick_size();
         for (n, &v) in voxels.iter().enumerate() {
-            let p = voxel_centre(&shape, &key, n as u32 % b, n as u32 / b % b, n as u32 / b / b);
+            let p = DVec3::from(key.voxel_centre(&shape, n as u32 % b, n as u32 / b % b, n as u32 / b / b));
             let expected = 2.0 * cubic_spline((p - centre).length(), h) / producer.density_scale();
             assert!((f64::from(v) / 65535.0 - expected.min(1.0)).abs() < 2.0 / 65535.0, "{p}");
         }

@@ -51,7 +51,6 @@ use glam::DVec3;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 use voxstream_core::{NodeKey, ProduceError, Produced, Producer, TreeShape};
-use voxstream_procedural::brick_fill::voxel_centre;
 
 use crate::error::GeometryError;
 use crate::formats::ply::PlyPointStream;
@@ -942,7 +941,7 @@ impl Producer for SuperbrickParticleProducer {
         let (_, size) = key.bounds(&self.shape);
         let voxel = size / f64::from(self.shape.brick_size);
         let min_support = MIN_SUPPORT_VOXELS * voxel;
-        let first = voxel_centre(&self.shape, &key, 0, 0, 0);
+        let first = DVec3::from(key.voxel_centre(&self.shape, 0, 0, 0));
         let last = first + DVec3::splat((b - 1) as f64 * voxel);
         let mut density = vec![0.0f64; b * b * b];
         let mut reached = false;

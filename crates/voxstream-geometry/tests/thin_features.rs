@@ -11,7 +11,6 @@ use glam::DVec3;
 use voxstream_core::{NodeKey, Producer};
 use voxstream_geometry::triangle_bvh::closest_on_triangle;
 use voxstream_geometry::{MeshProducer, MeshTreeSettings, RawMesh, TriangleMesh};
-use voxstream_procedural::brick_fill::voxel_centre;
 
 /// The winding number of the triangles around `p` (1 inside a closed outward-facing mesh, 0 outside).
 fn winding_number(positions: &[DVec3], triangles: &[[u32; 3]], p: DVec3) -> f64 {
@@ -102,7 +101,7 @@ fn disagreements(mesh: &TriangleMesh, resolution: u64) -> (usize, Vec<String>) {
         producer.produce(key, &mut voxels).unwrap();
         for (n, &v) in voxels.iter().enumerate() {
             let (i, j, k) = (n as u32 % b, n as u32 / b % b, n as u32 / b / b);
-            let p = voxel_centre(&shape, &key, i, j, k);
+            let p = DVec3::from(key.voxel_centre(&shape, i, j, k));
             check(p, v > u16::MAX / 2, key.level, &format!("brick {key:?}"));
         }
         if key.level < shape.max_level {

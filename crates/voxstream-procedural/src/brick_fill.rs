@@ -6,16 +6,10 @@
 use glam::DVec3;
 use voxstream_core::{quantize, NodeKey, TreeShape};
 
-/// Centre of stored voxel `(i, j, k)` of node `key`, volume units.
+/// Centre of stored voxel `(i, j, k)` of node `key`, volume units ([`NodeKey::voxel_centre`] as a vector).
 #[inline]
 pub fn voxel_centre(shape: &TreeShape, key: &NodeKey, i: u32, j: u32, k: u32) -> DVec3 {
-    let (lower, size) = key.bounds(shape);
-    let voxel = size / shape.brick_size as f64;
-    DVec3::new(
-        lower[0] + (i as f64 - 0.5) * voxel,
-        lower[1] + (j as f64 - 0.5) * voxel,
-        lower[2] + (k as f64 - 0.5) * voxel,
-    )
+    DVec3::from(key.voxel_centre(shape, i, j, k))
 }
 
 /// Writes `density(position)` (clamped to `[0, 1]`) at every stored voxel of `key`.

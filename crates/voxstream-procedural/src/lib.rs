@@ -18,7 +18,8 @@
 
 pub mod brick_fill;
 pub mod hypertexture;
-pub mod noise;
+/// The noise moved to `voxstream-core` (the meshes use it too); re-exported where it was.
+pub use voxstream_core::noise;
 pub mod shell;
 pub mod sponge;
 

@@ -1,4 +1,5 @@
-//! Aperiodic value noise and band-limited fBm, in `f64`, for hypertextures.
+//! Aperiodic value noise and band-limited fBm, in `f64`, for hypertextures: the procedural scenes' and the amplified
+//! meshes' (`voxstream-procedural`, `voxstream-geometry`), so it lives below both, beside the `Producer` trait.
 //!
 //! Lattice values come from a 64-bit integer hash, so the noise never repeats however deep the zoom (a 256-entry
 //! permutation table, as in classic Perlin noise, would tile at the finest octaves of a 2¹⁷³ volume). Value noise with
