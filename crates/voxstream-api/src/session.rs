@@ -93,6 +93,9 @@ pub struct Volume {
     opened_for: (u64, u32, u32),
     /// The session, and the budget, image size and options it was made for.
     session: Option<(SessionKey, FrameSession)>,
+    /// The settings and transfer function the session holds (changing them restarts the sparse gathering of a
+    /// converged frame, so they are only set when they change).
+    applied: Option<(voxstream_render::RenderSettings, voxstream_render::TransferFunction)>,
 }
 
 /// What a session cannot change once made: the budget (split at open between the store's cache and the pools), the
@@ -117,6 +120,7 @@ impl Volume {
             producer: Some(producer),
             opened_for: (budget_mb, options.width, options.height),
             session: None,
+            applied: None,
         })
     }
 
@@ -156,11 +160,21 @@ impl Volume {
             let prepared = prepare_view(view, &self.meta)?;
             let (session, _plan) = start_session(producer, &self.meta, &prepared, options, &budget)?;
             self.session = Some((key, session));
+            self.applied = Some((prepared.settings.clone(), prepared.transfer_function.clone()));
         }
         let prepared = prepare_view(view, &self.meta)?;
         let (_, session) = self.session.as_mut().expect("a session was just made or kept");
-        session.set_settings(prepared.settings.clone())?;
-        session.set_transfer_function(&prepared.transfer_function);
+        let (settings, transfer_function) = self.applied.get_or_insert_with(|| {
+            (prepared.settings.clone(), prepared.transfer_function.clone())
+        });
+        if *settings != prepared.settings {
+            session.set_settings(prepared.settings.clone())?;
+            *settings = prepared.settings.clone();
+        }
+        if *transfer_function != prepared.transfer_function {
+            session.set_transfer_function(&prepared.transfer_function);
+            *transfer_function = prepared.transfer_function.clone();
+        }
         let result = session.render_interruptible(&prepared.camera, mode, observe)?;
         Ok((result, prepared))
     }

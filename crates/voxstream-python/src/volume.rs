@@ -307,7 +307,9 @@ impl PyVolume {
                         ControlFlow::Continue(())
                     }
                 };
+                let started = std::time::Instant::now();
                 let result = volume.render(&view, &session, mode, &mut observe).map(|(frame, _)| {
+                    let rendered_at = std::time::Instant::now();
                     let remote = volume.meta().remote.as_ref().map(|remote| remote.counts());
                     let mut stats = vec![
                         ("passes", f64::from(frame.passes)),
@@ -325,11 +327,18 @@ impl PyVolume {
                     }
                     let renderer = volume.session().map(|s| s.renderer().describe()).unwrap_or_default();
                     let image = frame.image;
+                    let (width, height) = (image.width, image.height);
+                    let rgba8 = (!float32).then(|| image.to_rgba8());
+                    let rgba32 = float32.then(|| image.pixels.into_flattened());
+                    // Where the time outside the engine's frame went: preparing the view and session, converting.
+                    let total_ms = started.elapsed().as_secs_f64() * 1000.0;
+                    stats.push(("convert_ms", rendered_at.elapsed().as_secs_f64() * 1000.0));
+                    stats.push(("call_ms", total_ms));
                     Rendered {
-                        width: image.width,
-                        height: image.height,
-                        rgba8: (!float32).then(|| image.to_rgba8()),
-                        rgba32: float32.then(|| image.pixels.into_flattened()),
+                        width,
+                        height,
+                        rgba8,
+                        rgba32,
                         stats,
                         converged: frame.pending == 0 && !frame.interrupted,
                         interrupted: frame.interrupted,
