@@ -21,8 +21,12 @@ use voxstream_api::{
     TransferFunction, TransferFunctionChoice, ViewOptions, Volume,
 };
 use voxstream_store::remote_access::RemoteAccess;
+use voxstream_store::DType;
 
 use crate::errors::{incomplete, to_py_err};
+
+/// The most bytes `read_region` hands over at once.
+const MAX_REGION_BYTES: u64 = 4 << 30;
 
 /// How often a waiting render lets Python handle signals (Ctrl-C).
 const SIGNAL_POLL: Duration = Duration::from_millis(50);
@@ -153,8 +157,9 @@ impl PyVolume {
         self.meta.store.as_ref().map(|store| store.layout().level_dims.clone()).unwrap_or_default()
     }
 
-    /// Samples `[lower, lower + size)` (x, y, z) of a store's `level` in data values, as a float32 array indexed
-    /// [z, y, x] (what napari's multiscale layers read). At most 2^28 samples at once.
+    /// Samples `[lower, lower + size)` (x, y, z) of a store's `level` in data values, as an array of the store's
+    /// sample type (uint8, uint16, int16 or float32) indexed [z, y, x] (what napari's multiscale layers read). At
+    /// most 4 GiB at once.
     fn read_region<'py>(
         &self,
         py: Python<'py>,
@@ -175,13 +180,30 @@ impl PyVolume {
                 "region {lower:?} + {size:?} is not inside level {level} ({dims:?}, x, y, z)"
             )));
         }
-        let samples = size.iter().try_fold(1u64, |n, s| n.checked_mul(*s)).filter(|n| *n <= 1 << 28);
-        if samples.is_none() {
-            return Err(PyValueError::new_err(format!("region {size:?} is too large to read at once (2^28 samples)")));
+        let dtype = store.info().dtype;
+        let bytes = size.iter().try_fold(dtype.size() as u64, |n, s| n.checked_mul(*s));
+        if bytes.is_none_or(|b| b > MAX_REGION_BYTES) {
+            return Err(PyValueError::new_err(format!(
+                "region {size:?} of level {level} is too large to read at once (at most {} GiB): read a coarser \
+                 level or a smaller region",
+                MAX_REGION_BYTES >> 30
+            )));
         }
         let values = py.detach(|| store.read_region(level, lower, size)).map_err(|e| to_py_err(e.into()))?;
         let shape = [size[2] as usize, size[1] as usize, size[0] as usize];
-        Ok(PyArray1::from_vec(py, values).reshape(shape)?.into_any())
+        // The store's values are exact in f32 for every sample type: converted back without loss.
+        Ok(match dtype {
+            DType::U8 => PyArray1::from_vec(py, values.iter().map(|&v| v as u8).collect()).reshape(shape)?.into_any(),
+            DType::U16 => PyArray1::from_vec(py, values.iter().map(|&v| v as u16).collect()).reshape(shape)?.into_any(),
+            DType::I16 => PyArray1::from_vec(py, values.iter().map(|&v| v as i16).collect()).reshape(shape)?.into_any(),
+            DType::F32 => PyArray1::from_vec(py, values).reshape(shape)?.into_any(),
+        })
+    }
+
+    /// The samples' type of a store (`u8`, `u16`, `i16`, `f32`), or None.
+    #[getter]
+    fn dtype(&self) -> Option<&'static str> {
+        self.meta.store.as_ref().map(|store| store.info().dtype.name())
     }
 
     /// Renders one frame; returns (pixels, stats). See the Python wrapper `voxstream.Volume.render`.

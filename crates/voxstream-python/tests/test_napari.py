@@ -32,7 +32,19 @@ def test_levels_index_like_numpy_arrays():
             (slice(5, 0, -2),), (slice(None, None, -3), slice(2, 3), slice(8, 2, -1)), (slice(4, 4),),
             (Ellipsis,)]
     for key in keys:
-        assert np.array_equal(level[key], array[key]), key
+        assert np.array_equal(np.asarray(level[key]), array[key]), key
+        assert level[key].shape == array[key].shape, key
+    # Views of views, and nothing read until asked.
+    reads = []
+    fake = _Fake(array)
+    fake_read = fake.read_region
+    fake.read_region = lambda *args: reads.append(args) or fake_read(*args)
+    lazy = LevelArray(fake, 0, (11, 9, 7))
+    view = lazy[:, 2:8][::2, :, 3]
+    assert not reads and view.shape == array[:, 2:8][::2, :, 3].shape
+    assert np.array_equal(np.asarray(view), array[:, 2:8][::2, :, 3])
+    # One read, of the view's bounding box only: z 0..6, y 2..7, x 3.
+    assert reads == [(0, (3, 2, 0), (1, 6, 7))]
     assert np.array_equal(np.asarray(level), array)
     with pytest.raises(IndexError):
         level[7]
@@ -53,7 +65,8 @@ def test_the_reader_opens_a_store_as_a_multiscale_layer(ball_store):
         # Level 0's samples are the imported array's.
         from conftest import ball
 
-        assert np.array_equal(np.asarray(layer.data[0][20]), ball()[20].astype(np.float32))
+        assert layer.data[0].dtype == np.uint8
+        assert np.array_equal(np.asarray(layer.data[0][20]), ball()[20])
     finally:
         viewer.close()
 

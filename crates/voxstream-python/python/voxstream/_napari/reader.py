@@ -38,7 +38,8 @@ def read_store(path):
     path = os.fspath(path)
     native = _native.Volume(path)
     info = native.info
-    levels = [LevelArray(native, level, dims) for level, dims in enumerate(native.level_dims)]
+    dtype = {"u8": "uint8", "u16": "uint16", "i16": "int16", "f32": "float32"}[native.dtype]
+    levels = [LevelArray(native, level, dims, dtype) for level, dims in enumerate(native.level_dims)]
     lo, hi = info["typical_range"]
     if not hi > lo:
         lo, hi = info["value_range"]
