@@ -164,9 +164,8 @@ impl Volume {
         }
         let prepared = prepare_view(view, &self.meta)?;
         let (_, session) = self.session.as_mut().expect("a session was just made or kept");
-        let (settings, transfer_function) = self.applied.get_or_insert_with(|| {
-            (prepared.settings.clone(), prepared.transfer_function.clone())
-        });
+        let (settings, transfer_function) =
+            self.applied.get_or_insert_with(|| (prepared.settings.clone(), prepared.transfer_function.clone()));
         if *settings != prepared.settings {
             session.set_settings(prepared.settings.clone())?;
             *settings = prepared.settings.clone();

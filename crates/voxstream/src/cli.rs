@@ -39,23 +39,17 @@ pub enum Command {
 /// `voxstream view`.
 #[derive(Args, Debug, Clone)]
 pub struct ViewArgs {
-    /// What to show: as `voxstream render`'s SOURCE.
-    #[arg(default_value = crate::scenes::DEFAULT_SCENE)]
-    pub source: String,
+    /// SOURCE and how it is opened (as `render`'s).
+    #[command(flatten)]
+    pub input: SourceFlags,
     /// A scripted session: one camera move or action per line (see the README's "Viewer" section), e.g. for
     /// demonstrations and end-to-end tests.
     #[arg(long, value_name = "FILE")]
     pub script: Option<PathBuf>,
-    /// Starting camera JSON (as saved by the viewer or read by `render --camera`).
-    #[arg(long, value_name = "FILE")]
-    pub camera: Option<PathBuf>,
     /// When the window closes, write a frame log here (JSON: every frame's time, size and state; the first image,
     /// the first final image, the median moving frame, and input-to-final times).
     #[arg(long, value_name = "FILE")]
     pub stats: Option<PathBuf>,
-    /// Starting transfer function (as `render --tf`).
-    #[arg(long)]
-    pub tf: Option<PathBuf>,
     /// Render size in pixels (the image is scaled to the window; moving frames are smaller).
     #[arg(long, default_value_t = 640)]
     pub width: u32,
@@ -68,62 +62,14 @@ pub struct ViewArgs {
     /// Requests served per frame (more: detail arrives in fewer frames, each frame takes longer).
     #[arg(long, default_value_t = 256)]
     pub requests_per_frame: usize,
-    /// Level blending (Thiele et al.): arriving bricks fade in instead of popping.
-    #[arg(long, value_enum, default_value_t = Switch::On)]
-    pub blending: Switch,
     /// How a view at rest reaches its final image: converged (passes that trace again only what still misses data,
     /// interrupted by any input; the final image appears at once, as fast as `render`) or blended (interactive
     /// frames until final: detail fades in, several times slower).
     #[arg(long, value_enum, default_value_t = RefineArg::Converged)]
     pub refine: RefineArg,
-    /// Lighting (default: the scene's).
-    #[arg(long, value_enum)]
-    pub shading: Option<ShadingArg>,
-    /// Direction towards the light x,y,z (default: a headlight).
-    #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
-    pub light: Option<[f64; 3]>,
-    /// Draw isosurfaces of these data values (as `render --iso`).
-    #[arg(long, value_delimiter = ',', allow_negative_numbers = true, value_name = "V1,V2,...")]
-    pub iso: Vec<f64>,
-    /// Ray-march step as a fraction of the sampled voxel.
-    #[arg(long, default_value_t = 0.5)]
-    pub step: f64,
-    /// Level-of-detail bias (positive = finer than one voxel per pixel).
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
-    pub lod_bias: f64,
-    /// Mesh files: noise amplitude (as `render --amplify`).
-    #[arg(long, value_name = "AMPLITUDE")]
-    pub amplify: Option<f64>,
-    /// Mesh and particle files: voxels per axis of the finest level (as `render --resolution`).
-    #[arg(long, value_name = "VOXELS")]
-    pub resolution: Option<u64>,
-    /// Particle files: show the scalar attribute (as `render --attribute`).
-    #[arg(long)]
-    pub attribute: bool,
-    /// Particle files: the kernel's reach in smoothing lengths (as `render --smoothing-scale`).
-    #[arg(long, value_name = "FACTOR")]
-    pub smoothing_scale: Option<f64>,
-    /// Binary PLY point files and columns of text: read them out of core, holding about MIB of particles in memory (as `render
-    /// --particle-memory`).
-    #[arg(long, value_name = "MIB")]
-    pub particle_memory: Option<u64>,
-    /// Stores only: decode every level into RAM first (as `render --in-memory`).
-    #[arg(long)]
-    pub in_memory: bool,
-    /// Other tools' OME-Zarr images: normalise by this value range (as `render --value-range`).
-    #[arg(long, value_name = "LO,HI", value_parser = crate::store_open::parse_value_range, allow_hyphen_values = true)]
-    pub value_range: Option<[f64; 2]>,
-    /// Remote stores: the on-disk cache and the client's patience.
+    /// How it is drawn (as `render`'s).
     #[command(flatten)]
-    pub remote: RemoteArgs,
-    /// cpu: the CPU ray caster draws the frames; gpu: the GPU ray caster (wgpu on Vulkan, headless: the window
-    /// only shows its image). The same flag and errors as `render --backend`.
-    #[arg(long, value_enum, default_value_t = Backend::Cpu)]
-    pub backend: Backend,
-    /// With --backend gpu: how bricks are filtered: auto (the texture units where the adapter can), hardware, or
-    /// exact (in the shader, as the CPU).
-    #[arg(long, value_enum, default_value_t = GpuFilter::Auto)]
-    pub gpu_filter: GpuFilter,
+    pub look: LookFlags,
 }
 
 /// Shading choice on the command line.
@@ -144,9 +90,10 @@ pub enum NormalsArg {
     Central,
 }
 
-/// `voxstream render`.
+/// What `render` and `view` draw and how it is opened: SOURCE and the flags that shape it (one set, flattened into
+/// both commands, turned into the facade's `SourceOptions` by [`crate::view_flags::source_options`]).
 #[derive(Args, Debug, Clone)]
-pub struct RenderArgs {
+pub struct SourceFlags {
     /// A built-in scene (sponge, hypertexture, shell), a store (a folder made by `voxstream import` or another
     /// tool's OME-Zarr image, or its URL: https://…, s3://BUCKET/PREFIX, gs://…, az://…), or a mesh (.ply,
     /// .obj, .off, .stl) or particle file (.ply points, .xyz/.csv, .gro, .pdb, .vtk, .vtp, .vtu; any of them .gz).
@@ -174,15 +121,27 @@ pub struct RenderArgs {
     /// machine's memory, for a PLY point file that would take more than half of it.
     #[arg(long, value_name = "MIB")]
     pub particle_memory: Option<u64>,
-    /// Output PNG (with --path, frames are numbered: frame_0000.png, …).
-    #[arg(long, default_value = "frame.png")]
-    pub out: PathBuf,
-    /// Image width in pixels.
-    #[arg(long, default_value_t = 512)]
-    pub width: u32,
-    /// Image height in pixels.
-    #[arg(long, default_value_t = 512)]
-    pub height: u32,
+    /// Stores only: decode every level into RAM first and render from there (a baseline for benchmarks; ignores
+    /// --budget-mb for the volume itself).
+    #[arg(long)]
+    pub in_memory: bool,
+    /// Stores only: how the brick pool keeps voxels: auto (8 bits for 8-bit volumes, half the memory; 16 bits
+    /// otherwise, and with --backend gpu, whose atlas is 16-bit) or 16 (always 16 bits, as before 8-bit bricks).
+    #[arg(long, value_enum, default_value_t = BrickBits::Auto)]
+    pub brick_bits: BrickBits,
+    /// Other tools' OME-Zarr images: normalise by this value range instead of level 0's (which is then not read
+    /// at open); samples beyond it are clipped, with a warning.
+    #[arg(long, value_name = "LO,HI", value_parser = crate::store_open::parse_value_range, allow_hyphen_values = true)]
+    pub value_range: Option<[f64; 2]>,
+    /// Remote stores: the on-disk cache and the client's patience.
+    #[command(flatten)]
+    pub remote: RemoteArgs,
+}
+
+/// How `render` and `view` draw it: camera, transfer function, isosurfaces, shading, sampling, backend and level
+/// blending (one set, flattened into both commands; [`crate::view_flags::view_options`]).
+#[derive(Args, Debug, Clone)]
+pub struct LookFlags {
     /// Camera JSON {"eye": [x,y,z], "target": [x,y,z], "up": [x,y,z], "fov": 30}, as `voxstream view` saves it;
     /// --eye, --target, --up and --fov override its fields.
     #[arg(long, value_name = "FILE")]
@@ -232,9 +191,16 @@ pub struct RenderArgs {
     /// Background colour r,g,b in [0,1] (linear).
     #[arg(long, value_parser = parse_vec3, default_value = "0,0,0", allow_hyphen_values = true)]
     pub background: [f64; 3],
-    /// Memory budget of the node and brick pools, MiB (on the GPU too: the pools are uploaded at this size).
-    #[arg(long, default_value_t = 256)]
-    pub budget_mb: u64,
+    /// Ray-march step as a fraction of the sampled voxel.
+    #[arg(long, default_value_t = 0.5)]
+    pub step: f64,
+    /// Level-of-detail bias (positive = finer than one voxel per pixel).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub lod_bias: f64,
+    /// A diagnostic: colour the volume by the tree level each sample's data came from (eight hues, repeating),
+    /// keeping the transfer function's opacity.
+    #[arg(long)]
+    pub colour_by_level: bool,
     /// cpu: the cone-tracing ray caster on every core; gpu: the same traversal in a compute shader (wgpu on
     /// Vulkan): volumes, isosurfaces, shadows and level blending, with the CPU's image as its reference.
     #[arg(long, value_enum, default_value_t = Backend::Cpu)]
@@ -243,6 +209,34 @@ pub struct RenderArgs {
     /// exact (in the shader, as the CPU).
     #[arg(long, value_enum, default_value_t = GpuFilter::Auto)]
     pub gpu_filter: GpuFilter,
+    /// Interactive mode: level blending (Thiele et al.): bricks fade in from their parents over --fade-frames frames
+    /// and blend towards coarser neighbours still loading (unless the camera approaches faster than the fades), so
+    /// nothing pops. Converged frames are the same either way.
+    #[arg(long, value_enum, default_value_t = Switch::On)]
+    pub blending: Switch,
+    /// Interactive mode with --blending on: frames over which an arriving brick fades in.
+    #[arg(long, default_value_t = voxstream_core::DEFAULT_FADE_FRAMES)]
+    pub fade_frames: u32,
+}
+
+/// `voxstream render`.
+#[derive(Args, Debug, Clone)]
+pub struct RenderArgs {
+    /// SOURCE and how it is opened.
+    #[command(flatten)]
+    pub input: SourceFlags,
+    /// Output PNG (with --path, frames are numbered: frame_0000.png, …).
+    #[arg(long, default_value = "frame.png")]
+    pub out: PathBuf,
+    /// Image width in pixels.
+    #[arg(long, default_value_t = 512)]
+    pub width: u32,
+    /// Image height in pixels.
+    #[arg(long, default_value_t = 512)]
+    pub height: u32,
+    /// Memory budget of the node and brick pools, MiB (on the GPU too: the pools are uploaded at this size).
+    #[arg(long, default_value_t = 256)]
+    pub budget_mb: u64,
     /// converged: iterate until exact; interactive: bounded production per frame.
     #[arg(long, value_enum, default_value_t = Mode::Converged)]
     pub mode: Mode,
@@ -258,14 +252,6 @@ pub struct RenderArgs {
     /// fly:N (through the volume).
     #[arg(long)]
     pub path: Option<PathBuf>,
-    /// Interactive mode: level blending (Thiele et al.): bricks fade in from their parents over --fade-frames frames
-    /// and blend towards coarser neighbours still loading (unless the camera approaches faster than the fades), so
-    /// nothing pops. Converged frames are the same either way.
-    #[arg(long, value_enum, default_value_t = Switch::On)]
-    pub blending: Switch,
-    /// Interactive mode with --blending on: frames over which an arriving brick fades in.
-    #[arg(long, default_value_t = voxstream_core::DEFAULT_FADE_FRAMES)]
-    pub fade_frames: u32,
     /// Interactive mode: measure popping and seams against the converged images at the same cameras (rendered after
     /// the run), into the --stats file. Keeps every frame as 8-bit RGB until then, outside --budget-mb.
     #[arg(long)]
@@ -273,34 +259,12 @@ pub struct RenderArgs {
     /// Write statistics JSON here.
     #[arg(long)]
     pub stats: Option<PathBuf>,
-    /// Ray-march step as a fraction of the sampled voxel.
-    #[arg(long, default_value_t = 0.5)]
-    pub step: f64,
-    /// Stores only: decode every level into RAM first and render from there (a baseline for benchmarks; ignores
-    /// --budget-mb for the volume itself).
-    #[arg(long)]
-    pub in_memory: bool,
-    /// Stores only: how the brick pool keeps voxels: auto (8 bits for 8-bit volumes, half the memory; 16 bits
-    /// otherwise, and with --backend gpu, whose atlas is 16-bit) or 16 (always 16 bits, as before 8-bit bricks).
-    #[arg(long, value_enum, default_value_t = BrickBits::Auto)]
-    pub brick_bits: BrickBits,
-    /// Other tools' OME-Zarr images: normalise by this value range instead of level 0's (which is then not read
-    /// at open); samples beyond it are clipped, with a warning.
-    #[arg(long, value_name = "LO,HI", value_parser = crate::store_open::parse_value_range, allow_hyphen_values = true)]
-    pub value_range: Option<[f64; 2]>,
-    /// Remote stores: the on-disk cache and the client's patience.
-    #[command(flatten)]
-    pub remote: RemoteArgs,
-    /// Level-of-detail bias (positive = finer than one voxel per pixel).
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
-    pub lod_bias: f64,
-    /// A diagnostic: colour the volume by the tree level each sample's data came from (eight hues, repeating),
-    /// keeping the transfer function's opacity.
-    #[arg(long)]
-    pub colour_by_level: bool,
     /// No progress bar, no list of files written and no summary line (warnings and errors are still printed).
     #[arg(long)]
     pub quiet: bool,
+    /// How it is drawn.
+    #[command(flatten)]
+    pub look: LookFlags,
 }
 
 /// `view --refine`.

@@ -10,7 +10,7 @@ pub use voxstream_api::view::{check_isovalue, PALETTE};
 
 /// The surfaces the flags ask for (empty: volume rendering), checked against the data's `value_range`.
 pub fn surfaces(args: &RenderArgs, value_range: [f64; 2]) -> Result<Vec<IsoSurface>> {
-    voxstream_api::view::surfaces(&crate::render_command::view_options(args).iso, args.light, value_range)
+    voxstream_api::view::surfaces(&crate::render_command::view_options(args).iso, args.look.light, value_range)
 }
 
 #[cfg(test)]

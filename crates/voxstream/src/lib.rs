@@ -31,3 +31,4 @@ pub mod stats;
 pub mod trilinear_bound;
 #[cfg(feature = "viewer")]
 pub mod view_command;
+pub mod view_flags;

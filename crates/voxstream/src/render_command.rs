@@ -3,19 +3,15 @@
 use std::io::Write;
 
 use anyhow::{bail, Context, Result};
-use voxstream_api::{
-    CameraOptions, IsoOptions, PreparedView, SessionOptions, Source, SourceMeta, SourceOptions, TransferFunctionChoice,
-    ViewOptions,
-};
+use voxstream_api::{PreparedView, SessionOptions, Source, SourceMeta, SourceOptions, ViewOptions};
 use voxstream_engine::{MemoryBudget, Mode, MAX_BUDGET_MB};
-use voxstream_render::Shading;
 
 pub use voxstream_api::defaults::{
     default_store_transfer_function, frame_box, shown_number, store_camera, store_placement, STORE_VIEW_DIRECTION,
 };
 
 use crate::camera_path::{generated_path, parse_generated_path, read_camera_path};
-use crate::cli::{NormalsArg, RenderArgs, ShadingArg, Switch};
+use crate::cli::{RenderArgs, Switch};
 use crate::exit_status::IncompleteImage;
 use crate::memory::{bytes_read, peak_rss_bytes};
 use crate::output_file::{check_output, write_output};
@@ -26,6 +22,7 @@ use crate::render_progress::RenderProgress;
 use crate::render_warnings::{empty_image, transfer_function_mismatch};
 use crate::stats::RemoteStats;
 use crate::stats::RunStats;
+use crate::view_flags;
 
 /// Runs `voxstream render`.
 pub fn run(args: &RenderArgs) -> Result<()> {
@@ -43,7 +40,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
 /// Opens `args.source` (a built-in scene, a mesh or particle file, or a store) with its defaults, through the
 /// facade ([`voxstream_api::open`]); a mesh's or particles' description is shown unless `--quiet`.
 pub fn open_source(args: &RenderArgs, budget: &MemoryBudget) -> Result<Source> {
-    let source = voxstream_api::open(&args.source, &source_options(args), budget)?;
+    let source = voxstream_api::open(&args.input.source, &source_options(args), budget)?;
     if let Some(description) = source.meta.description.as_ref().filter(|_| !args.quiet) {
         eprintln!("{description}");
     }
@@ -52,68 +49,17 @@ pub fn open_source(args: &RenderArgs, budget: &MemoryBudget) -> Result<Source> {
 
 /// The source options the flags give.
 pub fn source_options(args: &RenderArgs) -> SourceOptions {
-    SourceOptions {
-        value_range: args.value_range,
-        in_memory: args.in_memory,
-        brick_bits: args.brick_bits,
-        amplify: args.amplify,
-        resolution: args.resolution,
-        attribute: args.attribute,
-        smoothing_scale: args.smoothing_scale,
-        particle_memory: args.particle_memory,
-        remote: args.remote.access(),
-        width: args.width,
-        height: args.height,
-        quiet: args.quiet,
-    }
+    view_flags::source_options(&args.input, args.width, args.height, args.quiet)
 }
 
 /// The view options the flags give.
 pub fn view_options(args: &RenderArgs) -> ViewOptions {
-    ViewOptions {
-        width: args.width,
-        height: args.height,
-        transfer_function: match &args.tf {
-            Some(path) => TransferFunctionChoice::File(path.clone()),
-            None => TransferFunctionChoice::Default,
-        },
-        iso: IsoOptions {
-            values: args.iso.clone(),
-            colors: args.iso_color.clone(),
-            opacities: args.iso_opacity.clone(),
-            shadows: args.shadows,
-            central_normals: args.normals == NormalsArg::Central,
-        },
-        shading: args.shading.map(|shading| match shading {
-            ShadingArg::None => Shading::None,
-            ShadingArg::Phong => Shading::Phong,
-        }),
-        light: args.light,
-        background: args.background,
-        step: args.step,
-        lod_bias: args.lod_bias,
-        colour_by_level: args.colour_by_level,
-        camera: CameraOptions {
-            file: args.camera.clone(),
-            camera: None,
-            eye: args.eye,
-            target: args.target,
-            up: args.up,
-            fov: args.fov,
-        },
-    }
+    view_flags::view_options(&args.look, args.width, args.height)
 }
 
 /// The session options the flags give.
 pub fn session_options(args: &RenderArgs) -> SessionOptions {
-    SessionOptions {
-        budget_mb: args.budget_mb,
-        backend: args.backend,
-        gpu_filter: args.gpu_filter,
-        requests_per_frame: args.requests_per_frame,
-        blending: args.blending == Switch::On,
-        fade_frames: args.fade_frames,
-    }
+    view_flags::session_options(&args.look, args.budget_mb, args.requests_per_frame)
 }
 
 /// Applies the flags to a source's defaults.
@@ -123,7 +69,7 @@ pub fn prepare_view(args: &RenderArgs, source: &SourceMeta) -> Result<PreparedVi
 
 /// `render`'s checks of the flags (also `view`'s, on the arguments it builds).
 pub fn check_flags(args: &RenderArgs) -> Result<()> {
-    crate::backend::check_backend_flags(args.backend, args.gpu_filter)?;
+    crate::backend::check_backend_flags(args.look.backend, args.look.gpu_filter)?;
     if args.width == 0 || args.height == 0 {
         bail!("image size must be positive, got {}x{}", args.width, args.height);
     }
@@ -142,7 +88,7 @@ pub fn check_flags(args: &RenderArgs) -> Result<()> {
     if args.popping && (args.mode != Mode::Interactive || args.stats.is_none()) {
         bail!("--popping measures interactive frames into the stats file: add --mode interactive and --stats FILE");
     }
-    check_fade_frames(args.fade_frames)
+    check_fade_frames(args.look.fade_frames)
 }
 
 /// `--fade-frames` (render and bench): at least 1.
@@ -203,7 +149,7 @@ fn render_source(args: &RenderArgs, source: Source, budget: &MemoryBudget) -> Re
             Err(warning) => progress.warn(&warning),
         }
     }
-    stats.blending = args.mode == Mode::Interactive && args.blending == Switch::On;
+    stats.blending = args.mode == Mode::Interactive && args.look.blending == Switch::On;
     let mut empty_images = 0usize;
     let mut reported_failures = 0usize;
     let mut written = Vec::new();

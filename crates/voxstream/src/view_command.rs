@@ -2,23 +2,23 @@
 //! to the viewer's window ([`voxstream_viewer::run_viewer`]).
 
 use anyhow::{bail, Context, Result};
-use voxstream_api::{
-    CameraOptions, IsoOptions, SessionOptions, Source, SourceOptions, TransferFunctionChoice, ViewOptions,
-};
-use voxstream_render::{Shading, TransferFunction};
+use voxstream_api::Source;
+use voxstream_render::TransferFunction;
 use voxstream_viewer::script::{Script, ScriptCommand};
 use voxstream_viewer::{run_viewer, Refinement, ViewerConfig};
 
-use crate::cli::{RefineArg, ShadingArg, Switch, ViewArgs};
+use crate::cli::{RefineArg, ViewArgs};
 use crate::exit_status::IncompleteImage;
 use crate::iso_flags::check_isovalue;
 use crate::output_file::check_output;
 use crate::render_budget::check_budget;
+use crate::view_flags;
 
 /// Runs `voxstream view`.
 pub fn run(args: &ViewArgs) -> Result<()> {
     // `render`'s checks and messages (size, budget, requests per frame, backend flags).
-    crate::backend::check_backend_flags(args.backend, args.gpu_filter)?;
+    crate::backend::check_backend_flags(args.look.backend, args.look.gpu_filter)?;
+    crate::render_command::check_fade_frames(args.look.fade_frames)?;
     if args.width == 0 || args.height == 0 {
         bail!("image size must be positive, got {}x{}", args.width, args.height);
     }
@@ -38,8 +38,9 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         RefineArg::Converged => Refinement::Converged,
         RefineArg::Blended => Refinement::Blended,
     };
-    let Source { producer, meta } = voxstream_api::open(&args.source, &source_options(args), &budget)?;
-    let prepared = voxstream_api::prepare_view(&view_options(args), &meta)?;
+    let source_options = view_flags::source_options(&args.input, args.width, args.height, true);
+    let Source { producer, meta } = voxstream_api::open(&args.input.source, &source_options, &budget)?;
+    let prepared = voxstream_api::prepare_view(&view_flags::view_options(&args.look, args.width, args.height), &meta)?;
     // The script's isovalues meet render's --iso checks, now that the data's range is known.
     if let Some(script) = &script {
         check_script_isovalues(script, meta.value_range)?;
@@ -49,7 +50,8 @@ pub fn run(args: &ViewArgs) -> Result<()> {
     if !voxstream_viewer::has_display() {
         bail!(voxstream_viewer::ViewerError::NoDisplay);
     }
-    let (session, plan) = voxstream_api::start_session(producer, &meta, &prepared, &session_options(args), &budget)?;
+    let session_options = view_flags::session_options(&args.look, args.budget_mb, args.requests_per_frame);
+    let (session, plan) = voxstream_api::start_session(producer, &meta, &prepared, &session_options, &budget)?;
     let config = ViewerConfig {
         title: format!("voxstream view {}", meta.name),
         camera: prepared.camera,
@@ -73,58 +75,6 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         return Err(IncompleteImage { failed_bricks }.into());
     }
     Ok(())
-}
-
-/// The source options `view`'s flags give (as `render`'s).
-fn source_options(args: &ViewArgs) -> SourceOptions {
-    SourceOptions {
-        value_range: args.value_range,
-        in_memory: args.in_memory,
-        amplify: args.amplify,
-        resolution: args.resolution,
-        attribute: args.attribute,
-        smoothing_scale: args.smoothing_scale,
-        particle_memory: args.particle_memory,
-        remote: args.remote.access(),
-        width: args.width,
-        height: args.height,
-        quiet: true,
-        ..SourceOptions::default()
-    }
-}
-
-/// The view options `view`'s flags give (as `render`'s).
-fn view_options(args: &ViewArgs) -> ViewOptions {
-    ViewOptions {
-        width: args.width,
-        height: args.height,
-        transfer_function: match &args.tf {
-            Some(path) => TransferFunctionChoice::File(path.clone()),
-            None => TransferFunctionChoice::Default,
-        },
-        iso: IsoOptions { values: args.iso.clone(), ..IsoOptions::default() },
-        shading: args.shading.map(|shading| match shading {
-            ShadingArg::None => Shading::None,
-            ShadingArg::Phong => Shading::Phong,
-        }),
-        light: args.light,
-        step: args.step,
-        lod_bias: args.lod_bias,
-        camera: CameraOptions { file: args.camera.clone(), ..CameraOptions::default() },
-        ..ViewOptions::default()
-    }
-}
-
-/// The session options `view`'s flags give.
-fn session_options(args: &ViewArgs) -> SessionOptions {
-    SessionOptions {
-        budget_mb: args.budget_mb,
-        backend: args.backend,
-        gpu_filter: args.gpu_filter,
-        requests_per_frame: args.requests_per_frame,
-        blending: args.blending == Switch::On,
-        ..SessionOptions::default()
-    }
 }
 
 /// Refuses a script's `iso VALUE` that `render --iso VALUE` would refuse on the same data.
