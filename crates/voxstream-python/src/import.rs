@@ -1,18 +1,20 @@
 //! `voxstream._native.import_volume`: a volume file (any format `voxstream import` reads) or a 3-D numpy array into
 //! a voxstream store, with a progress callback and Ctrl-C.
 //!
-//! The import runs with the GIL released; the callback and Python's signal handlers run between slabs of z slices
-//! (the GIL taken for each). Ctrl-C (or an exception in the callback) stops the import at the next slab: the
-//! partial store is removed and an existing store at `out` is left as it was (`voxstream_store::import_volume`).
+//! Through the facade ([`voxstream_api::import_input`]), as `voxstream import`. The import runs with the GIL released;
+//! the callback (input bytes read, of the total) and Python's signal handlers run between slabs of z slices (the GIL
+//! taken for each). Ctrl-C (or an exception in the callback) stops the import at the next slab: the partial store is
+//! removed and an existing store at `out` is left as it was.
 
-use std::path::PathBuf;
+use std::ops::ControlFlow;
+use std::path::{Path, PathBuf};
 
 use numpy::PyReadonlyArray3;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use voxstream_store::formats::{open_volume, WithGeometry};
-use voxstream_store::{DType, ImportOptions, StoreError, VolumeInfo, VolumeSource};
+use voxstream_api::import_input::{open_input, ImportInput, ImportSettings};
+use voxstream_store::{DType, StoreError, VolumeInfo, VolumeSource};
 
 use crate::errors::to_py_err;
 
@@ -52,49 +54,11 @@ impl VolumeSource for ArraySource {
     }
 }
 
-/// A source whose reads stop once Python asks to (Ctrl-C, or the progress callback raised).
-struct Interruptible<'a> {
-    inner: &'a mut dyn VolumeSource,
-    out: PathBuf,
-    callback: Option<Py<PyAny>>,
-    done_slices: u64,
-    /// What Python raised, to re-raise after the importer has cleaned up.
-    raised: Option<PyErr>,
-}
-
-impl VolumeSource for Interruptible<'_> {
-    fn info(&self) -> &VolumeInfo {
-        self.inner.info()
-    }
-
-    fn read_slices(&mut self, count: usize, out: &mut Vec<f32>) -> Result<(), StoreError> {
-        let total = self.inner.info().dims[2];
-        let done = self.done_slices;
-        let callback = self.callback.as_ref();
-        let answer = Python::attach(|py| -> PyResult<()> {
-            py.check_signals()?;
-            if let Some(callback) = callback {
-                callback.call1(py, (done, total))?;
-            }
-            Ok(())
-        });
-        if let Err(error) = answer {
-            self.raised = Some(error);
-            return Err(StoreError::Io {
-                path: self.out.clone(),
-                error: std::io::Error::new(std::io::ErrorKind::Interrupted, "interrupted from Python"),
-            });
-        }
-        self.done_slices += count as u64;
-        self.inner.read_slices(count, out)
-    }
-}
-
-/// Imports `source` (a file's path, or a 3-D numpy array indexed `[z, y, x]` of uint8, uint16, int16 or float32)
-/// into the store `out`; returns what was written.
+/// Imports `source` (a file's path: any format `voxstream import` reads, meshes and particles included; or a 3-D
+/// numpy array indexed `[z, y, x]` of uint8, uint16, int16 or float32) into the store `out`; returns what was written.
 #[pyfunction]
 #[pyo3(signature = (source, out, *, spacing=None, origin=None, brick_size=32, overwrite=false, nan_as=None,
-    progress=None))]
+    resolution=None, amplify=None, progress=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn import_volume<'py>(
     py: Python<'py>,
@@ -105,37 +69,65 @@ pub fn import_volume<'py>(
     brick_size: u64,
     overwrite: bool,
     nan_as: Option<f32>,
+    resolution: Option<u64>,
+    amplify: Option<f64>,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     if let Some(s) = spacing.filter(|s| s.iter().any(|v| !(v.is_finite() && *v > 0.0))) {
         return Err(PyValueError::new_err(format!("spacing must be positive, got {s:?}")));
     }
-    if let Some(v) = nan_as.filter(|v| !v.is_finite()) {
-        return Err(PyValueError::new_err(format!("nan_as must be a finite number, got {v}")));
-    }
-    let mut volume: Box<dyn VolumeSource> = match array_source(source, spacing, origin)? {
-        Some(array) => Box::new(array),
+    let settings = ImportSettings {
+        spacing,
+        origin,
+        nan_as,
+        brick_size,
+        overwrite,
+        resolution,
+        amplify,
+        ..ImportSettings::default()
+    };
+    let input = match array_source(source, spacing, origin)? {
+        Some(array) => ImportInput::from_source(Box::new(array), Path::new("the array")),
         None => {
             let path: PathBuf = source.extract().map_err(|_| {
                 PyValueError::new_err(
                     "source must be a file's path or a 3-D numpy array of uint8, uint16, int16 or float32",
                 )
             })?;
-            let opened = py.detach(|| open_volume(&path, None)).map_err(|e| to_py_err(e.into()))?;
-            Box::new(WithGeometry::new(opened, spacing, origin))
+            py.detach(|| open_input(&path, &settings)).map_err(to_py_err)?
         }
     };
-    let info = volume.info().clone();
-    let options = ImportOptions { brick_size, overwrite, nan_as, ..ImportOptions::default() };
-    let mut interruptible =
-        Interruptible { inner: volume.as_mut(), out: out.clone(), callback: progress, done_slices: 0, raised: None };
-    let report = py.detach(|| voxstream_store::import_volume(&mut interruptible, &out, &options, &mut |_, _| {}));
-    if let Some(raised) = interruptible.raised.take() {
-        return Err(raised);
+    let info = input.info.clone();
+    let description = input.description.clone();
+    let mut raised: Option<PyErr> = None;
+    let mut last = 0;
+    let report = py.detach(|| {
+        input.import(&out, &settings, &mut |done, total| {
+            last = done;
+            // Between slabs: Python's signal handlers (Ctrl-C) and the callback, with the GIL taken for them.
+            let answer = Python::attach(|py| -> PyResult<()> {
+                py.check_signals()?;
+                if let Some(callback) = &progress {
+                    callback.call1(py, (done, total))?;
+                }
+                Ok(())
+            });
+            match answer {
+                Ok(()) => ControlFlow::Continue(()),
+                Err(error) => {
+                    raised = Some(error);
+                    ControlFlow::Break(())
+                }
+            }
+        })
+    });
+    if let Some(error) = raised {
+        return Err(error);
     }
-    let report = report.map_err(|e| to_py_err(e.into()))?;
-    if let Some(callback) = &interruptible.callback {
-        callback.call1(py, (info.dims[2], info.dims[2]))?;
+    let report = report.map_err(to_py_err)?;
+    let total = info.byte_len();
+    if let (Some(callback), true) = (&progress, last < total) {
+        callback.call1(py, (total, total))?;
     }
     let result = PyDict::new(py);
     result.set_item("out", &out)?;
@@ -145,6 +137,9 @@ pub fn import_volume<'py>(
     result.set_item("bricks_written", report.bricks_written.iter().sum::<u64>())?;
     result.set_item("bricks_empty", report.bricks_empty.iter().sum::<u64>())?;
     result.set_item("value_range", report.value_range)?;
+    if let Some(description) = description {
+        result.set_item("description", description)?;
+    }
     Ok(result)
 }
 

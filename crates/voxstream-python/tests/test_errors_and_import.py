@@ -64,7 +64,8 @@ def test_import_reports_progress_and_an_exception_in_it_removes_the_partial_stor
     out = tmp_path / "a.zarr"
     report = vs.import_volume(ball(32), out, progress=lambda done, total: calls.append((done, total)))
     assert tuple(report["dims"]) == (40, 32, 24)
-    assert calls[-1] == (24, 24) and all(a[0] <= b[0] for a, b in zip(calls, calls[1:]))
+    # Input bytes: 40 x 32 x 24 samples of one byte.
+    assert calls[-1] == (30720, 30720) and all(a[0] <= b[0] for a, b in zip(calls, calls[1:]))
     # A second import over it is refused without overwrite, and allowed with it.
     with pytest.raises(Exception, match="overwrite"):
         vs.import_volume(ball(32), out)
@@ -77,6 +78,21 @@ def test_import_reports_progress_and_an_exception_in_it_removes_the_partial_stor
         vs.import_volume(ball(32), tmp_path / "b.zarr", progress=stop)
     assert not (tmp_path / "b.zarr").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.zarr"]
+
+
+def test_a_mesh_file_is_baked_into_a_store_as_the_cli_does(cli, tmp_path):
+    mesh = tmp_path / "tetra.obj"
+    mesh.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n")
+    report = vs.import_volume(mesh, tmp_path / "py.zarr", resolution=32)
+    result = run_cli(cli, "import", str(mesh), "--resolution", "32", "--out", str(tmp_path / "cli.zarr"), "--quiet")
+    assert result.returncode == 0, result.stderr
+    assert tuple(report["dims"]) == tuple(vs.open(tmp_path / "cli.zarr").info["dims"])
+    assert max(report["dims"]) <= 32 and "description" in report
+    ours = vs.open(tmp_path / "py.zarr", size=(64, 64)).render()
+    theirs = vs.open(tmp_path / "cli.zarr", size=(64, 64)).render()
+    assert np.array_equal(ours, theirs) and ours[..., :3].any()
+    with pytest.raises(ValueError, match="--resolution and --amplify apply to mesh and particle files"):
+        vs.import_volume(tmp_path / "x.npy", tmp_path / "q.zarr", resolution=32)
 
 
 def test_arrays_of_other_types_and_shapes_are_refused_with_the_fix(tmp_path):

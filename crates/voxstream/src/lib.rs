@@ -15,7 +15,6 @@ pub use voxstream_api::{
 pub mod bench;
 pub mod cli;
 pub mod exit_status;
-pub mod geometry_import;
 pub mod import_command;
 pub mod info_command;
 pub mod iso_flags;

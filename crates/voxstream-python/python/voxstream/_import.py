@@ -10,11 +10,13 @@ from . import _native
 
 def import_volume(source, out, *, spacing: Optional[Sequence[float]] = None,
                   origin: Optional[Sequence[float]] = None, brick_size: int = 32, overwrite: bool = False,
-                  nan_as: Optional[float] = None,
+                  nan_as: Optional[float] = None, resolution: Optional[int] = None,
+                  amplify: Optional[float] = None,
                   progress: Optional[Callable[[int, int], Any]] = None) -> Dict[str, Any]:
     """Writes ``source`` as a voxstream store at ``out``: a file's path (any format ``voxstream import`` reads:
-    NumPy, NIfTI, NRRD, MetaImage, TIFF stacks, …) or a 3-D numpy array indexed ``[z, y, x]`` of uint8, uint16,
-    int16 or float32. ``progress(done, total)`` is called with z slices read (tqdm-friendly:
+    NumPy, NIfTI, NRRD, MetaImage, VTK, TIFF stacks, …; meshes and particle files are baked into a grid of
+    ``resolution`` voxels per axis, meshes with noise of ``amplify``) or a 3-D numpy array indexed ``[z, y, x]`` of
+    uint8, uint16, int16 or float32. ``progress(done, total)`` is called with input bytes read (tqdm-friendly:
     ``lambda done, total: bar.update(done - bar.n)``). An existing store is replaced only with ``overwrite=True``,
     and only once the new one is complete; Ctrl-C or an exception raised by ``progress`` stops the import and
     removes what was written. Returns dims, dtype, levels, bricks written and empty, and the value range."""
@@ -25,4 +27,4 @@ def import_volume(source, out, *, spacing: Optional[Sequence[float]] = None,
     return dict(_native.import_volume(
         source, os.fspath(out), spacing=None if spacing is None else tuple(float(v) for v in spacing),
         origin=None if origin is None else tuple(float(v) for v in origin), brick_size=int(brick_size),
-        overwrite=bool(overwrite), nan_as=nan_as, progress=progress))
+        overwrite=bool(overwrite), nan_as=nan_as, resolution=resolution, amplify=amplify, progress=progress))

@@ -37,7 +37,8 @@ class Volume:
 
 def import_volume(source: Union[str, np.ndarray], out: str, *, spacing: Optional[_Vec3] = None,
                   origin: Optional[_Vec3] = None, brick_size: int = 32, overwrite: bool = False,
-                  nan_as: Optional[float] = None,
+                  nan_as: Optional[float] = None, resolution: Optional[int] = None,
+                  amplify: Optional[float] = None,
                   progress: Optional[Callable[[int, int], Any]] = None) -> Dict[str, Any]: ...
 
 def scene_names() -> List[str]: ...
