@@ -72,17 +72,12 @@ def test_the_reader_opens_a_store_as_a_multiscale_layer(ball_store):
 
 
 def test_the_widget_renders_napari_s_3d_view_as_voxstream_does(ball_store, qapp_events):
-    from voxstream._napari.widget import VoxstreamWidget
-
     viewer = napari.Viewer(show=True)
     try:
         viewer.open(str(ball_store), plugin="voxstream")
         viewer.dims.ndisplay = 3
         scene_camera(viewer).angles = (10.0, -30.0, 60.0)
-        viewer.window._qt_window.resize(1400, 900)
-        qapp_events(lambda: False, timeout=0.3)
-        widget = VoxstreamWidget(viewer, budget_mb=128)
-        viewer.window.add_dock_widget(widget)
+        widget = docked_widget(viewer, qapp_events)
         qapp_events(lambda: widget.converged, timeout=60)
         assert widget.converged, f"the widget did not converge: {widget.status.text()}"
         width, height = widget.size
@@ -109,8 +104,6 @@ def test_the_widget_renders_napari_s_3d_view_as_voxstream_does(ball_store, qapp_
 def test_the_widget_shows_what_napari_itself_draws(tmp_path, qapp_events):
     """An asymmetric volume (blobs along +x, +y, +z, bright to dim): each blob sits where napari's own 3D rendering
     (maximum intensity, its coarser level) draws it, so the view is neither mirrored nor shifted nor scaled."""
-    from voxstream._napari.widget import VoxstreamWidget
-
     n = 64
     array = np.zeros((n, n, n), np.uint8)
     array[28:36, 28:36, 50:60] = 250
@@ -124,10 +117,7 @@ def test_the_widget_shows_what_napari_itself_draws(tmp_path, qapp_events):
         layer.contrast_limits = (0, 255)
         viewer.dims.ndisplay = 3
         scene_camera(viewer).angles = (20.0, -40.0, 70.0)
-        viewer.window._qt_window.resize(1400, 900)
-        qapp_events(lambda: False, timeout=0.3)
-        widget = VoxstreamWidget(viewer, budget_mb=128)
-        viewer.window.add_dock_widget(widget)
+        widget = docked_widget(viewer, qapp_events)
         qapp_events(lambda: widget.converged, timeout=60)
         assert widget.converged, widget.status.text()
         layer.rendering = "mip"
@@ -156,6 +146,17 @@ def test_camera_conversion_keeps_napari_s_scale_at_the_centre():
     assert np.isclose(camera.distance, 100 / np.tan(np.radians(15)))
     assert np.allclose(np.subtract(camera.target, camera.eye) / camera.distance, (0, 0, 1))
     assert camera.up == (0.0, -1.0, 0.0)
+
+
+def docked_widget(viewer, qapp_events):
+    """voxstream's widget docked in a 1400x900 window (its canvas sized first), budget 128 MiB."""
+    from voxstream._napari.widget import VoxstreamWidget
+
+    viewer.window._qt_window.resize(1400, 900)
+    qapp_events(lambda: False, timeout=0.3)
+    widget = VoxstreamWidget(viewer, budget_mb=128)
+    viewer.window.add_dock_widget(widget)
+    return widget
 
 
 @pytest.fixture

@@ -101,8 +101,10 @@ pub fn check_fade_frames(fade_frames: u32) -> Result<()> {
 
 fn render_source(args: &RenderArgs, source: Source, budget: &MemoryBudget) -> Result<()> {
     let Source { producer, meta: source } = source;
-    let PreparedView { transfer_function, settings, camera: view, drawing_surfaces } = prepare_view(args, &source)?;
-    let surfaces_in_volume = settings.surfaces_in_volume;
+    let prepared = prepare_view(args, &source)?;
+    let PreparedView { transfer_function, camera: view, drawing_surfaces, .. } = &prepared;
+    let (view, drawing_surfaces) = (*view, *drawing_surfaces);
+    let surfaces_in_volume = prepared.settings.surfaces_in_volume;
     let cameras = match &args.path {
         Some(path) => match path.to_str().filter(|_| !path.exists()).and_then(parse_generated_path) {
             Some(generated) => {
@@ -120,8 +122,6 @@ fn render_source(args: &RenderArgs, source: Source, budget: &MemoryBudget) -> Re
     }
 
     let budget_bytes = budget.total_bytes();
-    let prepared =
-        PreparedView { transfer_function: transfer_function.clone(), settings, camera: view, drawing_surfaces };
     let (mut session, _plan) =
         voxstream_api::start_session(producer, &source, &prepared, &session_options(args), budget)?;
     let mut stats = RunStats {
@@ -137,7 +137,7 @@ fn render_source(args: &RenderArgs, source: Source, budget: &MemoryBudget) -> Re
     let sequence = args.path.is_some();
     let repeats = if sequence || args.mode == Mode::Converged { 1 } else { args.frames };
     let progress = RenderProgress::new(cameras.len() as u64 * u64::from(repeats), args.quiet);
-    let mismatch = transfer_function_mismatch(&transfer_function, source.typical_range, source.value_range);
+    let mismatch = transfer_function_mismatch(transfer_function, source.typical_range, source.value_range);
     if let Some(warning) = mismatch.filter(|_| !drawing_surfaces || surfaces_in_volume) {
         progress.warn(&warning);
     }

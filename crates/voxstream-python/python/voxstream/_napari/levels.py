@@ -53,7 +53,7 @@ class LevelArray:
             raise IndexError(f"too many indices for a {ndim}-D array: {key!r}")
         key = key + (slice(None),) * (ndim - len(key))
         if not all(isinstance(k, (int, np.integer, slice)) for k in key):
-            return LevelArray._wrap(np.asarray(self)[key])
+            return np.asarray(self)[key]
         axes: List[_Axis] = []
         remaining = iter(key)
         for axis in self._axes:
@@ -69,10 +69,6 @@ class LevelArray:
                     raise IndexError(f"index {i} is out of bounds for an axis of size {len(axis)}")
                 axes.append(axis[i])
         return LevelArray(self._native, self.level, self._dims_xyz, self.dtype, axes)
-
-    @staticmethod
-    def _wrap(array):
-        return array
 
     def __array__(self, dtype=None, copy=None):
         if any(isinstance(a, range) and len(a) == 0 for a in self._axes):
