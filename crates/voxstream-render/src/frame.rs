@@ -158,31 +158,14 @@ pub fn render_pass(
     let tiles_x = width.div_ceil(edge);
     let tiles_y = height.div_ceil(edge);
     let pending = &progressive.pending;
-    let results: Vec<TileResult> = if settings.surfaces.is_empty() {
+    let grid = TileGrid { tiles_x, tiles_y, edge };
+    let results = if settings.surfaces.is_empty() {
         let caster = RayCaster::new(view, feedback, lut, settings);
-        (0..tiles_x * tiles_y)
-            .into_par_iter()
-            .map_init(
-                || descent_paths(&caster, settings.shared_descents),
-                |paths, tile| {
-                    let corner = ((tile % tiles_x) * edge, (tile / tiles_x) * edge);
-                    render_tile(&caster, &frame, settings, corner, edge, feedback, pending, paths)
-                },
-            )
-            .collect()
+        trace_tiles(&caster, grid, &frame, settings, feedback, pending)
     } else {
         let surfaces = SurfaceSettings::new(settings, |value| lut.normalise(value));
         let caster = SurfaceCaster::new(view, feedback, &surfaces, lut, settings);
-        (0..tiles_x * tiles_y)
-            .into_par_iter()
-            .map_init(
-                || descent_paths(&caster, settings.shared_descents),
-                |paths, tile| {
-                    let corner = ((tile % tiles_x) * edge, (tile / tiles_x) * edge);
-                    render_tile(&caster, &frame, settings, corner, edge, feedback, pending, paths)
-                },
-            )
-            .collect()
+        trace_tiles(&caster, grid, &frame, settings, feedback, pending)
     };
     let mut stats = RayStats::default();
     let mut raw_requests = 0;
@@ -203,6 +186,36 @@ pub fn render_pass(
         raw_requests += result.raw_requests;
     }
     Ok((stats, raw_requests))
+}
+
+/// A pass's square tiles: `tiles_x` × `tiles_y` of `edge` pixels.
+#[derive(Clone, Copy)]
+struct TileGrid {
+    tiles_x: u32,
+    tiles_y: u32,
+    edge: u32,
+}
+
+/// Traces every tile of a pass with `caster`, in parallel (rayon), each worker reusing its descent paths over its
+/// share of the tiles; the results in tile order.
+fn trace_tiles<T: PixelTracer>(
+    caster: &T,
+    TileGrid { tiles_x, tiles_y, edge }: TileGrid,
+    frame: &CameraFrame,
+    settings: &RenderSettings,
+    feedback: &FeedbackBuffer,
+    pending: &[bool],
+) -> Vec<TileResult> {
+    (0..tiles_x * tiles_y)
+        .into_par_iter()
+        .map_init(
+            || descent_paths(caster, settings.shared_descents),
+            |paths, tile| {
+                let corner = ((tile % tiles_x) * edge, (tile / tiles_x) * edge);
+                render_tile(caster, frame, settings, corner, edge, feedback, pending, paths)
+            },
+        )
+        .collect()
 }
 
 struct TileResult {
