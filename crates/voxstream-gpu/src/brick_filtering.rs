@@ -63,7 +63,7 @@ impl BrickFiltering {
 
     /// The WGSL that declares the atlas (binding 3; the sampler at binding 12 for the hardware) and defines
     /// `voxel(at)` (one stored voxel, 0‥65535) and `filtered_value(slot, x)` (the trilinear value, normalised),
-    /// placed before `ray_caster.wgsl`, which uses them.
+    /// placed before the ray caster's files (`shader.rs`), which uses them.
     pub fn wgsl(self) -> &'static str {
         match self {
             BrickFiltering::Exact => {
@@ -117,7 +117,7 @@ mod tests {
     #[test]
     fn both_shader_variants_are_valid_wgsl() {
         for filtering in [BrickFiltering::Exact, BrickFiltering::Hardware] {
-            let source = crate::renderer::ray_caster_source(filtering);
+            let source = crate::shader::ray_caster_source(filtering);
             let module = naga::front::wgsl::parse_str(&source)
                 .unwrap_or_else(|e| panic!("{filtering:?}: {}", e.emit_to_string(&source)));
             let mut validator =

@@ -26,16 +26,7 @@ use crate::brick_filtering::BrickFiltering;
 use crate::context::GpuContext;
 use crate::error::GpuError;
 use crate::pools::{GpuPools, UploadStats};
-
-/// The ray caster's WGSL: the shared records of `voxstream-layout`, then the shader. The brick atlas's declaration
-/// and reads ([`BrickFiltering::wgsl`]) go between them.
-pub const RAY_CASTER_WGSL: [&str; 2] =
-    [include_str!("../../voxstream-layout/src/layout.wgsl"), include_str!("ray_caster.wgsl")];
-
-/// The whole shader for bricks filtered as `filtering` says.
-pub fn ray_caster_source(filtering: BrickFiltering) -> String {
-    [RAY_CASTER_WGSL[0], filtering.wgsl(), RAY_CASTER_WGSL[1]].concat()
-}
+use crate::shader::ray_caster_source;
 
 /// Storage buffers the ray caster binds (nodes, table, pixels, flags, feedback, usage, ranges, surfaces, blends).
 const STORAGE_BUFFERS: u32 = 9;

@@ -1,0 +1,124 @@
+// One trilinear cell along a ray (`CellCubic` in voxstream-render): its interpolant, the cubic along the ray and its
+// root refinement, and the surface normals (the cell's gradient or central differences).
+
+// The trilinear interpolant of a cell's corners (x fastest) at cell-local p.
+fn cell_value(v: array<f32, 8>, p: vec3<f32>) -> f32 {
+    let front = mix(mix(v[0], v[1], p.x), mix(v[2], v[3], p.x), p.y);
+    let back = mix(mix(v[4], v[5], p.x), mix(v[6], v[7], p.x), p.y);
+    return mix(front, back, p.z);
+}
+
+// The cubic f(u) = c.x + u·(c.y + u·(c.z + u·c.w)) of the trilinear interpolant of `v` along start + u·rate
+// (cell-local coordinates): `CellCubic::new`.
+fn cell_cubic(v: array<f32, 8>, start: vec3<f32>, rate: vec3<f32>) -> vec4<f32> {
+    var e: array<vec2<f32>, 4>;
+    for (var i = 0u; i < 4u; i++) {
+        let a = v[i];
+        let b = v[i + 4u];
+        e[i] = vec2<f32>(a + (b - a) * start.z, (b - a) * rate.z);
+    }
+    let w0 = 1.0 - start.y;
+    let w0u = -rate.y;
+    let w1 = start.y;
+    let w1u = rate.y;
+    // Along y: e00·(1 − y) + e01·y with x = 0 (edges 0, 2), the same with x = 1 (edges 1, 3).
+    let q0 = vec3<f32>(e[0].x * w0 + e[2].x * w1, e[0].x * w0u + e[0].y * w0 + e[2].x * w1u + e[2].y * w1,
+        e[0].y * w0u + e[2].y * w1u);
+    let q1 = vec3<f32>(e[1].x * w0 + e[3].x * w1, e[1].x * w0u + e[1].y * w0 + e[3].x * w1u + e[3].y * w1,
+        e[1].y * w0u + e[3].y * w1u);
+    let x0 = 1.0 - start.x;
+    let x0u = -rate.x;
+    let x1 = start.x;
+    let x1u = rate.x;
+    return vec4<f32>(q0.x * x0 + q1.x * x1, q0.x * x0u + q0.y * x0 + q1.x * x1u + q1.y * x1,
+        q0.y * x0u + q0.z * x0 + q1.y * x1u + q1.z * x1, q0.z * x0u + q1.z * x1u);
+}
+
+fn cubic_at(c: vec4<f32>, u: f32) -> f32 {
+    return c.x + u * (c.y + u * (c.z + u * c.w));
+}
+
+// The crossing in [a, b] where fa = f(a) − iso and fb = f(b) − iso lie on different sides: Illinois-modified
+// regula falsi (`CellCubic::refine`).
+fn cubic_refine(c: vec4<f32>, iso: f32, a_in: f32, fa_in: f32, b_in: f32, fb_in: f32) -> f32 {
+    var a = a_in;
+    var fa = fa_in;
+    var b = b_in;
+    var fb = fb_in;
+    let inside_a = fa >= 0.0;
+    var side = 0;
+    for (var k = 0u; k < 16u; k++) {
+        let denominator = fb - fa;
+        var m = 0.5 * (a + b);
+        if denominator != 0.0 {
+            m = a - fa * (b - a) / denominator;
+        }
+        if !(m > a && m < b) {
+            m = 0.5 * (a + b);
+            if !(m > a && m < b) {
+                break;
+            }
+        }
+        let fm = cubic_at(c, m) - iso;
+        if (fm >= 0.0) == inside_a {
+            a = m;
+            fa = fm;
+            if side == -1 {
+                fb *= 0.5;
+            }
+            side = -1;
+        } else {
+            b = m;
+            fb = fm;
+            if side == 1 {
+                fa *= 0.5;
+            }
+            side = 1;
+        }
+        if fm == 0.0 {
+            break;
+        }
+    }
+    return select(b, a, fa == 0.0);
+}
+
+// The analytic gradient of the trilinear cell at cell-local p (`cell_gradient`).
+fn cell_gradient(v: array<f32, 8>, p_in: vec3<f32>) -> vec3<f32> {
+    let p = clamp(p_in, vec3<f32>(0.0), vec3<f32>(1.0));
+    let gx = mix(mix(v[1] - v[0], v[3] - v[2], p.y), mix(v[5] - v[4], v[7] - v[6], p.y), p.z);
+    let gy = mix(mix(v[2] - v[0], v[3] - v[1], p.x), mix(v[6] - v[4], v[7] - v[5], p.x), p.z);
+    let gz = mix(mix(v[4] - v[0], v[5] - v[1], p.x), mix(v[6] - v[2], v[7] - v[3], p.x), p.y);
+    return vec3<f32>(gx, gy, gz);
+}
+
+// Central differences at the cell's corners, interpolated trilinearly at cell-local p; one-sided at the brick's
+// outer voxels (`CellVisit::central_gradient`).
+fn central_gradient(origin: vec3<u32>, cell: vec3<i32>, p_in: vec3<f32>) -> vec3<f32> {
+    let p = clamp(p_in, vec3<f32>(0.0), vec3<f32>(1.0));
+    let last = i32(tree.stored_brick_size) - 1;
+    var g = vec3<f32>(0.0);
+    for (var corner = 0u; corner < 8u; corner++) {
+        let side = vec3<u32>(corner & 1u, (corner >> 1u) & 1u, corner >> 2u);
+        let ijk = cell + vec3<i32>(side);
+        let f = select(vec3<f32>(1.0) - p, p, side == vec3<u32>(1u));
+        let w = f.x * f.y * f.z;
+        for (var a = 0u; a < 3u; a++) {
+            var lo = ijk;
+            var hi = ijk;
+            lo[a] = max(ijk[a] - 1, 0);
+            hi[a] = min(ijk[a] + 1, last);
+            let span = f32(hi[a] - lo[a]);
+            g[a] += w * (voxel(origin + vec3<u32>(hi)) - voxel(origin + vec3<u32>(lo))) / span;
+        }
+    }
+    return g;
+}
+
+// The normal at cell-local p, world axes (`Isosurfaces::cell`'s `gradient_at`).
+fn surface_gradient(v: array<f32, 8>, origin: vec3<u32>, cell: vec3<i32>, p: vec3<f32>) -> vec3<f32> {
+    var g = cell_gradient(v, p);
+    if (frame.flags & RAY_FRAME_CENTRAL_NORMALS) != 0u {
+        g = central_gradient(origin, cell, p);
+    }
+    return g * vec3<f32>(frame.inverse_scale_x, frame.inverse_scale_y, frame.inverse_scale_z);
+}
