@@ -42,8 +42,8 @@
 //!    and stores each particle's weight `mⱼ/ρⱼ·Aⱼ` in the spill file; one more pass over the superbricks evaluates the
 //!    interpolant at every particle for its range, as the in-memory producer does.
 //!
-//! The build (steps 1 to 4 and 7) is [`build`]'s, one step function a pass; serving bricks (5 and 6) is [`serve`]'s,
-//! over the [`spill`] file and the [`coarse`] levels.
+//! The build (steps 1 to 4 and 7) is `build`'s, one step function a pass; serving bricks (5 and 6) is `serve`'s,
+//! over the `spill` file and the `coarse` levels.
 
 mod build;
 mod chunks;

@@ -17,8 +17,8 @@
 //! each element count be checked against the bytes that follow the header before anything is allocated for it
 //! (count × the element's smallest size in a binary body, count × its fewest words in an ASCII one), and every
 //! error name the element, its number and, for ASCII, the line.//!
-//! The reader's parts: [`header`] (the header, and the counts it declares checked against the body), [`body`] (the
-//! reading plan and the ASCII and binary bodies: mesh faces and point elements) and [`stream`] (binary point files
+//! The reader's parts: `header` (the header, and the counts it declares checked against the body), `body` (the
+//! reading plan and the ASCII and binary bodies: mesh faces and point elements) and `stream` (binary point files
 //! read a chunk at a time, out of core).
 
 mod body;

@@ -22,7 +22,7 @@
 //! dataset types (`.vti` and the rest), other compressors (LZ4, LZMA), `String` and `Bit` arrays. The `VTKFile`
 //! type must match the file name's ending.
 //!
-//! This module scans the XML for the pieces and their arrays; [`assemble`] decodes the arrays and puts the particles
+//! This module scans the XML for the pieces and their arrays; `assemble` decodes the arrays and puts the particles
 //! together.
 
 mod assemble;
