@@ -74,7 +74,7 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
                                 message: "only VTK ImageData files".into(),
                             });
                         }
-                        h.encoding = Encoding::from_attributes(&attr).map_err(|unsupported| {
+                        h.encoding = Encoding::from_attributes(attr).map_err(|unsupported| {
                             StoreError::Unsupported { path: path.into(), message: unsupported.to_string() }
                         })?;
                     }

@@ -153,7 +153,7 @@ pub fn parse_dataset(bytes: &[u8], path: &Path, dataset: Dataset) -> Result<RawP
                                 dataset.ending()
                             )));
                         }
-                        encoding = Encoding::from_attributes(&attr)
+                        encoding = Encoding::from_attributes(attr)
                             .map_err(|compressor| unsupported(compressor.to_string()))?;
                     }
                     b"Piece" => {
