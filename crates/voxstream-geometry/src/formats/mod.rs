@@ -25,6 +25,8 @@ use crate::error::GeometryError;
 use crate::particles::RawParticles;
 use crate::triangle_mesh::RawMesh;
 
+#[cfg(test)]
+pub(crate) mod damaged_input;
 pub mod elements;
 pub mod gro;
 pub mod obj;

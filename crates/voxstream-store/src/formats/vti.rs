@@ -6,13 +6,15 @@
 //! and decodes to at most [`MAX_VTI_SAMPLE_BYTES`] of samples; every size in its binary block headers is checked
 //! against the extent before anything is inflated, and every block must inflate to exactly the size its header gives
 //! (zlib's adler32 checked).
+//! The array encodings (base64, appended, zlib blocks) are decoded by `voxstream-vtk-xml`, as for the particle
+//! reader's `.vtp` and `.vtu`.
 //! A `Direction` other than the identity is not applied (the volume stays axis-aligned, as in `vtkImageData`).
 
-use std::io::Read;
 use std::path::Path;
 
-use base64::Engine;
 use quick_xml::events::Event;
+use voxstream_vtk_xml::{appended_base64_text, attribute, decode_base64_array, decode_raw_array, find, xml_end};
+use voxstream_vtk_xml::{Bounds, Encoding};
 
 use super::sample_stream::{Endian, SampleStream, DEFLATE_MAX_RATIO};
 use crate::error::StoreError;
@@ -25,11 +27,12 @@ pub const MAX_VTI_SAMPLE_BYTES: u64 = 1 << 30;
 /// The largest `.vti` file read (ascii floats take up to ~4 characters per byte of samples).
 pub const MAX_VTI_FILE_BYTES: u64 = 4 * MAX_VTI_SAMPLE_BYTES;
 
+/// How the arrays' sizes are bounded and named in messages.
+const BOUNDS: Bounds = Bounds { needed_by: "the extent", deflate_max_ratio: DEFLATE_MAX_RATIO };
+
 #[derive(Default)]
 struct Header {
-    big_endian: bool,
-    header_u64: bool,
-    compressed: bool,
+    encoding: Encoding,
     extent: Option<[i64; 6]>,
     origin: [f64; 3],
     spacing: [f64; 3],
@@ -52,8 +55,7 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
     }
     let bytes = std::fs::read(path).map_err(|e| StoreError::io(path, e))?;
     // The XML part ends where appended raw data begins.
-    let appended_at = find(&bytes, b"<AppendedData");
-    let xml_end = appended_at.and_then(|a| find(&bytes[a..], b">").map(|p| a + p + 1)).unwrap_or(bytes.len());
+    let (appended_at, xml_end) = xml_end(&bytes);
     let mut h = Header { spacing: [1.0; 3], ..Header::default() };
     let mut reader = quick_xml::Reader::from_reader(&bytes[..xml_end]);
     let mut in_array = false;
@@ -63,12 +65,7 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
         let event = reader.read_event_into(&mut buffer).map_err(|e| bad(format!("malformed XML: {e}")))?;
         match event {
             Event::Start(ref e) | Event::Empty(ref e) => {
-                let attr = |name: &str| -> Option<String> {
-                    e.attributes()
-                        .flatten()
-                        .find(|a| a.key.as_ref() == name.as_bytes())
-                        .map(|a| String::from_utf8_lossy(&a.value).into_owned())
-                };
+                let attr = |name: &str| attribute(e, name);
                 match e.name().as_ref() {
                     b"VTKFile" => {
                         if attr("type").as_deref() != Some("ImageData") {
@@ -77,18 +74,9 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
                                 message: "only VTK ImageData files".into(),
                             });
                         }
-                        h.big_endian = attr("byte_order").as_deref() == Some("BigEndian");
-                        h.header_u64 = attr("header_type").as_deref() == Some("UInt64");
-                        match attr("compressor").as_deref() {
-                            None | Some("") => {}
-                            Some("vtkZLibDataCompressor") => h.compressed = true,
-                            Some(other) => {
-                                return Err(StoreError::Unsupported {
-                                    path: path.into(),
-                                    message: format!("compressor {other}"),
-                                })
-                            }
-                        }
+                        h.encoding = Encoding::from_attributes(attr).map_err(|unsupported| {
+                            StoreError::Unsupported { path: path.into(), message: unsupported.to_string() }
+                        })?;
                     }
                     b"ImageData" => {
                         let numbers = |name: &str, n: usize| -> Result<Option<Vec<f64>>, StoreError> {
@@ -172,28 +160,30 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
     }
     let expected = info.byte_len() as usize;
     let data = match h.format.as_deref() {
-        Some("ascii") => ascii(&h.inline_text, dtype, expected / dtype.size(), h.big_endian).map_err(bad)?,
-        Some("binary") => decode_base64_array(h.inline_text.trim().as_bytes(), &h, expected).map_err(bad)?,
+        Some("ascii") => ascii(&h.inline_text, dtype, expected / dtype.size(), h.encoding.big_endian).map_err(bad)?,
+        Some("binary") => decode_base64_array(h.inline_text.trim().as_bytes(), h.encoding, expected, &BOUNDS)
+            .map_err(|e| bad(e.to_string()))?,
         Some("appended") => {
             let start = appended_at.ok_or_else(|| bad("appended array but no AppendedData".into()))?;
             let underscore = find(&bytes[start..], b"_").ok_or_else(|| bad("AppendedData has no '_' marker".into()))?;
             let body = &bytes[start + underscore + 1..];
             if h.appended_encoding.as_deref() == Some("base64") {
-                let text: Vec<u8> =
-                    body.iter().copied().take_while(|&c| c != b'<').filter(|c| !c.is_ascii_whitespace()).collect();
+                let text = appended_base64_text(body);
                 decode_base64_array(
                     text.get(h.offset..).ok_or_else(|| bad("offset beyond the data".into()))?,
-                    &h,
+                    h.encoding,
                     expected,
+                    &BOUNDS,
                 )
-                .map_err(bad)?
+                .map_err(|e| bad(e.to_string()))?
             } else {
                 decode_raw_array(
                     body.get(h.offset..).ok_or_else(|| bad("offset beyond the data".into()))?,
-                    &h,
+                    h.encoding,
                     expected,
+                    &BOUNDS,
                 )
-                .map_err(bad)?
+                .map_err(|e| bad(e.to_string()))?
             }
         }
         other => return Err(bad(format!("unknown DataArray format {other:?}"))),
@@ -207,123 +197,8 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
             data.len()
         )));
     }
-    let endian = if h.big_endian { Endian::Big } else { Endian::Little };
+    let endian = if h.encoding.big_endian { Endian::Big } else { Endian::Little };
     SampleStream::from_reader(path, Box::new(std::io::Cursor::new(data)), info, endian)
-}
-
-fn find(haystack: &[u8], needle: &[u8]) -> Option<usize> {
-    haystack.windows(needle.len()).position(|w| w == needle)
-}
-
-fn read_uint(bytes: &[u8], at: usize, h: &Header) -> Result<u64, String> {
-    let size = if h.header_u64 { 8 } else { 4 };
-    let b = at.checked_add(size).and_then(|end| bytes.get(at..end)).ok_or("truncated block header")?;
-    let mut v = [0u8; 8];
-    if h.big_endian {
-        v[8 - size..].copy_from_slice(b);
-        Ok(u64::from_be_bytes(v))
-    } else {
-        v[..size].copy_from_slice(b);
-        Ok(u64::from_le_bytes(v))
-    }
-}
-
-/// An uncompressed array: a byte count, then the bytes; the count must be what the extent needs.
-fn uncompressed(all: &[u8], h: &Header, expected: usize) -> Result<Vec<u8>, String> {
-    let hsize = if h.header_u64 { 8 } else { 4 };
-    let n = read_uint(all, 0, h)?;
-    if n != expected as u64 {
-        return Err(format!("the array's header says {n} bytes, the extent needs {expected}"));
-    }
-    all.get(hsize..hsize + expected).map(<[u8]>::to_vec).ok_or_else(|| "truncated data".into())
-}
-
-/// Inline or appended base64: the header and the data are two separate base64 runs when compressed.
-fn decode_base64_array(text: &[u8], h: &Header, expected: usize) -> Result<Vec<u8>, String> {
-    let engine = base64::engine::general_purpose::STANDARD;
-    let decode = |t: &[u8]| engine.decode(t).map_err(|e| format!("bad base64: {e}"));
-    let hsize: usize = if h.header_u64 { 8 } else { 4 };
-    if !h.compressed {
-        return uncompressed(&decode(text)?, h, expected);
-    }
-    let first_chars = 4 * hsize.div_ceil(3);
-    let first = decode(text.get(..first_chars).ok_or("truncated header")?)?;
-    let blocks = read_uint(&first, 0, h)?;
-    let header_chars = block_header_len(blocks, hsize, text.len())?.div_ceil(3) * 4;
-    let header = decode(text.get(..header_chars).ok_or("truncated header")?)?;
-    let data = decode(text.get(header_chars..).ok_or("truncated data")?)?;
-    inflate_blocks(&header, &data, blocks as usize, h, expected)
-}
-
-fn decode_raw_array(bytes: &[u8], h: &Header, expected: usize) -> Result<Vec<u8>, String> {
-    let hsize = if h.header_u64 { 8 } else { 4 };
-    if !h.compressed {
-        return uncompressed(bytes, h, expected);
-    }
-    let blocks = read_uint(bytes, 0, h)?;
-    let header_len = block_header_len(blocks, hsize, bytes.len())?;
-    inflate_blocks(&bytes[..header_len], &bytes[header_len..], blocks as usize, h, expected)
-}
-
-/// Bytes of a `[blocks, block size, last block size, compressed sizes…]` header, which must fit in `available`.
-fn block_header_len(blocks: u64, hsize: usize, available: usize) -> Result<usize, String> {
-    blocks
-        .checked_add(3)
-        .and_then(|n| n.checked_mul(hsize as u64))
-        .filter(|&n| n <= available as u64)
-        .map(|n| n as usize)
-        .ok_or_else(|| format!("{blocks} compressed blocks announced, more than the data can hold"))
-}
-
-/// zlib blocks after the `[blocks, block size, last block size, compressed sizes…]` header. The sizes must add up to
-/// the `expected` bytes before anything is inflated, and each block must inflate to exactly its size.
-fn inflate_blocks(header: &[u8], data: &[u8], blocks: usize, h: &Header, expected: usize) -> Result<Vec<u8>, String> {
-    let hsize = if h.header_u64 { 8 } else { 4 };
-    let block_size = read_uint(header, hsize, h)?;
-    let last_size = match read_uint(header, 2 * hsize, h)? {
-        0 => block_size,
-        n => n,
-    };
-    let total = match blocks {
-        0 => Some(0),
-        n => block_size.checked_mul(n as u64 - 1).and_then(|t| t.checked_add(last_size)),
-    };
-    if last_size > block_size || total != Some(expected as u64) {
-        return Err(format!(
-            "the compression header ({blocks} blocks of {block_size} bytes, the last {last_size}) does not add up to \
-             the {expected} bytes the extent needs"
-        ));
-    }
-    if expected as u64 > (data.len() as u64).saturating_mul(DEFLATE_MAX_RATIO) {
-        return Err(format!(
-            "{} compressed bytes cannot inflate to the {expected} bytes the extent needs (deflate expands at most \
-             {DEFLATE_MAX_RATIO}:1)",
-            data.len()
-        ));
-    }
-    let mut out = Vec::with_capacity(expected);
-    let mut at = 0usize;
-    for block in 0..blocks {
-        let size = read_uint(header, (3 + block) * hsize, h)?;
-        let chunk = usize::try_from(size)
-            .ok()
-            .and_then(|size| data.get(at..at.checked_add(size)?))
-            .ok_or_else(|| format!("compressed block {block} ({size} bytes) runs past the end of the data"))?;
-        let want = if block + 1 == blocks { last_size } else { block_size };
-        let before = out.len();
-        // One byte more than announced is enough to tell a block that inflates too far.
-        flate2::read::ZlibDecoder::new(chunk)
-            .take(want + 1)
-            .read_to_end(&mut out)
-            .map_err(|e| format!("corrupt zlib block {block}: {e}"))?;
-        let got = (out.len() - before) as u64;
-        if got != want {
-            let got = if got > want { format!("more than {want}") } else { got.to_string() };
-            return Err(format!("zlib block {block} inflates to {got} bytes, its header says {want}"));
-        }
-        at += chunk.len();
-    }
-    Ok(out)
 }
 
 /// Ascii samples: exactly `count` of them, each a value of `dtype` (integers in range; any float for Float32, whose
