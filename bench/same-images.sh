@@ -19,6 +19,24 @@ mkdir -p "$work"
 if [ ! -d "$work/skull.vxs" ]; then
     "$before" import "$real/skull_2.9.inr" --out "$work/skull.vxs" --quiet >/dev/null
 fi
+# A binary PLY of 600,000 points (a deterministic cloud: a shell and a cluster), for the out-of-core particle path.
+if [ ! -f "$work/cloud.ply" ]; then
+    python3 - "$work/cloud.ply" <<'PY'
+import math, random, struct, sys
+random.seed(45)
+points = []
+for i in range(600_000):
+    if i % 3:
+        u, v = random.random() * 2 * math.pi, math.acos(2 * random.random() - 1)
+        r = 1.0 + 0.05 * random.gauss(0, 1)
+        points.append((r * math.sin(v) * math.cos(u), r * math.sin(v) * math.sin(u), r * math.cos(v)))
+    else:
+        points.append(tuple(0.3 * random.gauss(0, 1) for _ in range(3)))
+with open(sys.argv[1], "wb") as f:
+    f.write(b"ply\nformat binary_little_endian 1.0\nelement vertex %d\nproperty float x\nproperty float y\nproperty float z\nend_header\n" % len(points))
+    f.write(b"".join(struct.pack("<3f", *p) for p in points))
+PY
+fi
 echo '{"points": [[0, 0, 0, 0, 0], [0.4, 0.2, 0.4, 0.9, 0.05], [1, 1, 0.9, 0.6, 0.8]]}' >"$work/tf.json"
 cases=(
     "sponge|sponge"
@@ -41,6 +59,8 @@ cases=(
     "protein|$real/1hvr.pdb --resolution 64"
     "dam-break|$real/dam_break_3d_fluid.vtu --resolution 64"
     "dam-break-attribute|$real/dam_break_3d_fluid.vtu --resolution 64 --attribute"
+    "cloud-in-memory|$work/cloud.ply --resolution 64"
+    "cloud-out-of-core|$work/cloud.ply --resolution 64 --particle-memory 8"
     "sponge-gpu|sponge --backend gpu --gpu-filter exact"
     "skull-iso-gpu|$work/skull.vxs --iso 2.5 --backend gpu --gpu-filter exact"
 )
