@@ -56,8 +56,7 @@ pub struct StoreReader {
     levels: Vec<LevelSource>,
     /// Decoded bricks (inner chunks) by level and brick index, least recently used first out.
     brick_cache: Mutex<LruCache<(usize, [u64; 3]), Arc<Vec<f32>>>>,
-    cache_bytes: u64,
-    /// Decoded chunks of foreign arrays whose chunks do not tile the bricks (a share of `cache_bytes`).
+    /// Decoded chunks of foreign arrays whose chunks do not tile the bricks (a share of the host cache).
     chunk_cache: ChunkCache,
     /// Counts the bytes the level arrays read from the storage.
     metrics: Option<Arc<PerformanceMetricsStorageAdapter<CheckedStore>>>,
@@ -104,7 +103,6 @@ impl StoreReader {
             layout,
             levels,
             brick_cache,
-            cache_bytes,
             chunk_cache,
             metrics: None,
             clipped: std::sync::atomic::AtomicU64::new(0),
@@ -169,21 +167,6 @@ impl StoreReader {
     /// stored: compressed).
     pub fn storage_bytes_read(&self) -> u64 {
         self.metrics.as_ref().map_or(0, |m| m.bytes_read() as u64)
-    }
-
-    /// Bytes of decoded foreign chunks held now (part of the host cache).
-    pub fn cached_chunk_bytes(&self) -> u64 {
-        self.chunk_cache.bytes()
-    }
-
-    /// Capacity of the host-side brick cache, bytes.
-    pub fn cache_capacity_bytes(&self) -> u64 {
-        self.cache_bytes
-    }
-
-    /// Bricks cached now.
-    pub fn cached_bricks(&self) -> usize {
-        self.brick_cache.lock().unwrap_or_else(|p| p.into_inner()).len()
     }
 
     /// The remote store the bricks come from (its counts of requests, bytes and retries), `None` for a folder.

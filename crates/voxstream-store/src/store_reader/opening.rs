@@ -192,7 +192,6 @@ impl StoreReader {
                 let (attributes, levels, scan) =
                     crate::foreign::open_foreign(path, encoded, group.attributes(), foreign, &chunk_source)?;
                 let mut reader = StoreReader::assemble(path, attributes, levels, None, cache_bytes - cache_bytes / 4)?;
-                reader.cache_bytes = cache_bytes;
                 reader.metrics = Some(metrics);
                 reader.remote = remote;
                 if let Some((level, stored)) = scan {
@@ -271,7 +270,6 @@ impl StoreReader {
         }
         let mut reader =
             StoreReader::assemble(path, attributes, levels, Some(minmax), cache_bytes - range_cache_bytes)?;
-        reader.cache_bytes = cache_bytes;
         reader.metrics = Some(metrics);
         reader.remote = remote;
         reader.probe_levels()?;
