@@ -90,7 +90,7 @@ impl<P: Producer> CacheManager<P> {
 
 #[cfg(test)]
 mod tests {
-    use super::super::test_support::{brick_owners, request, root_children, Ramp};
+    use super::super::test_support::{brick_owners, request, root_children, smallest_with_root, Ramp};
     use super::*;
     use crate::budget::PoolCapacities;
     use crate::error::CoreError;
@@ -99,8 +99,7 @@ mod tests {
     #[test]
     fn children_without_room_are_reported_left_missing() {
         // The smallest budget the planner accepts: a few tiles of children fill its brick pool.
-        let mut cache = (1..100_000u64).find_map(|step| CacheManager::new(Ramp, step * 64).ok()).unwrap();
-        request(&mut cache, NodeId::ROOT, RequestKind::Produce, false);
+        let mut cache = smallest_with_root();
         let mut parents = vec![NodeId::ROOT];
         let mut subdivided = 0;
         loop {

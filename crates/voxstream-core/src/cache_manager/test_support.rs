@@ -79,3 +79,10 @@ pub(super) fn with_root_children(budget_bytes: u64, prefetch: bool) -> CacheMana
     request(&mut cache, NodeId::ROOT, RequestKind::Subdivide, prefetch);
     cache
 }
+
+/// A cache of the smallest budget the planner accepts for [`Ramp`], holding the root's brick.
+pub(super) fn smallest_with_root() -> CacheManager<Ramp> {
+    let mut cache = (1..100_000u64).find_map(|step| CacheManager::new(Ramp, step * 64).ok()).unwrap();
+    request(&mut cache, NodeId::ROOT, RequestKind::Produce, false);
+    cache
+}

@@ -55,7 +55,7 @@ impl<P: Producer> CacheManager<P> {
 
 #[cfg(test)]
 mod tests {
-    use super::super::test_support::{request, root_children, with_root_children, Ramp};
+    use super::super::test_support::{request, root_children, smallest_with_root, with_root_children, Ramp};
     use super::*;
     use crate::feedback::RequestKind;
     use crate::node::{BrickSlot, NodeData};
@@ -64,8 +64,7 @@ mod tests {
     #[test]
     fn a_full_pool_recycles_the_brick_least_recently_used() {
         // The smallest budget the planner accepts, filled breadth first by children produced with their tiles.
-        let mut cache = (1..100_000u64).find_map(|step| CacheManager::new(Ramp, step * 64).ok()).unwrap();
-        request(&mut cache, NodeId::ROOT, RequestKind::Produce, false);
+        let mut cache = smallest_with_root();
         let mut queue = std::collections::VecDeque::from([NodeId::ROOT]);
         let mut parent = NodeId::ROOT;
         while cache.brick_pool().free_slots() > 0 {
