@@ -29,7 +29,8 @@
 //!   [P09] §5 lets its cache manager load the children of a subdivided node at once. It only fills brick slots that
 //!   are free (never used, or released) once every request of the frame is served, and never evicts for it, so a
 //!   tight budget behaves as without it. It trades over-production (children no ray will need, e.g. off screen or
-//!   occluded; none for the shell scene, 2.6× the bricks for the sponge's 27-child tiles) for fewer passes; converged frames turn it on, interactive frames keep their bounded work.
+//!   occluded; none for the shell scene, 2.6× the bricks for the sponge's 27-child tiles) for fewer passes;
+//!   converged frames turn it on, interactive frames keep their bounded work.
 //!   A child whose production fails is left missing, to be requested, and its failure reported, if a ray needs it.
 //! - **Brick analysis.** A produced terminal brick whose voxels are all equal becomes a constant node (no brick
 //!   slot). Non-terminal bricks stay bricks: only the producer knows whether finer levels are constant too.
