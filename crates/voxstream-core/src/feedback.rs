@@ -129,11 +129,6 @@ impl FeedbackBuffer {
     pub fn take_requests(&mut self) -> Vec<Request> {
         std::mem::take(self.requests.get_mut().unwrap_or_else(|poisoned| poisoned.into_inner()))
     }
-
-    /// Bytes held by the usage flags.
-    pub fn flag_bytes(&self) -> usize {
-        self.used_tiles.len() + self.used_bricks.len()
-    }
 }
 
 #[cfg(test)]

@@ -7,10 +7,14 @@
 //!             ▲          (this crate: FeedbackBuffer, CacheManager, Producer, NodePool, BrickPool)
 //! ```
 //!
-//! - [`Node`]: two 32-bit words (child tile + flags, brick slot or constant), GigaVoxels [P09] §4.
-//! - [`NodePool`]: tiles of `N³` siblings; [`BrickPool`]: bricks of `(M+2)³` `u16` voxels with a one-voxel border.
+//! - [`Node`]: two 32-bit words (child tile + flags, brick slot or constant), GigaVoxels [P09] §4; defined in
+//!   `voxstream-layout` (GPU-visible) and re-exported here.
+//! - [`NodePool`]: tiles of `N³` siblings (N = 2, 3 or 4); [`BrickPool`]: bricks of `(M+2)³` voxels with a one-voxel
+//!   border, 16-bit (`u16`) or, for sources of 8-bit integer samples, 8-bit (`u8`): see [`VoxelFormat`]. Producers
+//!   always write 16-bit voxels; the pool narrows them when [`Producer::voxel_format`] says it is exact.
 //! - [`PoolCapacities`]: both pools sized from one byte budget, never exceeded.
-//! - [`FeedbackBuffer`]: what rays used and what they missed; [`RequestQueue`]: dedup, parent-first, bounded.
+//! - [`FeedbackBuffer`]: what rays used and what they missed; [`RequestQueue`]: dedup, largest level deficit
+//!   first, then parent-first, bounded.
 //! - [`CacheManager`]: serves requests by calling a [`Producer`] on worker threads; LRU recycling.
 //! - [`TreeView`]: the immutable flat view renderers read during a frame.
 //! - [`LevelBlending`]: Thiele et al.'s fade-in of arriving bricks and caps towards coarser neighbours.

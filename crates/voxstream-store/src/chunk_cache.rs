@@ -79,11 +79,6 @@ impl ChunkCache {
         self.units.get(level).is_some_and(Option::is_some)
     }
 
-    /// Decoded bytes held now.
-    pub fn bytes(&self) -> u64 {
-        self.entries.lock().unwrap_or_else(|p| p.into_inner()).bytes
-    }
-
     /// Samples `[lower, upper)` (x, y, z; within `shape`, the array's last three axes reversed) of `level`, x
     /// fastest, assembled from cached units (each read from `array` when missing). Levels not cached are read
     /// straight from `array`.

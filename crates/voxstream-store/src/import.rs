@@ -23,7 +23,7 @@ use crate::metadata::{ome_multiscales, StoreAttributes, MINMAX_GROUP};
 use crate::non_finite;
 use crate::store_lock::ImportLock;
 use crate::value_histogram::ValueHistogram;
-use crate::volume::{DType, VolumeInfo, VolumeSource};
+use crate::volume::{DType, VolumeSource};
 
 /// Choices of an import.
 #[derive(Clone, Debug, PartialEq)]
@@ -593,16 +593,6 @@ fn write_minmax(
     let flat: Vec<f32> = minmax.iter().flat_map(|r| if r[0] > r[1] { [0.0, 0.0] } else { *r }).collect();
     array.store_chunk(&[0, 0, 0, 0], &flat)?;
     Ok(())
-}
-
-/// Geometry of a store being read, for tests and `info`.
-pub fn volume_of(attributes: &StoreAttributes) -> Option<VolumeInfo> {
-    Some(VolumeInfo {
-        dims: attributes.dims,
-        dtype: attributes.dtype()?,
-        spacing: attributes.spacing,
-        origin: attributes.origin,
-    })
 }
 
 #[cfg(test)]
