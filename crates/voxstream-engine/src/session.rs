@@ -18,7 +18,7 @@ use std::ops::ControlFlow;
 use std::time::Instant;
 
 use voxstream_core::{CacheManager, ProduceError, Producer, Residency, ServeOptions, ServeReport, DEFAULT_FADE_FRAMES};
-use voxstream_render::{Camera, Image, ProgressiveImage, RenderSettings, TransferFunction, TransferLut};
+use voxstream_render::{Camera, Image, PassInputs, ProgressiveImage, RenderSettings, TransferFunction, TransferLut};
 
 use crate::error::EngineError;
 use crate::frame_renderer::{CpuRenderer, FrameRenderer};
@@ -432,14 +432,9 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
                 view.brick_blends = &[];
             }
             result.blended = !view.brick_blends.is_empty();
-            let (stats, _) = self.renderer.render_pass(
-                view,
-                self.cache.feedback(),
-                camera,
-                &self.lut,
-                &settings,
-                &mut progressive,
-            )?;
+            let inputs =
+                PassInputs { view, feedback: self.cache.feedback(), camera, lut: &self.lut, settings: &settings };
+            let (stats, _) = self.renderer.render_pass(inputs, &mut progressive)?;
             result.render_ms += render_start.elapsed().as_secs_f64() * 1e3;
             let options = match mode {
                 // The last pass of a frame whose view the pools cannot hold: its image is final, so nothing is
@@ -538,7 +533,7 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
 
 #[cfg(test)]
 mod tests {
-    use voxstream_core::{FeedbackBuffer, NodeContent, NodeKey, ProduceError, Produced, TreeShape, TreeView};
+    use voxstream_core::{NodeContent, NodeKey, ProduceError, Produced, TreeShape};
     use voxstream_render::RayStats;
 
     use super::*;
@@ -572,15 +567,11 @@ mod tests {
     impl FrameRenderer for CountingRenderer {
         fn render_pass(
             &mut self,
-            view: TreeView<'_>,
-            feedback: &FeedbackBuffer,
-            camera: &Camera,
-            lut: &TransferLut,
-            settings: &RenderSettings,
+            inputs: PassInputs<'_>,
             progressive: &mut ProgressiveImage,
         ) -> std::result::Result<(RayStats, usize), voxstream_render::RenderError> {
             self.passes += 1;
-            CpuRenderer.render_pass(view, feedback, camera, lut, settings, progressive)
+            CpuRenderer.render_pass(inputs, progressive)
         }
 
         fn describe(&self) -> String {

@@ -17,8 +17,8 @@ use voxstream_layout::{
 };
 use voxstream_render::transfer_function::LUT_SIZE;
 use voxstream_render::{
-    Camera, ProgressiveImage, RayStats, RenderError, RenderSettings, Shading, SurfaceNormals, SurfaceSettings,
-    TransferLut,
+    Camera, PassInputs, ProgressiveImage, RayStats, RenderError, RenderSettings, Shading, SurfaceNormals,
+    SurfaceSettings, TransferLut,
 };
 use wgpu::util::DeviceExt;
 
@@ -222,13 +222,10 @@ impl GpuRenderer {
 
     fn pass(
         &mut self,
-        view: TreeView<'_>,
-        feedback: &FeedbackBuffer,
-        camera: &Camera,
-        lut: &TransferLut,
-        settings: &RenderSettings,
+        inputs: PassInputs<'_>,
         progressive: &mut ProgressiveImage,
     ) -> Result<(RayStats, usize), RenderError> {
+        let PassInputs { view, feedback, camera, lut, settings } = inputs;
         settings.validate()?;
         let (width, height) = (settings.width, settings.height);
         if progressive.image.width != width || progressive.image.height != height {
@@ -451,14 +448,10 @@ impl GpuRenderer {
 impl FrameRenderer for GpuRenderer {
     fn render_pass(
         &mut self,
-        view: TreeView<'_>,
-        feedback: &FeedbackBuffer,
-        camera: &Camera,
-        lut: &TransferLut,
-        settings: &RenderSettings,
+        inputs: PassInputs<'_>,
         progressive: &mut ProgressiveImage,
     ) -> Result<(RayStats, usize), RenderError> {
-        self.pass(view, feedback, camera, lut, settings, progressive)
+        self.pass(inputs, progressive)
     }
 
     fn describe(&self) -> String {

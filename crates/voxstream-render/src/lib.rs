@@ -53,7 +53,8 @@ pub use block_visibility::BlockVisibility;
 pub use camera::{Camera, CameraFrame};
 pub use error::RenderError;
 pub use frame::{
-    frame_buffer_bytes, render_frame, render_pass, ProgressiveImage, RenderedFrame, FRAME_BYTES_PER_PIXEL, IMAGE_TILE,
+    frame_buffer_bytes, render_frame, render_pass, PassInputs, ProgressiveImage, RenderedFrame, FRAME_BYTES_PER_PIXEL,
+    IMAGE_TILE,
 };
 pub use image::{psnr, Image};
 pub use instruction_set::InstructionSet;

@@ -9,8 +9,8 @@ use voxstream::scenes::builtin;
 use voxstream_core::{BrickSlot, FeedbackBuffer, Request, TileId, TreeView};
 use voxstream_engine::{LoopLimits, Mode, Session};
 use voxstream_render::{
-    render_pass, Camera, Image, InstructionSet, IsoSurface, ProgressiveImage, RayStats, RenderSettings, Shading,
-    TransferLut,
+    render_pass, Camera, Image, InstructionSet, IsoSurface, PassInputs, ProgressiveImage, RayStats, RenderSettings,
+    Shading, TransferLut,
 };
 
 const SIZE: u32 = 64;
@@ -156,7 +156,8 @@ type PassOutcome = (ProgressiveImage, RayStats, usize, Vec<Request>, Vec<TileId>
 fn one_pass(view: TreeView<'_>, camera: &Camera, lut: &TransferLut, settings: &RenderSettings) -> PassOutcome {
     let mut feedback = FeedbackBuffer::new(view.capacity.tiles, view.capacity.bricks);
     let mut progressive = ProgressiveImage::new(settings.width, settings.height);
-    let (stats, raw_requests) = render_pass(view, &feedback, camera, lut, settings, &mut progressive).expect("pass");
+    let (stats, raw_requests) =
+        render_pass(PassInputs { view, feedback: &feedback, camera, lut, settings }, &mut progressive).expect("pass");
     let mut requests = feedback.take_requests();
     requests.sort();
     let (tiles, bricks) = (feedback.used_tiles().collect(), feedback.used_bricks().collect());
