@@ -10,7 +10,8 @@
 //! - [`brick_filtering`]: bricks filtered exactly in the shader or by the texture units;
 //! - [`pools`]: the node pool as a storage buffer and the brick pool as a 3D texture atlas, updated by changed tiles
 //!   and bricks only;
-//! - [`renderer`]: one pass: uniforms, the `ray_caster.wgsl` compute shader, readback, feedback to the CPU.
+//! - [`renderer`]: one pass: uniforms, the `ray_caster.wgsl` compute shader, readback, feedback to the CPU;
+//! - [`shader_records`]: the frame's uniform, isosurface records and value ranges as the shader reads them.
 //!
 //! The shader reads the `#[repr(C)]` records of `voxstream-layout` (nodes, tree header, transfer-table entries,
 //! feedback records, the frame's [`RayFrame`](voxstream_layout::RayFrame)) through their WGSL mirror
@@ -28,6 +29,7 @@ pub mod context;
 pub mod error;
 pub mod pools;
 pub mod renderer;
+pub mod shader_records;
 
 pub use brick_filtering::BrickFiltering;
 pub use context::GpuContext;
