@@ -57,7 +57,7 @@ pub use frame::{
     IMAGE_TILE,
 };
 pub use image::{psnr, Image};
-pub use instruction_set::InstructionSet;
+pub use instruction_set::{InstructionSet, RayLoopBuild};
 pub use integrand::{BrickSpan, Integrand, Sample};
 pub use isosurface::{IsoSurface, SurfaceNormals, SurfaceParameters, SurfaceSettings, MAX_SURFACES};
 pub use ray_caster::RayCaster;
