@@ -6,6 +6,8 @@
 //! - [`Session`]: a producer, its [`CacheManager`](voxstream_core::CacheManager) and a renderer; renders frames in
 //!   GigaVoxels' two display modes ([`Mode`]: converged, interactive) within [`LoopLimits`], and reports each
 //!   [`FrameResult`] and, pass by pass, [`PassProgress`].
+//! - [`PassPolicy`](pass_policy::PassPolicy): how one frame's passes go in its mode: how sparsely each traces, what
+//!   is produced after it, and when the frame ends.
 //! - [`FrameRenderer`]: what the loop needs from a renderer (one pass over a `TreeView`, writing the feedback);
 //!   [`CpuRenderer`] is the CPU ray caster of `voxstream-render`; a GPU backend implements the same trait.
 //! - [`MemoryBudget`] / [`MemoryPlan`]: one budget split among the image, a store's host cache and the pools.
@@ -44,6 +46,7 @@ pub mod frame_renderer;
 pub mod level_pace;
 pub mod memory_budget;
 pub mod output_file;
+pub mod pass_policy;
 pub mod popping;
 pub mod session;
 

@@ -17,78 +17,16 @@
 use std::ops::ControlFlow;
 use std::time::Instant;
 
-use voxstream_core::{CacheManager, ProduceError, Producer, Residency, ServeOptions, ServeReport, DEFAULT_FADE_FRAMES};
-use voxstream_render::{Camera, Image, ProgressiveImage, RenderSettings, TransferFunction, TransferLut};
+use voxstream_core::{CacheManager, ProduceError, Producer, Residency, ServeReport};
+use voxstream_render::{Camera, Image, PassInputs, ProgressiveImage, RenderSettings, TransferFunction, TransferLut};
 
 use crate::error::EngineError;
 use crate::frame_renderer::{CpuRenderer, FrameRenderer};
 use crate::level_pace::level_rate;
+pub use crate::pass_policy::{LoopLimits, Mode, CONVERGED_REQUESTS_PER_RAY, GATHER_STRIDE};
+use crate::pass_policy::{NextPass, PassPolicy};
 
 type Result<T> = std::result::Result<T, EngineError>;
-
-/// How a frame is completed.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
-#[cfg_attr(feature = "serde", derive(serde::Serialize))]
-#[cfg_attr(feature = "serde", serde(rename_all = "lowercase"))]
-pub enum Mode {
-    /// Repeat render + produce until no request remains.
-    Converged,
-    /// One render per frame, bounded production between frames.
-    Interactive,
-}
-
-/// Requests a ray may report per pass in converged mode.
-pub const CONVERGED_REQUESTS_PER_RAY: u32 = 64;
-
-/// Limits of the frame loop.
-#[derive(Clone, Copy, Debug)]
-pub struct LoopLimits {
-    /// Requests served per frame in interactive mode.
-    pub requests_per_frame: usize,
-    /// Passes after which a converged frame gives up (reported as not converged; one more traces every pixel the
-    /// sparse passes left untraced, if any).
-    pub max_passes: u32,
-    /// Converged mode only: when a node is subdivided, also produce its new children's bricks in the same pass,
-    /// into free brick slots (never evicting). Fewer passes, the same image.
-    pub prefetch_new_children: bool,
-    /// Converged mode only: the passes that only gather requests trace one pixel in [`GATHER_STRIDE`]² (their
-    /// neighbours ask for the same nodes, and subdividing produces whole tiles), until such a pass asks for
-    /// nothing, or until its requests, once served, leave those rays nothing more to ask; then one in half that
-    /// stride squared, and so on down to every pixel still pending. Each ray's final value is traced with all it
-    /// needs resident, so the image is the same; the early passes cost a quarter. The root is produced before the
-    /// first pass. A frame after one that needed no data starts with every pixel.
-    pub gather_sparsely: bool,
-    /// Interactive mode only: Thiele et al.'s level blending ([`voxstream_core::level_blending`]) with a fade-in of
-    /// this many frames; `None` turns it off. Converged frames never blend (their image is exact either way).
-    pub blending_fade_frames: Option<u32>,
-    /// Interactive frames with level blending: keep the working set restricted (Thiele et al.: neighbouring data at
-    /// most one level apart, forced splits first; [`voxstream_core::restriction`]). Converged frames, and frames
-    /// without blending, leave it free.
-    pub restrict_working_set: bool,
-    /// Interactive frames with level blending: fades keep pace with a camera that approaches or backs away (at least
-    /// [`voxstream_core::level_blending::FADES_PER_LEVEL`] fades in the frames the camera takes to want the next
-    /// level, measured by [`crate::level_rate`] between consecutive interactive cameras). At rest and on an orbit
-    /// fades take their `blending_fade_frames`.
-    pub pace_fades_to_camera: bool,
-}
-
-/// The pixel stride of the request-gathering passes of a converged frame ([`LoopLimits::gather_sparsely`]).
-pub const GATHER_STRIDE: u32 = 4;
-
-impl Default for LoopLimits {
-    fn default() -> Self {
-        LoopLimits {
-            requests_per_frame: 1024,
-            max_passes: 400,
-            prefetch_new_children: true,
-            gather_sparsely: true,
-            blending_fade_frames: Some(DEFAULT_FADE_FRAMES),
-            restrict_working_set: true,
-            pace_fades_to_camera: true,
-        }
-    }
-}
 
 /// The outcome of one output frame.
 #[derive(Clone, Debug)]
@@ -384,8 +322,9 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
             missing: Vec::new(),
         };
         let mut progressive = ProgressiveImage::new(self.settings.width, self.settings.height);
-        // Converged frames let each ray report every miss along its path, so passes are few.
+        let mut policy = PassPolicy::new(mode, self.limits, self.settings.pixel_stride, self.gather_sparsely_next);
         let mut settings = self.settings.clone();
+        settings.max_requests_per_ray = policy.max_requests_per_ray(settings.max_requests_per_ray);
         // Interactive frames with level blending step stand-ins as the data they stand in for (see
         // `RenderSettings::steps_ignore_stand_ins`): arriving data then changes values, never sample positions.
         settings.steps_ignore_stand_ins = mode == Mode::Interactive && self.limits.blending_fade_frames.is_some();
@@ -402,76 +341,33 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
         self.cache.set_blending_level_rate(pace);
         result.level_rate = pace;
         self.previous_interactive_camera = (mode == Mode::Interactive).then_some(*camera);
-        if mode == Mode::Converged {
-            settings.max_requests_per_ray = settings.max_requests_per_ray.max(CONVERGED_REQUESTS_PER_RAY);
-            if self.limits.gather_sparsely && self.gather_sparsely_next {
-                settings.pixel_stride = GATHER_STRIDE;
-            }
-        }
-        if mode == Mode::Converged && settings.pixel_stride > 1 {
-            let options = ServeOptions {
-                limit: None,
-                prefetch_new_children: self.limits.prefetch_new_children,
-                wait_for_data: true,
-            };
+        if let Some(options) = policy.serve_root_first() {
             if let Some(report) = self.cache.serve_root(options) {
                 result.add_report(&report);
             }
         }
-        // Set once the loop must end after the pass that traces every pending pixel.
-        let mut final_pass = false;
         loop {
-            if mode == Mode::Converged {
+            if !policy.blends() {
                 // Converged frames never blend: no transitions to track between their passes.
                 self.cache.settle_blending();
             }
+            settings.pixel_stride = policy.pixel_stride();
             self.cache.begin_frame();
             let render_start = Instant::now();
             let mut view = self.cache.view();
-            if mode == Mode::Converged {
+            if !policy.blends() {
                 view.brick_blends = &[];
             }
             result.blended = !view.brick_blends.is_empty();
-            let (stats, _) = self.renderer.render_pass(
-                view,
-                self.cache.feedback(),
-                camera,
-                &self.lut,
-                &settings,
-                &mut progressive,
-            )?;
+            let inputs =
+                PassInputs { view, feedback: self.cache.feedback(), camera, lut: &self.lut, settings: &settings };
+            let (stats, _) = self.renderer.render_pass(inputs, &mut progressive)?;
             result.render_ms += render_start.elapsed().as_secs_f64() * 1e3;
-            let options = match mode {
-                // The last pass of a frame whose view the pools cannot hold: its image is final, so nothing is
-                // produced for it (usage is still recorded).
-                Mode::Converged if final_pass => {
-                    ServeOptions { limit: Some(0), prefetch_new_children: false, wait_for_data: true }
-                }
-                // A converged frame waits for its data; an interactive one never does (ancestors stand in).
-                Mode::Converged => ServeOptions {
-                    limit: None,
-                    prefetch_new_children: self.limits.prefetch_new_children,
-                    wait_for_data: true,
-                },
-                Mode::Interactive => ServeOptions {
-                    limit: Some(self.limits.requests_per_frame),
-                    prefetch_new_children: false,
-                    wait_for_data: false,
-                },
-            };
-            let report = self.cache.end_frame(options);
+            let report = self.cache.end_frame(policy.serve_options());
             self.peak_resident_bytes = self.peak_resident_bytes.max(self.cache.residency().bytes);
             result.passes += 1;
             result.rays += stats.rays;
             result.samples += stats.samples;
-            // Whether the sparse rays will need nothing more once this pass's requests are served: each asked for
-            // at most one level more than it found, everything was served and the new tiles' children produced.
-            // Then the next pass need not trace the same sparse rays again only to find that out.
-            let sparse_rays_served = report.pending == 0
-                || (options.prefetch_new_children
-                    && report.largest_deficit <= 1
-                    && report.deferred == 0
-                    && report.children_left_missing == 0);
             result.add_report(&report);
             let flow = observe(&PassProgress {
                 pass: result.passes,
@@ -483,25 +379,7 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
                 result.interrupted = true;
                 break;
             }
-            let stalled = report.pending > 0 && report.served == 0;
-            let out_of_passes = result.passes >= self.limits.max_passes;
-            if settings.pixel_stride > 1 && sparse_rays_served && (report.pending == 0 || !out_of_passes) && !final_pass
-            {
-                // The sparse rays need nothing more (nothing was asked for, only what cannot be had: bricks that
-                // failed to load, or what was just served): trace more of the pixels still pending (4×4, 2×2, all).
-                settings.pixel_stride /= 2;
-                continue;
-            }
-            let stop = mode == Mode::Interactive || report.pending == 0 || stalled || out_of_passes || final_pass;
-            if stop && mode == Mode::Converged && settings.pixel_stride > 1 {
-                // The frame would end while only some pixels were traced (the pools cannot hold what the view
-                // needs, bricks failed to load, or the passes ran out): one more pass traces every pixel still
-                // pending with what is resident (coarser data standing in), so that no pixel is left untraced.
-                settings.pixel_stride = 1;
-                final_pass = true;
-                continue;
-            }
-            if stop {
+            if policy.after_pass(&report) == NextPass::Stop {
                 break;
             }
         }
@@ -538,7 +416,7 @@ impl<P: Producer, R: FrameRenderer> Session<P, R> {
 
 #[cfg(test)]
 mod tests {
-    use voxstream_core::{FeedbackBuffer, NodeContent, NodeKey, ProduceError, Produced, TreeShape, TreeView};
+    use voxstream_core::{NodeContent, NodeKey, ProduceError, Produced, TreeShape};
     use voxstream_render::RayStats;
 
     use super::*;
@@ -572,15 +450,11 @@ mod tests {
     impl FrameRenderer for CountingRenderer {
         fn render_pass(
             &mut self,
-            view: TreeView<'_>,
-            feedback: &FeedbackBuffer,
-            camera: &Camera,
-            lut: &TransferLut,
-            settings: &RenderSettings,
+            inputs: PassInputs<'_>,
             progressive: &mut ProgressiveImage,
         ) -> std::result::Result<(RayStats, usize), voxstream_render::RenderError> {
             self.passes += 1;
-            CpuRenderer.render_pass(view, feedback, camera, lut, settings, progressive)
+            CpuRenderer.render_pass(inputs, progressive)
         }
 
         fn describe(&self) -> String {

@@ -11,7 +11,8 @@
 //! - [`pools`]: the node pool as a storage buffer and the brick pool as a 3D texture atlas, updated by changed tiles
 //!   and bricks only;
 //! - [`renderer`]: one pass: uniforms, the ray caster's compute shader, readback, feedback to the CPU;
-//! - [`shader`]: that shader's WGSL, in files along the CPU traversal's seams (`src/shader/`), joined into one module.
+//! - [`shader`]: that shader's WGSL, in files along the CPU traversal's seams (`src/shader/`), joined into one module;
+//! - [`shader_records`]: the frame's uniform, isosurface records and value ranges as the shader reads them.
 //!
 //! The shader reads the `#[repr(C)]` records of `voxstream-layout` (nodes, tree header, transfer-table entries,
 //! feedback records, the frame's [`RayFrame`](voxstream_layout::RayFrame)) through their WGSL mirror
@@ -30,6 +31,7 @@ pub mod error;
 pub mod pools;
 pub mod renderer;
 pub mod shader;
+pub mod shader_records;
 
 pub use brick_filtering::BrickFiltering;
 pub use context::GpuContext;

@@ -132,20 +132,35 @@ pub fn render_frame(
     settings: &RenderSettings,
 ) -> Result<RenderedFrame, RenderError> {
     let mut progressive = ProgressiveImage::new(settings.width, settings.height);
-    let (stats, raw_requests) = render_pass(view, feedback, camera, lut, settings, &mut progressive)?;
+    let inputs = PassInputs { view, feedback, camera, lut, settings };
+    let (stats, raw_requests) = render_pass(inputs, &mut progressive)?;
     Ok(RenderedFrame { image: progressive.image, stats, raw_requests })
+}
+
+/// What one pass reads: the tree, the camera, the transfer function and the settings, and the feedback buffer its
+/// rays write their usage and requests into. The image the pass completes is handed beside it
+/// ([`render_pass`], `FrameRenderer::render_pass` of `voxstream-engine`).
+#[derive(Clone, Copy, Debug)]
+pub struct PassInputs<'a> {
+    /// The tree the rays read.
+    pub view: TreeView<'a>,
+    /// Where the rays record what they used and what they missed.
+    pub feedback: &'a FeedbackBuffer,
+    /// Where the rays start.
+    pub camera: &'a Camera,
+    /// The transfer function's table.
+    pub lut: &'a TransferLut,
+    /// Image size, sampling and shading.
+    pub settings: &'a RenderSettings,
 }
 
 /// Traces the pending rays of `progressive`, updating their pixels and marking which still miss data.
 /// Returns the ray counters and the number of raw requests.
 pub fn render_pass(
-    view: TreeView<'_>,
-    feedback: &FeedbackBuffer,
-    camera: &Camera,
-    lut: &TransferLut,
-    settings: &RenderSettings,
+    inputs: PassInputs<'_>,
     progressive: &mut ProgressiveImage,
 ) -> Result<(RayStats, usize), RenderError> {
+    let PassInputs { view, feedback, camera, lut, settings } = inputs;
     settings.validate()?;
     let (width, height) = (settings.width, settings.height);
     if progressive.image.width != width || progressive.image.height != height {

@@ -6,6 +6,15 @@
 //! build the baseline only. The arithmetic is the same IEEE operations in either version (Rust never fuses a
 //! multiply and an add on its own), so the image is the same bytes whichever runs; a test checks it.
 
+/// The build of the ray loop that runs ([`InstructionSet::build`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RayLoopBuild {
+    /// The build's baseline (x86-64-v2 on x86-64).
+    Baseline,
+    /// The x86-64-v3 build (AVX2, FMA, BMI2), with AVX2 gathers of brick corners.
+    X86_64V3,
+}
+
 /// The instruction set the ray loop uses.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum InstructionSet {
@@ -28,19 +37,23 @@ impl InstructionSet {
     /// Whether the ray loop reads brick corners with AVX2 gathers ([`crate::gathered_corners`]): where it runs the
     /// x86-64-v3 build.
     pub fn gathers(self) -> bool {
-        #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
-        if let (InstructionSet::Detect, pulp::Arch::V3(_)) = (self, pulp::Arch::new()) {
-            return true;
+        self.build() == RayLoopBuild::X86_64V3
+    }
+
+    /// The build of the ray loop that [`InstructionSet::arch`] dispatches to on this CPU.
+    pub fn build(self) -> RayLoopBuild {
+        match self.arch() {
+            #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
+            pulp::Arch::V3(_) => RayLoopBuild::X86_64V3,
+            _ => RayLoopBuild::Baseline,
         }
-        false
     }
 
     /// What [`InstructionSet::Detect`] finds on this CPU, for reports: `"x86-64-v3 (AVX2+FMA)"` or `"baseline"`.
     pub fn detected() -> &'static str {
-        #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
-        if let pulp::Arch::V3(_) = pulp::Arch::new() {
-            return "x86-64-v3 (AVX2+FMA)";
+        match InstructionSet::Detect.build() {
+            RayLoopBuild::X86_64V3 => "x86-64-v3 (AVX2+FMA)",
+            RayLoopBuild::Baseline => "baseline",
         }
-        "baseline"
     }
 }

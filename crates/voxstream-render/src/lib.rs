@@ -53,10 +53,11 @@ pub use block_visibility::BlockVisibility;
 pub use camera::{Camera, CameraFrame};
 pub use error::RenderError;
 pub use frame::{
-    frame_buffer_bytes, render_frame, render_pass, ProgressiveImage, RenderedFrame, FRAME_BYTES_PER_PIXEL, IMAGE_TILE,
+    frame_buffer_bytes, render_frame, render_pass, PassInputs, ProgressiveImage, RenderedFrame, FRAME_BYTES_PER_PIXEL,
+    IMAGE_TILE,
 };
 pub use image::{psnr, Image};
-pub use instruction_set::InstructionSet;
+pub use instruction_set::{InstructionSet, RayLoopBuild};
 pub use integrand::{BrickSpan, Integrand, Sample};
 pub use isosurface::{IsoSurface, SurfaceNormals, SurfaceParameters, SurfaceSettings, MAX_SURFACES};
 pub use ray_caster::RayCaster;

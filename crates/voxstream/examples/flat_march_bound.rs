@@ -24,6 +24,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
+use voxstream::bench::median;
 use voxstream::camera_path::read_camera_path;
 use voxstream::png_output::write_rgb8_png;
 use voxstream_render::step_table::{StepLength, StepTable};
@@ -214,11 +215,6 @@ impl pulp::WithSimd for PacketFrame<'_, '_> {
     }
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     if args.len() < 3 {
@@ -279,7 +275,7 @@ fn main() -> Result<()> {
         samples = (0..size * size).into_par_iter().map(|i| scene.march_one(i % size, i / size).1).sum::<u64>();
         times.push(start.elapsed().as_secs_f64());
     }
-    let t = median(times);
+    let t = median(&mut times);
     println!("| one ray at a time | {:.1} ms | {samples} | {:.2} |", t * 1e3, t * cores * 1e9 / samples as f64);
 
     let mut times = Vec::new();
@@ -290,7 +286,7 @@ fn main() -> Result<()> {
         times.push(start.elapsed().as_secs_f64());
         (image, samples) = (pixels, taken);
     }
-    let t = median(times);
+    let t = median(&mut times);
     println!("| 8 rays in lock-step | {:.1} ms | {samples} | {:.2} |", t * 1e3, t * cores * 1e9 / samples as f64);
     if let Some(out) = args.get(5) {
         let bytes: Vec<u8> =

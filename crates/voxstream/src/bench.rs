@@ -290,7 +290,24 @@ fn bench_scene(scene: &Scene, args: &BenchArgs, bounds: &TrilinearBounds) -> Res
     })
 }
 
-fn median(values: &mut [f64]) -> f64 {
+/// The median of `values`, sorted in place (by [`f64::total_cmp`]): the middle value, or with an even count the upper
+/// of the two middle ones (index `len / 2`); 0 for none.
+pub fn median(values: &mut [f64]) -> f64 {
     values.sort_by(f64::total_cmp);
     values.get(values.len() / 2).copied().unwrap_or(0.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::median;
+
+    #[test]
+    fn the_median_is_the_middle_value_or_the_upper_of_the_two_middle_ones() {
+        let mut odd = [3.0, 1.0, 2.0];
+        assert_eq!(median(&mut odd), 2.0);
+        assert_eq!(odd, [1.0, 2.0, 3.0], "sorted in place");
+        assert_eq!(median(&mut [4.0, 1.0, 3.0, 2.0]), 3.0, "an even count gives the upper middle value");
+        assert_eq!(median(&mut [5.0]), 5.0);
+        assert_eq!(median(&mut []), 0.0);
+    }
 }

@@ -9,6 +9,30 @@ use voxstream::scenes::{builtin, SceneProducer};
 use voxstream_engine::{LoopLimits, Mode, Session};
 use voxstream_render::{Camera, Image, RenderSettings};
 
+/// The repository's root folder (canonical).
+pub fn repository_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").canonicalize().unwrap()
+}
+
+/// The repository's `data/` folder (the real data and the Python environment of `scripts/fetch-real-data.sh`).
+pub fn data_folder() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data")
+}
+
+/// `data/real`, when `scripts/fetch-real-data.sh` has filled it; `None` (the test skips) where it is absent and
+/// `VOXSTREAM_SKIP_REAL_DATA` is set; panics otherwise.
+pub fn real_data_dir() -> Option<PathBuf> {
+    let dir = data_folder().join("real");
+    if dir.join("bunny_ls.reference.npy").exists() {
+        return Some(dir);
+    }
+    if std::env::var_os("VOXSTREAM_SKIP_REAL_DATA").is_some() {
+        eprintln!("real data absent and VOXSTREAM_SKIP_REAL_DATA set: skipping");
+        return None;
+    }
+    panic!("real data missing: run scripts/fetch-real-data.sh (or set VOXSTREAM_SKIP_REAL_DATA=1)");
+}
+
 /// A session on a built-in scene at `size`², with the scene's transfer function and shading.
 pub fn scene_session(name: &str, size: u32, budget_bytes: u64) -> Session<SceneProducer> {
     scene_session_with(name, size, budget_bytes, LoopLimits::default())

@@ -6,6 +6,9 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+mod common;
+
+use common::real_data_dir;
 use glam::DVec3;
 use voxstream_geometry::formats::{read_geometry, RawGeometry};
 use voxstream_geometry::triangle_bvh::closest_on_triangle;
@@ -40,18 +43,6 @@ fn read_png(path: &Path) -> (u32, u32, Vec<u8>) {
     assert_eq!(info.color_type, png::ColorType::Rgb);
     buffer.truncate(info.buffer_size());
     (info.width, info.height, buffer)
-}
-
-fn real_data_dir() -> Option<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/real");
-    if dir.join("bunny_ls.reference.npy").exists() {
-        return Some(dir);
-    }
-    if std::env::var_os("VOXSTREAM_SKIP_REAL_DATA").is_some() {
-        eprintln!("real data absent and VOXSTREAM_SKIP_REAL_DATA set: skipping");
-        return None;
-    }
-    panic!("real data missing: run scripts/fetch-real-data.sh (or set VOXSTREAM_SKIP_REAL_DATA=1)");
 }
 
 /// A UV sphere of radius 1 around (0.2, −0.1, 0.3): vertices and outward triangles.

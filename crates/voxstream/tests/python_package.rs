@@ -7,12 +7,13 @@
 //! The wheel builds into this build's `target/` (maturin runs cargo in the same workspace and environment), so only
 //! the module itself and the few crates whose features differ for it are compiled again.
 
-use std::path::Path;
 use std::process::Command;
+
+mod common;
 
 #[test]
 fn the_python_package_builds_installs_and_passes_pytest() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let root = common::repository_root();
     // This test binary is target/<profile>/deps/python_package-…: its build's target folder is three levels up.
     let exe = std::env::current_exe().expect("test binary path");
     let target = exe.ancestors().nth(3).expect("target folder").to_path_buf();

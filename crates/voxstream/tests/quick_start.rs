@@ -14,9 +14,9 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-fn repository() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").canonicalize().unwrap()
-}
+mod common;
+
+use common::repository_root;
 
 /// The first `cargo run` line of README.md's "Quick start" code block, without its comment.
 fn main_command(readme: &str) -> String {
@@ -56,7 +56,7 @@ fn tail(text: &str, lines: usize) -> String {
 
 #[test]
 fn readme_main_command_renders_the_default_scene_in_a_clean_checkout() {
-    let root = repository();
+    let root = repository_root();
     let command = main_command(&std::fs::read_to_string(root.join("README.md")).unwrap());
     assert!(command.starts_with("cargo run"), "{command}");
 

@@ -6,18 +6,18 @@
 //! The commands that read `data/real/` need `scripts/fetch-real-data.sh`; with `VOXSTREAM_SKIP_REAL_DATA=1` and no
 //! data they are skipped (and said to be).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
+
+mod common;
+
+use common::repository_root;
 
 /// Largest difference of a channel (of 255) that counts as equal: the PNGs are 8-bit, and a different libm may
 /// round a sample differently.
 const CHANNEL_TOLERANCE: u8 = 2;
 /// Fraction of pixels that may differ by more than the tolerance.
 const MAX_DIFFERING_FRACTION: f64 = 0.001;
-
-fn repository() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").canonicalize().unwrap()
-}
 
 /// The `voxstream` commands of README.md, in order, from code blocks (continuation lines joined) and from backticks.
 fn readme_commands(readme: &str) -> Vec<String> {
@@ -66,7 +66,7 @@ fn decode(path: &Path) -> (Vec<u8>, u32, u32) {
 
 #[test]
 fn readme_pictures_match_what_the_build_renders() {
-    let root = repository();
+    let root = repository_root();
     let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
     let commands = readme_commands(&readme);
     let update = std::env::var_os("VOXSTREAM_UPDATE_README_IMAGES").is_some();

@@ -5,6 +5,9 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+mod common;
+
+use common::{data_folder, real_data_dir};
 use glam::DVec3;
 use voxstream::render_command::{default_store_transfer_function, store_camera, store_placement};
 use voxstream_engine::{LoopLimits, Mode, Session};
@@ -33,22 +36,10 @@ fn volumes() -> Vec<(&'static str, &'static str, Option<RawLayout>)> {
     ]
 }
 
-fn data_dir() -> Option<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/real");
-    if dir.join("bunny_ls.reference.npy").exists() {
-        return Some(dir);
-    }
-    if std::env::var_os("VOXSTREAM_SKIP_REAL_DATA").is_some() {
-        eprintln!("real data absent and VOXSTREAM_SKIP_REAL_DATA set: skipping");
-        return None;
-    }
-    panic!("real data missing: run scripts/fetch-real-data.sh (or set VOXSTREAM_SKIP_REAL_DATA=1)");
-}
-
 /// The Python of the project's virtual environment (`data/venv`, made by `scripts/fetch-real-data.sh`), which has
 /// zarr-python and numpy.
 fn venv_python() -> PathBuf {
-    let python = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/venv/bin/python");
+    let python = data_folder().join("venv/bin/python");
     assert!(python.exists(), "{} missing: run scripts/fetch-real-data.sh", python.display());
     python
 }
@@ -87,7 +78,7 @@ fn scratch(name: &str) -> PathBuf {
 
 #[test]
 fn level_zero_equals_the_independently_decoded_source() {
-    let Some(dir) = data_dir() else { return };
+    let Some(dir) = real_data_dir() else { return };
     let work = scratch("exact");
     for (file, name, raw) in volumes() {
         let reader = import(&dir, file, raw.as_ref(), &work.join(format!("{name}.zarr")));
@@ -276,7 +267,7 @@ const MIN_PSNR_DB: f64 = 35.0;
 
 #[test]
 fn renders_match_a_brute_force_march_of_the_dense_array() {
-    let Some(dir) = data_dir() else { return };
+    let Some(dir) = real_data_dir() else { return };
     let work = scratch("render");
     let size = 96;
     for (file, name, raw) in volumes().into_iter().filter(|v| v.1 != "liver") {
@@ -313,7 +304,7 @@ const MIN_ISO_PSNR_DB: f64 = 40.0;
 
 #[test]
 fn isosurfaces_match_a_brute_force_search_of_the_dense_array() {
-    let Some(dir) = data_dir() else { return };
+    let Some(dir) = real_data_dir() else { return };
     let work = scratch("isosurface");
     let size = 96;
     // Scans and a level set; the isovalue halfway through the bulk of each one's values.
@@ -353,7 +344,7 @@ fn isosurfaces_match_a_brute_force_search_of_the_dense_array() {
 #[test]
 fn a_standard_zarr_reader_opens_the_store() {
     // zarr-python (installed by scripts/fetch-real-data.sh) reads the store: metadata, exact level 0, the pyramid.
-    let Some(dir) = data_dir() else { return };
+    let Some(dir) = real_data_dir() else { return };
     let work = scratch("zarr-python");
     for (file, name, raw) in volumes().into_iter().filter(|v| v.1 == "mni152_t1" || v.1 == "skull_2") {
         let store = work.join(format!("{name}.zarr"));
@@ -376,7 +367,7 @@ fn a_standard_zarr_reader_opens_the_store() {
 
 #[test]
 fn streaming_and_in_memory_producers_give_the_same_image() {
-    let Some(dir) = data_dir() else { return };
+    let Some(dir) = real_data_dir() else { return };
     let work = scratch("in-memory");
     let reader = import(&dir, "mni152_t1.nii.gz", None, &work.join("mni.zarr"));
     let range = reader.attributes().value_range;
@@ -405,7 +396,7 @@ fn streaming_and_in_memory_producers_give_the_same_image() {
 fn foreign_ome_zarr_v2_and_v3_render_like_the_native_store() {
     // OME-Zarr written by zarr-python (v3/0.5 and v2/0.4 with blosc, a pyramid that rounds down, no voxstream
     // attributes) renders like voxstream's own import of the same scan.
-    let Some(dir) = data_dir() else { return };
+    let Some(dir) = real_data_dir() else { return };
     let work = scratch("foreign");
     let native = import(&dir, "mni152_t1.nii.gz", None, &work.join("native.zarr"));
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/make_foreign_ome_zarr.py");
@@ -464,7 +455,7 @@ fn the_gpu_renders_real_stores_and_a_foreign_ome_zarr_like_the_cpu() {
     // The GPU renderer (crates/voxstream-gpu) against its reference, the CPU ray caster, on real scans: voxstream's
     // own stores (MRI, shaded CT) and an OME-Zarr written by zarr-python. PSNR ≥ 40 dB, as for the built-in scenes
     // (crates/voxstream/tests/gpu_backend.rs). Needs a Vulkan driver (CI installs Mesa's lavapipe).
-    let Some(dir) = data_dir() else { return };
+    let Some(dir) = real_data_dir() else { return };
     let work = scratch("gpu");
     let native = import(&dir, "mni152_t1.nii.gz", None, &work.join("mni.zarr"));
     let frog = import(&dir, "frog_tissues.vti", None, &work.join("frog.zarr"));

@@ -13,17 +13,13 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{import_ball, scratch, stderr, voxstream};
+use common::{data_folder, import_ball, repository_root, scratch, stderr, voxstream};
 
 const NGINX: &str = "/usr/sbin/nginx";
 
-fn repository_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").canonicalize().unwrap()
-}
-
 /// The project's Python environment (moto, boto3, zarr), made by `scripts/fetch-real-data.sh`.
 fn venv_python() -> PathBuf {
-    let python = repository_root().join("data/venv/bin/python");
+    let python = data_folder().join("venv/bin/python");
     assert!(
         python.exists(),
         "data/venv is missing: run scripts/fetch-real-data.sh (it installs moto, boto3 and zarr there)"

@@ -9,8 +9,8 @@ use voxstream::scenes::builtin;
 use voxstream_core::{BrickSlot, FeedbackBuffer, Request, TileId, TreeView};
 use voxstream_engine::{LoopLimits, Mode, Session};
 use voxstream_render::{
-    render_pass, Camera, Image, InstructionSet, IsoSurface, ProgressiveImage, RayStats, RenderSettings, Shading,
-    TransferLut,
+    render_pass, Camera, Image, InstructionSet, IsoSurface, PassInputs, ProgressiveImage, RayLoopBuild, RayStats,
+    RenderSettings, Shading, TransferLut,
 };
 
 const SIZE: u32 = 64;
@@ -70,6 +70,24 @@ fn the_image_does_not_depend_on_the_thread_count() {
 #[test]
 fn the_image_does_not_depend_on_the_instruction_set() {
     println!("this CPU: {}", InstructionSet::detected());
+    // Which build of the ray loop each setting runs: the baseline one always for `Baseline`; for `Detect`, the
+    // x86-64-v3 one exactly where this CPU has what pulp's V3 needs (checked here independently of pulp).
+    #[cfg(target_arch = "x86_64")]
+    let v3 = std::is_x86_feature_detected!("sse4.2")
+        && std::is_x86_feature_detected!("popcnt")
+        && std::is_x86_feature_detected!("avx")
+        && std::is_x86_feature_detected!("avx2")
+        && std::is_x86_feature_detected!("bmi1")
+        && std::is_x86_feature_detected!("bmi2")
+        && std::is_x86_feature_detected!("fma")
+        && std::is_x86_feature_detected!("lzcnt");
+    #[cfg(not(target_arch = "x86_64"))]
+    let v3 = false;
+    let expected = if v3 { RayLoopBuild::X86_64V3 } else { RayLoopBuild::Baseline };
+    assert_eq!(InstructionSet::Detect.build(), expected, "the detected instruction set runs the wrong build");
+    assert_eq!(InstructionSet::Baseline.build(), RayLoopBuild::Baseline, "the baseline runs another build");
+    assert_eq!(InstructionSet::Detect.gathers(), v3, "gathers follow the build");
+    assert!(!InstructionSet::Baseline.gathers(), "the baseline never gathers");
     for scene in ["shell", "sponge", "hypertexture"] {
         let (detected, _) = render_with(scene, 2, |s| s.instruction_set = InstructionSet::Detect);
         let (baseline, _) = render_with(scene, 2, |s| s.instruction_set = InstructionSet::Baseline);
@@ -156,7 +174,8 @@ type PassOutcome = (ProgressiveImage, RayStats, usize, Vec<Request>, Vec<TileId>
 fn one_pass(view: TreeView<'_>, camera: &Camera, lut: &TransferLut, settings: &RenderSettings) -> PassOutcome {
     let mut feedback = FeedbackBuffer::new(view.capacity.tiles, view.capacity.bricks);
     let mut progressive = ProgressiveImage::new(settings.width, settings.height);
-    let (stats, raw_requests) = render_pass(view, &feedback, camera, lut, settings, &mut progressive).expect("pass");
+    let (stats, raw_requests) =
+        render_pass(PassInputs { view, feedback: &feedback, camera, lut, settings }, &mut progressive).expect("pass");
     let mut requests = feedback.take_requests();
     requests.sort();
     let (tiles, bricks) = (feedback.used_tiles().collect(), feedback.used_bricks().collect());
