@@ -122,24 +122,64 @@ pub fn stderr(output: &Output) -> String {
 /// Imports a 48×40×36 u16 ball into the store `name` in `dir`, with bricks of 16 (levels of 48, 24 and 12 samples:
 /// several shards, empty bricks among them); the ball's samples fall from 3050 at its centre to 50 at its surface.
 pub fn import_ball(dir: &Path, name: &str) {
-    let (nx, ny, nz) = (48usize, 40usize, 36usize);
+    write_nrrd(&dir.join("ball.nrrd"), [48, 40, 36], "1 1 1", |i, j, k| {
+        let d = (((i as f64 - 24.0) / 18.0).powi(2)
+            + ((j as f64 - 20.0) / 16.0).powi(2)
+            + ((k as f64 - 18.0) / 14.0).powi(2))
+        .sqrt();
+        if d < 1.0 {
+            (3000.0 * (1.0 - d * d)) as u16 + 50
+        } else {
+            0
+        }
+    });
+    let out = voxstream(&["import", "ball.nrrd", "--out", name, "--brick-size", "16", "--quiet"], dir);
+    assert!(out.status.success(), "import: {}", stderr(&out));
+}
+
+/// A sample type of [`write_nrrd`]: its NRRD type name and its little-endian bytes.
+pub trait NrrdSample: Copy {
+    /// NRRD's name of the type.
+    const TYPE: &'static str;
+    /// Appends the sample's bytes, little-endian.
+    fn push(self, bytes: &mut Vec<u8>);
+}
+
+impl NrrdSample for u8 {
+    const TYPE: &'static str = "uchar";
+    fn push(self, bytes: &mut Vec<u8>) {
+        bytes.push(self);
+    }
+}
+
+impl NrrdSample for u16 {
+    const TYPE: &'static str = "ushort";
+    fn push(self, bytes: &mut Vec<u8>) {
+        bytes.extend(self.to_le_bytes());
+    }
+}
+
+/// Writes a raw NRRD of `sizes` samples (x fastest) with `spacings` ("1 1 1.2"), the sample at `(i, j, k)` being
+/// `sample(i, j, k)`: the synthetic volumes the tests import.
+pub fn write_nrrd<V: NrrdSample>(
+    path: &Path,
+    sizes: [usize; 3],
+    spacings: &str,
+    sample: impl Fn(usize, usize, usize) -> V,
+) {
+    let [nx, ny, nz] = sizes;
+    let endian = if std::mem::size_of::<V>() > 1 { "endian: little\n" } else { "" };
     let mut bytes = format!(
-        "NRRD0004\ntype: ushort\ndimension: 3\nsizes: {nx} {ny} {nz}\nspacings: 1 1 1\nencoding: raw\nendian: little\n\n"
+        "NRRD0004\ntype: {}\ndimension: 3\nsizes: {nx} {ny} {nz}\nspacings: {spacings}\nencoding: raw\n{endian}\n",
+        V::TYPE
     )
     .into_bytes();
     for k in 0..nz {
         for j in 0..ny {
             for i in 0..nx {
-                let d = (((i as f64 - 24.0) / 18.0).powi(2)
-                    + ((j as f64 - 20.0) / 16.0).powi(2)
-                    + ((k as f64 - 18.0) / 14.0).powi(2))
-                .sqrt();
-                let v = if d < 1.0 { (3000.0 * (1.0 - d * d)) as u16 + 50 } else { 0 };
-                bytes.extend(v.to_le_bytes());
+                sample(i, j, k).push(&mut bytes);
             }
         }
     }
-    std::fs::write(dir.join("ball.nrrd"), bytes).unwrap();
-    let out = voxstream(&["import", "ball.nrrd", "--out", name, "--brick-size", "16", "--quiet"], dir);
-    assert!(out.status.success(), "import: {}", stderr(&out));
+    std::fs::write(path, bytes).unwrap();
 }

@@ -14,24 +14,18 @@ fn scratch(name: &str) -> std::path::PathBuf {
 
 /// A 72×64×56 u8 NRRD: a textured ball in a box of `air` (0, or above 0 so that the value range starts there).
 fn write_ball(path: &Path, air: u8) {
-    let (nx, ny, nz) = (72usize, 64usize, 56usize);
-    let mut bytes =
-        format!("NRRD0004\ntype: uchar\ndimension: 3\nsizes: {nx} {ny} {nz}\nspacings: 1 1 1.2\nencoding: raw\n\n")
-            .into_bytes();
-    for k in 0..nz {
-        for j in 0..ny {
-            for i in 0..nx {
-                let d = (((i as f64 - 36.0) / 27.0).powi(2)
-                    + ((j as f64 - 32.0) / 24.0).powi(2)
-                    + ((k as f64 - 28.0) / 21.0).powi(2))
-                .sqrt();
-                let texture = ((i * 7 + j * 13 + k * 29) % 23) as f64;
-                let v = if d < 1.0 { (air as f64 + 180.0 * (1.0 - d * d) + texture).min(255.0) as u8 } else { air };
-                bytes.push(v);
-            }
+    common::write_nrrd(path, [72, 64, 56], "1 1 1.2", |i, j, k| {
+        let d = (((i as f64 - 36.0) / 27.0).powi(2)
+            + ((j as f64 - 32.0) / 24.0).powi(2)
+            + ((k as f64 - 28.0) / 21.0).powi(2))
+        .sqrt();
+        let texture = ((i * 7 + j * 13 + k * 29) % 23) as f64;
+        if d < 1.0 {
+            (air as f64 + 180.0 * (1.0 - d * d) + texture).min(255.0) as u8
+        } else {
+            air
         }
-    }
-    std::fs::write(path, bytes).unwrap();
+    });
 }
 
 fn read_png(path: &Path) -> Vec<u8> {

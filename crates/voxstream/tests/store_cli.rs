@@ -1,5 +1,7 @@
 //! The store through the command line: import with progress, info, render, and a corrupt brick at render time.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -16,24 +18,17 @@ fn scratch(name: &str) -> PathBuf {
 
 /// A 96×80×72 u16 NRRD: a soft ball in an empty box.
 fn write_ball(path: &Path) {
-    let (nx, ny, nz) = (96usize, 80usize, 72usize);
-    let mut bytes = format!(
-        "NRRD0004\ntype: ushort\ndimension: 3\nsizes: {nx} {ny} {nz}\nspacings: 0.5 0.5 0.6\nencoding: raw\nendian: little\n\n"
-    )
-    .into_bytes();
-    for k in 0..nz {
-        for j in 0..ny {
-            for i in 0..nx {
-                let d = (((i as f64 - 48.0) / 30.0).powi(2)
-                    + ((j as f64 - 40.0) / 28.0).powi(2)
-                    + ((k as f64 - 36.0) / 25.0).powi(2))
-                .sqrt();
-                let v = if d < 1.0 { (4000.0 * (1.0 - d * d)) as u16 + 100 } else { 0 };
-                bytes.extend(v.to_le_bytes());
-            }
+    common::write_nrrd(path, [96, 80, 72], "0.5 0.5 0.6", |i, j, k| {
+        let d = (((i as f64 - 48.0) / 30.0).powi(2)
+            + ((j as f64 - 40.0) / 28.0).powi(2)
+            + ((k as f64 - 36.0) / 25.0).powi(2))
+        .sqrt();
+        if d < 1.0 {
+            (4000.0 * (1.0 - d * d)) as u16 + 100
+        } else {
+            0
         }
-    }
-    std::fs::write(path, bytes).unwrap();
+    });
 }
 
 fn stderr(output: &Output) -> String {

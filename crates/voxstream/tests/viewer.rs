@@ -6,6 +6,8 @@
 //! Needs `xvfb-run` and `xdotool` (Debian: `apt-get install xvfb xauth xdotool libgl1-mesa-dri`); `.ci/run` installs
 //! them.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -31,29 +33,17 @@ fn require(tool: &str) {
 
 /// A 48×40×36 u16 NRRD: a large ball and a small one off to the side, so that turning the view changes the image.
 fn write_two_balls(path: &Path) {
-    let (nx, ny, nz) = (48usize, 40usize, 36usize);
-    let mut bytes = format!(
-        "NRRD0004\ntype: ushort\ndimension: 3\nsizes: {nx} {ny} {nz}\nspacings: 1 1 1\nencoding: raw\nendian: little\n\n"
-    )
-    .into_bytes();
-    for k in 0..nz {
-        for j in 0..ny {
-            for i in 0..nx {
-                let ball = |c: [f64; 3], r: f64| {
-                    let d =
-                        ((i as f64 - c[0]).powi(2) + (j as f64 - c[1]).powi(2) + (k as f64 - c[2]).powi(2)).sqrt() / r;
-                    if d < 1.0 {
-                        1.0 - d * d
-                    } else {
-                        0.0
-                    }
-                };
-                let v = 3000.0 * ball([18.0, 20.0, 18.0], 13.0) + 4000.0 * ball([38.0, 12.0, 26.0], 7.0);
-                bytes.extend((v as u16).to_le_bytes());
+    common::write_nrrd(path, [48, 40, 36], "1 1 1", |i, j, k| {
+        let ball = |c: [f64; 3], r: f64| {
+            let d = ((i as f64 - c[0]).powi(2) + (j as f64 - c[1]).powi(2) + (k as f64 - c[2]).powi(2)).sqrt() / r;
+            if d < 1.0 {
+                1.0 - d * d
+            } else {
+                0.0
             }
-        }
-    }
-    std::fs::write(path, bytes).unwrap();
+        };
+        (3000.0 * ball([18.0, 20.0, 18.0], 13.0) + 4000.0 * ball([38.0, 12.0, 26.0], 7.0)) as u16
+    });
 }
 
 fn store(dir: &Path) -> PathBuf {
