@@ -83,7 +83,28 @@ def reference(scene, size, data: Path, out: Path):
     return png
 
 
-def render_voxstream(scene, size, runs, data: Path, out: Path, step=0.5):
+def voxstream_variant(tool: str):
+    """The flags of a voxstream tool name: `voxstream` (the default), or `voxstream-` followed by dash-separated
+    parts `stepX` (--step X), `pre` (--preintegrate), `adapt` or `adaptX` (--adaptive-step [X]); e.g.
+    `voxstream-step1-pre-adapt0.05`. None if the name is not a voxstream tool."""
+    if tool == "voxstream":
+        return []
+    if not tool.startswith("voxstream-"):
+        return None
+    flags = []
+    for part in tool.removeprefix("voxstream-").split("-"):
+        if m := re.fullmatch(r"step(\d+(?:\.\d+)?)", part):
+            flags += ["--step", m.group(1)]
+        elif part == "pre":
+            flags.append("--preintegrate")
+        elif m := re.fullmatch(r"adapt(\d+(?:\.\d+)?)?", part):
+            flags += ["--adaptive-step"] + ([m.group(1)] if m.group(1) else [])
+        else:
+            raise ValueError(f"unknown part '{part}' of voxstream tool '{tool}'")
+    return flags
+
+
+def render_voxstream(scene, size, runs, data: Path, out: Path, tool="voxstream"):
     meta = volume_meta(data, scene["volume"])
     store = out / "stores" / scene["volume"]
     import_s = None
@@ -92,7 +113,10 @@ def render_voxstream(scene, size, runs, data: Path, out: Path, step=0.5):
         _, _, import_s, _ = run([VOXSTREAM, "import", meta["path"], "--dims", ",".join(map(str, meta["dims"])),
                                  "--dtype", meta["dtype"], "--spacing", ",".join(map(str, meta["spacing"])),
                                  "--out", store, "--quiet"])
-    work = out / f"voxstream-step{step:g}" / f"{scene['name']}-{size}"
+    flags = voxstream_variant(tool)
+    if "--step" not in flags:
+        flags = ["--step", "0.5"] + flags
+    work = out / tool / f"{scene['name']}-{size}"
     work.mkdir(parents=True, exist_ok=True)
     if scene["mode"] == "volume":
         (work / "tf.json").write_text(json.dumps(scene["tf"]))
@@ -105,7 +129,7 @@ def render_voxstream(scene, size, runs, data: Path, out: Path, step=0.5):
                             "--shading", scene["shading"], "--light",
                             ",".join(map(str, scene_list.headlight(scene["camera"]))),
                             "--path", work / "path.json", "--stats", work / "stats.json", "--out", work / "frame.png",
-                            "--budget-mb", BUDGET_MB, "--step", step])
+                            "--budget-mb", BUDGET_MB, *flags])
     stats = json.loads((work / "stats.json").read_text())
     frames = [ms / 1000 for ms in stats["frame_ms"]]
     image = work / f"frame_{runs:04d}.png"
@@ -183,6 +207,8 @@ def main():
     parser.add_argument("--sizes", default="512,1024")
     parser.add_argument("--scenes", default="", help="comma-separated scene names (default: all)")
     parser.add_argument("--tools", default="", help="comma-separated tools (default: all)")
+    parser.add_argument("--extra-tools", default="",
+                        help="voxstream variants to add to every volume scene, e.g. voxstream-step1-pre,voxstream-adapt")
     args = parser.parse_args()
     sizes = [int(s) for s in args.sizes.split(",")]
     wanted = set(filter(None, args.scenes.split(",")))
@@ -200,13 +226,13 @@ def main():
             ref_png = reference(scene, size, args.data, args.out)
             ref = np.asarray(Image.open(ref_png).convert("RGB"))
             row = results.get(key, {})
-            for tool in scene["tools"]:
+            tools = scene["tools"] + [t for t in args.extra_tools.split(",") if t and t not in scene["tools"]
+                                      and (scene["mode"] == "volume" or not t.startswith("voxstream-"))]
+            for tool in tools:
                 if tools_wanted and tool not in tools_wanted:
                     continue
-                if tool == "voxstream":
-                    r = render_voxstream(scene, size, args.runs, args.data, args.out)
-                elif tool == "voxstream-step1":
-                    r = render_voxstream(scene, size, args.runs, args.data, args.out, step=1.0)
+                if voxstream_variant(tool) is not None:
+                    r = render_voxstream(scene, size, args.runs, args.data, args.out, tool)
                 elif tool == "vdb_render":
                     r = render_vdb(scene, size, args.runs, args.data, args.out)
                 else:
@@ -221,7 +247,7 @@ def main():
                 row[tool] = r
             results[key] = row
             results_path.write_text(json.dumps(results, indent=1))
-            present = [t for t in scene["tools"] if t in row]
+            present = [t for t in tools if t in row]
             side_by_side([ref_png] + [row[t]["image"] for t in present],
                          ["reference"] + [f"{t} {row[t]['psnr']:.1f} dB" for t in present],
                          args.out / f"{key}.png")

@@ -42,6 +42,12 @@ MNI_FOG = {"colour": [1.0, 0.8, 0.65], "k": 0.025, "vmax": 255.0}
 MNI_SOFT = fog_tf(**MNI_FOG)
 MNI_SHADED = {"points": [[0, 0, 0, 0, 0], [60, 0.75, 0.55, 0.45, 0.0], [100, 0.9, 0.75, 0.65, 0.08],
                          [160, 1.0, 0.95, 0.9, 0.3], [255, 1.0, 1.0, 1.0, 0.5]], "unit_distance": 1.0}
+# Thin shells: narrow opacity peaks (6 values wide) at three tissue values, the kind of transfer function that
+# pre-integration is for (a peak the field crosses between two samples is integrated, not missed).
+MNI_SHELLS = {"points": [[0, 0, 0, 0, 0], [77, 1.0, 0.6, 0.3, 0.0], [80, 1.0, 0.6, 0.3, 0.5], [83, 1.0, 0.6, 0.3, 0.0],
+                         [127, 0.3, 0.9, 0.4, 0.0], [130, 0.3, 0.9, 0.4, 0.5], [133, 0.3, 0.9, 0.4, 0.0],
+                         [177, 0.4, 0.5, 1.0, 0.0], [180, 0.4, 0.5, 1.0, 0.7], [183, 0.4, 0.5, 1.0, 0.0],
+                         [255, 0, 0, 0, 0]], "unit_distance": 1.0}
 FROG = json.loads((Path(__file__).resolve().parents[2] / "docs/examples/frog-tf.json").read_text())
 DRAGON_FOG = {"colour": [0.9, 0.75, 0.55], "k": 0.03, "vmax": 1.0}
 DRAGON = fog_tf(**DRAGON_FOG)
@@ -82,6 +88,10 @@ def scenes(data: Path):
                 {"name": "mni-shaded", "volume": "mni", "mode": "volume",
                  "tf": MNI_SHADED, "shading": "phong", "camera": mni_camera,
                  "tools": ["voxstream", "voxstream-step1", "vtk-fixed-point"], "reference_step_scale": 1.0},
+                # The reference steps twice as finely: the shells are a tenth of a voxel thick where MNI is steep.
+                {"name": "mni-shells", "volume": "mni", "mode": "volume",
+                 "tf": MNI_SHELLS, "shading": "none", "camera": mni_camera,
+                 "tools": ["voxstream", "voxstream-step1", "vtk-fixed-point"], "reference_step_scale": 0.5},
             ]
     return result
 

@@ -90,6 +90,10 @@ pub struct ViewOptions {
     pub background: [f64; 3],
     /// Sample spacing as a fraction of the voxel size (`--step`).
     pub step: f64,
+    /// Pre-integrated segments between samples (`--preintegrate`).
+    pub preintegrate: bool,
+    /// The error-bounded adaptive step's tolerance (`--adaptive-step`); `None`: the fixed step.
+    pub adaptive_step: Option<f64>,
     /// Level-of-detail bias, levels (`--lod-bias`; positive is coarser).
     pub lod_bias: f64,
     /// Colour each brick by its level (`--colour-by-level`).
@@ -109,6 +113,8 @@ impl Default for ViewOptions {
             light: None,
             background: [0.0; 3],
             step: RenderSettings::default().step_factor,
+            preintegrate: RenderSettings::default().preintegrated,
+            adaptive_step: RenderSettings::default().adaptive_step,
             lod_bias: RenderSettings::default().lod_bias,
             colour_by_level: false,
             camera: CameraOptions::default(),
@@ -225,6 +231,8 @@ pub fn prepare_view(view: &ViewOptions, source: &SourceMeta) -> Result<PreparedV
         light_direction: view.light.or(source.light),
         background: view.background.map(|c| c as f32),
         step_factor: view.step,
+        preintegrated: view.preintegrate,
+        adaptive_step: view.adaptive_step,
         lod_bias: view.lod_bias,
         colour_by_level: view.colour_by_level,
         placement: source.placement,

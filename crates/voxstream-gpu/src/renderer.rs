@@ -250,6 +250,17 @@ impl GpuRenderer {
         progressive: &ProgressiveImage,
     ) -> Result<CameraFrame, RenderError> {
         settings.validate()?;
+        // The CPU's volume-rendering options the shader does not mirror yet (issue 46): refused, never ignored.
+        if settings.surfaces.is_empty() || settings.surfaces_in_volume {
+            if settings.preintegrated {
+                let (what, instead) = ("pre-integration (--preintegrate)", "--backend cpu, or drop --preintegrate");
+                return Err(GpuError::Unsupported { what, instead }.into());
+            }
+            if settings.adaptive_step.is_some() {
+                let (what, instead) = ("the adaptive step (--adaptive-step)", "--backend cpu, or drop --adaptive-step");
+                return Err(GpuError::Unsupported { what, instead }.into());
+            }
+        }
         let (width, height) = (settings.width, settings.height);
         if progressive.image.width != width || progressive.image.height != height {
             return Err(RenderError::InvalidSetting("progressive image size differs from the settings".into()));

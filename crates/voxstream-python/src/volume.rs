@@ -210,7 +210,7 @@ impl PyVolume {
     #[pyo3(signature = (*, width=512, height=512, budget_mb=256, backend="cpu", mode="converged", camera=None,
         tf_points=None, tf_file=None, iso=Vec::new(), iso_colors=Vec::new(), iso_opacities=Vec::new(),
         shadows=false, light=None, background=[0.0; 3], step=0.5, lod_bias=0.0, shading=None, blending=true,
-        float32=false))]
+        preintegrate=false, adaptive_step=None, float32=false))]
     #[allow(clippy::too_many_arguments)]
     fn render<'py>(
         &self,
@@ -233,6 +233,8 @@ impl PyVolume {
         lod_bias: f64,
         shading: Option<&str>,
         blending: bool,
+        preintegrate: bool,
+        adaptive_step: Option<f64>,
         float32: bool,
     ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyDict>)> {
         let mode = match mode {
@@ -272,6 +274,8 @@ impl PyVolume {
             light,
             background,
             step,
+            preintegrate,
+            adaptive_step,
             lod_bias,
             colour_by_level: false,
             camera: CameraOptions {

@@ -7,13 +7,15 @@
 
 use std::ops::ControlFlow;
 
-use glam::{DVec3, Vec3};
+use glam::{DVec3, Vec3, Vec4};
 
+use crate::adaptive_step::StepVariation;
 use crate::block_visibility::BlockVisibility;
 use crate::integrand::{Integrand, Sample};
 use crate::lighting::{LightingSettings, RayLight};
+use crate::preintegration::PreIntegration;
 use crate::settings::RenderSettings;
-use crate::step_table::{StepLength, StepTable};
+use crate::step_table::{StepLength, StepTable, STEPS_PER_OCTAVE};
 use crate::transfer_function::TransferLut;
 
 /// What stays the same for every ray of a frame.
@@ -24,6 +26,10 @@ pub struct EmissionAbsorptionSettings {
     stop_below: f32,
     /// Colour samples by their data's tree level ([`RenderSettings::colour_by_level`]).
     colour_by_level: bool,
+    /// Pre-integrated segments between samples ([`RenderSettings::preintegrated`]).
+    preintegrated: bool,
+    /// The adaptive step's tolerance ([`RenderSettings::adaptive_step`]).
+    adaptive_step: Option<f64>,
 }
 
 impl EmissionAbsorptionSettings {
@@ -33,8 +39,37 @@ impl EmissionAbsorptionSettings {
             lighting: LightingSettings::new(settings),
             stop_below: 1.0 - settings.opacity_cutoff,
             colour_by_level: settings.colour_by_level,
+            preintegrated: settings.preintegrated,
+            adaptive_step: settings.adaptive_step,
         }
     }
+}
+
+/// A pre-integrating ray's last sample, whose segment to the next sample is not known yet.
+#[derive(Clone, Copy, Debug)]
+struct Pending {
+    t: f64,
+    value: f32,
+    gradient: [f32; 3],
+    /// The step it stands for.
+    step: f64,
+}
+
+/// What a pre-integrating ray keeps between samples ([`crate::preintegration`]).
+///
+/// Samples stand for the ray as before (each its step around it, tiling the ray); pre-integrated, the ray between
+/// two consecutive samples is one segment, integrated over the values between theirs. A run of consecutive samples
+/// is closed at both ends by half a step of its end sample's own value, so a run accounts for exactly the distance
+/// its samples stand for: where samples are not consecutive (blocks skipped as invisible between them, a constant
+/// node, the volume's end) nothing is integrated across the gap.
+#[derive(Clone, Copy, Debug)]
+struct PreIntegrating<'a> {
+    table: &'a PreIntegration,
+    /// The half-step table of the current step.
+    half_table: Option<&'a StepTable>,
+    /// The current step, world units.
+    step: f64,
+    pending: Option<Pending>,
 }
 
 /// The colour and opacity accumulated along one ray.
@@ -54,6 +89,10 @@ pub struct EmissionAbsorption<'a> {
     /// The bits of [`Integrand::can_contribute`] per occupancy block, when the caller made them for this ray's
     /// transfer function and tree view ([`EmissionAbsorption::with_block_visibility`]).
     block_visibility: Option<&'a BlockVisibility>,
+    /// With [`RenderSettings::preintegrated`]: the segments' state.
+    preintegrating: Option<PreIntegrating<'a>>,
+    /// With [`RenderSettings::adaptive_step`]: the variation sums and the tolerance.
+    adaptive: Option<(&'a StepVariation, f64)>,
 }
 
 impl<'a> EmissionAbsorption<'a> {
@@ -75,6 +114,13 @@ impl<'a> EmissionAbsorption<'a> {
             color: Vec3::ZERO,
             transmittance: 1.0,
             block_visibility: None,
+            preintegrating: settings.preintegrated.then(|| PreIntegrating {
+                table: lut.preintegration(),
+                half_table: None,
+                step: 0.0,
+                pending: None,
+            }),
+            adaptive: settings.adaptive_step.map(|tolerance| (lut.variation(), tolerance)),
         }
     }
 
@@ -88,24 +134,116 @@ impl<'a> EmissionAbsorption<'a> {
 
     /// Premultiplied `[r, g, b]` and opacity.
     pub fn result(&self) -> ([f32; 3], f32) {
+        // A pre-integrating ray's last half step is still to be composited.
+        if let Some(Pending { value, gradient, .. }) = self.preintegrating.and_then(|p| p.pending) {
+            let half = self.preintegrating.and_then(|p| p.half_table).map_or(Vec4::ZERO, |t| t.lookup(value));
+            if let Some((color, alpha)) = self.shaded(half.truncate(), half.w, gradient) {
+                let color = self.color + self.transmittance * color;
+                return (color.to_array(), 1.0 - self.transmittance * (1.0 - alpha));
+            }
+        }
         (self.color.to_array(), 1.0 - self.transmittance)
+    }
+
+    /// A step's premultiplied colour as composited: tinted by level, shaded; `None` where it is transparent.
+    #[inline(always)]
+    fn shaded(&self, premultiplied: Vec3, alpha: f32, gradient: [f32; 3]) -> Option<(Vec3, f32)> {
+        if alpha <= 0.0 {
+            return None;
+        }
+        let premultiplied = match self.tint {
+            None => premultiplied,
+            Some(tint) => tint * alpha,
+        };
+        Some(match &self.light {
+            Some(light) => (light.shade(premultiplied, alpha, Vec3::from(gradient) * self.gradient_scale), alpha),
+            None => (premultiplied, alpha),
+        })
+    }
+
+    /// Composites one step's premultiplied colour and opacity (unshaded) behind what the ray holds.
+    #[inline(always)]
+    fn composite(&mut self, premultiplied: Vec3, alpha: f32, gradient: [f32; 3]) -> ControlFlow<()> {
+        if let Some((color, alpha)) = self.shaded(premultiplied, alpha, gradient) {
+            self.color += self.transmittance * color;
+            self.transmittance *= 1.0 - alpha;
+        }
+        if self.transmittance <= self.stop_below {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    }
+
+    /// Closes a pre-integrated run: its last sample's half step behind it.
+    #[inline]
+    fn close_run(&mut self) -> ControlFlow<()> {
+        let Some(state) = self.preintegrating.as_mut() else { return ControlFlow::Continue(()) };
+        let (Some(last), Some(half)) = (state.pending.take(), state.half_table) else {
+            return ControlFlow::Continue(());
+        };
+        let entry = half.lookup(last.value);
+        self.composite(entry.truncate(), entry.w, last.gradient)
+    }
+
+    /// One sample of a pre-integrating ray: the segment from the last sample when it is the one just before, else
+    /// the last run closed and a new one opened by half a step of this sample's value.
+    #[inline(always)]
+    fn sample_preintegrated(&mut self, sample: Sample) -> ControlFlow<()> {
+        let Some(state) = self.preintegrating else { return ControlFlow::Continue(()) };
+        let consecutive = state.pending.filter(|last| {
+            // Consecutive samples are half of each one's step apart (the steps may differ across segments).
+            let expected = 0.5 * (last.step + state.step);
+            (sample.t - last.t - expected).abs() <= 1e-3 * state.step
+        });
+        let next = Pending { t: sample.t, value: sample.value, gradient: sample.gradient, step: state.step };
+        let flow = match consecutive {
+            Some(last) => {
+                let entry = state.table.segment(last.value, sample.value, (sample.t - last.t) as f32);
+                // Shaded by the normal at the segment's middle (as a sample is by its own, at the middle of its
+                // step): the two ends' gradients averaged.
+                let gradient = std::array::from_fn(|a| 0.5 * (last.gradient[a] + sample.gradient[a]));
+                self.composite(entry.truncate(), entry.w, gradient)
+            }
+            None => {
+                if self.close_run().is_break() {
+                    return ControlFlow::Break(());
+                }
+                let entry = state.half_table.map_or(Vec4::ZERO, |t| t.lookup(sample.value));
+                self.composite(entry.truncate(), entry.w, sample.gradient)
+            }
+        };
+        if let Some(state) = self.preintegrating.as_mut() {
+            state.pending = Some(next);
+        }
+        flow
     }
 }
 
 impl Integrand for EmissionAbsorption<'_> {
     #[inline(always)]
     fn can_contribute(&self, lower: f32, upper: f32) -> bool {
+        // Pre-integrated, a segment reaching into a visible brick or block from a sample in an invisible one
+        // integrates values of both: the invisible one's samples are needed too (handing a run its front sample
+        // would let skipping stay; until then pre-integration skips only where the whole function is transparent).
+        if self.preintegrating.is_some() {
+            return self.lut.is_visible_in(0.0, 1.0);
+        }
         self.lut.is_visible_in(lower, upper)
     }
 
     #[inline(always)]
     fn contributes_throughout(&self, lower: f32, upper: f32) -> bool {
+        if self.preintegrating.is_some() {
+            return self.lut.is_visible_in(0.0, 1.0);
+        }
         self.lut.is_visible_throughout(lower, upper)
     }
 
     #[inline(always)]
     fn block_visibility(&self) -> Option<&BlockVisibility> {
-        self.block_visibility
+        // The bits were made for point samples' visibility.
+        self.block_visibility.filter(|_| self.preintegrating.is_none())
     }
 
     #[inline]
@@ -113,9 +251,28 @@ impl Integrand for EmissionAbsorption<'_> {
         self.light.is_some()
     }
 
+    #[inline(always)]
+    fn adapts_step(&self) -> bool {
+        self.adaptive.is_some()
+    }
+
+    #[inline]
+    fn adapt_step(&self, lower: f32, upper: f32, base: f64) -> f64 {
+        match self.adaptive {
+            Some((variation, tolerance)) => variation.step(lower, upper, base, tolerance),
+            None => base,
+        }
+    }
+
     #[inline]
     fn set_step(&mut self, step: StepLength) {
         self.table = Some(self.lut.step_table(step));
+        if let Some(state) = self.preintegrating.as_mut() {
+            // Half the step: one octave down the ladder.
+            let half = StepLength { index: step.index + STEPS_PER_OCTAVE, world: 0.5 * step.world };
+            state.half_table = Some(self.lut.step_table(half));
+            state.step = step.world;
+        }
     }
 
     #[inline]
@@ -127,6 +284,9 @@ impl Integrand for EmissionAbsorption<'_> {
 
     #[inline(always)]
     fn sample(&mut self, sample: Sample) -> ControlFlow<()> {
+        if self.preintegrating.is_some() {
+            return self.sample_preintegrated(sample);
+        }
         let Some(table) = self.table else { return ControlFlow::Continue(()) };
         let entry = table.lookup(sample.value);
         let premultiplied = match self.tint {
@@ -156,6 +316,9 @@ impl Integrand for EmissionAbsorption<'_> {
 
     #[inline]
     fn constant(&mut self, from: f64, to: f64, value: f32) -> ControlFlow<()> {
+        if self.close_run().is_break() {
+            return ControlFlow::Break(());
+        }
         let Some((color, alpha)) = constant_emission(self.lut, value, to - from) else {
             return ControlFlow::Continue(());
         };

@@ -100,6 +100,21 @@ pub trait Integrand {
     /// Whether [`Sample::gradient`] is needed (it costs a few operations per sample).
     fn wants_gradient(&self) -> bool;
 
+    /// Whether this integrand chooses its step per brick segment ([`Integrand::adapt_step`]); `false` (the
+    /// default): the fixed step, and the traversal asks nothing.
+    #[inline(always)]
+    fn adapts_step(&self) -> bool {
+        false
+    }
+
+    /// The step (world units of `t`) for a brick segment whose values lie in `[lower, upper]`, given the fixed step
+    /// `base` there: at least `base` ([`crate::adaptive_step`]). Only asked when [`Integrand::adapts_step`].
+    #[inline(always)]
+    fn adapt_step(&self, lower: f32, upper: f32, base: f64) -> f64 {
+        let _ = (lower, upper);
+        base
+    }
+
     /// The step that every following sample stands for, until the next call.
     fn set_step(&mut self, step: StepLength);
 

@@ -26,6 +26,7 @@
 //! assert!(lut.lookup(1.0).sigma > lut.lookup(0.5).sigma);
 //! ```
 
+pub mod adaptive_step;
 pub mod block_visibility;
 pub mod camera;
 pub mod cell_intersection;
@@ -40,6 +41,7 @@ pub mod integrand;
 pub mod isosurface;
 pub mod lighting;
 pub mod paraview_colormap;
+pub mod preintegration;
 pub mod ray_caster;
 pub mod sampler;
 pub mod settings;

@@ -84,6 +84,15 @@ pub struct RenderSettings {
     pub background: [f32; 3],
     /// Ray-march step as a fraction of the sampled level's voxel edge.
     pub step_factor: f64,
+    /// Volume rendering: integrate the transfer function over each segment between two samples, the field taken as
+    /// linear between them ([`crate::preintegration`], Engel et al. 2001), instead of taking each sample's value for
+    /// its whole step.
+    pub preintegrated: bool,
+    /// Volume rendering: the error-bounded adaptive step ([`crate::adaptive_step`]) with this tolerance (optical
+    /// depth per monotone stretch of a ray): each brick segment steps by up to
+    /// [`crate::adaptive_step::MAX_STEP_GROWTH`] times the fixed step where the transfer function varies little
+    /// over the brick's values. `None`: the fixed step everywhere.
+    pub adaptive_step: Option<f64>,
     /// Shifts the level of detail: positive = finer than one voxel per pixel.
     pub lod_bias: f64,
     /// Placement of the volume in the world.
@@ -187,6 +196,8 @@ impl Default for RenderSettings {
             light_direction: None,
             background: [0.0; 3],
             step_factor: 0.5,
+            preintegrated: false,
+            adaptive_step: None,
             lod_bias: 0.0,
             placement: VolumePlacement::default(),
             opacity_cutoff: 0.998,
@@ -221,6 +232,11 @@ impl RenderSettings {
         }
         if !(self.step_factor.is_finite() && self.step_factor > 0.01 && self.step_factor <= 4.0) {
             return bad(format!("step factor must be in (0.01, 4], got {}", self.step_factor));
+        }
+        if let Some(tolerance) = self.adaptive_step {
+            if !(tolerance.is_finite() && tolerance > 0.0 && tolerance <= 10.0) {
+                return bad(format!("adaptive step tolerance must be in (0, 10], got {tolerance}"));
+            }
         }
         if !self.lod_bias.is_finite() {
             return bad("lod bias must be finite".into());

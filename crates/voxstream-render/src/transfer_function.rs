@@ -7,7 +7,12 @@
 //! For rendering, the function is tabulated as colour and extinction `σ = −ln(1 − alpha) / unit_distance`, so the
 //! opacity of any step `Δt` is `1 − exp(−σ·Δt)` (the opacity correction of GigaVoxels [P09] §6 / [R08] §5).
 
+use std::sync::OnceLock;
+
 use serde::Deserialize;
+
+use crate::adaptive_step::StepVariation;
+use crate::preintegration::PreIntegration;
 
 use crate::error::RenderError;
 use crate::sampler::floor_index;
@@ -136,6 +141,10 @@ pub struct TransferLut {
     data_range: [f64; 2],
     /// The same table pre-corrected for each ray-march step used so far.
     step_tables: StepTables,
+    /// Its integral functions, for pre-integrated segments (built on first use).
+    preintegration: OnceLock<PreIntegration>,
+    /// Its variation sums, for the adaptive step (built on first use).
+    variation: OnceLock<StepVariation>,
 }
 
 /// Entries in the table.
@@ -167,6 +176,8 @@ impl TransferLut {
             scale: (LUT_SIZE - 1) as f32,
             data_range: [lower as f64, upper as f64],
             step_tables: StepTables::default(),
+            preintegration: OnceLock::new(),
+            variation: OnceLock::new(),
         }
     }
 
@@ -185,6 +196,18 @@ impl TransferLut {
     #[inline]
     pub fn step_table(&self, step: StepLength) -> &StepTable {
         self.step_tables.get(&self.entries, step)
+    }
+
+    /// The integral functions for pre-integrated segments ([`crate::preintegration`]; built on first use).
+    #[inline]
+    pub fn preintegration(&self) -> &PreIntegration {
+        self.preintegration.get_or_init(|| PreIntegration::new(&self.entries))
+    }
+
+    /// The variation sums for the adaptive step ([`crate::adaptive_step`]; built on first use).
+    #[inline]
+    pub fn variation(&self) -> &StepVariation {
+        self.variation.get_or_init(|| StepVariation::new(&self.entries))
     }
 
     /// The [`LUT_SIZE`] entries, evenly spaced over the normalised values `[0, 1]` (what a GPU uploads).

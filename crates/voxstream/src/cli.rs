@@ -194,6 +194,16 @@ pub struct LookFlags {
     /// Ray-march step as a fraction of the sampled voxel.
     #[arg(long, default_value_t = 0.5)]
     pub step: f64,
+    /// Volume rendering: integrate the transfer function over each segment between two samples, the field taken as
+    /// linear between them (pre-integration, Engel et al. 2001), so that thin features of the transfer function
+    /// are not missed between samples at longer steps. CPU backend.
+    #[arg(long)]
+    pub preintegrate: bool,
+    /// Volume rendering: the error-bounded adaptive step: each brick steps by up to four times --step where the
+    /// transfer function varies little over the brick's values, keeping the error of each monotone stretch of a
+    /// ray within TOLERANCE (optical depth; default 0.05). CPU backend.
+    #[arg(long, value_name = "TOLERANCE", num_args = 0..=1, default_missing_value = "0.05")]
+    pub adaptive_step: Option<f64>,
     /// Level-of-detail bias (positive = finer than one voxel per pixel).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub lod_bias: f64,

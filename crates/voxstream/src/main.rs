@@ -103,6 +103,8 @@ fn unreachable_default() -> RenderArgs {
             light: None,
             background: [0.0; 3],
             step: 0.5,
+            preintegrate: false,
+            adaptive_step: None,
             lod_bias: 0.0,
             colour_by_level: false,
             backend: voxstream::cli::Backend::Cpu,

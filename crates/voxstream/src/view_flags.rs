@@ -47,6 +47,8 @@ pub fn view_options(look: &LookFlags, width: u32, height: u32) -> ViewOptions {
         light: look.light,
         background: look.background,
         step: look.step,
+        preintegrate: look.preintegrate,
+        adaptive_step: look.adaptive_step,
         lod_bias: look.lod_bias,
         colour_by_level: look.colour_by_level,
         camera: CameraOptions {

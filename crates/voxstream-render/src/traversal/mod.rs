@@ -41,6 +41,8 @@ mod descent;
 mod lanes;
 mod segments;
 #[cfg(test)]
+mod step_choice_tests;
+#[cfg(test)]
 mod test_tree;
 
 use glam::DVec3;

@@ -129,7 +129,31 @@ impl<'a> Traversal<'a> {
                     let sampled_voxel = self.level_voxel[self.sampled_level(&fine, stand_in) as usize];
                     integrand.set_level(fine.level);
                     let blend = coarse.and(self.view.brick_blends.get(fine.slot.0 as usize)).filter(|b| !b.is_full());
-                    let desired_step = sampled_voxel.max(footprint_voxel) * self.step_factor / speed;
+                    let mut desired_step = sampled_voxel.max(footprint_voxel) * self.step_factor / speed;
+                    // The cone's level weight (1 where only coarser data exists).
+                    let cone = match coarse {
+                        Some(c) if blend_level => {
+                            let footprint = self.footprint(0.5 * (t + t_exit), ray.spread);
+                            // At least the fine level there (the usual case): the weight is 1 without the
+                            // logarithm.
+                            if footprint <= self.footprint_within_level[c.level as usize + 1] {
+                                1.0
+                            } else {
+                                (self.level_of_footprint(footprint) - c.level as f64).clamp(0.0, 1.0) as f32
+                            }
+                        }
+                        _ => 1.0,
+                    };
+                    if integrand.adapts_step() {
+                        // Every sample's value lies in the fine brick's range, or, where the coarse brick is blended
+                        // in, between it and the coarse one's.
+                        let [mut lo, mut hi] = self.view.brick_range(fine.slot);
+                        if let Some(c) = coarse.filter(|_| cone < 1.0 || blend.is_some()) {
+                            let [c_lo, c_hi] = self.view.brick_range(c.slot);
+                            (lo, hi) = (lo.min(c_lo), hi.max(c_hi));
+                        }
+                        desired_step = integrand.adapt_step(lo, hi, desired_step);
+                    }
                     let segment_step = StepLength::keep_or_at_most(walk.step, desired_step);
                     if walk.step != Some(segment_step) {
                         walk.step = Some(segment_step);
@@ -145,21 +169,8 @@ impl<'a> Traversal<'a> {
                         ControlFlow::Continue(())
                     } else {
                         let coarse = coarse.and_then(|c| {
-                            // The cone's level weight (1 where only coarser data exists), capped by the fine brick's
-                            // blending caps (Thiele et al.: fade-in, coarser neighbours) at the first and the last
+                            // The cone's level weight, capped by the fine brick's blending caps (Thiele et al.: fade-in, coarser neighbours) at the first and the last
                             // sample, and ramped linearly between them.
-                            let cone = if blend_level {
-                                let footprint = self.footprint(0.5 * (t + t_exit), ray.spread);
-                                // At least the fine level there (the usual case): the weight is 1 without the
-                                // logarithm.
-                                if footprint <= self.footprint_within_level[c.level as usize + 1] {
-                                    1.0
-                                } else {
-                                    (self.level_of_footprint(footprint) - c.level as f64).clamp(0.0, 1.0) as f32
-                                }
-                            } else {
-                                1.0
-                            };
                             let (cap_first, cap_last) = match blend {
                                 Some(blend) => {
                                     let last = first + (count - 1) as f64 * dt;
