@@ -26,8 +26,6 @@ pub struct EmissionAbsorptionSettings {
     stop_below: f32,
     /// Colour samples by their data's tree level ([`RenderSettings::colour_by_level`]).
     colour_by_level: bool,
-    /// Pre-integrated segments between samples ([`RenderSettings::preintegrated`]).
-    preintegrated: bool,
     /// The adaptive step's tolerance ([`RenderSettings::adaptive_step`]).
     adaptive_step: Option<f64>,
 }
@@ -39,7 +37,6 @@ impl EmissionAbsorptionSettings {
             lighting: LightingSettings::new(settings),
             stop_below: 1.0 - settings.opacity_cutoff,
             colour_by_level: settings.colour_by_level,
-            preintegrated: settings.preintegrated,
             adaptive_step: settings.adaptive_step,
         }
     }
@@ -60,8 +57,10 @@ struct Pending {
 /// Samples stand for the ray as before (each its step around it, tiling the ray); pre-integrated, the ray between
 /// two consecutive samples is one segment, integrated over the values between theirs. A run of consecutive samples
 /// is closed at both ends by half a step of its end sample's own value, so a run accounts for exactly the distance
-/// its samples stand for: where samples are not consecutive (blocks skipped as invisible between them, a constant
-/// node, the volume's end) nothing is integrated across the gap.
+/// its samples stand for: where samples are not consecutive (a constant node, the volume's end, invisible blocks
+/// skipped) nothing is integrated across the gap. The traversal widens the runs it hands over by the skipped sample
+/// on either side ([`Integrand::DILATED_RUNS`]), whose own step is transparent but whose segment to the run is not
+/// always.
 #[derive(Clone, Copy, Debug)]
 struct PreIntegrating<'a> {
     table: &'a PreIntegration,
@@ -70,10 +69,18 @@ struct PreIntegrating<'a> {
     /// The current step, world units.
     step: f64,
     pending: Option<Pending>,
+    /// The value one step after `pending` where the traversal handed it over as a run's back edge
+    /// ([`Integrand::edge`]): if the ray does not go on from `pending` by the next sample, the run is closed by the
+    /// segment towards it (the skipped sample's) instead of a half step.
+    back: Option<(f64, f32)>,
+    /// A front edge: `(t, value)` one step before where the next run starts (a skipped sample), whose segment to
+    /// the run's first sample then opens the run instead of a half step.
+    front: Option<(f64, f32)>,
 }
 
-/// The colour and opacity accumulated along one ray.
-pub struct EmissionAbsorption<'a> {
+/// The colour and opacity accumulated along one ray; `PRE`: pre-integrated segments between samples
+/// ([`RenderSettings::preintegrated`]), a type of its own so that the default ray's sample loop holds no test of it.
+pub struct EmissionAbsorption<'a, const PRE: bool = false> {
     lut: &'a TransferLut,
     table: Option<&'a StepTable>,
     light: Option<RayLight>,
@@ -95,14 +102,14 @@ pub struct EmissionAbsorption<'a> {
     adaptive: Option<(&'a StepVariation, f64)>,
 }
 
-impl<'a> EmissionAbsorption<'a> {
+impl<'a, const PRE: bool> EmissionAbsorption<'a, PRE> {
     /// A ray with nothing accumulated; `volume_direction` is the ray's direction in volume units per world unit.
     #[inline(always)]
     pub fn new(
         lut: &'a TransferLut,
         settings: &EmissionAbsorptionSettings,
         volume_direction: DVec3,
-    ) -> EmissionAbsorption<'a> {
+    ) -> EmissionAbsorption<'a, PRE> {
         EmissionAbsorption {
             lut,
             table: None,
@@ -114,11 +121,13 @@ impl<'a> EmissionAbsorption<'a> {
             color: Vec3::ZERO,
             transmittance: 1.0,
             block_visibility: None,
-            preintegrating: settings.preintegrated.then(|| PreIntegrating {
+            preintegrating: PRE.then(|| PreIntegrating {
                 table: lut.preintegration(),
                 half_table: None,
                 step: 0.0,
                 pending: None,
+                back: None,
+                front: None,
             }),
             adaptive: settings.adaptive_step.map(|tolerance| (lut.variation(), tolerance)),
         }
@@ -127,7 +136,7 @@ impl<'a> EmissionAbsorption<'a> {
     /// The same ray, reading occupancy blocks' visibility from `visibility` when given, which must have been made
     /// for the transfer function `lut` of this ray and the tree view it is traced through.
     #[inline(always)]
-    pub fn with_block_visibility(mut self, visibility: Option<&'a BlockVisibility>) -> EmissionAbsorption<'a> {
+    pub fn with_block_visibility(mut self, visibility: Option<&'a BlockVisibility>) -> EmissionAbsorption<'a, PRE> {
         self.block_visibility = visibility;
         self
     }
@@ -135,9 +144,12 @@ impl<'a> EmissionAbsorption<'a> {
     /// Premultiplied `[r, g, b]` and opacity.
     pub fn result(&self) -> ([f32; 3], f32) {
         // A pre-integrating ray's last half step is still to be composited.
-        if let Some(Pending { value, gradient, .. }) = self.preintegrating.and_then(|p| p.pending) {
-            let half = self.preintegrating.and_then(|p| p.half_table).map_or(Vec4::ZERO, |t| t.lookup(value));
-            if let Some((color, alpha)) = self.shaded(half.truncate(), half.w, gradient) {
+        if !PRE {
+            return (self.color.to_array(), 1.0 - self.transmittance);
+        }
+        // The ray ends here (outside the volume, or opaque): a back edge is no data of the ray's.
+        if let Some((entry, gradient)) = self.closing(false) {
+            if let Some((color, alpha)) = self.shaded(entry.truncate(), entry.w, gradient) {
                 let color = self.color + self.transmittance * color;
                 return (color.to_array(), 1.0 - self.transmittance * (1.0 - alpha));
             }
@@ -177,20 +189,56 @@ impl<'a> EmissionAbsorption<'a> {
 
     /// Closes a pre-integrated run: its last sample's half step behind it.
     #[inline]
-    fn close_run(&mut self) -> ControlFlow<()> {
-        let Some(state) = self.preintegrating.as_mut() else { return ControlFlow::Continue(()) };
-        let (Some(last), Some(half)) = (state.pending.take(), state.half_table) else {
-            return ControlFlow::Continue(());
+    fn close_run(&mut self, towards_back: bool) -> ControlFlow<()> {
+        let closing = self.closing(towards_back);
+        if let Some(state) = self.preintegrating.as_mut() {
+            (state.pending, state.back) = (None, None);
+        }
+        match closing {
+            Some((entry, gradient)) => self.composite(entry.truncate(), entry.w, gradient),
+            None => ControlFlow::Continue(()),
+        }
+    }
+
+    /// What closes the current run: the half step after its last sample, or `towards_back` with a back edge, the
+    /// segment from it to the edge's value (the skipped sample's: the field linear between them).
+    #[inline]
+    fn closing(&self, towards_back: bool) -> Option<(Vec4, [f32; 3])> {
+        let state = self.preintegrating?;
+        let last = state.pending?;
+        let entry = match state.back.filter(|_| towards_back) {
+            Some((t, back)) => state.table.segment(last.value, back, (t - last.t) as f32),
+            None => state.half_table?.lookup(last.value),
         };
-        let entry = half.lookup(last.value);
-        self.composite(entry.truncate(), entry.w, last.gradient)
+        Some((entry, last.gradient))
+    }
+
+    /// What opens a run at `sample`: the half step before it, or after a front edge one step before it, the
+    /// segment from the edge's value (the skipped sample's).
+    #[inline]
+    fn opening(&self, sample: &Sample) -> Vec4 {
+        let Some(state) = self.preintegrating else { return Vec4::ZERO };
+        match state.front {
+            Some((t, value)) if sample.t > t && sample.t - t <= state.step * (1.0 + 1e-3) => {
+                state.table.segment(value, sample.value, (sample.t - t) as f32)
+            }
+            _ => state.half_table.map_or(Vec4::ZERO, |t| t.lookup(sample.value)),
+        }
     }
 
     /// One sample of a pre-integrating ray: the segment from the last sample when it is the one just before, else
-    /// the last run closed and a new one opened by half a step of this sample's value.
-    #[inline(always)]
+    /// the last run closed and a new one opened by half a step of this sample's value. Kept out of line: the
+    /// default ray's sample loop stays as small as it was.
+    #[inline(never)]
     fn sample_preintegrated(&mut self, sample: Sample) -> ControlFlow<()> {
         let Some(state) = self.preintegrating else { return ControlFlow::Continue(()) };
+        // A sample before where the next consecutive one would be was taken already (a dilated run's sample taken
+        // again by the next run, [`Integrand::DILATED_RUNS`]): passed over.
+        if let Some(last) = state.pending {
+            if sample.t < last.t + 0.5 * (last.step + state.step) * (1.0 - 1e-3) {
+                return ControlFlow::Continue(());
+            }
+        }
         let consecutive = state.pending.filter(|last| {
             // Consecutive samples are half of each one's step apart (the steps may differ across segments).
             let expected = 0.5 * (last.step + state.step);
@@ -206,49 +254,77 @@ impl<'a> EmissionAbsorption<'a> {
                 self.composite(entry.truncate(), entry.w, gradient)
             }
             None => {
-                if self.close_run().is_break() {
+                if self.close_run(true).is_break() {
                     return ControlFlow::Break(());
                 }
-                let entry = state.half_table.map_or(Vec4::ZERO, |t| t.lookup(sample.value));
+                let entry = self.opening(&sample);
                 self.composite(entry.truncate(), entry.w, sample.gradient)
             }
         };
         if let Some(state) = self.preintegrating.as_mut() {
-            state.pending = Some(next);
+            (state.pending, state.back, state.front) = (Some(next), None, None);
         }
         flow
     }
+
+    /// A run's edge sample (pre-integrating rays): remembered, to close or open the run with ([`Integrand::edge`]).
+    #[inline(never)]
+    fn edge_preintegrated(&mut self, sample: Sample, before: bool) {
+        let Some(state) = self.preintegrating.as_mut() else { return };
+        let next_after = |last: &Pending| last.t + 0.5 * (last.step + state.step);
+        if before {
+            // Not where the last run goes on anyway.
+            if state.pending.is_none_or(|last| sample.t >= next_after(&last) * (1.0 - 1e-12) + 1e-3 * state.step) {
+                state.front = Some((sample.t, sample.value));
+            }
+        } else if state
+            .pending
+            .is_some_and(|last| sample.t > last.t && sample.t <= next_after(&last) + 1e-3 * state.step)
+        {
+            state.back = Some((sample.t, sample.value));
+        }
+    }
 }
 
-impl Integrand for EmissionAbsorption<'_> {
+impl<const PRE: bool> Integrand for EmissionAbsorption<'_, PRE> {
+    const DILATED_RUNS: bool = PRE;
+
     #[inline(always)]
     fn can_contribute(&self, lower: f32, upper: f32) -> bool {
-        // Pre-integrated, a segment reaching into a visible brick or block from a sample in an invisible one
-        // integrates values of both: the invisible one's samples are needed too (handing a run its front sample
-        // would let skipping stay; until then pre-integration skips only where the whole function is transparent).
-        if self.preintegrating.is_some() {
-            return self.lut.is_visible_in(0.0, 1.0);
-        }
+        // Pre-integrated too: a segment between a visible sample and a skipped one is taken by the runs' dilation
+        // (`DILATED_RUNS`).
         self.lut.is_visible_in(lower, upper)
     }
 
     #[inline(always)]
     fn contributes_throughout(&self, lower: f32, upper: f32) -> bool {
-        if self.preintegrating.is_some() {
-            return self.lut.is_visible_in(0.0, 1.0);
-        }
         self.lut.is_visible_throughout(lower, upper)
     }
 
     #[inline(always)]
     fn block_visibility(&self) -> Option<&BlockVisibility> {
-        // The bits were made for point samples' visibility.
-        self.block_visibility.filter(|_| self.preintegrating.is_none())
+        self.block_visibility
     }
 
     #[inline]
     fn wants_gradient(&self) -> bool {
         self.light.is_some()
+    }
+
+    #[inline]
+    fn edge(&mut self, sample: Sample, before: bool) {
+        if PRE {
+            self.edge_preintegrated(sample, before);
+        }
+    }
+
+    #[inline]
+    fn gap(&mut self) -> ControlFlow<()> {
+        if PRE {
+            // Empty space follows: no back edge of a brick's reaches into it.
+            return self.close_run(false);
+        }
+        ControlFlow::Continue(())
     }
 
     #[inline(always)]
@@ -284,7 +360,7 @@ impl Integrand for EmissionAbsorption<'_> {
 
     #[inline(always)]
     fn sample(&mut self, sample: Sample) -> ControlFlow<()> {
-        if self.preintegrating.is_some() {
+        if PRE {
             return self.sample_preintegrated(sample);
         }
         let Some(table) = self.table else { return ControlFlow::Continue(()) };
@@ -316,7 +392,7 @@ impl Integrand for EmissionAbsorption<'_> {
 
     #[inline]
     fn constant(&mut self, from: f64, to: f64, value: f32) -> ControlFlow<()> {
-        if self.close_run().is_break() {
+        if PRE && self.close_run(false).is_break() {
             return ControlFlow::Break(());
         }
         let Some((color, alpha)) = constant_emission(self.lut, value, to - from) else {
@@ -353,8 +429,8 @@ mod tests {
         let lut = TransferLut::new(&tf, 0.0, 1.0, 1.0);
         let settings = EmissionAbsorptionSettings::new(&RenderSettings { opacity_cutoff: 1.0, ..Default::default() });
         let step = StepLength::at_most(0.3);
-        let mut one_by_one = EmissionAbsorption::new(&lut, &settings, DVec3::Z);
-        let mut at_once = EmissionAbsorption::new(&lut, &settings, DVec3::Z);
+        let mut one_by_one = EmissionAbsorption::<false>::new(&lut, &settings, DVec3::Z);
+        let mut at_once = EmissionAbsorption::<false>::new(&lut, &settings, DVec3::Z);
         one_by_one.set_step(step);
         at_once.set_step(step);
         for k in 0..7 {
@@ -392,8 +468,8 @@ mod tests {
                 ..Default::default()
             });
             let step = StepLength::at_most(0.3);
-            let mut visible_only = EmissionAbsorption::new(&lut, &settings, DVec3::Z);
-            let mut with_transparent = EmissionAbsorption::new(&lut, &settings, DVec3::Z);
+            let mut visible_only = EmissionAbsorption::<false>::new(&lut, &settings, DVec3::Z);
+            let mut with_transparent = EmissionAbsorption::<false>::new(&lut, &settings, DVec3::Z);
             for ray in [&mut visible_only, &mut with_transparent] {
                 ray.set_step(step);
                 ray.set_level(2);

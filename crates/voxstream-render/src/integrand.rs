@@ -74,6 +74,29 @@ pub trait Integrand {
     /// a volume keeps it off: its samples are placed by the step of each finer node, which skipping would shift.
     const CULLS_SUBTREES: bool = Self::TAKES_SPANS;
 
+    /// Whether each run of samples in occupancy blocks that can contribute is widened by one sample on both sides
+    /// (and a segment's runs that touch its ends get its [`Integrand::edge`] samples):
+    /// for integrands whose samples' contributions depend on their neighbours (pre-integration, where the segment
+    /// from a run's last sample to the skipped one after it can cross visible values). Such an integrand passes over
+    /// a sample at or before one it has taken.
+    const DILATED_RUNS: bool = false;
+
+    /// With [`Integrand::DILATED_RUNS`]: the sample one step beyond a segment's start (`before`; only where the
+    /// segment before was a brick segment too) or end, evaluated in the segment's bricks, where a run of samples
+    /// reaches that end. It is not a sample of the ray (it lies in
+    /// the neighbouring segment, which may hand over its own); it tells the integrand what the field does next to
+    /// the run, for opening or closing it.
+    #[inline(always)]
+    fn edge(&mut self, sample: Sample, before: bool) {
+        let _ = (sample, before);
+    }
+
+    /// A segment of empty space (a node with no data) over which nothing is sampled.
+    #[inline(always)]
+    fn gap(&mut self) -> ControlFlow<()> {
+        ControlFlow::Continue(())
+    }
+
     /// Whether some normalised value in `[lower, upper]` can change the result. The traversal skips bricks and
     /// occupancy blocks whose values all lie in a range that cannot, so this must be conservative: skipping must not
     /// change a single bit of the result.

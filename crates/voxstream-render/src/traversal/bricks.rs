@@ -45,7 +45,7 @@ impl<'a> Traversal<'a> {
         integrand: &mut I,
         stats: &mut RayStats,
     ) -> ControlFlow<()> {
-        let March { fine, coarse, first, dt, count } = march;
+        let March { fine, coarse, first, dt, count, front_edge } = march;
         // Whether occupancy blocks are checked: not when every value of the bricks can contribute.
         let mut check_blocks = self.skip_empty_space;
         if self.skip_empty_space {
@@ -77,6 +77,15 @@ impl<'a> Traversal<'a> {
             } else {
                 (k, count, None)
             };
+            let (mut run_start, mut run_end) = (run_start, run_end);
+            if I::DILATED_RUNS {
+                // The skipped sample on either side of the run too, and one step beyond the segment's ends.
+                run_start = run_start.saturating_sub(1);
+                run_end = (run_end + 1).min(count);
+                if run_start == 0 && front_edge {
+                    self.edge_sample(&fine_line, &coarse_line, (first, dt), -1.0, integrand);
+                }
+            }
             k = run_start;
             // One loop per combination, so that the loop itself holds no test of either.
             let (coarse, weight) = match &coarse_line {
@@ -108,6 +117,9 @@ impl<'a> Traversal<'a> {
                     return ControlFlow::Break(());
                 }
                 ControlFlow::Continue(()) => stats.samples += (run_end - k) as u64,
+            }
+            if I::DILATED_RUNS && run_end == count {
+                self.edge_sample(&fine_line, &coarse_line, (first, dt), count as f32, integrand);
             }
             k = resume.unwrap_or(run_end);
         }
@@ -233,6 +245,82 @@ impl<'a> Traversal<'a> {
             kf += 1.0;
         }
         ControlFlow::Continue(())
+    }
+
+    /// With [`Integrand::DILATED_RUNS`]: the [`Integrand::edge`] sample `k` of a segment, −1 or the segment's count,
+    /// one step beyond its start or end, evaluated in its bricks (clamped to them: within the border voxels for steps of up to
+    /// a voxel), blended as the segment's samples are (the weight ramp held within `[0, 1]`).
+    #[inline(never)]
+    pub(super) fn edge_sample<I: Integrand>(
+        &self,
+        fine: &BrickLine<'_>,
+        coarse: &Option<(BrickLine<'_>, Blend)>,
+        (first, dt): (f64, f64),
+        k: f32,
+        integrand: &mut I,
+    ) {
+        // No further than the fine brick's stored voxels reach (its border voxels, half a voxel beyond its box):
+        // a longer step takes the edge where the brick's data ends, nearer the segment's end sample.
+        let reach = self.stored as f32 - 1.0;
+        let (before, end) = (k < 0.0, k);
+        let mut k = k;
+        for a in 0..3 {
+            let (start, delta) = (fine.start[a], fine.delta[a]);
+            if delta != 0.0 {
+                let (at_zero, at_reach) = (-start / delta, (reach - start) / delta);
+                k = if before { k.max(at_zero.min(at_reach)) } else { k.min(at_zero.max(at_reach)) };
+            }
+        }
+        // Never past the segment's own end sample (a ray grazing the brick's corner).
+        let k = if before { k.min(0.0) } else { k.max(end - 1.0) };
+        let gradient = integrand.wants_gradient();
+        let (value, gradient) = match (fine.voxels, coarse.as_ref().map(|(c, _)| c.voxels)) {
+            (PoolVoxels::Wide(f), Some(PoolVoxels::Wide(c))) => self.edge_value(f, fine, Some(c), coarse, k, gradient),
+            (PoolVoxels::Narrow(f), Some(PoolVoxels::Narrow(c))) => {
+                self.edge_value(f, fine, Some(c), coarse, k, gradient)
+            }
+            (PoolVoxels::Wide(f), None) => self.edge_value::<u16>(f, fine, None, coarse, k, gradient),
+            (PoolVoxels::Narrow(f), None) => self.edge_value::<u8>(f, fine, None, coarse, k, gradient),
+            _ => unreachable!("the bricks of one pool have one voxel format"),
+        };
+        integrand.edge(Sample { t: first + k as f64 * dt, value, gradient }, before);
+    }
+
+    /// The value (and gradient when `gradient`) at sample `k` of a segment, for [`Traversal::edge_sample`].
+    #[inline(always)]
+    fn edge_value<V: Voxel>(
+        &self,
+        fine_voxels: &[V],
+        fine: &BrickLine<'_>,
+        coarse_voxels: Option<&[V]>,
+        coarse: &Option<(BrickLine<'_>, Blend)>,
+        k: f32,
+        gradient: bool,
+    ) -> (f32, [f32; 3]) {
+        let (b, dq) = (self.stored, self.dequantize);
+        let cell = Cell::locate(b, fine.at(k));
+        let (value, grad) = if gradient {
+            cell.value_and_gradient(fine_voxels, b, dq)
+        } else {
+            (cell.value(fine_voxels, b, dq), [0.0; 3])
+        };
+        let (Some(coarse_voxels), Some((line, blend))) = (coarse_voxels, coarse) else { return (value, grad) };
+        let cell = Cell::locate(b, line.at(k));
+        let (coarse_value, coarse_grad) = if gradient {
+            cell.value_and_gradient(coarse_voxels, b, dq)
+        } else {
+            (cell.value(coarse_voxels, b, dq), [0.0; 3])
+        };
+        let w = blend.value.at(k).clamp(0.0, 1.0);
+        let value = coarse_value + (value - coarse_value) * w;
+        let grad = match blend.gradient {
+            Some(ramp) => {
+                let (w, scale) = (ramp.at(k).clamp(0.0, 1.0), 1.0 / self.n as f32);
+                std::array::from_fn(|a| coarse_grad[a] * scale + (grad[a] - coarse_grad[a] * scale) * w)
+            }
+            None => grad,
+        };
+        (value, grad)
     }
 
     /// The continuous voxel index in the brick of `node` along the ray, from sample `first` on in steps of `dt`.

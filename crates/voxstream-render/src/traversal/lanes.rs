@@ -183,12 +183,20 @@ impl<'a> Traversal<'a> {
             let mut ended = false;
             if let Some(run) = &mut lane.run {
                 if run.k >= run.end {
+                    // With dilated runs, the sample one step beyond the segment's end after a run that reaches it.
+                    if I::DILATED_RUNS && run.end == run.count {
+                        let edge = (run.first, run.dt);
+                        self.edge_sample(&run.line, &None, edge, run.count as f32, &mut lane.integrand);
+                    }
                     // The next run of the segment, if any.
                     let k = run.resume.unwrap_or(run.end);
                     let segment = (run.first, run.dt, run.count);
                     match self.run_from(&run.line, None, segment, k, LONG_RUN, &lane.integrand) {
-                        Some((from, to, resume)) => (run.k, run.end, run.resume) = (from, to, resume),
-                        None => lane.run = None,
+                        Some((from, to, resume)) => {
+                            let (from, to) = dilated::<I>(from, to, run.count);
+                            (run.k, run.end, run.resume) = (from, to, resume);
+                        }
+                        _ => lane.run = None,
                     }
                 }
             }
@@ -199,7 +207,16 @@ impl<'a> Traversal<'a> {
                         if march.coarse.is_some() || (lane.integrand.wants_gradient() && !lanes_take_gradients) {
                             ended = self.march_bricks(&lane.walk.ray, march, &mut lane.integrand, stats).is_break();
                         } else {
+                            let front_edge = march.front_edge;
                             lane.run = self.lane_run(&lane.walk.ray, march, &lane.integrand);
+                            // With dilated runs, the sample one step before the segment's start when the first run
+                            // begins there.
+                            if let Some(run) =
+                                lane.run.as_ref().filter(|run| I::DILATED_RUNS && front_edge && run.k == 0)
+                            {
+                                let edge = (run.first, run.dt);
+                                self.edge_sample(&run.line, &None, edge, -1.0, &mut lane.integrand);
+                            }
                         }
                     }
                 }
@@ -234,7 +251,19 @@ impl<'a> Traversal<'a> {
         } else {
             (0, count, None)
         };
+        let (k, end) = dilated::<I>(k, end, count);
         Some(LaneRun { line, first, dt, count, k, end, resume })
+    }
+}
+
+/// A run `k..end` of a segment of `count` samples, widened by a sample on either side for integrands that ask
+/// ([`Integrand::DILATED_RUNS`]).
+#[inline(always)]
+fn dilated<I: Integrand>(k: u32, end: u32, count: u32) -> (u32, u32) {
+    if I::DILATED_RUNS {
+        (k.saturating_sub(1), (end + 1).min(count))
+    } else {
+        (k, end)
     }
 }
 

@@ -39,6 +39,7 @@ impl<'a> Traversal<'a> {
             t_leave,
             covered: t,
             step: None,
+            after_bricks: false,
             segments: 0,
             level_hint: 0,
             requests_left: self.max_requests_per_ray,
@@ -86,9 +87,11 @@ impl<'a> Traversal<'a> {
             let flow = match data {
                 SegmentData::Nothing => {
                     walk.covered = walk.covered.max(t_exit);
-                    ControlFlow::Continue(())
+                    walk.after_bricks = false;
+                    integrand.gap()
                 }
                 SegmentData::Constant(value) => {
+                    walk.after_bricks = false;
                     integrand.set_level(box_level);
                     // Integrated over exactly the distance not yet accounted for.
                     let from = walk.covered;
@@ -104,6 +107,7 @@ impl<'a> Traversal<'a> {
                     // The whole segment at the fine brick's level: no level blending (the integrand closes the
                     // seams where the level changes).
                     walk.covered = walk.covered.max(t_exit);
+                    walk.after_bricks = true;
                     let skip = self.skip_empty_space && {
                         let [lo, hi] = self.view.brick_range(fine.slot);
                         !integrand.can_contribute(lo, hi)
@@ -128,6 +132,7 @@ impl<'a> Traversal<'a> {
                     // still far from resident, e.g. during a fast zoom).
                     let sampled_voxel = self.level_voxel[self.sampled_level(&fine, stand_in) as usize];
                     integrand.set_level(fine.level);
+                    let front_edge = std::mem::replace(&mut walk.after_bricks, true);
                     let blend = coarse.and(self.view.brick_blends.get(fine.slot.0 as usize)).filter(|b| !b.is_full());
                     let mut desired_step = sampled_voxel.max(footprint_voxel) * self.step_factor / speed;
                     // The cone's level weight (1 where only coarser data exists).
@@ -184,7 +189,7 @@ impl<'a> Traversal<'a> {
                             let gradient = blend.map(|_| WeightRamp::between(cap_first, cap_last, count));
                             (!value.is_fine() || gradient.is_some()).then_some((c, Blend { value, gradient }))
                         });
-                        return Some(March { fine, coarse, first, dt, count });
+                        return Some(March { fine, coarse, first, dt, count, front_edge });
                     }
                 }
             };
@@ -231,6 +236,8 @@ pub(super) struct RayWalk {
     pub(super) covered: f64,
     /// The current step (None before the first brick segment).
     pub(super) step: Option<StepLength>,
+    /// Whether the last segment was a brick segment (its samples taken or skipped).
+    pub(super) after_bricks: bool,
     pub(super) segments: u32,
     /// The previous segment's level of detail (where [`Traversal::footprint_at`] starts its search).
     pub(super) level_hint: usize,
@@ -248,6 +255,9 @@ pub(super) struct March {
     pub(super) first: f64,
     pub(super) dt: f64,
     pub(super) count: u64,
+    /// Whether the segment before was a brick segment too, so that the sample one step before this one's first
+    /// lies in data ([`Integrand::edge`]).
+    pub(super) front_edge: bool,
 }
 
 /// A distance along the ray (moving at `speed` volume units per unit of `t`) of `1e-7` of a node of edge

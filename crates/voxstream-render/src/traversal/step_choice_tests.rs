@@ -122,9 +122,9 @@ fn brute_force_opacity(lut: &TransferLut) -> f64 {
     1.0 - (-depth).exp()
 }
 
-fn render_opacity(tree: &TestTree, lut: &TransferLut, settings: &RenderSettings) -> f32 {
+fn render_opacity<const PRE: bool>(tree: &TestTree, lut: &TransferLut, settings: &RenderSettings) -> f32 {
     let direction = DVec3::X;
-    let mut integrand = EmissionAbsorption::new(lut, &EmissionAbsorptionSettings::new(settings), direction);
+    let mut integrand = EmissionAbsorption::<PRE>::new(lut, &EmissionAbsorptionSettings::new(settings), direction);
     trace(tree, settings, &ray([-0.5, 0.3, 0.3], [1.0, 0.0, 0.0]), &mut integrand);
     integrand.result().1
 }
@@ -139,8 +139,8 @@ fn preintegrated_rays_integrate_a_peak_their_samples_step_over() {
     for step_factor in [0.5, 1.3, 2.0] {
         for skip_empty_space in [true, false] {
             let settings = RenderSettings { step_factor, skip_empty_space, ..RenderSettings::default() };
-            let point = render_opacity(&tree, &lut, &settings);
-            let pre = render_opacity(&tree, &lut, &RenderSettings { preintegrated: true, ..settings.clone() });
+            let point = render_opacity::<false>(&tree, &lut, &settings);
+            let pre = render_opacity::<true>(&tree, &lut, &RenderSettings { preintegrated: true, ..settings.clone() });
             assert!(
                 (pre - want).abs() < 0.01,
                 "step {step_factor}, skipping {skip_empty_space}: pre-integrated {pre} against {want}"
@@ -161,13 +161,13 @@ fn a_smooth_field_and_function_render_as_point_samples_do() {
     let lut = TransferLut::new(&tf, 0.0, 1.0, 0.05);
     let settings = RenderSettings::default();
     let direction = DVec3::new(1.0, 0.4, 0.2).normalize();
-    let render = |settings: &RenderSettings| {
-        let mut integrand = EmissionAbsorption::new(&lut, &EmissionAbsorptionSettings::new(settings), direction);
-        trace(&tree, settings, &ray([-0.5, 0.1, 0.2], direction.to_array()), &mut integrand);
-        integrand.result()
-    };
-    let (point_colour, point_alpha) = render(&settings);
-    let (pre_colour, pre_alpha) = render(&RenderSettings { preintegrated: true, ..settings });
+    let ray = ray([-0.5, 0.1, 0.2], direction.to_array());
+    let mut point = EmissionAbsorption::<false>::new(&lut, &EmissionAbsorptionSettings::new(&settings), direction);
+    trace(&tree, &settings, &ray, &mut point);
+    let settings = RenderSettings { preintegrated: true, ..settings };
+    let mut pre = EmissionAbsorption::<true>::new(&lut, &EmissionAbsorptionSettings::new(&settings), direction);
+    trace(&tree, &settings, &ray, &mut pre);
+    let ((point_colour, point_alpha), (pre_colour, pre_alpha)) = (point.result(), pre.result());
     assert!(point_alpha > 0.2, "{point_alpha}");
     assert!((pre_alpha - point_alpha).abs() < 2e-3, "{pre_alpha} against {point_alpha}");
     for c in 0..3 {
