@@ -66,7 +66,7 @@ fn march(state: ptr<function, RayState>) {
                 }
                 if node.data_word == 0u {
                     // The parent stands in: drawn one level above this node (the deficit, as the CPU's).
-                    request(state, current.id, REQUEST_PRODUCE | (min(target_level + 1u - current.level, 255u) << REQUEST_DEFICIT_SHIFT));
+                    request(state, current.id, REQUEST_PRODUCE | (min(target_level + 1u - current.level, REQUEST_MAX_DEFICIT) << REQUEST_DEFICIT_SHIFT));
                     break;
                 }
                 if current.level >= target_level || (node.child_word & NODE_TERMINAL_BIT) != 0u {
@@ -82,7 +82,7 @@ fn march(state: ptr<function, RayState>) {
                 }
                 let tile = node.child_word & NODE_CHILD_MASK;
                 if tile == 0u {
-                    request(state, current.id, REQUEST_SUBDIVIDE | (min(target_level - current.level, 255u) << REQUEST_DEFICIT_SHIFT));
+                    request(state, current.id, REQUEST_SUBDIVIDE | (min(target_level - current.level, REQUEST_MAX_DEFICIT) << REQUEST_DEFICIT_SHIFT));
                     break;
                 }
                 mark_tile(tile);
