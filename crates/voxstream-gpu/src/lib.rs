@@ -12,6 +12,8 @@
 //!   and bricks only;
 //! - [`renderer`]: one pass: uniforms, the ray caster's compute shader, readback, feedback to the CPU;
 //! - [`shader`]: that shader's WGSL, in files along the CPU traversal's seams (`src/shader/`), joined into one module;
+//! - [`shader_interface`]: what the host and the shader share by number (bindings, pixel flags, workgroup, range
+//!   packing), named once;
 //! - [`shader_records`]: the frame's uniform, isosurface records and value ranges as the shader reads them.
 //!
 //! The shader reads the `#[repr(C)]` records of `voxstream-layout` (nodes, tree header, transfer-table entries,
@@ -31,6 +33,7 @@ pub mod error;
 pub mod pools;
 pub mod renderer;
 pub mod shader;
+pub mod shader_interface;
 pub mod shader_records;
 
 pub use brick_filtering::BrickFiltering;

@@ -1,6 +1,9 @@
 // One trilinear cell along a ray (`CellCubic` in voxstream-render): its interpolant, the cubic along the ray and its
 // root refinement, and the surface normals (the cell's gradient or central differences).
 
+// Regula-falsi iterations at most (`REFINE_ITERATIONS`).
+const REFINE_ITERATIONS: u32 = 16u;
+
 // The trilinear interpolant of a cell's corners (x fastest) at cell-local p.
 fn cell_value(v: array<f32, 8>, p: vec3<f32>) -> f32 {
     let front = mix(mix(v[0], v[1], p.x), mix(v[2], v[3], p.x), p.y);
@@ -47,7 +50,7 @@ fn cubic_refine(c: vec4<f32>, iso: f32, a_in: f32, fa_in: f32, b_in: f32, fb_in:
     var fb = fb_in;
     let inside_a = fa >= 0.0;
     var side = 0;
-    for (var k = 0u; k < 16u; k++) {
+    for (var k = 0u; k < REFINE_ITERATIONS; k++) {
         let denominator = fb - fa;
         var m = 0.5 * (a + b);
         if denominator != 0.0 {

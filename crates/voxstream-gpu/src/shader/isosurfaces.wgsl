@@ -1,6 +1,10 @@
 // The isosurfaces integrand (`Isosurfaces` and `SurfacesInVolume` in voxstream-render; Knoll et al., seed 002):
 // crossings per surface, the volume composited between them, and the cell walk through a brick segment.
 
+// Surfaces one frame draws at most (`MAX_SURFACES`: a bit each in `RayState::inside`), and the crossings one cell
+// can hold, three per surface.
+const MAX_SURFACES: u32 = 8u;
+const MAX_CROSSINGS: u32 = 3u * MAX_SURFACES;
 // A shadow ray's cone at the surface is this many times the primary ray's (`SurfaceCaster`).
 const SHADOW_CONE: f32 = 2.0;
 // A shadow ray starts this many of its footprints off the surface (no self-shadowing by the crossing itself).
@@ -11,7 +15,7 @@ const SHADOW_OFFSET: f32 = 1.5;
 // inside a trilinear cell (a root of the cell's cubic along the ray) or between pieces of the ray whose fields
 // differ (a level seam, a constant node).
 
-// The surfaces a stored value (0‥65535) is inside of.
+// The surfaces a stored value (0‥VOXEL_MAX) is inside of.
 fn iso_inside_of(stored: f32) -> u32 {
     var bits = 0u;
     for (var i = 0u; i < frame.surface_count; i++) {
@@ -101,8 +105,8 @@ fn fog_begin(state: ptr<function, RayState>, desired: f32) {
 // is the rung for the desired step (`StepLength::keep_or_at_most`).
 fn choose_step(state: ptr<function, RayState>, desired: f32) {
     if !((*state).has_step && (*state).step <= desired && desired < (*state).step * RUNG_RATIO) {
-        let index = clamp(ceil(-4.0 * log2(desired)), -512.0, 511.0);
-        (*state).step = exp2(-index / 4.0);
+        let index = clamp(ceil(-STEPS_PER_OCTAVE * log2(desired)), -LADDER_HALF, LADDER_HALF - 1.0);
+        (*state).step = exp2(-index / STEPS_PER_OCTAVE);
         (*state).has_step = true;
     }
 }
@@ -166,8 +170,8 @@ fn fog_until(state: ptr<function, RayState>, v: array<f32, 8>, x0: vec3<f32>, t_
     var centre = (*state).fog_first + f32((*state).fog_next) * dt;
     for (var guard = 0u; centre < limit && guard < 16777216u; guard++) {
         let p = x0 + (centre - t_from) * rate - vec3<f32>(cell);
-        let value = cell_value(v, p) * (1.0 / 65535.0);
-        let gradient = cell_gradient(v, p) * (1.0 / 65535.0);
+        let value = cell_value(v, p) * (1.0 / VOXEL_MAX);
+        let gradient = cell_gradient(v, p) * (1.0 / VOXEL_MAX);
         (*state).fog_next += 1u;
         centre = (*state).fog_first + f32((*state).fog_next) * dt;
         if !composite(state, value, gradient, NO_LEVEL) {
@@ -258,8 +262,8 @@ fn iso_cell(state: ptr<function, RayState>, v: array<f32, 8>, t_in: f32, span_le
     }
     ends[pieces] = span_length;
     // Every straddled surface's crossings, merged in ray order by insertion.
-    var cross_u: array<f32, 24>;
-    var cross_i: array<u32, 24>;
+    var cross_u: array<f32, MAX_CROSSINGS>;
+    var cross_i: array<u32, MAX_CROSSINGS>;
     var count = 0u;
     for (var i = 0u; i < frame.surface_count; i++) {
         if (straddle & (1u << i)) == 0u {

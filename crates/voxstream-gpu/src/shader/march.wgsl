@@ -124,7 +124,7 @@ fn march(state: ptr<function, RayState>) {
                     (*state).samples += 1u;
                     let value = bitcast<f32>(current.node.data_word);
                     if surfaces_on {
-                        running = iso_enter(state, iso_inside_of(value * 65535.0), segment_start, vec3<f32>(0.0));
+                        running = iso_enter(state, iso_inside_of(value * VOXEL_MAX), segment_start, vec3<f32>(0.0));
                         if running && fog_on(state) {
                             // The volume over the distance not yet accounted for (`SurfacesInVolume::constant`).
                             // From the end of the last sample's step, a little before or after the node's entry.
