@@ -59,4 +59,21 @@ mod tests {
         assert!(defined.iter().any(|&(file, name)| file == "march.wgsl" && name == "march"));
         assert!(defined.len() > 50, "{} functions", defined.len());
     }
+
+    /// `cell_cubic.wgsl` is valid WGSL on its own: it reads no binding and calls nothing from the other files, so
+    /// a twin test can run it alone on the GPU. Checked here without a GPU.
+    #[test]
+    fn the_cell_solver_stands_alone() {
+        let (_, text) = RAY_CASTER_FILES.iter().find(|(name, _)| *name == "cell_cubic.wgsl").expect("the file");
+        let module = naga::front::wgsl::parse_str(text).unwrap_or_else(|e| panic!("{}", e.emit_to_string(text)));
+        let mut validator =
+            naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all());
+        if let Err(error) = validator.validate(&module) {
+            panic!("{}", error.emit_to_string(text));
+        }
+        assert!(module.global_variables.is_empty(), "cell_cubic.wgsl declares no binding or global");
+        for name in ["cell_cubic", "cubic_pieces", "cubic_crossings", "cubic_refine"] {
+            assert!(module.functions.iter().any(|(_, f)| f.name.as_deref() == Some(name)), "{name}");
+        }
+    }
 }
