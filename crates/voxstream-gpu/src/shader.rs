@@ -61,7 +61,7 @@ mod tests {
     }
 
     /// `cell_cubic.wgsl` is valid WGSL on its own: it reads no binding and calls nothing from the other files, so
-    /// a twin test can run it alone on the GPU. Checked here without a GPU.
+    /// its twin test (`tests/cell_cubic_twin/`) can run it alone on the GPU. Checked here without a GPU.
     #[test]
     fn the_cell_solver_stands_alone() {
         let (_, text) = RAY_CASTER_FILES.iter().find(|(name, _)| *name == "cell_cubic.wgsl").expect("the file");
