@@ -4,7 +4,8 @@
 //! memory, rays run in shaders and write the feedback that drives loading, and the CPU serves requests. This crate
 //! is that renderer behind the frame loop's [`FrameRenderer`](voxstream_engine::FrameRenderer) interface:
 //! [`GpuRenderer`] draws the passes of the same [`Session`](voxstream_engine::Session), cache manager and producers
-//! as the CPU ray caster, whose image is its reference (every GPU stage has a CPU twin).
+//! as the CPU ray caster, whose image is its reference (every GPU stage has a CPU twin; the numbers they share and
+//! the cell solver are checked against the CPU's directly: `tests/shader_interface.rs`, `tests/cell_cubic_twin/`).
 //!
 //! - [`context`]: the headless Vulkan device (Mesa's lavapipe in CI) and its description;
 //! - [`brick_filtering`]: bricks filtered exactly in the shader or by the texture units;

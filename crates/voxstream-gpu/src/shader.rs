@@ -6,6 +6,11 @@
 //! the files of [`RAY_CASTER_FILES`]: the bindings and a ray's state, its feedback, brick reads, the
 //! emission–absorption integrand, level of detail and the descent's geometry, level blending, one trilinear cell's
 //! cubic, the isosurfaces integrand, the segment walk (`march`) and the entry point.
+//!
+//! Each file is a stage of the CPU traversal and names its twin there. Two tests guard the seams: the constants and
+//! bindings shared with Rust (`tests/shader_interface.rs`, against [`crate::shader_interface`] and the CPU's
+//! constants), and a file's functions against the CPU's, run on the GPU alone (`tests/cell_cubic_twin/`:
+//! `cell_cubic.wgsl`, which reads no binding so that it compiles on its own, against `CellCubic`).
 
 use crate::brick_filtering::BrickFiltering;
 
