@@ -11,9 +11,14 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 
-use voxstream_layout::{RequestRecord, REQUEST_DEFICIT_SHIFT, REQUEST_KIND_MASK, REQUEST_PRODUCE, REQUEST_SUBDIVIDE};
+use voxstream_layout::{
+    RequestRecord, REQUEST_DEFICIT_SHIFT, REQUEST_KIND_MASK, REQUEST_MAX_DEFICIT, REQUEST_PRODUCE, REQUEST_SUBDIVIDE,
+};
 
 use crate::node::{BrickSlot, NodeId, TileId};
+
+// A request's deficit is a `u8`: the most a record carries, and what a GPU ray writes at most, is its maximum.
+const _: () = assert!(REQUEST_MAX_DEFICIT == u8::MAX as u32);
 
 /// What a ray asks the cache manager to do for a node.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]

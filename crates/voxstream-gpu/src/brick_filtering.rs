@@ -79,7 +79,7 @@ impl BrickFiltering {
                 "@group(0) @binding(3) var bricks: texture_3d<f32>;\n\
                  @group(0) @binding(12) var brick_sampler: sampler;\n\
                  fn voxel(at: vec3<u32>) -> f32 {\n\
-                 \x20   return round(textureLoad(bricks, at, 0).r * 65535.0);\n\
+                 \x20   return round(textureLoad(bricks, at, 0).r * VOXEL_MAX);\n\
                  }\n\
                  fn filtered_value(slot: u32, x: vec3<f32>) -> f32 {\n\
                  \x20   let c = clamp(x, vec3<f32>(0.0), vec3<f32>(f32(tree.stored_brick_size - 1u)));\n\

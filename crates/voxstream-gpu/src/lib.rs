@@ -4,7 +4,8 @@
 //! memory, rays run in shaders and write the feedback that drives loading, and the CPU serves requests. This crate
 //! is that renderer behind the frame loop's [`FrameRenderer`](voxstream_engine::FrameRenderer) interface:
 //! [`GpuRenderer`] draws the passes of the same [`Session`](voxstream_engine::Session), cache manager and producers
-//! as the CPU ray caster, whose image is its reference (every GPU stage has a CPU twin).
+//! as the CPU ray caster, whose image is its reference (every GPU stage has a CPU twin; the numbers they share and
+//! the cell solver are checked against the CPU's directly: `tests/shader_interface.rs`, `tests/cell_cubic_twin/`).
 //!
 //! - [`context`]: the headless Vulkan device (Mesa's lavapipe in CI) and its description;
 //! - [`brick_filtering`]: bricks filtered exactly in the shader or by the texture units;
@@ -12,6 +13,8 @@
 //!   and bricks only;
 //! - [`renderer`]: one pass: uniforms, the ray caster's compute shader, readback, feedback to the CPU;
 //! - [`shader`]: that shader's WGSL, in files along the CPU traversal's seams (`src/shader/`), joined into one module;
+//! - [`shader_interface`]: what the host and the shader share by number (bindings, pixel flags, workgroup, range
+//!   packing), named once;
 //! - [`shader_records`]: the frame's uniform, isosurface records and value ranges as the shader reads them.
 //!
 //! The shader reads the `#[repr(C)]` records of `voxstream-layout` (nodes, tree header, transfer-table entries,
@@ -31,6 +34,7 @@ pub mod error;
 pub mod pools;
 pub mod renderer;
 pub mod shader;
+pub mod shader_interface;
 pub mod shader_records;
 
 pub use brick_filtering::BrickFiltering;

@@ -26,17 +26,18 @@ use crate::context::GpuContext;
 use crate::error::GpuError;
 use crate::pools::{GpuPools, UploadStats};
 use crate::shader::ray_caster_source;
+use crate::shader_interface::{
+    binding, layout_entries, storage_buffers, GROUP, PIXEL_MISSED, PIXEL_PENDING, PIXEL_UNTRACED, WORKGROUP_EDGE,
+};
 pub use crate::shader_records::anchor;
 use crate::shader_records::{range_words, ray_frame, surface_records};
 
-/// Storage buffers the ray caster binds (nodes, table, pixels, flags, feedback, usage, ranges, surfaces, blends).
-const STORAGE_BUFFERS: u32 = 9;
-/// Edge of a workgroup's square of pixels (`@workgroup_size(8, 8, 1)` in the shader).
-const WORKGROUP_EDGE: u32 = 8;
 /// Most request records one pass keeps (more are counted as dropped; their rays stay pending and ask again).
 const MAX_REQUEST_RECORDS: u64 = 1 << 18;
 /// Bytes before the request records in the feedback buffer: the request counters and the ray counters.
 const FEEDBACK_HEADER_BYTES: u64 = (size_of::<FeedbackCounters>() + size_of::<RayCounters>()) as u64;
+
+const _: () = assert!(GROUP == 0, "the pipeline layout lists the ray caster's group first");
 
 /// The GPU renderer: a device, the compiled ray caster, and the pools on the GPU.
 pub struct GpuRenderer {
@@ -78,12 +79,14 @@ impl GpuRenderer {
     pub fn with_context(context: GpuContext, filtering: BrickFiltering) -> Result<GpuRenderer, GpuError> {
         let filtering = filtering.check(context.filters_16bit_norm, &context.info.name)?;
         let device = &context.device;
-        // Bindings 2 and 4–11: one more than WebGPU's default limit of 8, which most Vulkan adapters exceed.
-        let allowed = context.limits.max_storage_buffers_per_shader_stage;
-        if allowed < STORAGE_BUFFERS {
+        let entries = layout_entries(filtering);
+        // Nine (nodes, table, pixels, flags, feedback, usage, ranges, surfaces, blends): one more than WebGPU's
+        // default limit of 8, which most Vulkan adapters exceed.
+        let (allowed, needed) = (context.limits.max_storage_buffers_per_shader_stage, storage_buffers(&entries));
+        if allowed < needed {
             return Err(GpuError::Device {
                 adapter: context.info.name.clone(),
-                reason: format!("the ray caster binds {STORAGE_BUFFERS} storage buffers, the adapter allows {allowed}"),
+                reason: format!("the ray caster binds {needed} storage buffers, the adapter allows {allowed}"),
             });
         }
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
@@ -92,57 +95,6 @@ impl GpuRenderer {
             label: Some("ray caster (src/shader)"),
             source: wgpu::ShaderSource::Wgsl(source.into()),
         });
-        let storage = |binding, read_only| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only },
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
-        let uniform = |binding| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Uniform,
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            count: None,
-        };
-        let mut entries = vec![
-            uniform(0),
-            uniform(1),
-            storage(2, true),
-            wgpu::BindGroupLayoutEntry {
-                binding: 3,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Texture {
-                    sample_type: filtering.sample_type(),
-                    view_dimension: wgpu::TextureViewDimension::D3,
-                    multisampled: false,
-                },
-                count: None,
-            },
-            storage(4, true),
-            storage(5, false),
-            storage(6, false),
-            storage(7, false),
-            storage(8, false),
-            storage(9, true),
-            storage(10, true),
-            storage(11, true),
-        ];
-        if filtering == BrickFiltering::Hardware {
-            entries.push(wgpu::BindGroupLayoutEntry {
-                binding: 12,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                count: None,
-            });
-        }
         let bind_group_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("ray caster"),
             entries: &entries,
@@ -155,6 +107,7 @@ impl GpuRenderer {
         });
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("ray caster"),
+            // The ray caster's only group, GROUP, is the first.
             bind_group_layouts: &[Some(&bind_group_layout)],
             immediate_size: 0,
         });
@@ -379,7 +332,8 @@ impl GpuRenderer {
             usage: copy_src,
             mapped_at_creation: false,
         });
-        let flags: Vec<u32> = progressive.pending.iter().map(|&p| p as u32).collect();
+        let flags: Vec<u32> =
+            progressive.pending.iter().map(|&p| if p { PIXEL_PENDING } else { PIXEL_UNTRACED }).collect();
         let pixel_flags = init("pixel flags", bytemuck::cast_slice(&flags), copy_src);
         let mut feedback_header = [0u32; (FEEDBACK_HEADER_BYTES / 4) as usize];
         feedback_header[1] = request_capacity;
@@ -418,21 +372,27 @@ impl GpuRenderer {
         let Some(pools) = self.pools.as_ref() else { unreachable!("the pools are uploaded first") };
         let Some((_, table)) = self.table.as_ref() else { unreachable!("the table is uploaded first") };
         let mut entries = vec![
-            entry(0, &buffers.tree_uniform),
-            entry(1, &buffers.frame_uniform),
-            entry(2, &pools.nodes),
-            wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(&buffers.brick_atlas) },
-            entry(4, table),
-            entry(5, &buffers.pixels),
-            entry(6, &buffers.pixel_flags),
-            entry(7, &buffers.feedback),
-            entry(8, &buffers.usage),
-            entry(9, &buffers.ranges),
-            entry(10, &buffers.surfaces),
-            entry(11, &buffers.blends),
+            entry(binding::TREE, &buffers.tree_uniform),
+            entry(binding::FRAME, &buffers.frame_uniform),
+            entry(binding::NODES, &pools.nodes),
+            wgpu::BindGroupEntry {
+                binding: binding::BRICKS,
+                resource: wgpu::BindingResource::TextureView(&buffers.brick_atlas),
+            },
+            entry(binding::TABLE, table),
+            entry(binding::PIXELS, &buffers.pixels),
+            entry(binding::PIXEL_FLAGS, &buffers.pixel_flags),
+            entry(binding::FEEDBACK, &buffers.feedback),
+            entry(binding::USAGE, &buffers.usage),
+            entry(binding::RANGES, &buffers.ranges),
+            entry(binding::SURFACES, &buffers.surfaces),
+            entry(binding::BLENDS, &buffers.blends),
         ];
         if self.filtering == BrickFiltering::Hardware {
-            entries.push(wgpu::BindGroupEntry { binding: 12, resource: wgpu::BindingResource::Sampler(&self.sampler) });
+            entries.push(wgpu::BindGroupEntry {
+                binding: binding::BRICK_SAMPLER,
+                resource: wgpu::BindingResource::Sampler(&self.sampler),
+            });
         }
         self.context.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("ray caster"),
@@ -459,7 +419,7 @@ impl GpuRenderer {
         {
             let mut compute = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
             compute.set_pipeline(pipeline);
-            compute.set_bind_group(0, bind_group, &[]);
+            compute.set_bind_group(GROUP, bind_group, &[]);
             compute.dispatch_workgroups(
                 settings.width.div_ceil(WORKGROUP_EDGE),
                 settings.height.div_ceil(WORKGROUP_EDGE),
@@ -545,9 +505,9 @@ fn read_back(
     let traced_pixels: &[[f32; 4]] = bytemuck::cast_slice(section(0));
     let traced_flags: &[u32] = bytemuck::cast_slice(section(1));
     for (index, (&flag, pixel)) in traced_flags.iter().zip(traced_pixels).enumerate() {
-        if flag != 0 {
+        if flag != PIXEL_UNTRACED {
             progressive.image.pixels[index] = *pixel;
-            progressive.pending[index] = flag == 2;
+            progressive.pending[index] = flag == PIXEL_MISSED;
         }
     }
     let feedback_section = section(2);

@@ -6,6 +6,11 @@
 //! the files of [`RAY_CASTER_FILES`]: the bindings and a ray's state, its feedback, brick reads, the
 //! emission–absorption integrand, level of detail and the descent's geometry, level blending, one trilinear cell's
 //! cubic, the isosurfaces integrand, the segment walk (`march`) and the entry point.
+//!
+//! Each file is a stage of the CPU traversal and names its twin there. Two tests guard the seams: the constants and
+//! bindings shared with Rust (`tests/shader_interface.rs`, against [`crate::shader_interface`] and the CPU's
+//! constants), and a file's functions against the CPU's, run on the GPU alone (`tests/cell_cubic_twin/`:
+//! `cell_cubic.wgsl`, which reads no binding so that it compiles on its own, against `CellCubic`).
 
 use crate::brick_filtering::BrickFiltering;
 
@@ -58,5 +63,22 @@ mod tests {
         assert!(defined.iter().any(|&(file, name)| file == "main.wgsl" && name == "main"));
         assert!(defined.iter().any(|&(file, name)| file == "march.wgsl" && name == "march"));
         assert!(defined.len() > 50, "{} functions", defined.len());
+    }
+
+    /// `cell_cubic.wgsl` is valid WGSL on its own: it reads no binding and calls nothing from the other files, so
+    /// its twin test (`tests/cell_cubic_twin/`) can run it alone on the GPU. Checked here without a GPU.
+    #[test]
+    fn the_cell_solver_stands_alone() {
+        let (_, text) = RAY_CASTER_FILES.iter().find(|(name, _)| *name == "cell_cubic.wgsl").expect("the file");
+        let module = naga::front::wgsl::parse_str(text).unwrap_or_else(|e| panic!("{}", e.emit_to_string(text)));
+        let mut validator =
+            naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all());
+        if let Err(error) = validator.validate(&module) {
+            panic!("{}", error.emit_to_string(text));
+        }
+        assert!(module.global_variables.is_empty(), "cell_cubic.wgsl declares no binding or global");
+        for name in ["cell_cubic", "cubic_pieces", "cubic_crossings", "cubic_refine"] {
+            assert!(module.functions.iter().any(|(_, f)| f.name.as_deref() == Some(name)), "{name}");
+        }
     }
 }

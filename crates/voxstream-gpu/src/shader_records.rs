@@ -9,6 +9,8 @@ use voxstream_layout::{
 };
 use voxstream_render::{CameraFrame, RenderSettings, Shading, SurfaceNormals, SurfaceSettings, TransferLut};
 
+use crate::shader_interface::RANGE_HIGH_SHIFT;
+
 /// A ray may not cross more segments than this (the CPU's bound).
 const MAX_SEGMENTS: u32 = 1 << 20;
 /// What empty-space skipping reads: per transfer-table index, the entries with non-zero extinction before it (one
@@ -23,7 +25,7 @@ pub(crate) fn range_words(lut: &TransferLut, view: &TreeView<'_>) -> Vec<u32> {
         visible += (entry.sigma > 0.0) as u32;
         words.push(visible);
     }
-    let pack = |&[lo, hi]: &[u16; 2]| lo as u32 | (hi as u32) << 16;
+    let pack = |&[lo, hi]: &[u16; 2]| lo as u32 | (hi as u32) << RANGE_HIGH_SHIFT;
     words.extend(view.brick_ranges.iter().map(pack));
     words.extend(view.block_ranges.iter().map(pack));
     words

@@ -37,6 +37,9 @@ pub const REQUEST_KIND_MASK: u32 = 0xff;
 /// [`RequestRecord::kind`]'s shift to the level deficit (8 bits): how many levels coarser than it wanted the ray drew
 /// for lack of this node (Thiele et al.'s ideal − actual level, the request's priority).
 pub const REQUEST_DEFICIT_SHIFT: u32 = 8;
+/// The largest level deficit a [`RequestRecord`] carries (8 bits: `voxstream_core::Request` keeps it in a `u8`); a
+/// ray that lacks more levels writes this.
+pub const REQUEST_MAX_DEFICIT: u32 = 0xff;
 
 /// The fill level of the request buffer.
 #[repr(C)]

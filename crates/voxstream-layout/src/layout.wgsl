@@ -51,6 +51,7 @@ const REQUEST_PRODUCE: u32 = 0u;
 const REQUEST_SUBDIVIDE: u32 = 1u;
 const REQUEST_KIND_MASK: u32 = 0xffu;
 const REQUEST_DEFICIT_SHIFT: u32 = 8u;
+const REQUEST_MAX_DEFICIT: u32 = 0xffu;
 
 struct FeedbackCounters {
     request_count: atomic<u32>,

@@ -46,8 +46,8 @@ pub mod tree_header;
 
 pub use brick_blend::BrickBlend;
 pub use feedback_records::{
-    FeedbackCounters, RayCounters, RequestRecord, UsageFlag, REQUEST_DEFICIT_SHIFT, REQUEST_KIND_MASK, REQUEST_PRODUCE,
-    REQUEST_SUBDIVIDE,
+    FeedbackCounters, RayCounters, RequestRecord, UsageFlag, REQUEST_DEFICIT_SHIFT, REQUEST_KIND_MASK,
+    REQUEST_MAX_DEFICIT, REQUEST_PRODUCE, REQUEST_SUBDIVIDE,
 };
 pub use node::{BrickSlot, Node, NodeData, NodeId, TileId, CHILD_MASK, CONSTANT_BIT, MAX_TILE_INDEX, TERMINAL_BIT};
 pub use ray_frame::{

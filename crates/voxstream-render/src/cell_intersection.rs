@@ -11,8 +11,9 @@
 //! between cells, levels and constant nodes in [`crate::isosurface`].
 
 /// Regula-falsi iterations at most; each one at least halves the bracket's weight on the stale side (Illinois), so
-/// a dozen reach f32 resolution on a monotone piece.
-const REFINE_ITERATIONS: u32 = 16;
+/// a dozen reach f32 resolution on a monotone piece. The GPU's `cubic_refine` (voxstream-gpu's `cell_cubic.wgsl`)
+/// mirrors it.
+pub const REFINE_ITERATIONS: u32 = 16;
 
 /// The field along a ray inside one cell: `f(u) = c[0] + u·(c[1] + u·(c[2] + u·c[3]))`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -52,6 +53,11 @@ impl CellCubic {
                 q0[2] * w0u + q1[2] * w1u,
             ],
         }
+    }
+
+    /// The coefficients `[c0, c1, c2, c3]` of `f(u) = c0 + c1·u + c2·u² + c3·u³` (what a GPU twin compares).
+    pub fn coefficients(&self) -> [f32; 4] {
+        self.c
     }
 
     /// The field at `u`.

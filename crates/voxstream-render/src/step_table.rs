@@ -15,12 +15,13 @@ use glam::Vec4;
 use crate::sampler::floor_index;
 use crate::transfer_function::{LutEntry, LUT_SIZE};
 
-/// Steps per octave of the ladder.
+/// Steps per octave of the ladder (the GPU's `choose_step` mirrors it, checked by voxstream-gpu's
+/// `tests/shader_interface.rs`, as are the two below).
 pub const STEPS_PER_OCTAVE: i32 = 4;
 /// The ladder spans `2^±(LADDER_HALF / STEPS_PER_OCTAVE)` world units: `2^±128`, wider than any volume placement.
-const LADDER_HALF: i32 = 512;
+pub const LADDER_HALF: i32 = 512;
 /// Ratio of consecutive rungs, `2^(1/4)`.
-const RUNG_RATIO: f64 = 1.189_207_115_002_721;
+pub const RUNG_RATIO: f64 = 1.189_207_115_002_721;
 
 /// One rung of the step ladder: the step length in world units and its index `j` (`Δt = 2^(−j/4)`).
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -17,10 +17,11 @@ use crate::surfaces_in_volume::{SurfacesInVolume, VolumeAroundSurfaces};
 use crate::transfer_function::TransferLut;
 use crate::traversal::{DescentPath, Ray, RayStats, Traversal};
 
-/// How much wider a shadow ray's cone is than the primary ray's at the surface.
-const SHADOW_CONE: f64 = 2.0;
+/// How much wider a shadow ray's cone is than the primary ray's at the surface (mirrored by the GPU's shader, as
+/// is [`SHADOW_OFFSET`]; voxstream-gpu's `tests/shader_interface.rs` checks both).
+pub const SHADOW_CONE: f64 = 2.0;
 /// A shadow ray starts this many of its footprints off the surface (no self-shadowing by the crossing itself).
-const SHADOW_OFFSET: f64 = 1.5;
+pub const SHADOW_OFFSET: f64 = 1.5;
 
 /// Traces isosurface rays against one frame's tree view, writing feedback.
 pub struct SurfaceCaster<'a> {

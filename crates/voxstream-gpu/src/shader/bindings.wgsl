@@ -31,12 +31,26 @@
 // that each variant is compiled without the other's code (its registers would slow the volume kernel by a third).
 override ISOSURFACES: bool = false;
 
-const MAX_LEVELS: u32 = 32u;
+// The constants below that the host or the CPU renderer shares are named the same on the Rust side, and
+// voxstream-gpu's tests/shader_interface.rs checks every one (as it checks the bindings' numbers): a value changed
+// on one side only fails there.
+
+// The step ladder of `StepLength` (voxstream-render's step_table.rs): 2^(−j/STEPS_PER_OCTAVE) world units for
+// j in [−LADDER_HALF, LADDER_HALF), consecutive rungs RUNG_RATIO apart.
+const STEPS_PER_OCTAVE: f32 = 4.0;
+const LADDER_HALF: f32 = 512.0;
 const RUNG_RATIO: f32 = 1.189207115;
-// Pixel flags, in and out: in, 1 = trace this pixel's ray this pass; out, 0 = not traced, 1 = traced and complete,
-// 2 = traced but it missed data (trace it again next pass).
+// Pixel flags, in and out (shader_interface.rs): in, PIXEL_PENDING = trace this pixel's ray this pass; out,
+// PIXEL_UNTRACED = not traced, PIXEL_DONE = traced and complete, PIXEL_MISSED = traced but it missed data (trace it
+// again next pass).
+const PIXEL_UNTRACED: u32 = 0u;
+const PIXEL_PENDING: u32 = 1u;
 const PIXEL_DONE: u32 = 1u;
 const PIXEL_MISSED: u32 = 2u;
+// Edge of a workgroup's square of pixels (the host dispatches width / WORKGROUP_EDGE × height / WORKGROUP_EDGE).
+const WORKGROUP_EDGE: u32 = 8u;
+// The largest stored voxel (`voxstream_core::VOXEL_MAX`): normalised values are stored / VOXEL_MAX.
+const VOXEL_MAX: f32 = 65535.0;
 
 struct Feedback {
     counters: FeedbackCounters,

@@ -34,7 +34,7 @@ fn sample_brick(slot: u32, x: vec3<f32>) -> vec4<f32> {
     let gz = c1 - c0;
     let gy = mix(c10 - c00, c11 - c01, f.z);
     let gx = mix(mix(v100 - v000, v110 - v010, f.y), mix(v101 - v001, v111 - v011, f.y), f.z);
-    return vec4<f32>(value, gx, gy, gz) * (1.0 / 65535.0);
+    return vec4<f32>(value, gx, gy, gz) * (1.0 / VOXEL_MAX);
 }
 
 // The sample at continuous voxel index x of the brick in `slot`: with its analytic gradient when `gradient`
@@ -46,18 +46,23 @@ fn sample_at(slot: u32, x: vec3<f32>, gradient: bool) -> vec4<f32> {
     return vec4<f32>(filtered_value(slot, x), 0.0, 0.0, 0.0);
 }
 
+// A packed [min, max] of `ranges` (`range_words` in shader_records.rs), normalised.
+const RANGE_HIGH_SHIFT: u32 = 16u;
+const RANGE_LOW_MASK: u32 = 0xffffu;
+fn unpack_range(packed: u32) -> vec2<f32> {
+    return vec2<f32>(f32(packed & RANGE_LOW_MASK), f32(packed >> RANGE_HIGH_SHIFT)) * (1.0 / VOXEL_MAX);
+}
+
 // The [min, max] of the brick in `slot`, normalised.
 fn brick_range(slot: u32) -> vec2<f32> {
-    let packed = ranges[arrayLength(&table) + 1u + slot];
-    return vec2<f32>(f32(packed & 0xffffu), f32(packed >> 16u)) * (1.0 / 65535.0);
+    return unpack_range(ranges[arrayLength(&table) + 1u + slot]);
 }
 
 // The [min, max] (normalised) of occupancy block `block` (x fastest) of the brick in `slot`.
 fn block_range(slot: u32, block: vec3<u32>) -> vec2<f32> {
     let blocks = tree.blocks_per_axis;
     let index = (block.z * blocks + block.y) * blocks + block.x;
-    let packed = ranges[arrayLength(&table) + 1u + tree.brick_count + slot * blocks * blocks * blocks + index];
-    return vec2<f32>(f32(packed & 0xffffu), f32(packed >> 16u)) * (1.0 / 65535.0);
+    return unpack_range(ranges[arrayLength(&table) + 1u + tree.brick_count + slot * blocks * blocks * blocks + index]);
 }
 
 // The occupancy block holding the cell that trilinear filtering reads at continuous voxel index x

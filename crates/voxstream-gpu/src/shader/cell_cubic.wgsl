@@ -1,5 +1,11 @@
-// One trilinear cell along a ray (`CellCubic` in voxstream-render): its interpolant, the cubic along the ray and its
-// root refinement, and the surface normals (the cell's gradient or central differences).
+// One trilinear cell along a ray (voxstream-render's cell_intersection.rs: `CellCubic`, `cell_gradient`): its
+// interpolant and gradient, the cubic along the ray, its monotone pieces and its crossings of an isovalue.
+//
+// Pure arithmetic, reading no binding: tests/cell_cubic_twin/ compiles this file alone inside a small compute shader
+// and checks its crossings against the CPU's on thousands of cells.
+
+// Regula-falsi iterations at most (`REFINE_ITERATIONS`).
+const REFINE_ITERATIONS: u32 = 16u;
 
 // The trilinear interpolant of a cell's corners (x fastest) at cell-local p.
 fn cell_value(v: array<f32, 8>, p: vec3<f32>) -> f32 {
@@ -47,7 +53,7 @@ fn cubic_refine(c: vec4<f32>, iso: f32, a_in: f32, fa_in: f32, b_in: f32, fb_in:
     var fb = fb_in;
     let inside_a = fa >= 0.0;
     var side = 0;
-    for (var k = 0u; k < 16u; k++) {
+    for (var k = 0u; k < REFINE_ITERATIONS; k++) {
         let denominator = fb - fa;
         var m = 0.5 * (a + b);
         if denominator != 0.0 {
@@ -82,6 +88,77 @@ fn cubic_refine(c: vec4<f32>, iso: f32, a_in: f32, fa_in: f32, b_in: f32, fb_in:
     return select(b, a, fa == 0.0);
 }
 
+// The ends of the cubic's monotone pieces over [0, length]: its extrema strictly inside (0, length), ascending,
+// then `length` itself; `count` pieces, 1 to 3 (`CellCubic::extrema`).
+struct CubicPieces {
+    ends: array<f32, 3>,
+    count: u32,
+}
+
+fn cubic_pieces(c: vec4<f32>, length: f32) -> CubicPieces {
+    // f'(u) = c.y + 2·c.z·u + 3·c.w·u².
+    let qa = 3.0 * c.w;
+    let qb = 2.0 * c.z;
+    let qc = c.y;
+    var pieces = CubicPieces(array<f32, 3>(length, length, length), 0u);
+    let scale = max(max(abs(qa), abs(qb)), abs(qc));
+    if scale != 0.0 {
+        var r = vec2<f32>(-1.0, -1.0);
+        if abs(qa) <= 1e-6 * scale {
+            if qb != 0.0 {
+                r.x = -qc / qb;
+            }
+        } else {
+            let discriminant = qb * qb - 4.0 * qa * qc;
+            if discriminant > 0.0 {
+                // The numerically stable pair (no cancellation).
+                let q = -0.5 * (qb + select(-sqrt(discriminant), sqrt(discriminant), qb >= 0.0));
+                let r0 = q / qa;
+                let r1 = select(0.0, qc / q, q != 0.0);
+                r = vec2<f32>(min(r0, r1), max(r0, r1));
+                if r.y == r.x {
+                    r.y = -1.0;
+                }
+            }
+        }
+        if r.x > 0.0 && r.x < length {
+            pieces.ends[pieces.count] = r.x;
+            pieces.count += 1u;
+        }
+        if r.y > 0.0 && r.y < length {
+            pieces.ends[pieces.count] = r.y;
+            pieces.count += 1u;
+        }
+    }
+    pieces.ends[pieces.count] = length;
+    pieces.count += 1u;
+    return pieces;
+}
+
+// Every crossing of `iso` (where f ≥ iso changes) over the pieces, ascending, at most one per piece
+// (`CellCubic::crossings`).
+struct CubicCrossings {
+    u: array<f32, 3>,
+    count: u32,
+}
+
+fn cubic_crossings(c: vec4<f32>, iso: f32, pieces: CubicPieces) -> CubicCrossings {
+    var found = CubicCrossings(array<f32, 3>(0.0, 0.0, 0.0), 0u);
+    var a = 0.0;
+    var fa = cubic_at(c, 0.0) - iso;
+    for (var k = 0u; k < pieces.count; k++) {
+        let b = pieces.ends[k];
+        let fb = cubic_at(c, b) - iso;
+        if (fa >= 0.0) != (fb >= 0.0) {
+            found.u[found.count] = cubic_refine(c, iso, a, fa, b, fb);
+            found.count += 1u;
+        }
+        a = b;
+        fa = fb;
+    }
+    return found;
+}
+
 // The analytic gradient of the trilinear cell at cell-local p (`cell_gradient`).
 fn cell_gradient(v: array<f32, 8>, p_in: vec3<f32>) -> vec3<f32> {
     let p = clamp(p_in, vec3<f32>(0.0), vec3<f32>(1.0));
@@ -89,36 +166,4 @@ fn cell_gradient(v: array<f32, 8>, p_in: vec3<f32>) -> vec3<f32> {
     let gy = mix(mix(v[2] - v[0], v[3] - v[1], p.x), mix(v[6] - v[4], v[7] - v[5], p.x), p.z);
     let gz = mix(mix(v[4] - v[0], v[5] - v[1], p.x), mix(v[6] - v[2], v[7] - v[3], p.x), p.y);
     return vec3<f32>(gx, gy, gz);
-}
-
-// Central differences at the cell's corners, interpolated trilinearly at cell-local p; one-sided at the brick's
-// outer voxels (`CellVisit::central_gradient`).
-fn central_gradient(origin: vec3<u32>, cell: vec3<i32>, p_in: vec3<f32>) -> vec3<f32> {
-    let p = clamp(p_in, vec3<f32>(0.0), vec3<f32>(1.0));
-    let last = i32(tree.stored_brick_size) - 1;
-    var g = vec3<f32>(0.0);
-    for (var corner = 0u; corner < 8u; corner++) {
-        let side = vec3<u32>(corner & 1u, (corner >> 1u) & 1u, corner >> 2u);
-        let ijk = cell + vec3<i32>(side);
-        let f = select(vec3<f32>(1.0) - p, p, side == vec3<u32>(1u));
-        let w = f.x * f.y * f.z;
-        for (var a = 0u; a < 3u; a++) {
-            var lo = ijk;
-            var hi = ijk;
-            lo[a] = max(ijk[a] - 1, 0);
-            hi[a] = min(ijk[a] + 1, last);
-            let span = f32(hi[a] - lo[a]);
-            g[a] += w * (voxel(origin + vec3<u32>(hi)) - voxel(origin + vec3<u32>(lo))) / span;
-        }
-    }
-    return g;
-}
-
-// The normal at cell-local p, world axes (`Isosurfaces::cell`'s `gradient_at`).
-fn surface_gradient(v: array<f32, 8>, origin: vec3<u32>, cell: vec3<i32>, p: vec3<f32>) -> vec3<f32> {
-    var g = cell_gradient(v, p);
-    if (frame.flags & RAY_FRAME_CENTRAL_NORMALS) != 0u {
-        g = central_gradient(origin, cell, p);
-    }
-    return g * vec3<f32>(frame.inverse_scale_x, frame.inverse_scale_y, frame.inverse_scale_z);
 }

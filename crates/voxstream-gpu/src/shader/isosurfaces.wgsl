@@ -1,6 +1,11 @@
 // The isosurfaces integrand (`Isosurfaces` and `SurfacesInVolume` in voxstream-render; Knoll et al., seed 002):
-// crossings per surface, the volume composited between them, and the cell walk through a brick segment.
+// crossings per surface, the volume composited between them, the surfaces' normals, and the cell walk through a
+// brick segment. One cell's cubic and its crossings are cell_cubic.wgsl's.
 
+// Surfaces one frame draws at most (`MAX_SURFACES`: a bit each in `RayState::inside`), and the crossings one cell
+// can hold, three per surface.
+const MAX_SURFACES: u32 = 8u;
+const MAX_CROSSINGS: u32 = 3u * MAX_SURFACES;
 // A shadow ray's cone at the surface is this many times the primary ray's (`SurfaceCaster`).
 const SHADOW_CONE: f32 = 2.0;
 // A shadow ray starts this many of its footprints off the surface (no self-shadowing by the crossing itself).
@@ -11,7 +16,7 @@ const SHADOW_OFFSET: f32 = 1.5;
 // inside a trilinear cell (a root of the cell's cubic along the ray) or between pieces of the ray whose fields
 // differ (a level seam, a constant node).
 
-// The surfaces a stored value (0‥65535) is inside of.
+// The surfaces a stored value (0‥VOXEL_MAX) is inside of.
 fn iso_inside_of(stored: f32) -> u32 {
     var bits = 0u;
     for (var i = 0u; i < frame.surface_count; i++) {
@@ -101,8 +106,8 @@ fn fog_begin(state: ptr<function, RayState>, desired: f32) {
 // is the rung for the desired step (`StepLength::keep_or_at_most`).
 fn choose_step(state: ptr<function, RayState>, desired: f32) {
     if !((*state).has_step && (*state).step <= desired && desired < (*state).step * RUNG_RATIO) {
-        let index = clamp(ceil(-4.0 * log2(desired)), -512.0, 511.0);
-        (*state).step = exp2(-index / 4.0);
+        let index = clamp(ceil(-STEPS_PER_OCTAVE * log2(desired)), -LADDER_HALF, LADDER_HALF - 1.0);
+        (*state).step = exp2(-index / STEPS_PER_OCTAVE);
         (*state).has_step = true;
     }
 }
@@ -166,8 +171,8 @@ fn fog_until(state: ptr<function, RayState>, v: array<f32, 8>, x0: vec3<f32>, t_
     var centre = (*state).fog_first + f32((*state).fog_next) * dt;
     for (var guard = 0u; centre < limit && guard < 16777216u; guard++) {
         let p = x0 + (centre - t_from) * rate - vec3<f32>(cell);
-        let value = cell_value(v, p) * (1.0 / 65535.0);
-        let gradient = cell_gradient(v, p) * (1.0 / 65535.0);
+        let value = cell_value(v, p) * (1.0 / VOXEL_MAX);
+        let gradient = cell_gradient(v, p) * (1.0 / VOXEL_MAX);
         (*state).fog_next += 1u;
         centre = (*state).fog_first + f32((*state).fog_next) * dt;
         if !composite(state, value, gradient, NO_LEVEL) {
@@ -175,6 +180,38 @@ fn fog_until(state: ptr<function, RayState>, v: array<f32, 8>, x0: vec3<f32>, t_
         }
     }
     return true;
+}
+
+// Central differences at the cell's corners, interpolated trilinearly at cell-local p; one-sided at the brick's
+// outer voxels (`CellVisit::central_gradient`).
+fn central_gradient(origin: vec3<u32>, cell: vec3<i32>, p_in: vec3<f32>) -> vec3<f32> {
+    let p = clamp(p_in, vec3<f32>(0.0), vec3<f32>(1.0));
+    let last = i32(tree.stored_brick_size) - 1;
+    var g = vec3<f32>(0.0);
+    for (var corner = 0u; corner < 8u; corner++) {
+        let side = vec3<u32>(corner & 1u, (corner >> 1u) & 1u, corner >> 2u);
+        let ijk = cell + vec3<i32>(side);
+        let f = select(vec3<f32>(1.0) - p, p, side == vec3<u32>(1u));
+        let w = f.x * f.y * f.z;
+        for (var a = 0u; a < 3u; a++) {
+            var lo = ijk;
+            var hi = ijk;
+            lo[a] = max(ijk[a] - 1, 0);
+            hi[a] = min(ijk[a] + 1, last);
+            let span = f32(hi[a] - lo[a]);
+            g[a] += w * (voxel(origin + vec3<u32>(hi)) - voxel(origin + vec3<u32>(lo))) / span;
+        }
+    }
+    return g;
+}
+
+// The normal at cell-local p, world axes (`Isosurfaces::cell`'s `gradient_at`).
+fn surface_gradient(v: array<f32, 8>, origin: vec3<u32>, cell: vec3<i32>, p: vec3<f32>) -> vec3<f32> {
+    var g = cell_gradient(v, p);
+    if (frame.flags & RAY_FRAME_CENTRAL_NORMALS) != 0u {
+        g = central_gradient(origin, cell, p);
+    }
+    return g * vec3<f32>(frame.inverse_scale_x, frame.inverse_scale_y, frame.inverse_scale_z);
 }
 
 // One trilinear cell entered at t_in and crossed over `span_length` (world t): the seams at its entry, then its exact
@@ -222,69 +259,28 @@ fn iso_cell(state: ptr<function, RayState>, v: array<f32, 8>, t_in: f32, span_le
     if changed != 0u && !iso_enter_changed(state, changed, t_in, surface_gradient(v, origin, cell, start)) {
         return false;
     }
-    // The cubic's extrema inside (0, span_length) split it into monotone pieces (`CellCubic::extrema`).
-    let qa = 3.0 * c.w;
-    let qb = 2.0 * c.z;
-    let qc = c.y;
-    var ends = array<f32, 3>(span_length, span_length, span_length);
-    var pieces = 0u;
-    let scale = max(max(abs(qa), abs(qb)), abs(qc));
-    if scale != 0.0 {
-        var r = vec2<f32>(-1.0, -1.0);
-        if abs(qa) <= 1e-6 * scale {
-            if qb != 0.0 {
-                r.x = -qc / qb;
-            }
-        } else {
-            let discriminant = qb * qb - 4.0 * qa * qc;
-            if discriminant > 0.0 {
-                let q = -0.5 * (qb + select(-sqrt(discriminant), sqrt(discriminant), qb >= 0.0));
-                let r0 = q / qa;
-                let r1 = select(0.0, qc / q, q != 0.0);
-                r = vec2<f32>(min(r0, r1), max(r0, r1));
-                if r.y == r.x {
-                    r.y = -1.0;
-                }
-            }
-        }
-        if r.x > 0.0 && r.x < span_length {
-            ends[pieces] = r.x;
-            pieces += 1u;
-        }
-        if r.y > 0.0 && r.y < span_length {
-            ends[pieces] = r.y;
-            pieces += 1u;
-        }
-    }
-    ends[pieces] = span_length;
+    // The cubic's extrema inside (0, span_length) split it into monotone pieces, shared by every surface.
+    let pieces = cubic_pieces(c, span_length);
     // Every straddled surface's crossings, merged in ray order by insertion.
-    var cross_u: array<f32, 24>;
-    var cross_i: array<u32, 24>;
+    var cross_u: array<f32, MAX_CROSSINGS>;
+    var cross_i: array<u32, MAX_CROSSINGS>;
     var count = 0u;
     for (var i = 0u; i < frame.surface_count; i++) {
         if (straddle & (1u << i)) == 0u {
             continue;
         }
-        let iso = surfaces[i].iso;
-        var a = 0.0;
-        var fa = f0 - iso;
-        for (var k = 0u; k <= pieces; k++) {
-            let b = ends[k];
-            let fb = cubic_at(c, b) - iso;
-            if (fa >= 0.0) != (fb >= 0.0) {
-                let u = cubic_refine(c, iso, a, fa, b, fb);
-                var j = count;
-                while j > 0u && cross_u[j - 1u] > u {
-                    cross_u[j] = cross_u[j - 1u];
-                    cross_i[j] = cross_i[j - 1u];
-                    j -= 1u;
-                }
-                cross_u[j] = u;
-                cross_i[j] = i;
-                count += 1u;
+        let found = cubic_crossings(c, surfaces[i].iso, pieces);
+        for (var r = 0u; r < found.count; r++) {
+            let u = found.u[r];
+            var j = count;
+            while j > 0u && cross_u[j - 1u] > u {
+                cross_u[j] = cross_u[j - 1u];
+                cross_i[j] = cross_i[j - 1u];
+                j -= 1u;
             }
-            a = b;
-            fa = fb;
+            cross_u[j] = u;
+            cross_i[j] = i;
+            count += 1u;
         }
     }
     for (var k = 0u; k < count; k++) {

@@ -1,13 +1,13 @@
 // The entry point: one invocation per pending pixel, its primary ray (and shadow rays), its pixel and flags.
 
-@compute @workgroup_size(8, 8, 1)
+@compute @workgroup_size(WORKGROUP_EDGE, WORKGROUP_EDGE, 1)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if id.x >= frame.width || id.y >= frame.height {
         return;
     }
     let pixel = id.y * frame.width + id.x;
-    if pixel_flags[pixel] == 0u || (id.x % frame.pixel_stride) != 0u || (id.y % frame.pixel_stride) != 0u {
-        pixel_flags[pixel] = 0u;
+    if pixel_flags[pixel] != PIXEL_PENDING || (id.x % frame.pixel_stride) != 0u || (id.y % frame.pixel_stride) != 0u {
+        pixel_flags[pixel] = PIXEL_UNTRACED;
         return;
     }
 

@@ -66,7 +66,7 @@ fn march(state: ptr<function, RayState>) {
                 }
                 if node.data_word == 0u {
                     // The parent stands in: drawn one level above this node (the deficit, as the CPU's).
-                    request(state, current.id, REQUEST_PRODUCE | (min(target_level + 1u - current.level, 255u) << REQUEST_DEFICIT_SHIFT));
+                    request(state, current.id, REQUEST_PRODUCE | (min(target_level + 1u - current.level, REQUEST_MAX_DEFICIT) << REQUEST_DEFICIT_SHIFT));
                     break;
                 }
                 if current.level >= target_level || (node.child_word & NODE_TERMINAL_BIT) != 0u {
@@ -82,7 +82,7 @@ fn march(state: ptr<function, RayState>) {
                 }
                 let tile = node.child_word & NODE_CHILD_MASK;
                 if tile == 0u {
-                    request(state, current.id, REQUEST_SUBDIVIDE | (min(target_level - current.level, 255u) << REQUEST_DEFICIT_SHIFT));
+                    request(state, current.id, REQUEST_SUBDIVIDE | (min(target_level - current.level, REQUEST_MAX_DEFICIT) << REQUEST_DEFICIT_SHIFT));
                     break;
                 }
                 mark_tile(tile);
@@ -124,7 +124,7 @@ fn march(state: ptr<function, RayState>) {
                     (*state).samples += 1u;
                     let value = bitcast<f32>(current.node.data_word);
                     if surfaces_on {
-                        running = iso_enter(state, iso_inside_of(value * 65535.0), segment_start, vec3<f32>(0.0));
+                        running = iso_enter(state, iso_inside_of(value * VOXEL_MAX), segment_start, vec3<f32>(0.0));
                         if running && fog_on(state) {
                             // The volume over the distance not yet accounted for (`SurfacesInVolume::constant`).
                             // From the end of the last sample's step, a little before or after the node's entry.
