@@ -12,7 +12,7 @@ use voxstream_core::{BrickSlot, FeedbackBuffer, Request, TileId, TreeView};
 use voxstream_engine::FrameRenderer;
 use voxstream_layout::{
     BrickBlend, FeedbackCounters, RayCounters, RayFrame, RequestRecord, SurfaceRecord, TransferTableEntry,
-    RAY_FRAME_BLENDING,
+    RAY_FRAME_ADAPTIVE_STEP, RAY_FRAME_BLENDING,
 };
 use voxstream_render::transfer_function::LUT_SIZE;
 use voxstream_render::{
@@ -203,16 +203,10 @@ impl GpuRenderer {
         progressive: &ProgressiveImage,
     ) -> Result<CameraFrame, RenderError> {
         settings.validate()?;
-        // The CPU's volume-rendering options the shader does not mirror yet (issue 46): refused, never ignored.
-        if settings.surfaces.is_empty() || settings.surfaces_in_volume {
-            if settings.preintegrated {
-                let (what, instead) = ("pre-integration (--preintegrate)", "--backend cpu, or drop --preintegrate");
-                return Err(GpuError::Unsupported { what, instead }.into());
-            }
-            if settings.adaptive_step.is_some() {
-                let (what, instead) = ("the adaptive step (--adaptive-step)", "--backend cpu, or drop --adaptive-step");
-                return Err(GpuError::Unsupported { what, instead }.into());
-            }
+        // The CPU's volume-rendering option the shader does not mirror yet (issue 46): refused, never ignored.
+        if (settings.surfaces.is_empty() || settings.surfaces_in_volume) && settings.preintegrated {
+            let (what, instead) = ("pre-integration (--preintegrate)", "--backend cpu, or drop --preintegrate");
+            return Err(GpuError::Unsupported { what, instead }.into());
         }
         let (width, height) = (settings.width, settings.height);
         if progressive.image.width != width || progressive.image.height != height {
@@ -221,7 +215,10 @@ impl GpuRenderer {
         let frame = camera.frame(width, height)?;
         let pixel_count = width as u64 * height as u64;
         let max_storage = self.context.max_storage_bytes();
-        let range_bytes = (LUT_SIZE as u64 + 1 + view.brick_ranges.len() as u64 + view.block_ranges.len() as u64) * 4;
+        let variation_words = if settings.adaptive_step.is_some() { LUT_SIZE as u64 } else { 0 };
+        let range_bytes =
+            (LUT_SIZE as u64 + 1 + view.brick_ranges.len() as u64 + view.block_ranges.len() as u64 + variation_words)
+                * 4;
         let readback_bytes = pixel_count * 20 + FEEDBACK_HEADER_BYTES + MAX_REQUEST_RECORDS * 8 + usage_count(view) * 4;
         for (what, bytes) in [
             ("image", pixel_count * 16),
@@ -318,7 +315,9 @@ impl GpuRenderer {
         let copy_src = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC;
         // Brick and block ranges (4 bytes per brick and per block: a few % of the bricks' bytes) change with every
         // brick produced: written whole each pass.
-        let ranges = init("ranges", bytemuck::cast_slice(&range_words(lut, view)), wgpu::BufferUsages::STORAGE);
+        let adaptive = ray_frame.flags & RAY_FRAME_ADAPTIVE_STEP != 0;
+        let ranges =
+            init("ranges", bytemuck::cast_slice(&range_words(lut, view, adaptive)), wgpu::BufferUsages::STORAGE);
         let surfaces = init("surfaces", bytemuck::cast_slice(surface_records), wgpu::BufferUsages::STORAGE);
         // Written whole each pass while blending (the caps change every frame of a transition).
         let unused = [BrickBlend::FULL];

@@ -4,8 +4,9 @@
 
 use voxstream_core::TreeView;
 use voxstream_layout::{
-    RayFrame, SurfaceRecord, RAY_FRAME_CENTRAL_NORMALS, RAY_FRAME_COLOUR_BY_LEVEL, RAY_FRAME_PHONG, RAY_FRAME_SHADOWS,
-    RAY_FRAME_SKIP_EMPTY_SPACE, RAY_FRAME_STEPS_IGNORE_STAND_INS, RAY_FRAME_SURFACES_IN_VOLUME,
+    RayFrame, SurfaceRecord, RAY_FRAME_ADAPTIVE_STEP, RAY_FRAME_CENTRAL_NORMALS, RAY_FRAME_COLOUR_BY_LEVEL,
+    RAY_FRAME_PHONG, RAY_FRAME_SHADOWS, RAY_FRAME_SKIP_EMPTY_SPACE, RAY_FRAME_STEPS_IGNORE_STAND_INS,
+    RAY_FRAME_SURFACES_IN_VOLUME,
 };
 use voxstream_render::{CameraFrame, RenderSettings, Shading, SurfaceNormals, SurfaceSettings, TransferLut};
 
@@ -16,7 +17,7 @@ const MAX_SEGMENTS: u32 = 1 << 20;
 /// What empty-space skipping reads: per transfer-table index, the entries with non-zero extinction before it (one
 /// more than the table's length), then per brick slot its `[min, max]` voxel as `min | max << 16`, then per slot
 /// its occupancy blocks' ranges, packed the same way.
-pub(crate) fn range_words(lut: &TransferLut, view: &TreeView<'_>) -> Vec<u32> {
+pub(crate) fn range_words(lut: &TransferLut, view: &TreeView<'_>, adaptive_step: bool) -> Vec<u32> {
     let entries = lut.entries();
     let mut words = Vec::with_capacity(entries.len() + 1 + view.brick_ranges.len());
     let mut visible = 0u32;
@@ -28,6 +29,10 @@ pub(crate) fn range_words(lut: &TransferLut, view: &TreeView<'_>) -> Vec<u32> {
     let pack = |&[lo, hi]: &[u16; 2]| lo as u32 | (hi as u32) << RANGE_HIGH_SHIFT;
     words.extend(view.brick_ranges.iter().map(pack));
     words.extend(view.block_ranges.iter().map(pack));
+    // The adaptive step's variation sums (`StepVariation`), last: the shader finds them from the list's end.
+    if adaptive_step {
+        words.extend(lut.variation().prefix().iter().map(|&v| (v as f32).to_bits()));
+    }
     words
 }
 
@@ -92,6 +97,10 @@ pub(crate) fn ray_frame(
     if settings.surfaces_in_volume {
         flags |= RAY_FRAME_SURFACES_IN_VOLUME;
     }
+    // Volume rendering only, as on the CPU (surfaces inside a volume step by `BrickSpan::step`, fixed).
+    if settings.adaptive_step.is_some() && settings.surfaces.is_empty() {
+        flags |= RAY_FRAME_ADAPTIVE_STEP;
+    }
     // As `SurfaceCaster`: shadows from a fixed light, with Phong shading.
     if settings.shadows && settings.shading == Shading::Phong && light != [0.0; 3] {
         flags |= RAY_FRAME_SHADOWS;
@@ -151,7 +160,7 @@ pub(crate) fn ray_frame(
         anchor_scale: anchor_scale as f32,
         surface_count: 0,
         finest_voxel: 0.0,
-        reserved0: 0,
+        adaptive_tolerance: settings.adaptive_step.unwrap_or(0.0) as f32,
         reserved1: 0,
     }
 }

@@ -31,7 +31,7 @@ use voxstream_gpu::shader_interface::{
 };
 use voxstream_gpu::BrickFiltering;
 use voxstream_layout::*;
-use voxstream_render::{cell_intersection, step_table, surface_caster, MAX_SURFACES};
+use voxstream_render::{adaptive_step, cell_intersection, step_table, surface_caster, MAX_SURFACES};
 
 const VARIANTS: [BrickFiltering; 2] = [BrickFiltering::Exact, BrickFiltering::Hardware];
 
@@ -67,10 +67,12 @@ fn rust_twins() -> Vec<(&'static str, Value)> {
         ("RAY_FRAME_SHADOWS", int(RAY_FRAME_SHADOWS)),
         ("RAY_FRAME_BLENDING", int(RAY_FRAME_BLENDING)),
         ("RAY_FRAME_SURFACES_IN_VOLUME", int(RAY_FRAME_SURFACES_IN_VOLUME)),
+        ("RAY_FRAME_ADAPTIVE_STEP", int(RAY_FRAME_ADAPTIVE_STEP)),
         // The CPU renderer (voxstream-render), which the shader mirrors stage by stage.
         ("STEPS_PER_OCTAVE", Int(step_table::STEPS_PER_OCTAVE as i128)),
         ("LADDER_HALF", Int(step_table::LADDER_HALF as i128)),
         ("RUNG_RATIO", Float(step_table::RUNG_RATIO)),
+        ("MAX_STEP_GROWTH", Float(adaptive_step::MAX_STEP_GROWTH)),
         ("SHADOW_CONE", Float(surface_caster::SHADOW_CONE)),
         ("SHADOW_OFFSET", Float(surface_caster::SHADOW_OFFSET)),
         ("REFINE_ITERATIONS", int(cell_intersection::REFINE_ITERATIONS)),

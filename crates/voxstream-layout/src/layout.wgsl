@@ -99,6 +99,7 @@ const RAY_FRAME_CENTRAL_NORMALS: u32 = 16u;
 const RAY_FRAME_SHADOWS: u32 = 32u;
 const RAY_FRAME_BLENDING: u32 = 64u;
 const RAY_FRAME_SURFACES_IN_VOLUME: u32 = 128u;
+const RAY_FRAME_ADAPTIVE_STEP: u32 = 256u;
 
 struct RayFrame {
     width: u32,
@@ -155,7 +156,7 @@ struct RayFrame {
     anchor_scale: f32,
     surface_count: u32,
     finest_voxel: f32,
-    reserved0: u32,
+    adaptive_tolerance: f32,
     reserved1: u32,
 }
 

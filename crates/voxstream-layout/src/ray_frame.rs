@@ -21,7 +21,7 @@
 //! | 160 | `light_*`, `specular` | unit light direction (world; zero: a headlight); Phong's specular coefficient |
 //! | 176 | `shininess`, `atlas_bricks_x`, `atlas_bricks_y`, `anchor_level` | Phong's exponent; brick slots per row and per column of the brick atlas (slot `s` sits at brick `(s mod x, (s div x) mod y, s div xy)`); the anchor's level |
 //! | 192 | `anchor_x`, `anchor_y`, `anchor_z`, `anchor_scale` | the anchor's integer coordinates at its level; `N^anchor_level` |
-//! | 208 | `surface_count`, `finest_voxel`, `reserved0`, `reserved1` | isosurfaces drawn (0: emission–absorption), each a [`SurfaceRecord`]; world length of the finest voxel (the least shadow offset); zero |
+//! | 208 | `surface_count`, `finest_voxel`, `adaptive_tolerance`, `reserved1` | isosurfaces drawn (0: emission–absorption), each a [`SurfaceRecord`]; world length of the finest voxel (the least shadow offset); the adaptive step's tolerance (with [`RAY_FRAME_ADAPTIVE_STEP`]); zero |
 //!
 //! Size 224 bytes (a multiple of 16, as uniforms need).
 //!
@@ -56,6 +56,10 @@ pub const RAY_FRAME_BLENDING: u32 = 64;
 /// [`RayFrame::flags`]: isosurfaces are drawn inside the transfer function's volume, composited in depth order
 /// (`RenderSettings::surfaces_in_volume`).
 pub const RAY_FRAME_SURFACES_IN_VOLUME: u32 = 128;
+/// [`RayFrame::flags`]: the error-bounded adaptive step (`RenderSettings::adaptive_step`): each brick segment's
+/// step from the transfer function's variation over the brick's range, which follows the range list as `f32`
+/// prefix sums, with [`RayFrame::adaptive_tolerance`].
+pub const RAY_FRAME_ADAPTIVE_STEP: u32 = 256;
 
 /// The frame's ray parameters, as a GPU reads them (see the module docs for the offsets).
 #[repr(C)]
@@ -116,7 +120,7 @@ pub struct RayFrame {
     pub anchor_scale: f32,
     pub surface_count: u32,
     pub finest_voxel: f32,
-    pub reserved0: u32,
+    pub adaptive_tolerance: f32,
     pub reserved1: u32,
 }
 

@@ -172,7 +172,7 @@ fn every_struct_matches_its_rust_twin() {
             anchor_scale,
             surface_count,
             finest_voxel,
-            reserved0,
+            adaptive_tolerance,
             reserved1,
         }),
         rust_layout!(SurfaceRecord { iso, lower, upper, opacity, r, g, b, reserved }),
@@ -209,6 +209,7 @@ fn every_constant_matches_its_rust_twin() {
         ("RAY_FRAME_SHADOWS", RAY_FRAME_SHADOWS),
         ("RAY_FRAME_BLENDING", RAY_FRAME_BLENDING),
         ("RAY_FRAME_SURFACES_IN_VOLUME", RAY_FRAME_SURFACES_IN_VOLUME),
+        ("RAY_FRAME_ADAPTIVE_STEP", RAY_FRAME_ADAPTIVE_STEP),
     ]
     .into_iter()
     .map(|(name, value)| (name.to_string(), value))

@@ -47,6 +47,11 @@ impl StepVariation {
         StepVariation { before: before.into_boxed_slice() }
     }
 
+    /// The prefix sums themselves, one per table entry (what a GPU uploads).
+    pub fn prefix(&self) -> &[f64] {
+        &self.before
+    }
+
     /// The table's variation (per world unit) over the normalised values `[lower, upper]`, widened to whole entries.
     #[inline]
     pub fn over(&self, lower: f32, upper: f32) -> f64 {

@@ -227,9 +227,8 @@ impl<'a, const PRE: bool> EmissionAbsorption<'a, PRE> {
     }
 
     /// One sample of a pre-integrating ray: the segment from the last sample when it is the one just before, else
-    /// the last run closed and a new one opened by half a step of this sample's value. Kept out of line: the
-    /// default ray's sample loop stays as small as it was.
-    #[inline(never)]
+    /// the last run closed and a new one opened by half a step of this sample's value (or from a front edge).
+    #[inline(always)]
     fn sample_preintegrated(&mut self, sample: Sample) -> ControlFlow<()> {
         let Some(state) = self.preintegrating else { return ControlFlow::Continue(()) };
         // A sample before where the next consecutive one would be was taken already (a dilated run's sample taken

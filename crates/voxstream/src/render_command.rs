@@ -70,14 +70,8 @@ pub fn prepare_view(args: &RenderArgs, source: &SourceMeta) -> Result<PreparedVi
 /// `render`'s checks of the flags (also `view`'s, on the arguments it builds).
 pub fn check_flags(args: &RenderArgs) -> Result<()> {
     crate::backend::check_backend_flags(args.look.backend, args.look.gpu_filter)?;
-    if args.look.backend == crate::backend::Backend::Gpu {
-        for (given, flag) in
-            [(args.look.preintegrate, "--preintegrate"), (args.look.adaptive_step.is_some(), "--adaptive-step")]
-        {
-            if given {
-                bail!("{flag} is not drawn by the GPU backend yet: use --backend cpu, or drop {flag}");
-            }
-        }
+    if args.look.backend == crate::backend::Backend::Gpu && args.look.preintegrate {
+        bail!("--preintegrate is not drawn by the GPU backend yet: use --backend cpu, or drop --preintegrate");
     }
     if args.width == 0 || args.height == 0 {
         bail!("image size must be positive, got {}x{}", args.width, args.height);

@@ -185,36 +185,38 @@ fn bad_input_is_one_clear_line() {
     // --gpu-filter without the GPU renderer.
     assert_fails(&["render", "--gpu-filter", "hardware", "--out", "x.png"], "add --backend gpu");
     assert_fails(&["bench", "--gpu-filter", "exact"], "add --backend gpu");
-    // Issue 46's step options: a tolerance out of range; the GPU backend, which does not mirror them yet.
+    // Issue 46's step options: a tolerance out of range; pre-integration on the GPU backend, which does not mirror
+    // it yet.
     assert_fails(&["render", "--adaptive-step", "0", "--out", "x.png"], "adaptive step tolerance must be in (0, 10]");
     assert_fails(&["render", "--adaptive-step", "nan", "--out", "x.png"], "adaptive step tolerance");
     assert_fails(&["render", "--backend", "gpu", "--preintegrate", "--out", "x.png"], "use --backend cpu");
-    assert_fails(&["render", "--backend", "gpu", "--adaptive-step", "--out", "x.png"], "use --backend cpu");
 }
 
 /// The step options render, and change the image only as they should: the adaptive step takes fewer samples where
-/// the transfer function varies little, pre-integration keeps the image within a few levels of the fixed step's.
+/// the transfer function varies little (the shell's soft fog), pre-integration keeps the image within a few levels
+/// of the fixed step's.
 #[test]
-fn the_step_options_render_the_default_scene_with_fewer_samples() {
+fn the_step_options_render_the_shell_with_fewer_samples() {
     let dir = scratch("step-options");
     let render = |name: &str, extra: &[&str]| {
         let out = format!("{name}.png");
         let stats = format!("{name}.json");
-        let mut args = vec!["render", "--out", &out, "--stats", &stats];
+        let mut args = vec!["render", "shell", "--out", &out, "--stats", &stats];
         args.extend_from_slice(extra);
         let output = run(&args, &dir);
         assert!(output.status.success(), "{extra:?}: {}", stderr(&output));
         let stats: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join(&stats)).unwrap()).unwrap();
         let decoder = png::Decoder::new(std::io::Cursor::new(std::fs::read(dir.join(&out)).unwrap()));
         let mut reader = decoder.read_info().unwrap();
-        let mut pixels = vec![0; reader.output_buffer_size().unwrap()];
+        let mut pixels = vec![0; reader.output_buffer_size()];
         reader.next_frame(&mut pixels).unwrap();
         (stats["samples"].as_u64().expect("samples in the stats"), pixels)
     };
     let (fixed_samples, fixed) = render("fixed", &[]);
     let (adaptive_samples, adaptive) = render("adaptive", &["--adaptive-step"]);
     let (_, preintegrated) = render("pre", &["--preintegrate"]);
-    assert!(adaptive_samples < fixed_samples, "adaptive {adaptive_samples} against fixed {fixed_samples} samples");
+    // Measured: 18.0 M against 62.9 M.
+    assert!(adaptive_samples * 2 < fixed_samples, "adaptive {adaptive_samples} against fixed {fixed_samples} samples");
     let psnr = |a: &[u8], b: &[u8]| {
         let mse = a.iter().zip(b).map(|(x, y)| (*x as f64 - *y as f64).powi(2)).sum::<f64>() / a.len() as f64;
         10.0 * (255.0f64 * 255.0 / mse.max(1e-12)).log10()

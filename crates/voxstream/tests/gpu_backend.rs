@@ -350,6 +350,41 @@ fn empty_space_skipping_takes_fewer_samples_and_changes_no_pixel() {
     assert_eq!(skipping.image.pixels, sampling_all.image.pixels, "skipping changed the image");
 }
 
+/// The error-bounded adaptive step (issue 46) on the GPU: the same steps as the CPU's, so the same image, with
+/// fewer samples than the fixed step on the GPU itself.
+#[test]
+fn the_adaptive_step_matches_the_cpu_image_with_fewer_samples() {
+    for name in ["shell", "hypertexture"] {
+        let (settings, producer, tf, camera) = settings(name, SIZE);
+        let adaptive = RenderSettings { adaptive_step: Some(0.05), ..settings.clone() };
+        let mut cpu = Session::new(producer, &tf, adaptive.clone(), 64 << 20, LoopLimits::default()).expect("cpu");
+        let expected = common::converged(&mut cpu, &camera);
+        let gpu_frame = |settings: RenderSettings| {
+            let mut gpu = Session::with_renderer(
+                open_gpu(),
+                producer,
+                &tf,
+                settings,
+                64 << 20,
+                LoopLimits::default(),
+                [0.0, 1.0],
+            )
+            .expect("gpu session");
+            gpu.render(&camera, Mode::Converged).expect("gpu render");
+            gpu.render(&camera, Mode::Converged).expect("warm frame")
+        };
+        let (adapted, fixed) = (gpu_frame(adaptive), gpu_frame(settings));
+        assert!(expected.pixels.iter().any(|p| p[3] > 0.5), "{name}: the reference shows nothing");
+        assert_close(&format!("{name}-adaptive"), &adapted.image, &expected);
+        println!("{name}: {} samples adaptive, {} fixed", adapted.samples, fixed.samples);
+        // The shell's soft fog: a fraction of the samples (3.5 times fewer on the CPU at 512²); the
+        // hypertexture's sharp transfer function: about as many.
+        let fewer =
+            if name == "shell" { adapted.samples * 2 < fixed.samples } else { adapted.samples <= fixed.samples };
+        assert!(fewer, "{name}: {} vs {}", adapted.samples, fixed.samples);
+    }
+}
+
 /// The isosurfaces of `name` with `surfaces`, Phong-shaded from a fixed light, `adjust`ed: the GPU's converged
 /// frame against the CPU's (Knoll et al.'s exact crossings on both sides: the same cell walk, cubic and seams).
 fn compare_isosurfaces(

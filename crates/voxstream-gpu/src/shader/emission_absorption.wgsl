@@ -45,6 +45,24 @@ fn visible_in(lower: f32, upper: f32) -> bool {
     return ranges[end + 1u] > ranges[first];
 }
 
+// The error-bounded adaptive step (`StepVariation::step`, voxstream-render's adaptive_step.rs): `tolerance / TV`
+// within [base, MAX_STEP_GROWTH·base], TV the transfer function's variation over [lower, upper] from the prefix sums
+// that end the range list (RAY_FRAME_ADAPTIVE_STEP).
+const MAX_STEP_GROWTH: f32 = 4.0;
+fn adaptive_step(lower: f32, upper: f32, base: f32) -> f32 {
+    let entries = arrayLength(&table);
+    let last = f32(entries - 1u);
+    let a = u32(clamp(floor(lower * last), 0.0, last));
+    let b = u32(clamp(ceil(upper * last), 0.0, last));
+    let sums = arrayLength(&ranges) - entries;
+    let variation = bitcast<f32>(ranges[sums + max(a, b)]) - bitcast<f32>(ranges[sums + min(a, b)]);
+    let longest = MAX_STEP_GROWTH * base;
+    if variation * longest <= frame.adaptive_tolerance {
+        return longest;
+    }
+    return max(frame.adaptive_tolerance / variation, base);
+}
+
 fn power(base: f32, exponent: f32) -> f32 {
     if base <= 0.0 {
         return select(0.0, 1.0, exponent == 0.0);

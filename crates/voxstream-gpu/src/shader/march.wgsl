@@ -197,9 +197,28 @@ fn march(state: ptr<function, RayState>) {
                 continue;
             }
 
+            // Quadrilinear: blend with the parent by the cone's level where the finest data is the wanted level.
+            var weight = 1.0;
+            if has_coarse && fine.level == target_level {
+                weight = clamp(level_at(0.5 * (t_start + t_exit)) - f32(coarse.level), 0.0, 1.0);
+            }
+            let fine_slot = fine.node.data_word - 1u;
+            let coarse_slot = coarse.node.data_word - 1u;
+            let capped = has_coarse && !blend_is_full(fine_slot);
             // The step: the footprint voxel, or the sampled level's voxel where only coarser data exists, rounded
-            // down to the ladder of `StepLength` (kept while it still is the rung for the desired step).
-            choose_step(state, max(level_voxel(sampled_level), footprint_voxel) * frame.step_factor / (*state).speed);
+            // down to the ladder of `StepLength` (kept while it still is the rung for the desired step); with
+            // RAY_FRAME_ADAPTIVE_STEP, longer where the transfer function varies little over the bricks' values
+            // (the coarse brick's too where it is blended in).
+            var desired = max(level_voxel(sampled_level), footprint_voxel) * frame.step_factor / (*state).speed;
+            if (frame.flags & RAY_FRAME_ADAPTIVE_STEP) != 0u {
+                var values = brick_range(fine_slot);
+                if has_coarse && (weight < 1.0 || capped) {
+                    let coarse_values = brick_range(coarse_slot);
+                    values = vec2<f32>(min(values.x, coarse_values.x), max(values.y, coarse_values.y));
+                }
+                desired = adaptive_step(values.x, values.y, desired);
+            }
+            choose_step(state, desired);
             let dt = (*state).step;
             let first = covered + 0.5 * dt;
             var count = 0u;
@@ -211,16 +230,8 @@ fn march(state: ptr<function, RayState>) {
             if count == 0u {
                 continue;
             }
-            // Quadrilinear: blend with the parent by the cone's level where the finest data is the wanted level.
-            var weight = 1.0;
-            if has_coarse && fine.level == target_level {
-                weight = clamp(level_at(0.5 * (t_start + t_exit)) - f32(coarse.level), 0.0, 1.0);
-            }
-            let fine_slot = fine.node.data_word - 1u;
-            let coarse_slot = coarse.node.data_word - 1u;
             // Thiele et al.: the cone's weight capped by the fine brick's caps (fade-in, coarser neighbours) at the
             // first and the last sample, ramped linearly between them; normals blend by the caps alone.
-            let capped = has_coarse && !blend_is_full(fine_slot);
             var weight_first = weight;
             var weight_step = 0.0;
             var normal_first = 1.0;
