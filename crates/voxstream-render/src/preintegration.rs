@@ -94,10 +94,33 @@ fn interpolate(table: &[Vec4], x: f32) -> Vec4 {
     a + (b - a) * (x - floor)
 }
 
-/// `1 − e^(−x)` for `x ≥ 0`, to the precision of `f32` (also for thin segments, where `1 − exp` would cancel).
+/// `1 − e^(−x)` for `x ≥ 0`, to within 2·10⁻⁶ (far below an 8-bit level; relative to the result for thin segments),
+/// without a call: a series for thin segments (where `1 − exp` would cancel), else `2^y` split into exponent bits
+/// and a polynomial in the fraction. Written by hand: it sits in the per-sample loop, where `expm1f` was a fifth of a pre-integrated
+/// sample's time.
 #[inline(always)]
 pub fn one_minus_exp_neg(x: f32) -> f32 {
-    -(-x).exp_m1()
+    if x < 0.125 {
+        // x − x²/2 + x³/6 − x⁴/24 + x⁵/120 − x⁶/720: the next term is below x⁷/5040 < 10⁻⁹·x.
+        x * (1.0 - x * (0.5 - x * (1.0 / 6.0 - x * (1.0 / 24.0 - x * (1.0 / 120.0 - x * (1.0 / 720.0))))))
+    } else {
+        1.0 - exp2_negative(-x * std::f32::consts::LOG2_E)
+    }
+}
+
+/// `2^y` for `y ≤ 0` (0 below 2⁻¹²⁶): the integer part into the exponent bits, the fraction by its Taylor
+/// polynomial of degree 7 (relative error below 1.4·10⁻⁶ on `[0, 1)`).
+#[inline(always)]
+fn exp2_negative(y: f32) -> f32 {
+    if y < -126.0 {
+        return 0.0;
+    }
+    let whole = y.floor();
+    let f = y - whole;
+    const C: [f32; 7] =
+        [0.693_147_2, 0.240_226_5, 0.055_504_11, 0.009_618_129, 0.001_333_356, 1.540_353e-4, 1.525_273e-5];
+    let p = 1.0 + f * (C[0] + f * (C[1] + f * (C[2] + f * (C[3] + f * (C[4] + f * (C[5] + f * C[6]))))));
+    p * f32::from_bits(((whole as i32 + 127) as u32) << 23)
 }
 
 #[cfg(test)]
@@ -184,11 +207,18 @@ mod tests {
     }
 
     #[test]
-    fn one_minus_exp_neg_keeps_its_precision_for_thin_segments() {
-        for x in [0.0f32, 1e-7, 1e-4, 1e-3, 0.01, 0.5, 3.0, 20.0, 100.0] {
+    fn one_minus_exp_neg_is_within_its_stated_error_everywhere() {
+        let mut worst = 0f64;
+        let mut x = 0f32;
+        while x < 200.0 {
             let want = -(-(x as f64)).exp_m1();
             let got = one_minus_exp_neg(x) as f64;
-            assert!((got - want).abs() <= 2e-7 * want, "{x}: {got} against {want}");
+            let error = (got - want).abs();
+            let thin = x < 0.125;
+            assert!(error <= 2e-6 && (!thin || error <= 1e-6 * want), "{x}: {got} against {want}");
+            worst = worst.max(error);
+            x = if x < 1e-3 { x + 1e-6 } else { x * 1.0007 + 1e-6 };
         }
+        assert!(worst > 0.0, "the approximation was compared");
     }
 }
