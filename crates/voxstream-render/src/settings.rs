@@ -256,6 +256,11 @@ impl RenderSettings {
         if self.surfaces_in_volume && self.surfaces.is_empty() {
             return bad("a volume around isosurfaces needs at least one isosurface".into());
         }
+        if !self.surfaces.is_empty() && (self.preintegrated || self.adaptive_step.is_some()) {
+            return bad("pre-integration and the adaptive step are for volume rendering: drop them with isosurfaces \
+                 (--iso), whose volume around them steps by the fixed step"
+                .into());
+        }
         if self.surfaces.len() > MAX_SURFACES {
             return bad(format!("at most {MAX_SURFACES} isosurfaces, got {}", self.surfaces.len()));
         }

@@ -201,7 +201,7 @@ pub struct LookFlags {
     pub preintegrate: bool,
     /// Volume rendering: the error-bounded adaptive step: each brick steps by up to four times --step where the
     /// transfer function varies little over the brick's values, keeping the error of each monotone stretch of a
-    /// ray within TOLERANCE (optical depth; default 0.05). CPU backend.
+    /// ray within TOLERANCE (optical depth; default 0.05). Both backends.
     #[arg(long, value_name = "TOLERANCE", num_args = 0..=1, default_missing_value = "0.05")]
     pub adaptive_step: Option<f64>,
     /// Level-of-detail bias (positive = finer than one voxel per pixel).

@@ -190,6 +190,8 @@ fn bad_input_is_one_clear_line() {
     assert_fails(&["render", "--adaptive-step", "0", "--out", "x.png"], "adaptive step tolerance must be in (0, 10]");
     assert_fails(&["render", "--adaptive-step", "nan", "--out", "x.png"], "adaptive step tolerance");
     assert_fails(&["render", "--backend", "gpu", "--preintegrate", "--out", "x.png"], "use --backend cpu");
+    assert_fails(&["render", "--iso", "0.5", "--preintegrate", "--out", "x.png"], "for volume rendering");
+    assert_fails(&["render", "--iso", "0.5", "--adaptive-step", "--out", "x.png"], "for volume rendering");
 }
 
 /// The step options render, and change the image only as they should: the adaptive step takes fewer samples where

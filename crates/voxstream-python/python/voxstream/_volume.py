@@ -94,7 +94,7 @@ class Volume:
         - ``backend``: ``"cpu"`` or ``"gpu"``; ``budget_mb``: the whole memory budget;
         - ``step``: the ray-march step in voxels of the sampled level; ``preintegrate``: integrate the transfer
           function between samples (the CLI's ``--preintegrate``); ``adaptive_step``: the error-bounded adaptive
-          step's tolerance (``--adaptive-step``, e.g. 0.05) or None for the fixed step (both CPU only).
+          step's tolerance (``--adaptive-step``, e.g. 0.05) or None for the fixed step (pre-integration: CPU only).
 
         The GIL is released while rendering; Ctrl-C raises ``KeyboardInterrupt`` at once. Statistics of the frame
         are in ``last_stats``. A converged render whose bricks could not all be read raises ``RuntimeError``."""
