@@ -78,6 +78,22 @@ struct PreIntegrating<'a> {
     front: Option<(f64, f32)>,
 }
 
+impl PreIntegrating<'_> {
+    /// Where the sample after `last` lies when they are consecutive: half of each one's step on (the steps may
+    /// differ across segments).
+    #[inline(always)]
+    fn next_after(&self, last: &Pending) -> f64 {
+        last.t + 0.5 * (last.step + self.step)
+    }
+
+    /// How far two distances along the ray may differ and still be the same place: a thousandth of the step (far
+    /// above their rounding, far below a step).
+    #[inline(always)]
+    fn slack(&self) -> f64 {
+        1e-3 * self.step
+    }
+}
+
 /// The colour and opacity accumulated along one ray; `PRE`: pre-integrated segments between samples
 /// ([`RenderSettings::preintegrated`]), a type of its own so that the default ray's sample loop holds no test of it.
 pub struct EmissionAbsorption<'a, const PRE: bool = false> {
@@ -219,7 +235,7 @@ impl<'a, const PRE: bool> EmissionAbsorption<'a, PRE> {
     fn opening(&self, sample: &Sample) -> Vec4 {
         let Some(state) = self.preintegrating else { return Vec4::ZERO };
         match state.front {
-            Some((t, value)) if sample.t > t && sample.t - t <= state.step * (1.0 + 1e-3) => {
+            Some((t, value)) if sample.t > t && sample.t - t <= state.step + state.slack() => {
                 state.table.segment(value, sample.value, (sample.t - t) as f32)
             }
             _ => state.half_table.map_or(Vec4::ZERO, |t| t.lookup(sample.value)),
@@ -233,16 +249,10 @@ impl<'a, const PRE: bool> EmissionAbsorption<'a, PRE> {
         let Some(state) = self.preintegrating else { return ControlFlow::Continue(()) };
         // A sample before where the next consecutive one would be was taken already (a dilated run's sample taken
         // again by the next run, [`Integrand::DILATED_RUNS`]): passed over.
-        if let Some(last) = state.pending {
-            if sample.t < last.t + 0.5 * (last.step + state.step) * (1.0 - 1e-3) {
-                return ControlFlow::Continue(());
-            }
+        if state.pending.is_some_and(|last| sample.t < state.next_after(&last) - state.slack()) {
+            return ControlFlow::Continue(());
         }
-        let consecutive = state.pending.filter(|last| {
-            // Consecutive samples are half of each one's step apart (the steps may differ across segments).
-            let expected = 0.5 * (last.step + state.step);
-            (sample.t - last.t - expected).abs() <= 1e-3 * state.step
-        });
+        let consecutive = state.pending.filter(|last| (sample.t - state.next_after(last)).abs() <= state.slack());
         let next = Pending { t: sample.t, value: sample.value, gradient: sample.gradient, step: state.step };
         let flow = match consecutive {
             Some(last) => {
@@ -270,15 +280,14 @@ impl<'a, const PRE: bool> EmissionAbsorption<'a, PRE> {
     #[inline(never)]
     fn edge_preintegrated(&mut self, sample: Sample, before: bool) {
         let Some(state) = self.preintegrating.as_mut() else { return };
-        let next_after = |last: &Pending| last.t + 0.5 * (last.step + state.step);
         if before {
             // Not where the last run goes on anyway.
-            if state.pending.is_none_or(|last| sample.t >= next_after(&last) * (1.0 - 1e-12) + 1e-3 * state.step) {
+            if state.pending.is_none_or(|last| sample.t >= state.next_after(&last) + state.slack()) {
                 state.front = Some((sample.t, sample.value));
             }
         } else if state
             .pending
-            .is_some_and(|last| sample.t > last.t && sample.t <= next_after(&last) + 1e-3 * state.step)
+            .is_some_and(|last| sample.t > last.t && sample.t <= state.next_after(&last) + state.slack())
         {
             state.back = Some((sample.t, sample.value));
         }
