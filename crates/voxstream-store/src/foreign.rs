@@ -97,7 +97,11 @@ pub(crate) fn open_foreign(
         if let ChunkSource::Folder(_) = chunk_source {
             crate::metadata_files::check_node_metadata(path, name)?;
         }
-        let array = Array::open(readable.clone(), &format!("/{}", name.trim_start_matches('/')))
+        let opened = Array::open(readable.clone(), &format!("/{}", name.trim_start_matches('/')))
+            .map_err(|e| bad(format!("dataset '{name}': {e}")))?;
+        // The metadata as written (a v2 array's own keys), before a blosc array is re-created from it as v3.
+        let metadata = serde_json::to_value(opened.metadata()).unwrap_or(Value::Null);
+        let array = crate::strict_codecs::with_strict_blosc(opened, readable.clone())
             .map_err(|e| bad(format!("dataset '{name}': {e}")))?;
         let shape = array.shape().to_vec();
         if shape.len() < 3 || shape[..shape.len() - 3].iter().any(|&d| d == 0) {
@@ -106,7 +110,6 @@ pub(crate) fn open_foreign(
                 message: format!("dataset '{name}' has shape {shape:?} (needs ≥ 3 axes)"),
             });
         }
-        let metadata = serde_json::to_value(array.metadata()).unwrap_or(Value::Null);
         check_chunk_sizes(path, name, &metadata)?;
         check_axes(ms, shape.len()).map_err(|m| bad(format!("dataset '{name}': {m}")))?;
         let chunks = stored_chunks_in(chunk_source, name, &metadata, shape.len())
@@ -163,7 +166,10 @@ pub(crate) fn open_foreign(
                 level_datasets.push(Some(i));
                 let leading = array.shape().len() - 3;
                 levels.push(LevelSource::Array {
-                    array: Array::open(readable.clone(), array.path().as_str()).map_err(|e| bad(e.to_string()))?,
+                    array: Array::open(readable.clone(), array.path().as_str())
+                        .map_err(|e| e.to_string())
+                        .and_then(|opened| crate::strict_codecs::with_strict_blosc(opened, readable.clone()))
+                        .map_err(bad)?,
                     leading,
                     shape: last3(array.shape()),
                 });

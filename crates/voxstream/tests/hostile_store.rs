@@ -514,6 +514,58 @@ fn forged_shard_indexes_bombs_fifos_and_flipped_bits_are_failed_bricks() {
     assert_bricks_fail(&dir, "fifo.zarr", "not a regular file");
 }
 
+/// Blosc (lz4, no shuffle) of `bytes`, as numcodecs writes a Zarr v2 chunk.
+fn blosc(bytes: Vec<u8>) -> Vec<u8> {
+    use zarrs::array::codec::api::{Codec, CodecOptions};
+    let metadata: zarrs::metadata::v3::MetadataV3 = serde_json::from_str(
+        r#"{"name": "blosc", "configuration": {"cname": "lz4", "clevel": 5, "shuffle": "noshuffle", "blocksize": 0}}"#,
+    )
+    .unwrap();
+    let Codec::BytesToBytes(codec) = Codec::from_metadata(&metadata).unwrap() else { panic!("blosc") };
+    codec.encode(std::borrow::Cow::Owned(bytes), &CodecOptions::default()).unwrap().into_owned()
+}
+
+#[test]
+fn a_blosc_bomb_in_another_tools_store_is_a_failed_brick_within_memory() {
+    // A Zarr v2 OME-Zarr image (as zarr-python writes it) of 64³ bytes in eight 32³ blosc chunks; one chunk is 512
+    // MiB of zeros in about 2 MB of blosc, whose header declares it. zarrs allocated and filled that much.
+    let dir = scratch("blosc");
+    let store = dir.join("blosc.zarr");
+    let write_json = |path: &Path, value: serde_json::Value| {
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        std::fs::write(path, value.to_string()).unwrap();
+    };
+    write_json(&store.join(".zgroup"), serde_json::json!({"zarr_format": 2}));
+    let axes: Vec<serde_json::Value> =
+        ["z", "y", "x"].iter().map(|a| serde_json::json!({"name": a, "type": "space"})).collect();
+    write_json(
+        &store.join(".zattrs"),
+        serde_json::json!({"multiscales": [{"version": "0.4", "axes": axes, "datasets": [{"path": "0",
+            "coordinateTransformations": [{"type": "scale", "scale": [1.0, 1.0, 1.0]}]}]}]}),
+    );
+    write_json(
+        &store.join("0/.zarray"),
+        serde_json::json!({"zarr_format": 2, "shape": [64, 64, 64], "chunks": [32, 32, 32], "dtype": "|u1",
+            "compressor": {"id": "blosc", "cname": "lz4", "clevel": 5, "shuffle": 0, "blocksize": 0},
+            "fill_value": 0, "order": "C", "filters": null, "dimension_separator": "/"}),
+    );
+    let good = blosc(vec![100u8; 32 * 32 * 32]);
+    for chunk in 0..8 {
+        let path = store.join(format!("0/{}/{}/{}", chunk >> 2, (chunk >> 1) & 1, chunk & 1));
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        std::fs::write(&path, if chunk == 7 { blosc(vec![0u8; 512 << 20]) } else { good.clone() }).unwrap();
+    }
+    // The level's probe at open reads that chunk: the store is refused in one line, within the memory bound.
+    let out = checked(&["render", "blosc.zarr", "--out", "b.png", "--width", "64", "--height", "64"], &dir);
+    assert_eq!(out.code, 1, "exit {}: {}", out.code, out.stderr);
+    assert_eq!(out.stderr.trim_end().lines().count(), 1, "not one line:\n{}", out.stderr);
+    assert!(out.stderr.contains("declares 536870912 bytes, past the 32768 bytes"), "{}", out.stderr);
+    // Without the bomb the store renders (the blosc chunks decode through the strict decoder).
+    std::fs::write(store.join("0/1/1/1"), &good).unwrap();
+    let out = checked(&["render", "blosc.zarr", "--out", "b.png", "--width", "64", "--height", "64"], &dir);
+    assert_eq!(out.code, 0, "exit {}: {}", out.code, out.stderr);
+}
+
 fn copy_dir(from: &Path, to: &Path) {
     let _ = std::fs::remove_dir_all(to);
     std::fs::create_dir_all(to).unwrap();
