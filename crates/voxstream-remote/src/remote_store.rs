@@ -198,10 +198,18 @@ impl RemoteStore {
                     _ => "access denied: set the service's credentials in the environment",
                 }
             }
+            _ if transport_cause(error).is_some_and(|cause| cause.contains("certificate")) => {
+                "the server's TLS certificate is not trusted: if the server is yours, set SSL_CERT_FILE to the \
+                 certificate (PEM) of the authority that signed it"
+            }
             _ => "",
         };
-        // object_store's messages name the request's URL, which never holds credentials here (see `location`).
-        let text = error.to_string();
+        // object_store's messages name the request's URL, which never holds credentials here (see `location`). A
+        // transport failure's own message ("error sending request") hides its cause: the innermost one is added.
+        let text = match transport_cause(error) {
+            Some(cause) => format!("{error}: {cause}"),
+            None => first_line(&error.to_string()),
+        };
         if hint.is_empty() {
             self.error(key, text)
         } else {
@@ -417,6 +425,29 @@ impl ReadableStorageTraits for RemoteStore {
     }
 }
 
+/// The first line of a client message, without the start of an HTML body after it: a server's error page (nginx's
+/// "400 The plain HTTP request was sent to HTTPS port") follows the status line in object_store's message.
+fn first_line(text: &str) -> String {
+    let line = text.lines().next().unwrap_or_default().trim_end();
+    line.strip_suffix("<html>")
+        .or_else(|| line.strip_suffix("<!DOCTYPE html>"))
+        .unwrap_or(line)
+        .trim_end_matches([':', ' '])
+        .to_string()
+}
+
+/// The innermost cause under a transport error (a refused connection, a TLS certificate rejected, a reset), which
+/// the client's own message ("error sending request") leaves out; `None` where the chain adds nothing.
+fn transport_cause(error: &object_store::Error) -> Option<String> {
+    let mut innermost: &dyn std::error::Error = error;
+    while let Some(source) = innermost.source() {
+        innermost = source;
+    }
+    let cause = innermost.to_string();
+    (!std::ptr::addr_eq(innermost, error as &dyn std::error::Error) && !error.to_string().contains(&cause))
+        .then_some(cause)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -436,5 +467,35 @@ mod tests {
         assert_eq!(to_get_range(ByteRange::FromStart(5, Some(10))), Some(GetRange::Bounded(5..15)));
         assert_eq!(to_get_range(ByteRange::Suffix(8)), Some(GetRange::Suffix(8)));
         assert_eq!(to_get_range(ByteRange::FromStart(3, None)), Some(GetRange::Offset(3)));
+    }
+
+    #[test]
+    fn client_messages_keep_their_first_line_without_an_error_page() {
+        let page = "GET http://h/x: Server returned non-2xx status code: 400 Bad Request: <html>\n<head>…</head>\n";
+        assert_eq!(first_line(page), "GET http://h/x: Server returned non-2xx status code: 400 Bad Request");
+        assert_eq!(first_line("plain message"), "plain message");
+        assert_eq!(first_line(""), "");
+    }
+
+    #[test]
+    fn a_transport_error_names_its_innermost_cause() {
+        /// A client error whose message leaves out its cause, as reqwest's "error sending request" does.
+        #[derive(Debug)]
+        struct Sending(std::io::Error);
+        impl std::fmt::Display for Sending {
+            fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str("error sending request")
+            }
+        }
+        impl std::error::Error for Sending {
+            fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+                Some(&self.0)
+            }
+        }
+        let io = std::io::Error::new(std::io::ErrorKind::ConnectionRefused, "Connection refused");
+        let error = object_store::Error::Generic { store: "HTTP", source: Box::new(Sending(io)) };
+        assert_eq!(transport_cause(&error).as_deref(), Some("Connection refused"));
+        let error = object_store::Error::NotFound { path: "x".into(), source: "x".into() };
+        assert_eq!(transport_cause(&error), None, "a cause the message already holds is not repeated");
     }
 }

@@ -58,6 +58,27 @@ impl Drop for Server {
 
 /// nginx serving `root` on a free port, its access log at `dir/access.log`.
 fn nginx(dir: &Path, root: &Path) -> Server {
+    nginx_serving(dir, root, None)
+}
+
+/// A certificate authority's certificate (PEM) and nginx's certificate and key (PEM) signed by it, for 127.0.0.1.
+fn certificates() -> (String, String, String) {
+    use rcgen::{BasicConstraints, CertificateParams, IsCa, KeyPair, SanType};
+    let ca_key = KeyPair::generate().unwrap();
+    let mut ca = CertificateParams::new(Vec::<String>::new()).unwrap();
+    ca.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
+    ca.distinguished_name.push(rcgen::DnType::CommonName, "voxstream test CA");
+    let ca_cert = ca.self_signed(&ca_key).unwrap();
+    let issuer = rcgen::Issuer::new(ca, ca_key);
+    let server_key = KeyPair::generate().unwrap();
+    let mut server = CertificateParams::new(vec!["localhost".to_string()]).unwrap();
+    server.subject_alt_names.push(SanType::IpAddress(std::net::Ipv4Addr::LOCALHOST.into()));
+    let server_cert = server.signed_by(&server_key, &issuer).unwrap();
+    (ca_cert.pem(), server_cert.pem(), server_key.serialize_pem())
+}
+
+/// nginx serving `root` on a free port, over HTTPS with `tls`'s certificate and key files where given.
+fn nginx_serving(dir: &Path, root: &Path, tls: Option<(&Path, &Path)>) -> Server {
     assert!(Path::new(NGINX).exists(), "nginx is missing: sudo apt-get install nginx-light (.ci/run installs it)");
     let port = free_port();
     let prefix = dir.join("nginx");
@@ -67,7 +88,13 @@ fn nginx(dir: &Path, root: &Path) -> Server {
         "daemon off;\nmaster_process off;\npid {p}/nginx.pid;\nerror_log {p}/error.log;\nevents {{ worker_connections \
          512; }}\nhttp {{\n  log_format ranges '$request \"$http_range\" $status';\n  access_log {p}/access.log ranges;\n  client_body_temp_path {p}/body;\n  proxy_temp_path \
          {p}/proxy;\n  fastcgi_temp_path {p}/fastcgi;\n  uwsgi_temp_path {p}/uwsgi;\n  scgi_temp_path {p}/scgi;\n  \
-         server {{ listen 127.0.0.1:{port}; root {}; location / {{ }} }}\n}}\n",
+         server {{ listen 127.0.0.1:{port}{}; {} root {}; location / {{ }} }}\n}}\n",
+        if tls.is_some() { " ssl" } else { "" },
+        tls.map_or(String::new(), |(cert, key)| format!(
+            "ssl_certificate {}; ssl_certificate_key {};",
+            cert.display(),
+            key.display()
+        )),
         root.display()
     );
     std::fs::write(prefix.join("nginx.conf"), config).unwrap();
@@ -197,6 +224,40 @@ fn http_and_s3_give_the_local_image_byte_for_byte() {
     assert!(text.contains("s3://scans/volumes/ball.zarr") && text.contains("48 x 40 x 36"), "{text}");
     assert!(!text.contains("s3cretValue") && !stderr(&info).contains("s3cretValue"));
     assert_eq!(lines.len(), distinct.len(), "a chunk range was fetched twice:\n{log}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn https_certificates_are_verified_and_a_trusted_one_reads_the_local_image() {
+    let dir = scratch("remote_stores", "https");
+    import_ball(&dir, "www/ball.zarr");
+    let (local, out) = render(&dir, "www/ball.zarr", "local.png", &[], &[]);
+    assert!(out.status.success() && !local.is_empty(), "local render: {}", stderr(&out));
+    let (ca, cert, key) = certificates();
+    for (name, pem) in [("ca.pem", &ca), ("server.pem", &cert), ("server.key", &key)] {
+        std::fs::write(dir.join(name), pem).unwrap();
+    }
+    let server = nginx_serving(&dir, &dir.join("www"), Some((&dir.join("server.pem"), &dir.join("server.key"))));
+    let url = format!("https://127.0.0.1:{}/ball.zarr", server.port);
+    // A certificate no root the client trusts signed: refused in one line naming the cause and the fix, and no
+    // chunk fetched. (SSL_CERT_FILE names the roots instead of the system's; the system's do not hold the test CA.)
+    let (_, out) = render(&dir, &url, "untrusted.png", &["--retries", "0"], &[]);
+    let message = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{message}");
+    assert_eq!(message.trim().lines().count(), 1, "not one line: {message}");
+    assert!(message.contains("certificate") && message.contains("SSL_CERT_FILE"), "{message}");
+    assert!(!dir.join("untrusted.png").exists(), "an image was written");
+    // Trusting the test CA, the image is the local folder's byte for byte.
+    let ca_path = dir.join("ca.pem").display().to_string();
+    let (https, out) = render(&dir, &url, "https.png", &[], &[("SSL_CERT_FILE", &ca_path)]);
+    assert!(out.status.success(), "HTTPS render: {}", stderr(&out));
+    assert!(https == local, "the image over HTTPS differs from the local folder's");
+    // Plain HTTP to the TLS port is not silently accepted either.
+    let (_, out) = render(&dir, &url.replacen("https", "http", 1), "plain.png", &["--retries", "0"], &[]);
+    let message = stderr(&out);
+    assert!(!out.status.success(), "plain HTTP to an HTTPS port succeeded");
+    assert_eq!(message.trim().lines().count(), 1, "the server's error page was printed: {message}");
+    assert!(message.contains("400 Bad Request"), "{message}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

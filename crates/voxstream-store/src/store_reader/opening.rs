@@ -171,6 +171,10 @@ impl StoreReader {
                 "no zarr.json (nor .zattrs) there: check that the URL names the store's root folder, the one holding \
                  zarr.json",
             ),
+            // A remote store's read failed (the network, the server, TLS): its message says why; the file may be fine.
+            (Some(_), zarrs::group::GroupCreateError::StorageError(e)) => {
+                StoreError::store(path, format!("cannot read zarr.json: {e}"))
+            }
             _ => StoreError::store(path, format!("missing or corrupt zarr.json: {e}")),
         })?;
         let attributes: StoreAttributes = match group.attributes().get("voxstream") {
