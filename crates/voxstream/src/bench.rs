@@ -1,12 +1,15 @@
-//! `voxstream bench`: per built-in scene, converged time from a cold cache, frames to converge interactively,
-//! warm frame time once resident (frames/s, rays/s, samples/s, ns per sample and core next to a scalar trilinear
-//! bound measured in the same run), and frame times along an interactive camera path.
+//! `voxstream bench`: per built-in scene — or any source `render` opens: a store's folder or URL, a mesh or particle
+//! file — converged time from a cold cache, frames to converge interactively, warm frame time once resident
+//! (frames/s, rays/s, samples/s, ns per sample and core next to a scalar trilinear bound measured in the same run),
+//! and frame times along an interactive camera path. Each cold measurement opens its source afresh (through the
+//! facade, as `render` does), so a remote store's figures include its fetching.
 
 use std::io::Write;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
+use voxstream_api::{Source, SourceOptions};
 use voxstream_core::Producer;
 use voxstream_engine::{FrameRenderer, LoopLimits, Mode, Session};
 use voxstream_render::RenderSettings;
@@ -16,7 +19,7 @@ use crate::cli::{BenchArgs, Switch};
 use crate::memory::peak_rss_bytes;
 use crate::output_file::{check_output, write_output};
 use crate::render_budget::{check_budget, plan_budget};
-use crate::scenes::{builtin, Scene, SCENE_NAMES};
+use crate::scenes::{builtin, SCENE_NAMES};
 use crate::trilinear_bound::{lanes_trilinear_ns_per_sample, scalar_trilinear_ns_per_sample, BoundVoxel};
 
 /// How long each trilinear bound is measured (four of them: scalar and lanes, 16-bit and 8-bit voxels; 2 s in all).
@@ -86,15 +89,17 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let names: Vec<String> =
         if args.scenes.is_empty() { SCENE_NAMES.iter().map(|s| s.to_string()).collect() } else { args.scenes.clone() };
     check_budget(args.budget_mb, args.size, args.size, "--size")?;
-    bench_surfaces(args)?;
     crate::backend::check_backend_flags(args.backend, args.gpu_filter)?;
+    // Every source opens (and its isovalues fit its data) before anything is measured.
+    for name in &names {
+        bench_surfaces(args, open_source(name, args)?.meta.value_range)?;
+    }
     eprintln!("bench: the trilinear bounds …");
     let bounds = TrilinearBounds { wide: TrilinearBounds::measure::<u16>(), narrow: TrilinearBounds::measure::<u8>() };
     let mut figures = Vec::new();
     for name in &names {
-        let scene = builtin(name).with_context(|| format!("unknown scene '{name}'"))?;
         eprintln!("bench: {name} at {0}x{0} …", args.size);
-        figures.push(bench_scene(&scene, args, &bounds)?);
+        figures.push(bench_source(name, args, &bounds)?);
     }
     println!(
         "backend: {}\nthreads: {}, ray loop: {}, peak RSS: {:.0} MiB, trilinear bounds in ns per sample on one core \
@@ -142,8 +147,16 @@ pub fn run(args: &BenchArgs) -> Result<()> {
 /// The light of `bench --iso` (towards the light, world axes).
 const BENCH_LIGHT: [f64; 3] = [0.3, 0.8, 0.5];
 
-/// The surfaces `--iso` asks for (empty: volume rendering), checked against the built-in scenes' data range.
-fn bench_surfaces(args: &BenchArgs) -> Result<Vec<voxstream_render::IsoSurface>> {
+/// `name` opened as `render` opens it (a built-in scene, a store's folder or URL, a mesh or particle file), framed
+/// for the benchmark's image size, within its budget.
+fn open_source(name: &str, args: &BenchArgs) -> Result<Source> {
+    let budget = check_budget(args.budget_mb, args.size, args.size, "--size")?;
+    let options = SourceOptions { width: args.size, height: args.size, ..SourceOptions::default() };
+    voxstream_api::open(name, &options, &budget)
+}
+
+/// The surfaces `--iso` asks for (empty: volume rendering), checked against the source's data range.
+fn bench_surfaces(args: &BenchArgs, value_range: [f64; 2]) -> Result<Vec<voxstream_render::IsoSurface>> {
     if args.iso.is_empty() {
         if args.shadows {
             bail!("--shadows applies to isosurfaces: add --iso VALUE");
@@ -157,8 +170,8 @@ fn bench_surfaces(args: &BenchArgs) -> Result<Vec<voxstream_render::IsoSurface>>
             voxstream_render::MAX_SURFACES
         );
     }
-    if let Some(bad) = args.iso.iter().find(|v| !(**v > 0.0 && **v <= 1.0)) {
-        bail!("--iso {bad} lies outside the built-in scenes' values (0 to 1): pick a value between them");
+    for &value in &args.iso {
+        crate::iso_flags::check_isovalue(value, value_range, "--iso")?;
     }
     Ok(args
         .iso
@@ -168,17 +181,19 @@ fn bench_surfaces(args: &BenchArgs) -> Result<Vec<voxstream_render::IsoSurface>>
         .collect())
 }
 
+/// A session over `name` opened afresh (cold caches), and the source's defaults.
 fn new_session(
-    scene: &Scene,
+    name: &str,
     args: &BenchArgs,
-) -> Result<Session<crate::scenes::SceneProducer, Box<dyn FrameRenderer + Send>>> {
-    let surfaces = bench_surfaces(args)?;
+) -> Result<(Session<Box<dyn Producer>, Box<dyn FrameRenderer + Send>>, voxstream_api::SourceMeta)> {
+    let Source { producer, meta } = open_source(name, args)?;
+    let surfaces = bench_surfaces(args, meta.value_range)?;
     let settings = if surfaces.is_empty() {
         RenderSettings {
             width: args.size,
             height: args.size,
-            shading: scene.shading,
-            light_direction: scene.light,
+            shading: meta.shading,
+            light_direction: meta.light,
             ..RenderSettings::default()
         }
     } else {
@@ -194,20 +209,20 @@ fn new_session(
     };
     // The same split as `render`: the frame's buffers count, and a budget beyond the machine is refused.
     let budget = check_budget(args.budget_mb, args.size, args.size, "--size")?;
-    let plan = plan_budget(&budget, &scene.producer.shape(), 0)?;
+    let plan = plan_budget(&budget, &producer.shape(), meta.producer_cache_bytes)?;
     let blending = args.blending == Switch::On;
     let limits = LoopLimits { blending_fade_frames: blending.then_some(args.fade_frames), ..LoopLimits::default() };
     let renderer = crate::backend::open_renderer(args.backend, args.gpu_filter)?;
     let session = Session::with_renderer(
         renderer,
-        scene.producer,
-        &scene.transfer_function,
+        producer,
+        &meta.transfer_function,
         settings,
         plan.pool_bytes,
         limits,
-        [0.0, 1.0],
+        meta.value_range,
     )?;
-    Ok(session)
+    Ok((session, meta))
 }
 
 /// The trilinear bounds (scalar, eight rays in lock-step; ns per sample on one core) per voxel width.
@@ -225,10 +240,11 @@ impl TrilinearBounds {
     }
 }
 
-fn bench_scene(scene: &Scene, args: &BenchArgs, bounds: &TrilinearBounds) -> Result<SceneFigures> {
+fn bench_source(name: &str, args: &BenchArgs, bounds: &TrilinearBounds) -> Result<SceneFigures> {
     // Cold, converged.
-    let mut session = new_session(scene, args)?;
-    let cold = session.render(&scene.camera, Mode::Converged)?;
+    let (mut session, meta) = new_session(name, args)?;
+    let camera = meta.camera;
+    let cold = session.render(&camera, Mode::Converged)?;
     // The bounds for the width the session's pool keeps (a GPU session keeps 16 bits whatever the scene allows).
     let voxel_bytes = session.cache().brick_pool().format().voxel_bytes();
     let (bound_ns, lanes_bound_ns) = if voxel_bytes == 1 { bounds.narrow } else { bounds.wide };
@@ -239,7 +255,7 @@ fn bench_scene(scene: &Scene, args: &BenchArgs, bounds: &TrilinearBounds) -> Res
     let (mut rays, mut samples) = (0u64, 0u64);
     let start = Instant::now();
     for _ in 0..args.warm_frames.max(1) {
-        let frame = session.render(&scene.camera, Mode::Interactive)?;
+        let frame = session.render(&camera, Mode::Interactive)?;
         warm_ms.push(frame.elapsed_ms);
         rays += frame.rays;
         samples += frame.samples;
@@ -251,13 +267,20 @@ fn bench_scene(scene: &Scene, args: &BenchArgs, bounds: &TrilinearBounds) -> Res
     let warm_frame_ms = median(&mut warm_ms);
 
     // Interactive from cold: frames until complete.
-    let mut session = new_session(scene, args)?;
-    let (frames_to_converge, _) = session.render_until_converged_interactively(&scene.camera, 2000)?;
+    let (mut session, _) = new_session(name, args)?;
+    let (frames_to_converge, _) = session.render_until_converged_interactively(&camera, 2000)?;
 
-    // Interactive camera path from cold.
-    let mut session = new_session(scene, args)?;
+    // Interactive camera path from cold: an orbit about the default view's target, at the built-in scenes' 2.6
+    // (their figures stay comparable with earlier runs), else at the default view's distance.
+    let distance = if builtin(name).is_some() {
+        2.6
+    } else {
+        let [dx, dy, dz] = [0, 1, 2].map(|k| camera.eye[k] - camera.target[k]);
+        (dx * dx + dy * dy + dz * dz).sqrt()
+    };
+    let (mut session, _) = new_session(name, args)?;
     let mut path_ms = Vec::new();
-    for camera in orbit(args.path_frames.max(1), scene.camera.target, 2.6, 0.45, scene.camera.fov) {
+    for camera in orbit(args.path_frames.max(1), camera.target, distance, 0.45, camera.fov) {
         path_ms.push(session.render(&camera, Mode::Interactive)?.elapsed_ms);
     }
     let path_bytes_uploaded_per_frame = session.renderer().bytes_uploaded() as f64 / path_ms.len() as f64;
@@ -266,7 +289,7 @@ fn bench_scene(scene: &Scene, args: &BenchArgs, bounds: &TrilinearBounds) -> Res
     let path_p95_ms = path_ms[((path_ms.len() as f64 * 0.95) as usize).min(path_ms.len() - 1)];
 
     Ok(SceneFigures {
-        scene: scene.name.to_string(),
+        scene: meta.name.clone(),
         size: args.size,
         converged_ms: cold.elapsed_ms,
         converged_passes: cold.passes,

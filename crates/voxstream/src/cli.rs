@@ -381,7 +381,8 @@ pub struct InfoArgs {
 /// `voxstream bench`.
 #[derive(Args, Debug, Clone)]
 pub struct BenchArgs {
-    /// Scenes to measure (default: all built-in scenes).
+    /// Scenes to measure (default: all built-in scenes): built-in scene names, or any source `render` opens — a
+    /// store's folder or URL (http(s)://, s3://…: each cold measurement fetches afresh), a mesh or particle file.
     #[arg(long, value_delimiter = ',')]
     pub scenes: Vec<String>,
     /// Image edge in pixels.

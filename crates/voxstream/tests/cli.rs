@@ -179,7 +179,8 @@ fn bad_input_is_one_clear_line() {
     assert_fails(&["render", "--out", "no/such/folder/x.png"], "does not exist");
     assert_fails(&["render", "--background", "2,0,0", "--out", "x.png"], "background");
     // bench --iso: checked before anything is measured.
-    assert_fails(&["bench", "--iso", "2"], "outside the built-in scenes' values");
+    assert_fails(&["bench", "--iso", "2"], "--iso 2 lies outside the data's values (0 to 1)");
+    assert_fails(&["bench", "--scenes", "shel"], "did you mean `shell`?");
     assert_fails(&["bench", "--shadows"], "add --iso");
     assert_fails(&["bench", "--popping", "--fade-frames", "0"], "--fade-frames must be at least 1");
     // --gpu-filter without the GPU renderer.

@@ -262,6 +262,35 @@ fn https_certificates_are_verified_and_a_trusted_one_reads_the_local_image() {
 }
 
 #[test]
+fn bench_measures_a_store_over_http_as_from_its_folder() {
+    let dir = scratch("remote_stores", "bench");
+    import_ball(&dir, "www/ball.zarr");
+    let server = nginx(&dir, &dir.join("www"));
+    let url = format!("http://127.0.0.1:{}/ball.zarr", server.port);
+    let quick = ["--size", "48", "--warm-frames", "2", "--path-frames", "3", "--budget-mb", "64"];
+    let mut figures = Vec::new();
+    for (source, json) in [("www/ball.zarr", "local.json"), (url.as_str(), "http.json")] {
+        let out = voxstream(&[&["bench", "--scenes", source, "--json", json][..], &quick[..]].concat(), &dir);
+        assert!(out.status.success(), "bench {source}: {}", stderr(&out));
+        let text = std::fs::read_to_string(dir.join(json)).unwrap();
+        let value: serde_json::Value = serde_json::from_str(&text).unwrap();
+        let figure = value.as_array().and_then(|a| a.first()).cloned().expect("one source's figures");
+        assert!(figure["scene"].as_str().is_some_and(|s| s.ends_with("ball.zarr")), "{figure}");
+        assert!(figure["converged_ms"].as_f64().is_some_and(|ms| ms > 0.0), "{figure}");
+        assert!(figure["bricks_resident"].as_u64().is_some_and(|b| b > 0), "{figure}");
+        figures.push(figure);
+    }
+    // The same view of the same data: the same converged work, wherever the bytes come from (interactive frames
+    // never wait on the network, so their counts may differ).
+    for field in ["converged_passes", "voxel_bytes"] {
+        assert_eq!(figures[0][field], figures[1][field], "{field}: {} against {}", figures[0], figures[1]);
+    }
+    let log = std::fs::read_to_string(dir.join("nginx/access.log")).unwrap();
+    assert!(log.lines().any(|l| l.starts_with("GET") && l.contains("/c/")), "bench fetched no brick: {log}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
 fn faults_are_retried_and_the_image_stays_identical() {
     let dir = scratch("remote_stores", "faults");
     import_ball(&dir, "www/ball.zarr");
