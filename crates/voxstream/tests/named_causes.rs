@@ -170,6 +170,9 @@ fn view_exits_three_on_unreadable_bricks_as_render_does() {
     let stats: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("stats.json")).unwrap()).unwrap();
     assert!(stats["producer_failures"].as_u64().unwrap() > 0, "{stats}");
+    // The window's status line says so too.
+    let status = stats["status_line"].as_str().unwrap_or_default();
+    assert!(status.contains("failed (coarser data stands in)"), "status line: {status}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

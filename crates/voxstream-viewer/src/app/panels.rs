@@ -187,6 +187,11 @@ impl ViewerApp {
     }
 
     pub(super) fn status_line(&self, ui: &mut egui::Ui) {
+        ui.label(self.status_text());
+    }
+
+    /// The status line's text: rates, memory, requests, the frame's state and time, and bricks that failed.
+    pub(super) fn status_text(&self) -> String {
         // Rates between the first and the last frame of the window (the first frame's bricks came before it).
         let mut parts = match (self.frame_times.front(), self.frame_times.back()) {
             (Some((first, _)), Some((last, _))) if last > first => {
@@ -216,8 +221,14 @@ impl ViewerApp {
         } else {
             parts.push("first frame…".into());
         }
+        // Bricks that could not be produced (a damaged store, a server that failed them): their ancestors stand in,
+        // and the viewer will exit 3 as `render` does.
+        let failed = self.failed_bricks.load(std::sync::atomic::Ordering::Relaxed);
+        if failed > 0 {
+            parts.push(format!("{failed} brick{} failed (coarser data stands in)", if failed == 1 { "" } else { "s" }));
+        }
         parts.push("H: help".into());
-        ui.label(parts.join(" · "));
+        parts.join(" · ")
     }
 
     pub(super) fn image(&mut self, ui: &mut egui::Ui) {

@@ -195,6 +195,7 @@ impl ViewerApp {
         serde_json::json!({
             "renderer": self.config.renderer,
             "producer_failures": self.failed_bricks.load(Ordering::Relaxed),
+            "status_line": self.status_text(),
             "render_size": full,
             "first_image_ms": self.frame_log.first().map(|f| f.at_ms),
             "first_final_ms": self.frame_log.iter().find(|f| f.is_final).map(|f| f.at_ms),
