@@ -84,9 +84,10 @@ def reference(scene, size, data: Path, out: Path):
 
 
 def voxstream_variant(tool: str):
-    """The flags of a voxstream tool name: `voxstream` (the default), or `voxstream-` followed by dash-separated
-    parts `stepX` (--step X), `pre` (--preintegrate), `adapt` or `adaptX` (--adaptive-step [X]); e.g.
-    `voxstream-step1-pre-adapt0.05`. None if the name is not a voxstream tool."""
+    """The flags of a voxstream tool name: `voxstream` (the default: since 2026-12-06 the adaptive step at 0.05 for
+    volumes), or `voxstream-` followed by dash-separated parts `stepX` (--step X), `pre` (--preintegrate), `adapt` or
+    `adaptX` (--adaptive-step [X]), `faithful` (--faithful: fixed steps, the default before); e.g.
+    `voxstream-step1-pre-adapt0.05`, `voxstream-faithful`. None if the name is not a voxstream tool."""
     if tool == "voxstream":
         return []
     if not tool.startswith("voxstream-"):
@@ -99,6 +100,8 @@ def voxstream_variant(tool: str):
             flags.append("--preintegrate")
         elif m := re.fullmatch(r"adapt(\d+(?:\.\d+)?)?", part):
             flags += ["--adaptive-step"] + ([m.group(1)] if m.group(1) else [])
+        elif part == "faithful":
+            flags.append("--faithful")
         else:
             raise ValueError(f"unknown part '{part}' of voxstream tool '{tool}'")
     return flags

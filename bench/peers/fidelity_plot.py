@@ -19,7 +19,8 @@ def mode(tool: str) -> str:
         return "vtk"
     parts = set(tool.split("-")[1:])
     pre = "pre" in parts
-    adapt = any(p.startswith("adapt") for p in parts)
+    # Volumes take the adaptive step unless `faithful` (the default since 2026-12-06).
+    adapt = "faithful" not in parts
     return "pre-adapt" if pre and adapt else "pre" if pre else "adapt" if adapt else "fixed"
 
 

@@ -72,13 +72,13 @@ def scenes(data: Path):
         result += [
             {"name": f"mni-soft{label}", "volume": f"mni{suffix}", "mode": "volume",
              "tf": MNI_SOFT, "shading": "none", "camera": mni_camera, "fog": MNI_FOG,
-             "tools": ["voxstream", "voxstream-step1", "vtk-fixed-point", "vdb_render"], **upsampled},
+             "tools": ["voxstream", "voxstream-faithful", "voxstream-step1", "vtk-fixed-point", "vdb_render"], **upsampled},
             {"name": f"frog{label}", "volume": f"frog{suffix}", "mode": "volume",
              "tf": FROG, "shading": "none", "camera": frog_camera,
-             "tools": ["voxstream", "voxstream-step1", "vtk-fixed-point"], **upsampled},
+             "tools": ["voxstream", "voxstream-faithful", "voxstream-step1", "vtk-fixed-point"], **upsampled},
             {"name": f"dragon{label}", "volume": f"dragon{suffix}", "mode": "volume",
              "tf": DRAGON, "shading": "none", "camera": dragon_camera,
-             "fog": DRAGON_FOG, "tools": ["voxstream", "voxstream-step1", "vtk-fixed-point", "vdb_render"], **upsampled},
+             "fog": DRAGON_FOG, "tools": ["voxstream", "voxstream-faithful", "voxstream-step1", "vtk-fixed-point", "vdb_render"], **upsampled},
         ]
         result.append({"name": f"mni-iso{label}", "volume": f"mni{suffix}", "mode": "isosurface",
                        "iso": MNI_ISO, "shading": "phong", "camera": mni_camera,
@@ -87,11 +87,11 @@ def scenes(data: Path):
             result += [
                 {"name": "mni-shaded", "volume": "mni", "mode": "volume",
                  "tf": MNI_SHADED, "shading": "phong", "camera": mni_camera,
-                 "tools": ["voxstream", "voxstream-step1", "vtk-fixed-point"], "reference_step_scale": 1.0},
+                 "tools": ["voxstream", "voxstream-faithful", "voxstream-step1", "vtk-fixed-point"], "reference_step_scale": 1.0},
                 # The reference steps twice as finely: the shells are a tenth of a voxel thick where MNI is steep.
                 {"name": "mni-shells", "volume": "mni", "mode": "volume",
                  "tf": MNI_SHELLS, "shading": "none", "camera": mni_camera,
-                 "tools": ["voxstream", "voxstream-step1", "vtk-fixed-point"], "reference_step_scale": 0.5},
+                 "tools": ["voxstream", "voxstream-faithful", "voxstream-step1", "vtk-fixed-point"], "reference_step_scale": 0.5},
             ]
     return result
 

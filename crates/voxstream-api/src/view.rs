@@ -92,8 +92,11 @@ pub struct ViewOptions {
     pub step: f64,
     /// Pre-integrated segments between samples (`--preintegrate`).
     pub preintegrate: bool,
-    /// The error-bounded adaptive step's tolerance (`--adaptive-step`); `None`: the fixed step.
+    /// The error-bounded adaptive step's tolerance (`--adaptive-step TOLERANCE`); `None`: not given, so volumes take
+    /// the adaptive step at [`voxstream_render::adaptive_step::DEFAULT_TOLERANCE`] unless `faithful`.
     pub adaptive_step: Option<f64>,
+    /// Fixed steps of `step` everywhere (`--faithful`): no adaptive step, today's reference-quality march.
+    pub faithful: bool,
     /// Level-of-detail bias, levels (`--lod-bias`; positive is coarser).
     pub lod_bias: f64,
     /// Colour each brick by its level (`--colour-by-level`).
@@ -114,7 +117,8 @@ impl Default for ViewOptions {
             background: [0.0; 3],
             step: RenderSettings::default().step_factor,
             preintegrate: RenderSettings::default().preintegrated,
-            adaptive_step: RenderSettings::default().adaptive_step,
+            adaptive_step: None,
+            faithful: false,
             lod_bias: RenderSettings::default().lod_bias,
             colour_by_level: false,
             camera: CameraOptions::default(),
@@ -133,6 +137,9 @@ pub struct PreparedView {
     pub camera: Camera,
     /// Whether isosurfaces are drawn (instead of the volume, or inside it with a transfer function).
     pub drawing_surfaces: bool,
+    /// The adaptive step's tolerance volumes take when no isosurface is drawn (`settings.adaptive_step` is `None`
+    /// while surfaces are): a front end that turns surfaces off again (the viewer's `iso` panel) uses it.
+    pub volume_adaptive_step: Option<f64>,
 }
 
 /// Checks one isovalue against the data's `value_range`; `given` names where it came from (`--iso`, or a viewer
@@ -196,6 +203,21 @@ pub fn surfaces(iso: &IsoOptions, light: Option<[f64; 3]>, value_range: [f64; 2]
         .collect())
 }
 
+/// The adaptive step's tolerance for `view`: the one given (`--adaptive-step`), none with `--faithful` or where only
+/// isosurfaces are drawn (their cell walk has its own exact steps), else the default — volumes trade the fidelity a
+/// fixed half-voxel step holds beyond what the eye or the peers show for speed (issue 46: within
+/// [`voxstream_render::adaptive_step::DEFAULT_TOLERANCE`] of optical depth per monotone stretch of a ray).
+fn step_choice(view: &ViewOptions, drawing_surfaces: bool) -> Result<Option<f64>> {
+    match view.adaptive_step {
+        Some(_) if view.faithful => {
+            bail!("--faithful takes fixed steps and --adaptive-step varies them: give one of the two")
+        }
+        Some(tolerance) => Ok(Some(tolerance)),
+        None if view.faithful || drawing_surfaces => Ok(None),
+        None => Ok(Some(voxstream_render::adaptive_step::DEFAULT_TOLERANCE)),
+    }
+}
+
 /// Applies `view` to `source`'s defaults.
 pub fn prepare_view(view: &ViewOptions, source: &SourceMeta) -> Result<PreparedView> {
     if view.width == 0 || view.height == 0 {
@@ -211,6 +233,8 @@ pub fn prepare_view(view: &ViewOptions, source: &SourceMeta) -> Result<PreparedV
         surfaces = source.default_surfaces.clone();
     }
     let drawing_surfaces = !surfaces.is_empty();
+    let adaptive_step = step_choice(view, drawing_surfaces)?;
+    let volume_adaptive_step = step_choice(view, false)?;
     let settings = RenderSettings {
         width: view.width,
         height: view.height,
@@ -232,7 +256,7 @@ pub fn prepare_view(view: &ViewOptions, source: &SourceMeta) -> Result<PreparedV
         background: view.background.map(|c| c as f32),
         step_factor: view.step,
         preintegrated: view.preintegrate,
-        adaptive_step: view.adaptive_step,
+        adaptive_step,
         lod_bias: view.lod_bias,
         colour_by_level: view.colour_by_level,
         placement: source.placement,
@@ -263,7 +287,7 @@ pub fn prepare_view(view: &ViewOptions, source: &SourceMeta) -> Result<PreparedV
     camera
         .frame(view.width, view.height)
         .with_context(|| format!("invalid camera ({})", camera_origin(options, source)))?;
-    Ok(PreparedView { transfer_function, settings, camera, drawing_surfaces })
+    Ok(PreparedView { transfer_function, settings, camera, drawing_surfaces, volume_adaptive_step })
 }
 
 /// Where the camera came from, for its error: the options that set parts of it over a camera file or the source's

@@ -210,7 +210,7 @@ impl PyVolume {
     #[pyo3(signature = (*, width=512, height=512, budget_mb=256, backend="cpu", mode="converged", camera=None,
         tf_points=None, tf_file=None, iso=Vec::new(), iso_colors=Vec::new(), iso_opacities=Vec::new(),
         shadows=false, light=None, background=[0.0; 3], step=0.5, lod_bias=0.0, shading=None, blending=true,
-        preintegrate=false, adaptive_step=None, float32=false))]
+        preintegrate=false, adaptive_step=None, faithful=false, float32=false))]
     #[allow(clippy::too_many_arguments)]
     fn render<'py>(
         &self,
@@ -235,6 +235,7 @@ impl PyVolume {
         blending: bool,
         preintegrate: bool,
         adaptive_step: Option<f64>,
+        faithful: bool,
         float32: bool,
     ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyDict>)> {
         let mode = match mode {
@@ -276,6 +277,7 @@ impl PyVolume {
             step,
             preintegrate,
             adaptive_step,
+            faithful,
             lod_bias,
             colour_by_level: false,
             camera: CameraOptions {

@@ -199,11 +199,16 @@ pub struct LookFlags {
     /// are not missed between samples at longer steps. CPU backend.
     #[arg(long)]
     pub preintegrate: bool,
-    /// Volume rendering: the error-bounded adaptive step: each brick steps by up to four times --step where the
-    /// transfer function varies little over the brick's values, keeping the error of each monotone stretch of a
-    /// ray within TOLERANCE (optical depth; default 0.05). Both backends.
+    /// Volume rendering: the error-bounded adaptive step's tolerance. By default each brick steps by up to four
+    /// times --step where the transfer function varies little over the brick's values, keeping the error of each
+    /// monotone stretch of a ray within 0.05 of optical depth; give another TOLERANCE here, or --faithful for fixed
+    /// steps. Both backends.
     #[arg(long, value_name = "TOLERANCE", num_args = 0..=1, default_missing_value = "0.05")]
     pub adaptive_step: Option<f64>,
+    /// Volume rendering: fixed steps of --step everywhere (no adaptive step): the reference-quality march, slower
+    /// where the transfer function is smooth.
+    #[arg(long)]
+    pub faithful: bool,
     /// Level-of-detail bias (positive = finer than one voxel per pixel).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub lod_bias: f64,

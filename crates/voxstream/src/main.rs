@@ -105,6 +105,7 @@ fn unreachable_default() -> RenderArgs {
             step: 0.5,
             preintegrate: false,
             adaptive_step: None,
+            faithful: false,
             lod_bias: 0.0,
             colour_by_level: false,
             backend: voxstream::cli::Backend::Cpu,

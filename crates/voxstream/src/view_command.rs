@@ -57,6 +57,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         camera: prepared.camera,
         transfer_function: prepared.transfer_function,
         settings: prepared.settings,
+        volume_adaptive_step: prepared.volume_adaptive_step,
         value_range: meta.value_range,
         presets: presets(meta.typical_range),
         script,

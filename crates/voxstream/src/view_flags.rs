@@ -49,6 +49,7 @@ pub fn view_options(look: &LookFlags, width: u32, height: u32) -> ViewOptions {
         step: look.step,
         preintegrate: look.preintegrate,
         adaptive_step: look.adaptive_step,
+        faithful: look.faithful,
         lod_bias: look.lod_bias,
         colour_by_level: look.colour_by_level,
         camera: CameraOptions {

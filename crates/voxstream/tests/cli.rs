@@ -215,9 +215,12 @@ fn the_step_options_render_the_shell_with_fewer_samples() {
         reader.next_frame(&mut pixels).unwrap();
         (stats["samples"].as_u64().expect("samples in the stats"), pixels)
     };
-    let (fixed_samples, fixed) = render("fixed", &[]);
+    let (fixed_samples, fixed) = render("fixed", &["--faithful"]);
     let (adaptive_samples, adaptive) = render("adaptive", &["--adaptive-step"]);
-    let (_, preintegrated) = render("pre", &["--preintegrate"]);
+    let (_, preintegrated) = render("pre", &["--preintegrate", "--faithful"]);
+    // The default is the adaptive step at its default tolerance.
+    let (default_samples, default) = render("default", &[]);
+    assert_eq!((default_samples, &default), (adaptive_samples, &adaptive), "the default is not --adaptive-step 0.05");
     // Measured: 18.0 M against 62.9 M.
     assert!(adaptive_samples * 2 < fixed_samples, "adaptive {adaptive_samples} against fixed {fixed_samples} samples");
     let psnr = |a: &[u8], b: &[u8]| {
@@ -227,6 +230,11 @@ fn the_step_options_render_the_shell_with_fewer_samples() {
     assert!(psnr(&adaptive, &fixed) > 35.0, "adaptive: {:.1} dB", psnr(&adaptive, &fixed));
     assert!(psnr(&preintegrated, &fixed) > 35.0, "pre-integrated: {:.1} dB", psnr(&preintegrated, &fixed));
     assert_ne!(adaptive, fixed, "the adaptive step changed something");
+    // Fixed and adaptive steps at once: refused in one line.
+    let out = run(&["render", "shell", "--out", "both.png", "--faithful", "--adaptive-step", "0.1"], &dir);
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert!(stderr(&out).contains("give one of the two"), "{}", stderr(&out));
+    assert!(!dir.join("both.png").exists());
 }
 
 /// Runs a command line clap rejects: exit 2, clap's whole message (the problem, then valid values, a suggestion or

@@ -33,6 +33,7 @@ class Volume:
                iso: Sequence[float] = ..., iso_colors: Sequence[_Vec3] = ..., iso_opacities: Sequence[float] = ...,
                shadows: bool = False, light: Optional[_Vec3] = None, background: _Vec3 = ..., step: float = 0.5,
                lod_bias: float = 0.0, shading: Optional[str] = None, blending: bool = True,
+               preintegrate: bool = False, adaptive_step: Optional[float] = None, faithful: bool = False,
                float32: bool = False) -> Tuple[np.ndarray, Dict[str, Any]]: ...
 
 def import_volume(source: Union[str, np.ndarray], out: str, *, spacing: Optional[_Vec3] = None,

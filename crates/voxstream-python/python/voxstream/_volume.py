@@ -81,7 +81,8 @@ class Volume:
                mode: str = "converged", dtype=np.uint8, iso_colors=None, iso_opacities=None,
                shadows: bool = False, light=None, background=(0.0, 0.0, 0.0), step: float = 0.5,
                lod_bias: float = 0.0, shading: Optional[str] = None, blending: bool = True,
-               preintegrate: bool = False, adaptive_step: Optional[float] = None) -> np.ndarray:
+               preintegrate: bool = False, adaptive_step: Optional[float] = None,
+               faithful: bool = False) -> np.ndarray:
         """Renders the volume; returns an (height, width, 4) array, RGBA: ``uint8`` (the CLI's PNG, plus alpha) or
         ``float32`` (linear, unclamped). The array's memory is Rust's buffer, handed over without a copy.
 
@@ -94,7 +95,8 @@ class Volume:
         - ``backend``: ``"cpu"`` or ``"gpu"``; ``budget_mb``: the whole memory budget;
         - ``step``: the ray-march step in voxels of the sampled level; ``preintegrate``: integrate the transfer
           function between samples (the CLI's ``--preintegrate``); ``adaptive_step``: the error-bounded adaptive
-          step's tolerance (``--adaptive-step``, e.g. 0.05) or None for the fixed step (pre-integration: CPU only).
+          step's tolerance (``--adaptive-step``; None: the default, 0.05, for volumes); ``faithful``: fixed steps
+          of ``step`` everywhere (``--faithful``) (pre-integration: CPU only).
 
         The GIL is released while rendering; Ctrl-C raises ``KeyboardInterrupt`` at once. Statistics of the frame
         are in ``last_stats``. A converged render whose bricks could not all be read raises ``RuntimeError``."""
@@ -112,6 +114,7 @@ class Volume:
             lod_bias=float(lod_bias), shading=shading, blending=bool(blending),
             preintegrate=bool(preintegrate),
             adaptive_step=None if adaptive_step is None else float(adaptive_step),
+            faithful=bool(faithful),
             float32=np.dtype(dtype) == np.dtype(np.float32))
         self.last_stats = dict(stats)
         return pixels

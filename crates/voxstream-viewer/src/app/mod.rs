@@ -67,6 +67,9 @@ pub struct ViewerConfig {
     pub transfer_function: TransferFunction,
     /// The render settings at full size.
     pub settings: RenderSettings,
+    /// The adaptive step's tolerance while no isosurface is drawn (`None`: fixed steps, `view --faithful`); with
+    /// isosurfaces, none (their cell walk steps exactly), as `render` does.
+    pub volume_adaptive_step: Option<f64>,
     /// Data values the voxel values 0 and 1 stand for.
     pub value_range: [f64; 2],
     /// Transfer-function presets offered besides the starting one.
@@ -209,6 +212,9 @@ impl ViewerApp {
     fn desired_request(&self) -> ViewRequest {
         let mut settings = self.settings.clone();
         settings.focus = Some(self.focus);
+        // Isosurfaces turned on or off in the window: the step choice follows, as `render`'s would.
+        settings.adaptive_step = if settings.surfaces.is_empty() { self.config.volume_adaptive_step } else { None };
+        settings.preintegrated &= settings.surfaces.is_empty();
         let moving = self.moving();
         if moving {
             settings.width = (settings.width / self.moving_divisor).max(1);
