@@ -134,8 +134,7 @@ impl Header {
         }
         let f = |i: usize| f64::from_le_bytes(h[16 + 8 * i..24 + 8 * i].try_into().unwrap_or([0; 8]));
         let (step, offset, min, max) = (f(0), f(1), f(2), f(3));
-        if !(step.is_finite() && step > 0.0 && offset.is_finite() && min.is_finite() && max.is_finite() && min <= max)
-        {
+        if !(step.is_finite() && step > 0.0 && offset.is_finite() && min.is_finite() && max.is_finite() && min <= max) {
             return Err(bad("step, offset or range not finite and ordered"));
         }
         if dtype != DType::F32 && (step.fract() != 0.0 || offset.fract() != 0.0 || step > 1e9 || offset.abs() > 1e9) {

@@ -159,13 +159,27 @@ fn pass_rows(data: &mut [i32], dims: [usize; 3], corner: [usize; 3], axis: usize
         let base = o * outer_stride;
         for k in 0..n {
             // Forward: gather in natural order, scatter to subband order. Inverse: the other way round.
-            let src_k = if inverse { if k & 1 == 0 { k / 2 } else { h + k / 2 } } else { k };
+            let src_k = if inverse {
+                if k & 1 == 0 {
+                    k / 2
+                } else {
+                    h + k / 2
+                }
+            } else {
+                k
+            };
             let at = base + src_k * stride;
             s[k * cx..(k + 1) * cx].copy_from_slice(&data[at..at + cx]);
         }
         lift_rows(s, n, cx, inverse);
         for k in 0..n {
-            let dst_k = if inverse { k } else if k & 1 == 0 { k / 2 } else { h + k / 2 };
+            let dst_k = if inverse {
+                k
+            } else if k & 1 == 0 {
+                k / 2
+            } else {
+                h + k / 2
+            };
             let at = base + dst_k * stride;
             data[at..at + cx].copy_from_slice(&s[k * cx..(k + 1) * cx]);
         }

@@ -316,7 +316,14 @@ pub struct Scratch {
 }
 
 /// Decodes the coefficients written by [`encode`] from `b[*pos..]` into `coef` (length = product of `dims`).
-pub fn decode(b: &[u8], pos: &mut usize, dims: [usize; 3], levels: u32, coef: &mut [i32], sc: &mut Scratch) -> Result<(), Corrupt> {
+pub fn decode(
+    b: &[u8],
+    pos: &mut usize,
+    dims: [usize; 3],
+    levels: u32,
+    coef: &mut [i32],
+    sc: &mut Scratch,
+) -> Result<(), Corrupt> {
     let n = coef.len();
     let nctx = n_contexts(levels);
     sc.table.clear();
