@@ -12,7 +12,7 @@
 //! | 15 | reserved, 0 |
 //! | 16..24 | quantisation step (f64; 1 in lossless mode) |
 //! | 24..32 | quantisation offset (f64): sample = offset + q · step |
-//! | 32..40 | min of the DECODED samples (f64) |
+//! | 32..40 | min of the DECODED samples (f64; NaNs ignored, ±inf only in raw bricks) |
 //! | 40..48 | max of the DECODED samples (f64) |
 //! | 48..52 | payload length (u32), which must be exactly the rest of the buffer |
 //!
@@ -134,8 +134,13 @@ impl Header {
         }
         let f = |i: usize| f64::from_le_bytes(h[16 + 8 * i..24 + 8 * i].try_into().unwrap_or([0; 8]));
         let (step, offset, min, max) = (f(0), f(1), f(2), f(3));
-        if !(step.is_finite() && step > 0.0 && offset.is_finite() && min.is_finite() && max.is_finite() && min <= max) {
-            return Err(bad("step, offset or range not finite and ordered"));
+        if !(step.is_finite() && step > 0.0 && offset.is_finite()) {
+            return Err(bad("step or offset not finite and positive"));
+        }
+        // Only a raw (bit-exact) brick may hold infinities, or only NaNs (then min = +inf > max = -inf).
+        let ordered = min.is_finite() && max.is_finite() && min <= max;
+        if !(ordered || (kind == Kind::Raw && !min.is_nan() && !max.is_nan())) {
+            return Err(bad("range not finite and ordered"));
         }
         if dtype != DType::F32 && (step.fract() != 0.0 || offset.fract() != 0.0 || step > 1e9 || offset.abs() > 1e9) {
             return Err(bad("integer samples need an integral step and offset"));
