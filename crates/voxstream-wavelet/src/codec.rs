@@ -17,7 +17,7 @@
 //! max-error guarantee needs a correction pass over most voxels at tight bounds; quantise-first gives the bound by
 //! construction.
 
-use crate::header::{Header, Kind, HEADER_LEN, MAX_DIM, MAX_VOXELS};
+use crate::header::{Header, Kind, MAX_DIM, MAX_VOXELS};
 use crate::rans::{get_varint, put_varint_pub, Breakdown};
 use crate::sample::Sample;
 use crate::{lift, planes, rans, DecodeError, EncodeError, Entropy, Mode, Options};
@@ -103,7 +103,7 @@ impl Codec {
         if samples.iter().all(|x| (x.to_f64() - mid.to_f64()).abs() <= e && (e > 0.0 || x.same(mid))) {
             h.kind = Kind::Constant;
             (h.min, h.max) = (mid.to_f64(), mid.to_f64());
-            let mut out = Vec::with_capacity(HEADER_LEN);
+            let mut out = Vec::with_capacity(h.len());
             h.write(&mut out);
             return Ok(out);
         }
@@ -114,6 +114,12 @@ impl Codec {
             let spacing = (f32::from_bits(ulp + 1) - f32::from_bits(ulp)) as f64;
             2.0 * (e - spacing)
         };
+        // The header stores the step as f32: round down, so the bound only gets safer.
+        let mut step32 = step as f32;
+        if step32 as f64 > step {
+            step32 = f32::from_bits(step32.to_bits() - 1);
+        }
+        let step = step32 as f64;
         if step <= 0.0 || (hi - lo) / step > (1u64 << 30) as f64 {
             return Ok(self.raw(samples, h));
         }
@@ -156,15 +162,14 @@ impl Codec {
             x.put(&mut payload);
             prev = i + 1;
         }
-        if payload.len() >= n * T::SIZE {
-            // Incompressible: raw samples are smaller and exact.
-            h.entropy = Entropy::Rans;
-            (h.step, h.offset, h.min, h.max) = (1.0, 0.0, lo, hi);
-            return Ok(self.raw(samples, h));
+        // Label-like bricks (long runs, few values) are smaller as zstd of the raw samples, which are also exact.
+        let raw = self.raw(samples, Header { entropy: Entropy::Rans, min: lo, max: hi, ..h });
+        if raw.len() <= h.len() + payload.len() {
+            return Ok(raw);
         }
         h.kind = Kind::Wavelet;
         h.payload_len = payload.len();
-        let mut out = Vec::with_capacity(HEADER_LEN + payload.len());
+        let mut out = Vec::with_capacity(h.len() + payload.len());
         h.write(&mut out);
         out.extend_from_slice(&payload);
         Ok(out)
@@ -187,7 +192,7 @@ impl Codec {
         }
         let z = zstd::bulk::compress(&shuffled, 3).unwrap_or_default();
         h.payload_len = z.len();
-        let mut out = Vec::with_capacity(HEADER_LEN + z.len());
+        let mut out = Vec::with_capacity(h.len() + z.len());
         h.write(&mut out);
         out.extend_from_slice(&z);
         out
@@ -204,7 +209,7 @@ impl Codec {
         if out.len() != n {
             return Err(DecodeError::WrongLength { brick: n, buffer: out.len() });
         }
-        let p = &b[HEADER_LEN..];
+        let p = &b[h.len()..];
         let bad = DecodeError::Payload;
         match h.kind {
             Kind::Constant => {

@@ -12,7 +12,7 @@
 //! | `rans` | tokens + contexts + interleaved static rANS for the coefficients (the default entropy stage) |
 //! | `planes` | zstd of zigzagged coefficient byte planes (the measured alternative) |
 //! | `codec` | quantisation with an unconditional error bound, the corrections, the encoder and the decoder |
-//! | `header` | the self-describing 52-byte header and its validation |
+//! | `header` | the self-describing header (18–27 bytes) and its validation |
 //! | `sample` | the sample types |
 //!
 //! ```
@@ -41,7 +41,7 @@ mod rans;
 mod sample;
 
 pub use codec::{max_error_for_psnr, Codec};
-pub use header::{Header, Kind, HEADER_LEN, MAX_DIM, MAX_VOXELS};
+pub use header::{header_len, Header, Kind, MAX_DIM, MAX_VOXELS};
 pub use rans::Breakdown;
 pub use sample::{DType, Sample};
 

@@ -13,6 +13,15 @@ pub enum DType {
 }
 
 impl DType {
+    /// Bytes per sample.
+    pub fn size(self) -> usize {
+        match self {
+            Self::U8 => 1,
+            Self::U16 => 2,
+            Self::F32 => 4,
+        }
+    }
+
     pub(crate) fn from_u8(v: u8) -> Option<Self> {
         match v {
             0 => Some(Self::U8),
