@@ -94,52 +94,56 @@ fn inv_line(line: &mut [i32], s: &mut Vec<i32>) {
     line.copy_from_slice(s);
 }
 
-/// `dst[i] op= f(a[i], b[i])` over rows; the vectorised kernel of the y and z passes.
+/// `dst[i] ±= pred|upd(a[i], b[i])` over rows; the vectorised kernel of the y and z passes.
 #[inline(always)]
-fn rows_apply(dst: &mut [i32], a: &[i32], b: &[i32], sub: bool, f: fn(i32, i32) -> i32) {
-    if sub {
-        for ((d, &x), &y) in dst.iter_mut().zip(a).zip(b) {
-            *d = d.wrapping_sub(f(x, y));
-        }
-    } else {
-        for ((d, &x), &y) in dst.iter_mut().zip(a).zip(b) {
-            *d = d.wrapping_add(f(x, y));
-        }
+fn rows_apply<const SUB: bool, const UPD: bool>(dst: &mut [i32], a: &[i32], b: &[i32]) {
+    let n = dst.len().min(a.len()).min(b.len());
+    let (dst, a, b) = (&mut dst[..n], &a[..n], &b[..n]);
+    for i in 0..n {
+        let f = if UPD { upd(a[i], b[i]) } else { pred(a[i], b[i]) };
+        dst[i] = if SUB { dst[i].wrapping_sub(f) } else { dst[i].wrapping_add(f) };
     }
 }
 
-/// Lifts `n` rows of width `w` held contiguously in `s` (row k at `s[k*w..]`), forward (`inverse == false`) or
-/// backward. `s` is in interleaved order here; the caller (de)interleaves.
+/// Row `k` of `s` (rows of width `w`) as the target, rows `l` and `r` (≠ k) as sources.
+#[inline(always)]
+fn split3(s: &mut [i32], w: usize, k: usize, l: usize, r: usize) -> (&mut [i32], &[i32], &[i32]) {
+    let (lo, hi) = s.split_at_mut(k * w);
+    let (tgt, rest) = hi.split_at_mut(w);
+    let get = |j: usize| -> &[i32] {
+        if j < k {
+            &lo[j * w..(j + 1) * w]
+        } else {
+            &rest[(j - k - 1) * w..(j - k) * w]
+        }
+    };
+    let (a, b) = (get(l), get(r));
+    (tgt, a, b)
+}
+
+/// Lifts `n` rows of width `w` held contiguously in `s` (row k at `s[k*w..]`), forward or backward. `s` is in
+/// interleaved order here; the caller (de)interleaves.
 fn lift_rows(s: &mut [i32], n: usize, w: usize, inverse: bool) {
-    let row = |k: usize| k * w..(k + 1) * w;
-    // Split borrows: the target row is odd/even and its neighbours the other parity, never the target itself.
-    let step = |s: &mut [i32], k: usize, l: usize, r: usize, sub: bool, f: fn(i32, i32) -> i32| {
-        let (lo, hi) = s.split_at_mut(k * w);
-        let (tgt, rest) = hi.split_at_mut(w);
-        let a: &[i32] = if l < k { &lo[row(l)] } else { &rest[(l - k - 1) * w..(l - k) * w] };
-        let b: &[i32] = if r < k { &lo[row(r)] } else { &rest[(r - k - 1) * w..(r - k) * w] };
-        rows_apply(tgt, a, b, sub, f);
-    };
-    let predict = |s: &mut [i32], sub: bool| {
-        let mut k = 1;
-        while k < n {
-            step(s, k, k - 1, if k + 1 < n { k + 1 } else { k - 1 }, sub, pred);
-            k += 2;
-        }
-    };
-    let update = |s: &mut [i32], sub: bool| {
-        let mut k = 0;
-        while k < n {
-            step(s, k, if k > 0 { k - 1 } else { 1 }, if k + 1 < n { k + 1 } else { k - 1 }, sub, upd);
-            k += 2;
-        }
-    };
+    let right = |k: usize| if k + 1 < n { k + 1 } else { k - 1 };
+    let left = |k: usize| if k > 0 { k - 1 } else { 1 };
     if inverse {
-        update(s, true);
-        predict(s, false);
+        for k in (0..n).step_by(2) {
+            let (t, a, b) = split3(s, w, k, left(k), right(k));
+            rows_apply::<true, true>(t, a, b);
+        }
+        for k in (1..n).step_by(2) {
+            let (t, a, b) = split3(s, w, k, k - 1, right(k));
+            rows_apply::<false, false>(t, a, b);
+        }
     } else {
-        predict(s, true);
-        update(s, false);
+        for k in (1..n).step_by(2) {
+            let (t, a, b) = split3(s, w, k, k - 1, right(k));
+            rows_apply::<true, false>(t, a, b);
+        }
+        for k in (0..n).step_by(2) {
+            let (t, a, b) = split3(s, w, k, left(k), right(k));
+            rows_apply::<false, true>(t, a, b);
+        }
     }
 }
 

@@ -69,18 +69,23 @@ impl Sample for u8 {
     const DTYPE: DType = DType::U8;
     const SIZE: usize = 1;
     const INTEGER: bool = true;
+    #[inline(always)]
     fn to_f64(self) -> f64 {
         self as f64
     }
+    #[inline(always)]
     fn from_i64(v: i64) -> Self {
         v.clamp(0, u8::MAX as i64) as u8
     }
+    #[inline(always)]
     fn from_f64(v: f64) -> Self {
         v.round() as u8 // `as` saturates; NaN → 0
     }
+    #[inline(always)]
     fn put(self, out: &mut Vec<u8>) {
         out.push(self)
     }
+    #[inline(always)]
     fn get(b: &[u8]) -> Self {
         b[0]
     }
@@ -93,18 +98,23 @@ impl Sample for u16 {
     const DTYPE: DType = DType::U16;
     const SIZE: usize = 2;
     const INTEGER: bool = true;
+    #[inline(always)]
     fn to_f64(self) -> f64 {
         self as f64
     }
+    #[inline(always)]
     fn from_i64(v: i64) -> Self {
         v.clamp(0, u16::MAX as i64) as u16
     }
+    #[inline(always)]
     fn from_f64(v: f64) -> Self {
         v.round() as u16
     }
+    #[inline(always)]
     fn put(self, out: &mut Vec<u8>) {
         out.extend_from_slice(&self.to_le_bytes())
     }
+    #[inline(always)]
     fn get(b: &[u8]) -> Self {
         u16::from_le_bytes([b[0], b[1]])
     }
@@ -117,18 +127,23 @@ impl Sample for f32 {
     const DTYPE: DType = DType::F32;
     const SIZE: usize = 4;
     const INTEGER: bool = false;
+    #[inline(always)]
     fn to_f64(self) -> f64 {
         self as f64
     }
+    #[inline(always)]
     fn from_i64(v: i64) -> Self {
         v as f32
     }
+    #[inline(always)]
     fn from_f64(v: f64) -> Self {
         v as f32
     }
+    #[inline(always)]
     fn put(self, out: &mut Vec<u8>) {
         out.extend_from_slice(&self.to_le_bytes())
     }
+    #[inline(always)]
     fn get(b: &[u8]) -> Self {
         f32::from_le_bytes([b[0], b[1], b[2], b[3]])
     }
