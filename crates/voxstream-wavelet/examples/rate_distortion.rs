@@ -1,7 +1,7 @@
 //! Rate–distortion and decode speed of the brick codec on real volumes (issue 47's measurements).
 //!
 //! `cargo run --release -p voxstream-wavelet --example rate_distortion -- [DATA_DIR] [BRICK]`
-//! (DATA_DIR defaults to `data/real`, BRICK to 32). Reads `mni152_t1.nii.gz` (NIfTI), `skull_2.9.inr` and
+//! (DATA_DIR defaults to `data/real`, BRICK to 32; timings are the best of `REPS` runs, default 9). Reads `mni152_t1.nii.gz` (NIfTI), `skull_2.9.inr` and
 //! `liver.inr.gz` (INRIA), cuts each into BRICK³ bricks (edges padded by clamping), codes every brick, and prints per
 //! dataset and configuration: bits per voxel of the volume, the ratio to zstd -3 of the raw bricks (what voxstream
 //! stores today), PSNR over the dataset's value range and the max error (both over the volume's voxels only), and
@@ -134,7 +134,7 @@ fn run<T: Sample>(name: &str, v: &Volume<T>, b: usize, errors: &[f64]) {
     );
     println!("| config | bits/voxel | × smaller than zstd | PSNR dB | max err | decode GB/s (1 thread) |");
     println!("|---|---|---|---|---|---|");
-    let reps = 5;
+    let reps: usize = std::env::var("REPS").ok().and_then(|s| s.parse().ok()).unwrap_or(9);
     // memcpy bound.
     let raw: Vec<Vec<u8>> = bricks.iter().map(|br| as_bytes(br)).collect();
     let mut dst = vec![0u8; b * b * b * T::SIZE];

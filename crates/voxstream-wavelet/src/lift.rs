@@ -66,30 +66,25 @@ fn fwd_line(line: &mut [i32], s: &mut Vec<i32>) {
     }
 }
 
-/// Inverse of [`fwd_line`].
+/// Inverse of [`fwd_line`]: undoes the update into the even samples and the predict into the odd ones, reading
+/// the subband halves directly (no separate de-interleave pass).
 fn inv_line(line: &mut [i32], s: &mut Vec<i32>) {
     let n = line.len();
     if n < 2 {
         return;
     }
-    let h = n.div_ceil(2);
+    let (h, nd) = (n.div_ceil(2), n / 2);
     s.clear();
     s.resize(n, 0);
-    for (i, v) in s.iter_mut().enumerate() {
-        *v = line[if i & 1 == 0 { i / 2 } else { h + i / 2 }];
+    let (lo, d) = line.split_at(h);
+    for i in 0..h {
+        let dl = d[i.saturating_sub(1)];
+        let dr = d[i.min(nd - 1)];
+        s[2 * i] = lo[i].wrapping_sub(upd(dl, dr));
     }
-    let mut k = 0;
-    while k < n {
-        let l = if k > 0 { s[k - 1] } else { s[1] };
-        let r = if k + 1 < n { s[k + 1] } else { s[k - 1] };
-        s[k] = s[k].wrapping_sub(upd(l, r));
-        k += 2;
-    }
-    let mut k = 1;
-    while k < n {
-        let r = if k + 1 < n { s[k + 1] } else { s[k - 1] };
-        s[k] = s[k].wrapping_add(pred(s[k - 1], r));
-        k += 2;
+    for i in 0..nd {
+        let r = s[2 * (i + 1).min(h - 1)];
+        s[2 * i + 1] = d[i].wrapping_add(pred(s[2 * i], r));
     }
     line.copy_from_slice(s);
 }

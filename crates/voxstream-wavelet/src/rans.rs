@@ -326,13 +326,16 @@ pub fn decode(
 ) -> Result<(), Corrupt> {
     let n = coef.len();
     let nctx = n_contexts(levels);
-    sc.table.clear();
+    // Slots of unused contexts must read as zero (freq 0 → caught); used contexts overwrite all their slots.
     sc.table.resize(nctx * M as usize, 0);
     for c in 0..nctx {
         let used = *b.get(*pos).ok_or(Corrupt("truncated tables"))? as usize;
         *pos += 1;
         if used > NSYM {
             return Err(Corrupt("table has too many tokens"));
+        }
+        if used == 0 {
+            sc.table[c * M as usize..(c + 1) * M as usize].fill(0);
         }
         let mut start = 0u32;
         let t = &mut sc.table[c * M as usize..(c + 1) * M as usize];
