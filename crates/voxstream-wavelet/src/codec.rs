@@ -103,7 +103,7 @@ impl Codec {
         if samples.iter().all(|x| (x.to_f64() - mid.to_f64()).abs() <= e && (e > 0.0 || x.same(mid))) {
             h.kind = Kind::Constant;
             (h.min, h.max) = (mid.to_f64(), mid.to_f64());
-            let mut out = Vec::with_capacity(h.len());
+            let mut out = Vec::with_capacity(h.byte_len());
             h.write(&mut out);
             return Ok(out);
         }
@@ -164,12 +164,12 @@ impl Codec {
         }
         // Label-like bricks (long runs, few values) are smaller as zstd of the raw samples, which are also exact.
         let raw = self.raw(samples, Header { entropy: Entropy::Rans, min: lo, max: hi, ..h });
-        if raw.len() <= h.len() + payload.len() {
+        if raw.len() <= h.byte_len() + payload.len() {
             return Ok(raw);
         }
         h.kind = Kind::Wavelet;
         h.payload_len = payload.len();
-        let mut out = Vec::with_capacity(h.len() + payload.len());
+        let mut out = Vec::with_capacity(h.byte_len() + payload.len());
         h.write(&mut out);
         out.extend_from_slice(&payload);
         Ok(out)
@@ -192,7 +192,7 @@ impl Codec {
         }
         let z = zstd::bulk::compress(&shuffled, 3).unwrap_or_default();
         h.payload_len = z.len();
-        let mut out = Vec::with_capacity(h.len() + z.len());
+        let mut out = Vec::with_capacity(h.byte_len() + z.len());
         h.write(&mut out);
         out.extend_from_slice(&z);
         out
@@ -209,7 +209,7 @@ impl Codec {
         if out.len() != n {
             return Err(DecodeError::WrongLength { brick: n, buffer: out.len() });
         }
-        let p = &b[h.len()..];
+        let p = &b[h.byte_len()..];
         let bad = DecodeError::Payload;
         match h.kind {
             Kind::Constant => {

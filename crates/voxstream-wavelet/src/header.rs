@@ -79,7 +79,7 @@ impl Header {
     }
 
     /// Bytes of this header.
-    pub fn len(&self) -> usize {
+    pub fn byte_len(&self) -> usize {
         header_len(self.dtype)
     }
 
@@ -158,7 +158,8 @@ impl Header {
         }
         // Only a raw (bit-exact) brick may hold infinities, or only NaNs (then min = +inf > max = -inf).
         let ordered = min.is_finite() && max.is_finite() && min <= max;
-        if !(ordered || (kind == Kind::Raw && !min.is_nan() && !max.is_nan())) {
+        let raw_unordered = kind == Kind::Raw && !min.is_nan() && !max.is_nan();
+        if !ordered && !raw_unordered {
             return Err(bad("range not finite and ordered"));
         }
         if dtype != DType::F32 && step.fract() != 0.0 {

@@ -249,7 +249,7 @@ mod tests {
     #[test]
     fn smooth_data_concentrates_in_the_low_pass() {
         let dims = [16, 16, 16];
-        let mut d: Vec<i32> = (0..4096).map(|i| (i % 16 + (i / 16) % 16 + i / 256) as i32 * 4).collect();
+        let mut d: Vec<i32> = (0..4096i32).map(|i| (i % 16 + (i / 16) % 16 + i / 256) * 4).collect();
         forward(&mut d, dims, 1, &mut Vec::new());
         // A linear ramp is predicted exactly by the 5/3 predict step: the high-pass is zero away from the ends.
         let (x, y, z) = (9, 3, 3);

@@ -90,9 +90,9 @@ fn for_each_context(dims: [usize; 3], levels: u32, tok: &mut [u8], mut f: impl F
     let (lx, ly, lz) = (band_levels(nx, levels), band_levels(ny, levels), band_levels(nz, levels));
     let slice = nx * ny;
     let mut i = 0;
-    for z in 0..nz {
-        for y in 0..ny {
-            let myz = ly[y].min(lz[z]);
+    for (z, &bz) in lz.iter().enumerate().take(nz) {
+        for (y, &by) in ly.iter().enumerate().take(ny) {
+            let myz = by.min(bz);
             for &bx in lx.iter() {
                 let a = if y > 0 { tok[i - nx] } else { 0 };
                 let b = if z > 0 { tok[i - slice] } else { 0 };
