@@ -29,6 +29,10 @@
 //! assert_eq!(header.max, *back.iter().max().unwrap() as f64);
 //! ```
 //!
+//! Measured (`examples/rate_distortion.rs`, 32³ bricks): 2 levels are best (1 level costs ~5% more, 3 levels no
+//! gain, as Reichl found); rANS beats zstd of the coefficients by 10–50% and a Huffman code of the same tokens by
+//! 5–40%. Decoding is still scalar, 0.2–0.4 GB/s per core on a loaded 2-core machine: below issue 47's 1 GB/s goal.
+//!
 //! Decoding never panics and never allocates by an unchecked size: dims are capped ([`MAX_DIM`], [`MAX_VOXELS`]),
 //! every length is checked against the buffer, and failures are a [`DecodeError`]. Not yet wired into the store,
 //! cache or GPU.
