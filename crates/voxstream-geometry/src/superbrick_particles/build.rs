@@ -14,8 +14,8 @@ use voxstream_core::TreeShape;
 use super::coarse::{aggregate_into, coarse_levels, Aggregates};
 use super::spill::{encode, index_input, Record, MASS, RECORD_BYTES, WEIGHT};
 use super::{
-    OutOfCoreSettings, ParticleChunks, SuperbrickCache, SuperbrickExtent, SuperbrickParticleProducer,
-    BYTES_PER_LOADED_PARTICLE, MAX_SUPERBRICKS_PER_AXIS, MIN_MEMORY_BYTES,
+    OutOfCoreSettings, ParticleChunks, SuperbrickCache, SuperbrickExtent, SuperbrickParticleProducer, AGGREGATE_SHARE,
+    BYTES_PER_AGGREGATE, BYTES_PER_LOADED_PARTICLE, MAX_SUPERBRICKS_PER_AXIS, MIN_MEMORY_BYTES,
 };
 use crate::error::GeometryError;
 use crate::mesh_distance::UnitCubeFit;
@@ -149,6 +149,7 @@ impl SuperbrickParticleProducer {
             extents: Vec::new(),
             support_cap: f32::INFINITY,
             coarse: Vec::new(),
+            coarse_held: 0,
             oracle: Vec::new(),
             max_support: 0.0,
             cache: Mutex::new(SuperbrickCache::default()),
@@ -166,11 +167,13 @@ impl SuperbrickParticleProducer {
         producer.shape =
             TreeShape::new(2, settings.brick_size, max_level).map_err(|error| invalid(error.to_string()))?;
         debug_assert!(superbrick_level <= max_level);
+        producer.coarse_held =
+            held_coarse_levels(survey.count, settings.brick_size, superbrick_level, out_of_core.memory_bytes);
         let aggregates = producer.probe(min_support, settings.attribute).map_err(spill_io)?;
         if settings.attribute {
             producer.attribute_range().map_err(spill_io)?;
         }
-        producer.coarse = coarse_levels(aggregates, &producer.shape, superbrick_level);
+        producer.coarse = coarse_levels(aggregates, &producer.shape, producer.coarse_held);
         Ok(producer)
     }
 
@@ -254,7 +257,7 @@ impl SuperbrickParticleProducer {
     fn probe(&mut self, min_support: f64, attribute: bool) -> std::io::Result<Aggregates> {
         let bins = self.starts.len() - 1;
         let max_support = self.max_support;
-        let superbrick_level = self.superbrick_level;
+        let coarse_held = self.coarse_held;
         // The last class holds every wider kernel.
         let class_support = |c: usize| match c {
             c if c + 1 == MAX_CLASSES => max_support,
@@ -309,8 +312,8 @@ impl SuperbrickParticleProducer {
                 if let Some(grid) = &mut counts[class] {
                     grid.add(positions[i]);
                 }
-                if superbrick_level > 0 {
-                    let level = superbrick_level - 1;
+                if coarse_held > 0 {
+                    let level = coarse_held - 1;
                     let weight = f64::from(own[i][WEIGHT]);
                     let mass = f64::from(masses[i]);
                     aggregate_into(&mut aggregates, &self.shape, level, positions[i], support[i], mass, weight);
@@ -379,6 +382,20 @@ fn check_settings(
     }
     TreeShape::new(2, settings.brick_size, 0).map_err(|error| invalid(error.to_string()))?;
     Ok(())
+}
+
+/// How many of the levels coarser than the superbricks are held as aggregates (the module's step 6): those whose
+/// aggregates fit [`AGGREGATE_SHARE`] of the memory budget at [`BYTES_PER_AGGREGATE`] each, counted at their most (a
+/// level of `c` half-voxel cells per axis holds at most `c³` of them, and never more than the particles); the
+/// finer ones are resampled from the superbricks like the levels below.
+pub(super) fn held_coarse_levels(count: u64, brick_size: u32, superbrick_level: u32, memory_bytes: u64) -> u32 {
+    let most = memory_bytes / AGGREGATE_SHARE / BYTES_PER_AGGREGATE;
+    (0..superbrick_level)
+        .take_while(|&level| {
+            let cells = (2 * u64::from(brick_size)) << level;
+            cells.saturating_pow(3).min(count) <= most
+        })
+        .count() as u32
 }
 
 /// Pass 1: count, bounds, smoothing lengths, mass; every run validated.
@@ -601,6 +618,22 @@ mod tests {
             let unit = binning.unit_of(file);
             assert_eq!(record, [unit.x as f32, unit.y as f32, unit.z as f32, support, 1.0, 1.0]);
         }
+    }
+
+    #[test]
+    fn the_coarse_levels_held_fit_a_share_of_the_budget_whatever_the_count() {
+        // 20 million particles in 64 MiB: the aggregates of level 4 (256³ half voxels of 8³ bricks) took 2 GiB;
+        // now only the levels whose aggregates fit a quarter of the budget are held, the rest resampled from the
+        // superbricks.
+        let memory = 64u64 << 20;
+        let held = held_coarse_levels(20_000_000, 8, 5, memory);
+        assert!(held < 5, "{held}");
+        let cells = (16u64 << held.saturating_sub(1)).pow(3);
+        assert!(cells * BYTES_PER_AGGREGATE <= memory / AGGREGATE_SHARE, "{held} levels");
+        // A file with fewer particles than fit is held whole, however fine its levels.
+        assert_eq!(held_coarse_levels(1000, 8, 5, memory), 5);
+        // Bricks whose coarsest level's aggregates would not fit: every level from the superbricks.
+        assert_eq!(held_coarse_levels(u64::MAX, 64, 5, MIN_MEMORY_BYTES), 0);
     }
 
     #[test]

@@ -1,6 +1,6 @@
 //! Serving bricks (the module's steps 5 and 6): levels at or below the superbricks' size resampled from the
-//! superbricks their kernels reach, loaded on demand into an LRU cache within the memory budget; coarser levels
-//! from the aggregates held in memory. Also what the producer tells of itself (ranges, statistics, memory).
+//! superbricks their kernels reach, loaded on demand into an LRU cache within the memory budget; the coarsest levels
+//! from the aggregates held in memory, and any level between them and the superbricks' from the superbricks too. Also what the producer tells of itself (ranges, statistics, memory).
 
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -125,6 +125,7 @@ impl SuperbrickParticleProducer {
             peak_cached_particles: cache.peak,
             loads: cache.loads,
             coarse_particles: self.coarse.iter().map(|c| c.len() as u64).sum(),
+            coarse_levels_held: self.coarse_held,
             spill_bytes: self.starts.last().copied().unwrap_or(0) * RECORD_BYTES as u64,
         }
     }
