@@ -104,6 +104,8 @@ pub struct OutOfCoreSettings {
 pub struct SuperbrickStatistics {
     /// Particles in the set.
     pub particles: u64,
+    /// Particles in the spill file: fewer where particles closer than a 64th of the finest voxel merged.
+    pub spilled_particles: u64,
     /// Superbricks per axis.
     pub superbricks_per_axis: u64,
     /// The tree level whose nodes are superbricks (coarser levels use aggregated particles).
@@ -155,6 +157,8 @@ pub struct SuperbrickParticleProducer {
     loaded_signal: std::sync::Condvar,
     budget_particles: u64,
     total_mass: f64,
+    /// Particles in the file (the spill file holds fewer where close ones merged).
+    count: u64,
     scale: FieldScale,
 }
 

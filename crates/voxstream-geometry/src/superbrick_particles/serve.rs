@@ -117,7 +117,8 @@ impl SuperbrickParticleProducer {
         let cache = self.cache.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
         let largest = self.starts.windows(2).map(|w| w[1] - w[0]).max().unwrap_or(0);
         SuperbrickStatistics {
-            particles: self.starts.last().copied().unwrap_or(0),
+            particles: self.count,
+            spilled_particles: self.starts.last().copied().unwrap_or(0),
             superbricks_per_axis: self.per_axis,
             superbrick_level: self.superbrick_level,
             largest_superbrick: largest,

@@ -252,3 +252,24 @@ fn bad_settings_are_named() {
     let error = SuperbrickParticleProducer::new(&set, ParticleTreeSettings::default(), &missing).unwrap_err();
     assert!(error.to_string().contains("/nonexistent/voxstream-spill"), "{error}");
 }
+
+#[test]
+fn a_cluster_finer_than_a_voxel_merges_out_of_core_too() {
+    // As in memory (`particle_producer`'s test): 20,000 points within 5·10⁻⁵ of the origin and one 100 away. Every
+    // point was spilled and the probe of their superbrick was quadratic; within a 64th of the finest voxel the
+    // settings allow they are a few records of the same mass.
+    let mut state = 11u64;
+    let mut next = move || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut positions: Vec<[f64; 3]> = (0..20_000).map(|_| [next() * 5e-5, next() * 5e-5, next() * 5e-5]).collect();
+    positions.push([100.0; 3]);
+    let set = ParticleSet::new(RawParticles { positions, ..RawParticles::default() }).unwrap();
+    let settings = ParticleTreeSettings::default();
+    let producer = SuperbrickParticleProducer::new(&set, settings, &out_of_core(MIN_MEMORY_BYTES)).unwrap();
+    let statistics = producer.statistics();
+    assert_eq!(statistics.particles, 20_001);
+    assert!(statistics.spill_bytes <= 9 * 24, "{statistics:?}");
+    assert!((producer.total_mass() - 20_001.0).abs() < 1e-6);
+}
