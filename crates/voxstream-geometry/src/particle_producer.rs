@@ -333,8 +333,8 @@ impl ParticleProducer {
 }
 
 /// Bytes per particle the in-memory producer holds while it renders (the index's position, support, class and
-/// mass: [`ParticleProducer::heap_bytes`] without the coarse count tables and the attribute's weights), for checking
-/// a file's declared count against the memory budget before reading it.
+/// mass: [`ParticleProducer::heap_bytes`] without the coarse count tables and the attribute's weights), once built;
+/// a file's count is checked before reading against the build's peak, [`BUILD_BYTES_PER_PARTICLE`].
 pub const HELD_BYTES_PER_PARTICLE: u64 = 12 + 4 + 4 + 8;
 
 /// Bytes per particle at the in-memory build's peak, the file's columns included: what a file's count is held to
