@@ -12,7 +12,7 @@ use anyhow::{bail, Context, Result};
 use voxstream_core::{NodeKey, ProduceError, Produced, Producer, TreeShape};
 use voxstream_geometry::formats::ply::{declared_points, PlyPointStream};
 use voxstream_geometry::formats::{read_geometry, RawGeometry};
-use voxstream_geometry::particle_producer::{HELD_BYTES_PER_PARTICLE, SMOOTHING_SCALE_RANGE};
+use voxstream_geometry::particle_producer::{BUILD_BYTES_PER_PARTICLE, SMOOTHING_SCALE_RANGE};
 use voxstream_geometry::superbrick_particles::{
     open_out_of_core, OutOfCoreSettings, MIN_MEMORY_BYTES, STREAMED_FILE_ENDINGS,
 };
@@ -255,12 +255,12 @@ pub fn open(path: &Path, args: &GeometryOptions) -> Result<GeometrySource> {
     }
 }
 
-/// Refuses `count` particles whose in-memory index ([`HELD_BYTES_PER_PARTICLE`] each) would not fit `--budget-mb`
-/// beside the image, naming the count, the bytes and the flags that help (`verb`: "declares" for a header's count,
-/// "holds" for particles read).
+/// Refuses `count` particles whose in-memory index would not fit `--budget-mb` beside the image while it is built
+/// ([`BUILD_BYTES_PER_PARTICLE`] each, the file's columns included; it holds less once built), naming the count, the
+/// bytes and the flags that help (`verb`: "declares" for a header's count, "holds" for particles read).
 fn check_particle_budget(path: &Path, count: u64, verb: &str, args: &GeometryOptions) -> Result<()> {
     let Some(budget_mb) = args.budget_mb else { return Ok(()) };
-    let held = count.saturating_mul(HELD_BYTES_PER_PARTICLE);
+    let held = count.saturating_mul(BUILD_BYTES_PER_PARTICLE);
     let image = FRAME_BYTES_PER_PIXEL * u64::from(args.width) * u64::from(args.height);
     let needed_mb = held.saturating_add(image).div_ceil(1 << 20);
     if needed_mb < budget_mb {
@@ -273,7 +273,7 @@ fn check_particle_budget(path: &Path, count: u64, verb: &str, args: &GeometryOpt
         ""
     };
     bail!(
-        "{} {verb} {count} particles: held in memory their index takes {} MiB ({HELD_BYTES_PER_PARTICLE} bytes \
+        "{} {verb} {count} particles: built in memory their index takes {} MiB ({BUILD_BYTES_PER_PARTICLE} bytes \
          each), which with the {}x{} image leaves nothing of --budget-mb {budget_mb} for the bricks: raise \
          --budget-mb above {needed_mb}{out_of_core}",
         path.display(),
@@ -297,10 +297,6 @@ fn smoothing_scale(args: &GeometryOptions, molecular: bool) -> Result<f64> {
         ),
     })
 }
-
-/// Bytes a particle takes in memory while the in-memory producer is built (the file's columns in double and single
-/// precision, the sorted index and the build's temporaries), for choosing out of core by itself.
-const IN_MEMORY_BYTES_PER_PARTICLE: u64 = 160;
 
 /// Whether to read `path` out of core, and with how many bytes: `--particle-memory` (binary PLY point files only),
 /// or by itself for a binary PLY point file whose particles would take more than half of the machine's memory.
@@ -335,7 +331,7 @@ fn out_of_core_memory(path: &Path, args: &GeometryOptions) -> Result<Option<u64>
 /// The memory to read `count` particles out of core with, on a machine of `machine` bytes: a quarter of it where
 /// reading them into memory would take more than half; `None` (read into memory) otherwise.
 fn automatic_particle_memory(count: u64, machine: u64) -> Option<u64> {
-    let needed = count.saturating_mul(IN_MEMORY_BYTES_PER_PARTICLE);
+    let needed = count.saturating_mul(BUILD_BYTES_PER_PARTICLE);
     (needed > machine / 2).then(|| (machine / 4).max(MIN_MEMORY_BYTES))
 }
 
@@ -471,10 +467,11 @@ mod tests {
     #[test]
     fn particle_sets_larger_than_half_the_memory_are_read_out_of_core() {
         let gib = 1u64 << 30;
-        // 24 GiB: up to about 80 million particles in memory; beyond, out of core with 6 GiB.
+        // 24 GiB: up to half of it in memory (about 80 million particles); beyond, out of core with 6 GiB.
+        let most = 12 * gib / BUILD_BYTES_PER_PARTICLE;
         assert_eq!(automatic_particle_memory(1_000_000, 24 * gib), None);
-        assert_eq!(automatic_particle_memory(80_000_000, 24 * gib), None);
-        assert_eq!(automatic_particle_memory(81_000_000, 24 * gib), Some(6 * gib));
+        assert_eq!(automatic_particle_memory(most, 24 * gib), None);
+        assert_eq!(automatic_particle_memory(most + 1, 24 * gib), Some(6 * gib));
         assert_eq!(automatic_particle_memory(u64::MAX, 24 * gib), Some(6 * gib));
         // A tiny machine still gets the smallest budget.
         assert_eq!(automatic_particle_memory(1_000_000, 16 << 20), Some(MIN_MEMORY_BYTES));

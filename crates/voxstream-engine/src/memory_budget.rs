@@ -142,14 +142,10 @@ impl MemoryBudget {
     /// The whole split for a tree of `shape` whose producer holds a cache of `host_cache_bytes` (what it was given:
     /// [`MemoryBudget::store_cache_bytes`] for a streamed store, 0 otherwise).
     pub fn plan(&self, shape: &TreeShape, host_cache_bytes: u64) -> Result<MemoryPlan, BudgetError> {
-        let pool_bytes = self.total_bytes.saturating_sub(self.image_bytes).saturating_sub(host_cache_bytes);
-        let pools = PoolCapacities::plan(shape, pool_bytes).map_err(|error| match error {
-            CoreError::BudgetTooSmall { minimum_bytes, .. } => BudgetError::PoolsTooSmall {
-                budget_mb: self.budget_mb,
-                minimum_mb: self.minimum_mb(minimum_bytes, pool_bytes),
-            },
-            // `PoolCapacities::plan` fails only for want of bytes; any other error would be a budget too small too.
-            _ => BudgetError::PoolsTooSmall { budget_mb: self.budget_mb, minimum_mb: self.budget_mb + 1 },
+        let pool_bytes = self.pool_bytes(host_cache_bytes);
+        let pools = PoolCapacities::plan(shape, pool_bytes).map_err(|_| BudgetError::PoolsTooSmall {
+            budget_mb: self.budget_mb,
+            minimum_mb: self.minimum_mb(shape, host_cache_bytes),
         })?;
         Ok(MemoryPlan {
             total_bytes: self.total_bytes,
@@ -160,16 +156,41 @@ impl MemoryBudget {
         })
     }
 
-    /// The smallest budget, in MiB, that gives the pools `minimum_pool_bytes`: the pools get `pool_bytes` of the
-    /// whole, so the minimum is scaled up by the same share and rounded up to whole MiB; always more than now.
-    fn minimum_mb(&self, minimum_pool_bytes: u64, pool_bytes: u64) -> u64 {
-        let share = pool_bytes.max(1) as f64 / self.total_bytes.max(1) as f64;
-        let minimum_mb = ((minimum_pool_bytes as f64 / share) / MIB as f64).ceil().max(1.0) as u64;
-        if minimum_mb <= self.budget_mb {
-            self.budget_mb + 1
+    /// What the image and a host cache of `host_cache_bytes` leave for the pools.
+    fn pool_bytes(&self, host_cache_bytes: u64) -> u64 {
+        self.total_bytes.saturating_sub(self.image_bytes).saturating_sub(host_cache_bytes)
+    }
+
+    /// The smallest budget, in MiB, whose pools fit a tree of `shape` beside the same image and host cache: a
+    /// store's cache ([`MemoryBudget::store_cache_bytes`]) grows with the budget, any other (a particle or mesh
+    /// index) is fixed. Checked against [`PoolCapacities::plan`] itself, so the figure works; always more than now.
+    fn minimum_mb(&self, shape: &TreeShape, host_cache_bytes: u64) -> u64 {
+        let scales = host_cache_bytes > 0 && host_cache_bytes == self.store_cache_bytes();
+        let fits = |budget_mb: u64| {
+            let total = budget_mb.saturating_mul(MIB);
+            let cache =
+                if scales { total.saturating_sub(self.image_bytes) / STORE_CACHE_SHARE } else { host_cache_bytes };
+            let pools = total.saturating_sub(self.image_bytes).saturating_sub(cache);
+            PoolCapacities::plan(shape, pools).is_ok()
+        };
+        // A first guess from the pools' own minimum, then up by sixteenths until the planner accepts it (the node
+        // pool's share and the production batch come out of the pools too).
+        let minimum_pool = match PoolCapacities::plan(shape, 0) {
+            Err(CoreError::BudgetTooSmall { minimum_bytes, .. }) => minimum_bytes,
+            _ => 0,
+        };
+        let minimum_pool = if scales {
+            minimum_pool.saturating_mul(STORE_CACHE_SHARE) / (STORE_CACHE_SHARE - 1)
         } else {
-            minimum_mb
+            minimum_pool
+        };
+        let guess =
+            self.image_bytes.saturating_add(if scales { 0 } else { host_cache_bytes }).saturating_add(minimum_pool);
+        let mut budget_mb = guess.div_ceil(MIB).max(self.budget_mb + 1);
+        while !fits(budget_mb) && budget_mb <= MAX_BUDGET_MB {
+            budget_mb += (budget_mb / 16).max(1);
         }
+        budget_mb
     }
 }
 
@@ -236,6 +257,43 @@ mod tests {
         assert!(minimum_mb > 1);
         let enough = MemoryBudget::new(minimum_mb, 64, 64, None).unwrap();
         assert!(enough.plan(&shape, 0).is_ok(), "{minimum_mb} MiB should hold the pools");
+    }
+
+    #[test]
+    fn a_fixed_host_cache_adds_to_the_minimum_instead_of_scaling_it() {
+        // A particle index of 53.5 MiB and a 10 MiB image in a 64 MiB budget: the pools get what is left, half a
+        // MiB of 64. Scaling their minimum by that share named a budget a hundred times too large (the "9 TiB" of
+        // issue 41); the index is fixed, so the minimum is the image, the index and the pools' minimum, and that
+        // budget works.
+        let shape = TreeShape::new(2, 32, 8).unwrap();
+        let index = 53 * MIB + MIB / 2;
+        let budget = MemoryBudget::new(64, 512, 512, None).unwrap();
+        let Err(BudgetError::PoolsTooSmall { budget_mb: 64, minimum_mb }) = budget.plan(&shape, index) else {
+            panic!("64 MiB should not hold the index and the pools");
+        };
+        let Err(CoreError::BudgetTooSmall { minimum_bytes, .. }) = PoolCapacities::plan(&shape, 0) else {
+            panic!("the pools have a minimum");
+        };
+        let exact = (budget.image_bytes() + index + minimum_bytes).div_ceil(MIB);
+        assert!(
+            minimum_mb >= exact && minimum_mb <= exact + exact / 16 + 1,
+            "{minimum_mb} MiB, about {exact} expected"
+        );
+        let enough = MemoryBudget::new(minimum_mb, 512, 512, None).unwrap();
+        assert!(enough.plan(&shape, index).is_ok(), "{minimum_mb} MiB should hold the index and the pools");
+    }
+
+    #[test]
+    fn a_store_cache_minimum_holds_the_cache_it_grows_with() {
+        let shape = TreeShape::new(2, 32, 6).unwrap();
+        let budget = MemoryBudget::new(1, 64, 64, None).unwrap();
+        let Err(BudgetError::PoolsTooSmall { minimum_mb, .. }) = budget.plan(&shape, budget.store_cache_bytes()) else {
+            panic!("1 MiB should not hold the pools of 32³ bricks");
+        };
+        let enough = MemoryBudget::new(minimum_mb, 64, 64, None).unwrap();
+        assert!(enough.plan(&shape, enough.store_cache_bytes()).is_ok(), "{minimum_mb} MiB should hold them");
+        let less = MemoryBudget::new(minimum_mb * 15 / 16, 64, 64, None).unwrap();
+        assert!(less.plan(&shape, less.store_cache_bytes()).is_err(), "{minimum_mb} MiB is about the least");
     }
 
     #[test]

@@ -267,21 +267,22 @@ impl ParticleIndex {
             class_max[c] = class_max[c].max(h);
         }
         let class_cells = class_max.map(|h| if h > 0.0 { ((1.0 / h).floor() as u64).clamp(1, 1 << 20) } else { 1 });
-        let mut keyed: Vec<(usize, u64, u32)> = unit
+        // (class, cell key, input index): 16 bytes a particle, the class as a byte (there are at most 24).
+        let mut keyed: Vec<(u8, u64, u32)> = unit
             .par_iter()
             .zip(support)
             .enumerate()
             .map(|(i, (p, &h))| {
                 let c = class_of(h, min_support);
                 let cells = SortedCells { cells: class_cells[c], keys: Vec::new() };
-                (c, cells.key(cells.cell_of(*p)), i as u32)
+                (c as u8, cells.key(cells.cell_of(*p)), i as u32)
             })
             .collect();
         keyed.par_sort_unstable();
         let order: Vec<u32> = keyed.iter().map(|&(_, _, i)| i).collect();
         let mut classes = Vec::new();
         for group in keyed.chunk_by(|a, b| a.0 == b.0) {
-            let class = group[0].0;
+            let class = usize::from(group[0].0);
             let first = classes.last().map_or(0, |c: &SupportClass| c.first + c.cells.keys.len());
             let counts = oracle_grids.then(|| {
                 let mut grid = ParticleGrid::counting(oracle_cells(class_max[class]));

@@ -371,9 +371,9 @@ fn particle_files_beyond_the_budget_are_refused_from_their_header() {
     ];
     assert_fails(
         &args,
-        "many.ply declares 100000 particles: held in memory their index takes 3 MiB (28 bytes each), which with the \
-         64x64 image leaves nothing of --budget-mb 2 for the bricks: raise --budget-mb above 3, or read it out of \
-         core with --particle-memory MIB",
+        "many.ply declares 100000 particles: built in memory their index takes 13 MiB (128 bytes each), which with \
+         the 64x64 image leaves nothing of --budget-mb 2 for the bricks: raise --budget-mb above 13, or read it out \
+         of core with --particle-memory MIB",
     );
     // One point a million times, compressed to a few kilobytes.
     let count = 1_000_000;
@@ -395,7 +395,7 @@ fn particle_files_beyond_the_budget_are_refused_from_their_header() {
         "--budget-mb",
         "8",
     ];
-    assert_fails(&args, "copies.ply.gz declares 1000000 particles: held in memory their index takes 27 MiB");
+    assert_fails(&args, "copies.ply.gz declares 1000000 particles: built in memory their index takes 123 MiB");
     assert!(!out.exists(), "no image is written");
 }
 

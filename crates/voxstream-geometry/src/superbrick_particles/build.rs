@@ -14,13 +14,15 @@ use voxstream_core::TreeShape;
 use super::coarse::{aggregate_into, coarse_levels, Aggregates};
 use super::spill::{encode, index_input, Record, MASS, RECORD_BYTES, WEIGHT};
 use super::{
-    OutOfCoreSettings, ParticleChunks, SuperbrickCache, SuperbrickExtent, SuperbrickParticleProducer,
-    BYTES_PER_LOADED_PARTICLE, MAX_SUPERBRICKS_PER_AXIS, MIN_MEMORY_BYTES,
+    OutOfCoreSettings, ParticleChunks, SuperbrickCache, SuperbrickExtent, SuperbrickParticleProducer, AGGREGATE_SHARE,
+    BYTES_PER_AGGREGATE, BYTES_PER_LOADED_PARTICLE, MAX_SUPERBRICKS_PER_AXIS, MIN_MEMORY_BYTES,
 };
 use crate::error::GeometryError;
 use crate::mesh_distance::UnitCubeFit;
 use crate::particle_index::{class_of, oracle_cells, GridCounts, ParticleGrid, ParticleIndex, MAX_CLASSES};
-use crate::particle_producer::{FieldScale, MAX_SUPPORT_OVER_MEDIAN, SMOOTHING_NEIGHBOURS, SMOOTHING_SCALE_RANGE};
+use crate::particle_producer::{
+    FieldScale, MAX_SUPPORT_OVER_MEDIAN, MERGE_CELLS_PER_VOXEL, SMOOTHING_NEIGHBOURS, SMOOTHING_SCALE_RANGE,
+};
 use crate::particles::check_particles;
 use crate::ParticleTreeSettings;
 
@@ -110,7 +112,9 @@ fn to_support(h: f32, settings: &ParticleTreeSettings, fit: &UnitCubeFit) -> f64
 
 /// The finest level's resolution, given or from the narrowest support.
 fn resolution_for(settings: &ParticleTreeSettings, min_support: f64) -> u64 {
-    settings.resolution.unwrap_or_else(|| (4.0 / min_support.max(1e-9)).clamp(256.0, 8192.0) as u64)
+    settings
+        .resolution
+        .unwrap_or_else(|| (4.0 / min_support.max(1e-9)).clamp(256.0, MAX_DEFAULT_RESOLUTION as f64) as u64)
 }
 
 /// The finest level of a tree of `resolution` voxels per axis.
@@ -149,28 +153,35 @@ impl SuperbrickParticleProducer {
             extents: Vec::new(),
             support_cap: f32::INFINITY,
             coarse: Vec::new(),
+            coarse_held: 0,
             oracle: Vec::new(),
             max_support: 0.0,
             cache: Mutex::new(SuperbrickCache::default()),
             loaded_signal: std::sync::Condvar::new(),
             budget_particles,
             total_mass: survey.total_mass,
+            count: survey.count,
             scale: FieldScale::of_densities(1.0, 1.0, settings.attribute),
         };
         let spill_io = |error| GeometryError::Io { path: out_of_core.spill_directory.clone(), error };
         if !has_smoothing {
             producer.adaptive_smoothing(survey.count).map_err(spill_io)?;
         }
-        let min_support = producer.sort_and_measure().map_err(spill_io)?;
+        // Out of core as in memory, particles closer than a 64th of the finest voxel merge (here the finest the
+        // settings allow: the smallest support is not known yet); not for an attribute, whose weights are per particle.
+        let merge_cell = (!settings.attribute).then(|| finest_voxel_bound(&settings) / MERGE_CELLS_PER_VOXEL);
+        let min_support = producer.sort_and_measure(merge_cell).map_err(spill_io)?;
         let max_level = max_level_for(&settings, resolution_for(&settings, min_support));
         producer.shape =
             TreeShape::new(2, settings.brick_size, max_level).map_err(|error| invalid(error.to_string()))?;
         debug_assert!(superbrick_level <= max_level);
+        producer.coarse_held =
+            held_coarse_levels(survey.count, settings.brick_size, superbrick_level, out_of_core.memory_bytes);
         let aggregates = producer.probe(min_support, settings.attribute).map_err(spill_io)?;
         if settings.attribute {
             producer.attribute_range().map_err(spill_io)?;
         }
-        producer.coarse = coarse_levels(aggregates, &producer.shape, superbrick_level);
+        producer.coarse = coarse_levels(aggregates, &producer.shape, producer.coarse_held);
         Ok(producer)
     }
 
@@ -219,20 +230,28 @@ impl SuperbrickParticleProducer {
     }
 
     /// The supports' range, now that every particle has one: each superbrick's extent, the largest support, and each
-    /// superbrick's run rewritten in the order its index sorts them. Returns the smallest support.
-    fn sort_and_measure(&mut self) -> std::io::Result<f64> {
+    /// superbrick's run rewritten in the order its index sorts them, its particles within one cell of `merge_cell`
+    /// merged first (the runs compacted in place: a merged run ends no later than it did). Returns the smallest
+    /// support.
+    fn sort_and_measure(&mut self, merge_cell: Option<f64>) -> std::io::Result<f64> {
         let bins = self.starts.len() - 1;
         let (mut min_support, mut max_support) = (f64::INFINITY, 0.0f64);
         let mut extents = Vec::with_capacity(bins);
+        let mut compacted = vec![0u64; bins + 1];
         for bin in 0..bins {
             let mut extent = SuperbrickExtent { lower: DVec3::INFINITY, upper: DVec3::NEG_INFINITY, max_support: 0.0 };
             let records = self.read(bin)?;
+            let records = match merge_cell {
+                Some(cell) => merge_records(records, cell),
+                None => records,
+            };
+            compacted[bin + 1] = compacted[bin] + records.len() as u64;
             // Rewritten in the order its index sorts them (support class, cell), so that each later load of the
             // superbrick sorts sorted keys (a linear pass) instead of shuffled ones.
             let (positions, support, masses) = index_input(records.iter(), MASS);
             let (_, order) = ParticleIndex::build(&positions, &support, &masses, false);
             let records: Vec<Record> = order.iter().map(|&i| records[i as usize]).collect();
-            self.write(self.starts[bin], &records)?;
+            self.write(compacted[bin], &records)?;
             for record in records {
                 let p = DVec3::new(f64::from(record[0]), f64::from(record[1]), f64::from(record[2]));
                 extent.lower = extent.lower.min(p);
@@ -245,6 +264,10 @@ impl SuperbrickParticleProducer {
         }
         self.extents = extents;
         self.max_support = max_support;
+        if compacted[bins] < self.starts[bins] {
+            self.spill.set_len(compacted[bins] * RECORD_BYTES as u64)?;
+        }
+        self.starts = compacted;
         Ok(min_support)
     }
 
@@ -254,7 +277,7 @@ impl SuperbrickParticleProducer {
     fn probe(&mut self, min_support: f64, attribute: bool) -> std::io::Result<Aggregates> {
         let bins = self.starts.len() - 1;
         let max_support = self.max_support;
-        let superbrick_level = self.superbrick_level;
+        let coarse_held = self.coarse_held;
         // The last class holds every wider kernel.
         let class_support = |c: usize| match c {
             c if c + 1 == MAX_CLASSES => max_support,
@@ -309,8 +332,8 @@ impl SuperbrickParticleProducer {
                 if let Some(grid) = &mut counts[class] {
                     grid.add(positions[i]);
                 }
-                if superbrick_level > 0 {
-                    let level = superbrick_level - 1;
+                if coarse_held > 0 {
+                    let level = coarse_held - 1;
                     let weight = f64::from(own[i][WEIGHT]);
                     let mass = f64::from(masses[i]);
                     aggregate_into(&mut aggregates, &self.shape, level, positions[i], support[i], mass, weight);
@@ -379,6 +402,63 @@ fn check_settings(
     }
     TreeShape::new(2, settings.brick_size, 0).map_err(|error| invalid(error.to_string()))?;
     Ok(())
+}
+
+/// How many of the levels coarser than the superbricks are held as aggregates (the module's step 6): those whose
+/// aggregates fit [`AGGREGATE_SHARE`] of the memory budget at [`BYTES_PER_AGGREGATE`] each, counted at their most (a
+/// level of `c` half-voxel cells per axis holds at most `c³` of them, and never more than the particles); the
+/// finer ones are resampled from the superbricks like the levels below.
+pub(super) fn held_coarse_levels(count: u64, brick_size: u32, superbrick_level: u32, memory_bytes: u64) -> u32 {
+    let most = memory_bytes / AGGREGATE_SHARE / BYTES_PER_AGGREGATE;
+    (0..superbrick_level)
+        .take_while(|&level| {
+            let cells = (2 * u64::from(brick_size)) << level;
+            cells.saturating_pow(3).min(count) <= most
+        })
+        .count() as u32
+}
+
+/// The finest voxel the settings allow (the finest level's when `resolution` is given; else that of the largest
+/// default resolution), unit-cube units.
+fn finest_voxel_bound(settings: &ParticleTreeSettings) -> f64 {
+    let level = max_level_for(settings, settings.resolution.unwrap_or(MAX_DEFAULT_RESOLUTION));
+    1.0 / (f64::from(settings.brick_size) * 2f64.powi(level as i32))
+}
+
+/// The largest resolution [`resolution_for`] chooses by itself.
+const MAX_DEFAULT_RESOLUTION: u64 = 8192;
+
+/// A superbrick's records with those in one cell of `cell` whose supports lie within a sixteenth of an octave merged
+/// into one of their summed mass and weight, at their centre of mass with their mass-weighted mean support (as the
+/// in-memory producer merges them). Returned as given where nothing merges.
+fn merge_records(records: Vec<Record>, cell: f64) -> Vec<Record> {
+    let key = |r: &Record| {
+        let c = [0, 1, 2].map(|a| (f64::from(r[a]) / cell).floor() as i64);
+        [c[0], c[1], c[2], (f64::from(r[3]).log2() * 16.0).floor() as i64]
+    };
+    let mut order: Vec<u32> = (0..records.len() as u32).collect();
+    order.sort_unstable_by_key(|&i| key(&records[i as usize]));
+    if order.windows(2).all(|w| key(&records[w[0] as usize]) != key(&records[w[1] as usize])) {
+        return records;
+    }
+    let mut merged = Vec::new();
+    let (mut mass, mut weight, mut sum_w, mut position, mut reach) = (0.0f64, 0.0f64, 0.0f64, DVec3::ZERO, 0.0f64);
+    for (n, &i) in order.iter().enumerate() {
+        let r = &records[i as usize];
+        // Massless particles weigh a little in the mean, so a cell of them still has a position.
+        let w = f64::from(r[MASS]).max(1e-30);
+        mass += f64::from(r[MASS]);
+        weight += f64::from(r[WEIGHT]);
+        sum_w += w;
+        position += DVec3::new(f64::from(r[0]), f64::from(r[1]), f64::from(r[2])) * w;
+        reach += f64::from(r[3]) * w;
+        if n + 1 == order.len() || key(&records[order[n + 1] as usize]) != key(r) {
+            let p = (position / sum_w).as_vec3();
+            merged.push([p.x, p.y, p.z, (reach / sum_w) as f32, mass as f32, weight as f32]);
+            (mass, weight, sum_w, position, reach) = (0.0, 0.0, 0.0, DVec3::ZERO, 0.0);
+        }
+    }
+    merged
 }
 
 /// Pass 1: count, bounds, smoothing lengths, mass; every run validated.
@@ -601,6 +681,22 @@ mod tests {
             let unit = binning.unit_of(file);
             assert_eq!(record, [unit.x as f32, unit.y as f32, unit.z as f32, support, 1.0, 1.0]);
         }
+    }
+
+    #[test]
+    fn the_coarse_levels_held_fit_a_share_of_the_budget_whatever_the_count() {
+        // 20 million particles in 64 MiB: the aggregates of level 4 (256³ half voxels of 8³ bricks) took 2 GiB;
+        // now only the levels whose aggregates fit a quarter of the budget are held, the rest resampled from the
+        // superbricks.
+        let memory = 64u64 << 20;
+        let held = held_coarse_levels(20_000_000, 8, 5, memory);
+        assert!(held < 5, "{held}");
+        let cells = (16u64 << held.saturating_sub(1)).pow(3);
+        assert!(cells * BYTES_PER_AGGREGATE <= memory / AGGREGATE_SHARE, "{held} levels");
+        // A file with fewer particles than fit is held whole, however fine its levels.
+        assert_eq!(held_coarse_levels(1000, 8, 5, memory), 5);
+        // Bricks whose coarsest level's aggregates would not fit: every level from the superbricks.
+        assert_eq!(held_coarse_levels(u64::MAX, 64, 5, MIN_MEMORY_BYTES), 0);
     }
 
     #[test]

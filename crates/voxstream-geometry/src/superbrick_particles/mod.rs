@@ -31,12 +31,15 @@
 //!    ([`crate::particle_index`]) that holds at most the budget's particles (plus those in use by bricks being made;
 //!    a thread needing a superbrick another is loading waits for it). Not counted in the budget: the build
 //!    passes' neighbourhoods (a superbrick and the kernels reaching it) and the coarse levels' aggregates.
-//! 6. **Coarser levels** (a node spanning superbricks): from particles aggregated per voxel of the level (mass
-//!    summed, placed at the centre of mass, mass-weighted mean smoothing length; kernels of different widths kept
-//!    apart) on cells half a voxel wide, built bottom-up and held in memory: at most `(brick·S)³` aggregates for
-//!    the finest of them, far fewer where space is empty. The mass, hence the integral of the density, is exact;
-//!    the profile is approximated (within 1.1% of the density scale on the tests' cloud; the kernel there is two
-//!    voxels wide).
+//! 6. **Coarser levels** (a node spanning superbricks): the coarsest from particles aggregated per voxel of the
+//!    level (mass summed, placed at the centre of mass, mass-weighted mean smoothing length; kernels of different
+//!    widths kept apart) on cells half a voxel wide, built bottom-up and held in memory. A level of `c` cells per
+//!    axis holds at most `min(c³, particles)` aggregates: only the levels whose aggregates fit a quarter of the
+//!    memory budget are held ([`BYTES_PER_AGGREGATE`] each while built; 20 million particles in 64 MiB took
+//!    2 GiB when every level was), and those between them and the superbricks' are resampled from the superbricks
+//!    like the finer levels (exact; a node there loads each superbrick it spans in turn, through the cache). The
+//!    aggregates' mass, hence the integral of the density, is exact; the profile is approximated (within 1.1% of
+//!    the density scale on the tests' cloud; the kernel there is two voxels wide).
 //!
 //! 7. **The attribute** ([`ParticleTreeSettings::attribute`]): the probe pass computes the density at every particle
 //!    and stores each particle's weight `mⱼ/ρⱼ·Aⱼ` in the spill file; one more pass over the superbricks evaluates the
@@ -77,6 +80,13 @@ pub const MAX_SUPERBRICKS_PER_AXIS: u64 = 32;
 /// memory budget is divided by.
 pub const BYTES_PER_LOADED_PARTICLE: u64 = 64;
 
+/// Bytes an aggregated particle of the coarse levels takes at its most (while it is summed in a hash map, listed and
+/// indexed; 28 once held).
+pub const BYTES_PER_AGGREGATE: u64 = 256;
+
+/// The coarse levels' aggregates may take a `1/AGGREGATE_SHARE` of the memory budget while they are built.
+pub const AGGREGATE_SHARE: u64 = 4;
+
 /// The smallest memory budget: room for 27 superbricks of a few thousand particles.
 pub const MIN_MEMORY_BYTES: u64 = 8 << 20;
 
@@ -94,6 +104,8 @@ pub struct OutOfCoreSettings {
 pub struct SuperbrickStatistics {
     /// Particles in the set.
     pub particles: u64,
+    /// Particles in the spill file: fewer where particles closer than a 64th of the finest voxel merged.
+    pub spilled_particles: u64,
     /// Superbricks per axis.
     pub superbricks_per_axis: u64,
     /// The tree level whose nodes are superbricks (coarser levels use aggregated particles).
@@ -108,6 +120,9 @@ pub struct SuperbrickStatistics {
     pub loads: u64,
     /// Aggregated particles held for the coarse levels.
     pub coarse_particles: u64,
+    /// Levels held as aggregates (the coarsest; those between them and the superbricks' are resampled from the
+    /// superbricks).
+    pub coarse_levels_held: u32,
     /// Bytes of the spill file.
     pub spill_bytes: u64,
 }
@@ -130,8 +145,10 @@ pub struct SuperbrickParticleProducer {
     extents: Vec<SuperbrickExtent>,
     /// The adaptive smoothing lengths' cap (infinite where the file gives them).
     support_cap: f32,
-    /// Aggregated particles of each level coarser than the superbricks.
+    /// Aggregated particles of the coarsest levels (`coarse_held` of them; the levels between are resampled from
+    /// the superbricks).
     coarse: Vec<ParticleIndex>,
+    coarse_held: u32,
     /// The oracle: per support class, its largest support and its counts.
     oracle: Vec<(f64, ParticleGrid)>,
     max_support: f64,
@@ -140,6 +157,8 @@ pub struct SuperbrickParticleProducer {
     loaded_signal: std::sync::Condvar,
     budget_particles: u64,
     total_mass: f64,
+    /// Particles in the file (the spill file holds fewer where close ones merged).
+    count: u64,
     scale: FieldScale,
 }
 

@@ -1,6 +1,6 @@
 //! Serving bricks (the module's steps 5 and 6): levels at or below the superbricks' size resampled from the
-//! superbricks their kernels reach, loaded on demand into an LRU cache within the memory budget; coarser levels
-//! from the aggregates held in memory. Also what the producer tells of itself (ranges, statistics, memory).
+//! superbricks their kernels reach, loaded on demand into an LRU cache within the memory budget; the coarsest levels
+//! from the aggregates held in memory, and any level between them and the superbricks' from the superbricks too. Also what the producer tells of itself (ranges, statistics, memory).
 
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -117,7 +117,8 @@ impl SuperbrickParticleProducer {
         let cache = self.cache.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
         let largest = self.starts.windows(2).map(|w| w[1] - w[0]).max().unwrap_or(0);
         SuperbrickStatistics {
-            particles: self.starts.last().copied().unwrap_or(0),
+            particles: self.count,
+            spilled_particles: self.starts.last().copied().unwrap_or(0),
             superbricks_per_axis: self.per_axis,
             superbrick_level: self.superbrick_level,
             largest_superbrick: largest,
@@ -125,6 +126,7 @@ impl SuperbrickParticleProducer {
             peak_cached_particles: cache.peak,
             loads: cache.loads,
             coarse_particles: self.coarse.iter().map(|c| c.len() as u64).sum(),
+            coarse_levels_held: self.coarse_held,
             spill_bytes: self.starts.last().copied().unwrap_or(0) * RECORD_BYTES as u64,
         }
     }

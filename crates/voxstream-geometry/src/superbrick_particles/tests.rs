@@ -85,6 +85,11 @@ fn out_of_core_bricks_equal_the_in_memory_ones_within_a_budget() {
     let statistics = streamed.statistics();
     assert_eq!(statistics.particles, count as u64);
     assert!(statistics.superbricks_per_axis >= 4, "{statistics:?}");
+    // The coarse levels' aggregates fit a quarter of the budget while built (before, the level above the
+    // superbricks' was held whole whatever the budget: 2 GiB for 20 million points in 64 MiB).
+    let aggregate_bytes = statistics.coarse_particles * BYTES_PER_AGGREGATE;
+    assert!(aggregate_bytes <= MIN_MEMORY_BYTES / AGGREGATE_SHARE, "{aggregate_bytes} bytes: {statistics:?}");
+    assert!(statistics.coarse_levels_held < statistics.superbrick_level, "{statistics:?}");
     assert!((streamed.total_mass() / memory.total_mass() - 1.0).abs() < 1e-9);
     // Every particle probed in both (one support class): the same peak, the same scale.
     assert!((streamed.density_scale() / memory.density_scale() - 1.0).abs() < 1e-9);
@@ -97,7 +102,8 @@ fn out_of_core_bricks_equal_the_in_memory_ones_within_a_budget() {
         assert!(compared > 20, "level {level}: {compared} bricks");
         assert!(worst <= 1.0 / 65535.0, "level {level}: {worst}");
     }
-    // Coarser levels come from aggregated particles: close, not equal (1.1% of the scale at most, measured).
+    // Coarser levels come from aggregated particles (the coarsest) or the superbricks: close, not equal (1.1% of the
+    // scale at most, measured).
     for level in 0..statistics.superbrick_level {
         let (worst, compared) = largest_difference(&memory, &streamed, level, 1);
         assert!(compared > 0);
@@ -245,4 +251,25 @@ fn bad_settings_are_named() {
         OutOfCoreSettings { memory_bytes: MIN_MEMORY_BYTES, spill_directory: "/nonexistent/voxstream-spill".into() };
     let error = SuperbrickParticleProducer::new(&set, ParticleTreeSettings::default(), &missing).unwrap_err();
     assert!(error.to_string().contains("/nonexistent/voxstream-spill"), "{error}");
+}
+
+#[test]
+fn a_cluster_finer_than_a_voxel_merges_out_of_core_too() {
+    // As in memory (`particle_producer`'s test): 20,000 points within 5·10⁻⁵ of the origin and one 100 away. Every
+    // point was spilled and the probe of their superbrick was quadratic; within a 64th of the finest voxel the
+    // settings allow they are a few records of the same mass.
+    let mut state = 11u64;
+    let mut next = move || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut positions: Vec<[f64; 3]> = (0..20_000).map(|_| [next() * 5e-5, next() * 5e-5, next() * 5e-5]).collect();
+    positions.push([100.0; 3]);
+    let set = ParticleSet::new(RawParticles { positions, ..RawParticles::default() }).unwrap();
+    let settings = ParticleTreeSettings::default();
+    let producer = SuperbrickParticleProducer::new(&set, settings, &out_of_core(MIN_MEMORY_BYTES)).unwrap();
+    let statistics = producer.statistics();
+    assert_eq!(statistics.particles, 20_001);
+    assert!(statistics.spill_bytes <= 9 * 24, "{statistics:?}");
+    assert!((producer.total_mass() - 20_001.0).abs() < 1e-6);
 }
