@@ -137,6 +137,12 @@ put("vdb_converter_header", "fog", json.dumps({"name": "density", "class": "fog 
                                                "spacing": [0.5, 0.5, 0.5], "origin": [0, 0, 0], "background": 0.0}))
 attributes = {"format_version": 1, "dims": [40, 30, 20], "dtype": "u8", "spacing": [1, 1, 2], "origin": [0, 0, 0],
               "brick_size": 32, "levels": 2, "value_range": [0, 255], "complete": True}
+# wavelet_brick: a first byte choosing decoding (even) or a round trip (odd), then bytes; the round trips' seeds are a
+# smooth ramp and noise (the codec's own encodings are reached through the round trip and libFuzzer's mutations).
+put("wavelet_brick", "decode_zeros", bytes(64))
+put("wavelet_brick", "round_trip_ramp", bytes([1, 0x3f]) + bytes(range(256)) * 8)
+put("wavelet_brick", "round_trip_noise_lossy", bytes([0x71, 0x2a]) + bytes((i * 151 + 7) % 256 for i in range(2048)))
+
 # remote_inputs: store locations as users type them, and a disk-cache entry (magic, key, length, bytes, CRC-32).
 for name, url in [("https", b"https://example.org/data/brain.zarr/"), ("s3", b"s3://bucket/scans/ct.zarr"),
                   ("credentials", b"https://alice:s3cr%40t@example.org:8443/s.zarr?sig=abc#x"),
