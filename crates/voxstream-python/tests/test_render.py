@@ -32,6 +32,22 @@ def test_a_scene_renders_as_the_cli_does(cli, tmp_path):
     assert image[..., :3].std() > 10
 
 
+def test_the_step_options_render_as_the_clis(cli, tmp_path):
+    # The default is the adaptive step (as the CLI's); faithful=True is --faithful, adaptive_step=T is
+    # --adaptive-step T, and they differ from one another on the translucent shell.
+    volume = vs.open("shell", size=(96, 96))
+    images = {}
+    for name, kwargs, flags in [("default", {}, []), ("faithful", {"faithful": True}, ["--faithful"]),
+                                ("loose", {"adaptive_step": 0.5}, ["--adaptive-step", "0.5"])]:
+        expected = cli_png(cli, tmp_path, "shell", "--width", "96", "--height", "96", *flags)
+        images[name] = volume.render(**kwargs)[..., :3]
+        assert np.array_equal(images[name], expected), name
+    assert not np.array_equal(images["default"], images["faithful"])
+    assert not np.array_equal(images["default"], images["loose"])
+    with pytest.raises(ValueError, match="give one of the two"):
+        volume.render(faithful=True, adaptive_step=0.1)
+
+
 def test_a_store_with_camera_tf_and_isosurfaces_renders_as_the_cli_does(cli, tmp_path, ball_store):
     camera = {"eye": [150.0, -90.0, 80.0], "target": [28.0, 24.0, 30.0], "up": [0.0, 0.0, 1.0], "fov": 35.0}
     (tmp_path / "camera.json").write_text(json.dumps(camera))
