@@ -10,3 +10,24 @@
 //! shaded ([`shading`]). [`FluidScene`] ties them together under a memory budget.
 
 pub mod screen_space;
+pub mod binning;
+pub mod bit_brick;
+pub mod grid;
+pub mod sphere_caster;
+
+pub use binning::{FluidBins, FluidSettings};
+pub use grid::{BrickKey, FluidGrid};
+
+/// What can go wrong opening or rendering a fluid.
+#[derive(Debug, thiserror::Error)]
+pub enum FluidError {
+    /// The particle file could not be read.
+    #[error(transparent)]
+    Geometry(#[from] voxstream_geometry::GeometryError),
+    /// A setting (or what the particles imply for one) is out of range; the message names the flag.
+    #[error("{0}")]
+    Settings(String),
+    /// The camera or image size is unusable.
+    #[error(transparent)]
+    Render(#[from] voxstream_render::RenderError),
+}

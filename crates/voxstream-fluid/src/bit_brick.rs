@@ -1,0 +1,392 @@
+//! A brick as one bit per cell, made from a brick's binned particles when a ray asks for it (Reichl §6.4.1), with
+//! the brick processors of §6.5.1 and §6.5.5 applied as it is made: foam classification and the acceleration mask.
+//!
+//! Layout: the thesis packs 4×4×8 cells into four 32-bit words, one texel of a GPU texture; on a CPU the natural
+//! word is a row of the brick along x, so a 64³ brick is 64 × 64 `u64` rows (row `y + 64·z`), and a cell's
+//! neighbourhood of `2k + 1` cells per axis is `(2k + 1)²` masked words. The same bits, another order.
+//!
+//! - **Coarser levels** are the finer bits OR-ed (the thesis' binary mipmap): a cell of level `L` is set when any
+//!   particle lies in its `2^L`-cube, which makes every coarse level conservative. They are made here straight from
+//!   the level-0 cell lists under the brick.
+//! - **Foam** (§6.5.5): an occupied cell whose neighbourhood (`FOAM_REACH` cells a side) holds less than a fraction
+//!   of the cells the fluid's interior would is isolated spray: its bit moves from the surface bits to the foam
+//!   count of its 4³ block (one byte per block, as the thesis keeps), drawn as a translucent volume.
+//! - **The acceleration mask** (§6.5.1's mipmap skip, at cell resolution): `near` holds every cell a sphere can
+//!   reach, so a ray tests spheres only in those cells; cells within reach of a face whose neighbouring brick holds
+//!   particles are marked too (the neighbour's spheres reach in).
+
+use crate::binning::{unpack_cell, FluidBins};
+use crate::grid::{BrickKey, BRICK};
+
+/// Words of a brick's bits.
+pub const ROWS: usize = BRICK * BRICK;
+
+/// Cells a side of the foam neighbourhood (a cube of `2·FOAM_REACH + 1`).
+pub const FOAM_REACH: i32 = 2;
+
+/// Blocks of the foam count per axis (4³ cells each).
+pub const FOAM_BLOCKS: usize = BRICK / 4;
+
+/// One brick of one level, as bits.
+#[derive(Clone, Debug)]
+pub struct BitBrick {
+    /// Which brick.
+    pub key: BrickKey,
+    /// Surface particles: bit `x` of row `y + 64·z`.
+    pub surface: Box<[u64]>,
+    /// Cells a surface sphere or foam can reach (the traversal's skip mask).
+    pub near: Box<[u64]>,
+    /// Foam cells per 4³ block (0..=64), block `bx + 16·(by + 16·bz)`; empty when the brick has no foam.
+    pub foam: Box<[u8]>,
+    /// Surface cells set.
+    pub surface_cells: u32,
+    /// Foam cells.
+    pub foam_cells: u32,
+}
+
+/// How bricks are made.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BrickSettings {
+    /// Sphere reach in cells at this level: a ray in cell `c` tests the spheres of cells within `reach` per axis.
+    pub reach: i32,
+    /// A cell is foam when its neighbourhood holds fewer occupied cells than this (0: no foam).
+    pub foam_below: u32,
+}
+
+#[inline]
+fn row(y: usize, z: usize) -> usize {
+    y + BRICK * z
+}
+
+/// Bits `from..=to` (clamped to the row) set.
+#[inline]
+pub fn span_mask(from: i32, to: i32) -> u64 {
+    let from = from.max(0);
+    let to = to.min(BRICK as i32 - 1);
+    if from > to {
+        return 0;
+    }
+    let width = (to - from + 1) as u32;
+    let ones = if width == 64 { u64::MAX } else { (1u64 << width) - 1 };
+    ones << from
+}
+
+impl BitBrick {
+    /// Makes brick `key` from the binned particles under it.
+    pub fn build(bins: &FluidBins, key: BrickKey, settings: BrickSettings) -> BitBrick {
+        let mut surface = vec![0u64; ROWS].into_boxed_slice();
+        let level = u32::from(key.level);
+        for_each_leaf_under(bins, key, &mut |leaf| {
+            // Offset of the leaf brick within `key`, in level-`L` cells (0 when L ≥ 6: many leaves per cell).
+            let offset: [u32; 3] =
+                std::array::from_fn(|a| ((leaf.at[a] - (key.at[a] << level)) * BRICK as u32) >> level);
+            for &packed in bins.leaf_cells(leaf) {
+                let c = unpack_cell(packed);
+                let [x, y, z] = std::array::from_fn(|a| ((c[a] >> level) + offset[a]) as usize);
+                surface[row(y, z)] |= 1 << x;
+            }
+        });
+        let mut brick = BitBrick {
+            key,
+            near: vec![0u64; ROWS].into_boxed_slice(),
+            foam: Box::new([]),
+            surface_cells: surface.iter().map(|r| r.count_ones()).sum(),
+            foam_cells: 0,
+            surface,
+        };
+        if settings.foam_below > 0 {
+            brick.classify_foam(settings.foam_below);
+        }
+        brick.make_near(bins, settings.reach);
+        brick
+    }
+
+    /// Whether cell `(x, y, z)` (within the brick) holds a surface particle.
+    #[inline]
+    pub fn is_set(&self, x: usize, y: usize, z: usize) -> bool {
+        self.surface[row(y, z)] >> x & 1 == 1
+    }
+
+    /// Whether a sphere or foam can reach cell `(x, y, z)`.
+    #[inline]
+    pub fn is_near(&self, x: usize, y: usize, z: usize) -> bool {
+        self.near[row(y, z)] >> x & 1 == 1
+    }
+
+    /// Foam cells in the 4³ block holding cell `(x, y, z)` (0..=64).
+    #[inline]
+    pub fn foam_at(&self, x: usize, y: usize, z: usize) -> u8 {
+        if self.foam.is_empty() {
+            return 0;
+        }
+        self.foam[x / 4 + FOAM_BLOCKS * (y / 4 + FOAM_BLOCKS * (z / 4))]
+    }
+
+    /// Occupied cells within `reach` of `(x, y, z)` per axis, inside this brick.
+    fn neighbours(&self, x: i32, y: i32, z: i32, reach: i32) -> u32 {
+        let mask = span_mask(x - reach, x + reach);
+        let mut count = 0;
+        for zz in (z - reach).max(0)..=(z + reach).min(BRICK as i32 - 1) {
+            for yy in (y - reach).max(0)..=(y + reach).min(BRICK as i32 - 1) {
+                count += (self.surface[row(yy as usize, zz as usize)] & mask).count_ones();
+            }
+        }
+        count
+    }
+
+    /// Moves isolated cells (fewer than `below` occupied cells in their neighbourhood, itself included) from the
+    /// surface to the foam counts. The neighbourhood is clamped to the brick and the threshold scaled by the part
+    /// of it inside, so that cells near a face are not taken for spray.
+    fn classify_foam(&mut self, below: u32) {
+        let full = (2 * FOAM_REACH + 1).pow(3) as u32;
+        let mut foam_rows = vec![0u64; ROWS];
+        let mut any = false;
+        for z in 0..BRICK {
+            for y in 0..BRICK {
+                let mut bits = self.surface[row(y, z)];
+                while bits != 0 {
+                    let x = bits.trailing_zeros() as i32;
+                    bits &= bits - 1;
+                    let inside = |c: i32| ((c + FOAM_REACH).min(BRICK as i32 - 1) - (c - FOAM_REACH).max(0) + 1) as u32;
+                    let examined = inside(x) * inside(y as i32) * inside(z as i32);
+                    let count = self.neighbours(x, y as i32, z as i32, FOAM_REACH);
+                    // count / examined < below / full, in integers.
+                    if u64::from(count) * u64::from(full) < u64::from(below) * u64::from(examined) {
+                        foam_rows[row(y, z)] |= 1 << x;
+                        any = true;
+                    }
+                }
+            }
+        }
+        if !any {
+            return;
+        }
+        let mut foam = vec![0u8; FOAM_BLOCKS.pow(3)];
+        let mut foam_cells = 0;
+        for z in 0..BRICK {
+            for y in 0..BRICK {
+                let bits = foam_rows[row(y, z)];
+                if bits == 0 {
+                    continue;
+                }
+                self.surface[row(y, z)] &= !bits;
+                foam_cells += bits.count_ones();
+                for bx in 0..FOAM_BLOCKS {
+                    let n = (bits >> (4 * bx) & 0xf).count_ones() as u8;
+                    foam[bx + FOAM_BLOCKS * (y / 4 + FOAM_BLOCKS * (z / 4))] += n;
+                }
+            }
+        }
+        self.surface_cells -= foam_cells;
+        self.foam_cells = foam_cells;
+        self.foam = foam.into_boxed_slice();
+    }
+
+    /// The skip mask: surface cells dilated by `reach` (a box), foam blocks whole, and a shell of `reach` cells on
+    /// each face whose side holds a non-empty neighbouring brick.
+    fn make_near(&mut self, bins: &FluidBins, reach: i32) {
+        let n = BRICK as i32;
+        // Dilate along x, then y, then z.
+        let mut a: Vec<u64> = self
+            .surface
+            .iter()
+            .map(|&r| {
+                let mut d = r;
+                for s in 1..=reach {
+                    d |= r << s | r >> s;
+                }
+                d
+            })
+            .collect();
+        let mut b = vec![0u64; ROWS];
+        for z in 0..n {
+            for y in 0..n {
+                let mut d = 0;
+                for yy in (y - reach).max(0)..=(y + reach).min(n - 1) {
+                    d |= a[row(yy as usize, z as usize)];
+                }
+                b[row(y as usize, z as usize)] = d;
+            }
+        }
+        for z in 0..n {
+            for y in 0..n {
+                let mut d = 0;
+                for zz in (z - reach).max(0)..=(z + reach).min(n - 1) {
+                    d |= b[row(y as usize, zz as usize)];
+                }
+                a[row(y as usize, z as usize)] = d;
+            }
+        }
+        if !self.foam.is_empty() {
+            for z in 0..BRICK {
+                for y in 0..BRICK {
+                    for bx in 0..FOAM_BLOCKS {
+                        if self.foam_at(4 * bx, y, z) > 0 {
+                            a[row(y, z)] |= 0xf << (4 * bx);
+                        }
+                    }
+                }
+            }
+        }
+        // Faces with neighbours: for each occupied neighbour, the shells on the sides its offset points to.
+        let mut shell = [[false; 2]; 3];
+        let bricks = bins.grid.bricks(self.key.level);
+        for dz in -1i32..=1 {
+            for dy in -1i32..=1 {
+                for dx in -1i32..=1 {
+                    let d = [dx, dy, dz];
+                    if d == [0; 3] {
+                        continue;
+                    }
+                    let at: [i64; 3] = std::array::from_fn(|i| i64::from(self.key.at[i]) + i64::from(d[i]));
+                    if (0..3).any(|i| at[i] < 0 || at[i] >= i64::from(bricks[i])) {
+                        continue;
+                    }
+                    let neighbour = BrickKey { level: self.key.level, at: at.map(|c| c as u32) };
+                    if bins.is_occupied(neighbour) {
+                        for i in 0..3 {
+                            match d[i] {
+                                -1 => shell[i][0] = true,
+                                1 => shell[i][1] = true,
+                                _ => {}
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        let x_shell = if shell[0][0] { span_mask(0, reach - 1) } else { 0 }
+            | if shell[0][1] { span_mask(n - reach, n - 1) } else { 0 };
+        for z in 0..n {
+            for y in 0..n {
+                let in_shell = (shell[1][0] && y < reach)
+                    || (shell[1][1] && y >= n - reach)
+                    || (shell[2][0] && z < reach)
+                    || (shell[2][1] && z >= n - reach);
+                let r = &mut a[row(y as usize, z as usize)];
+                *r |= if in_shell { u64::MAX } else { x_shell };
+            }
+        }
+        self.near = a.into_boxed_slice();
+    }
+
+    /// Bytes this brick holds.
+    pub fn heap_bytes(&self) -> u64 {
+        (8 * (self.surface.len() + self.near.len()) + self.foam.len()) as u64 + std::mem::size_of::<Self>() as u64
+    }
+}
+
+/// Calls `f` with every non-empty level-0 brick under `key`, descending only through non-empty bricks.
+pub fn for_each_leaf_under(bins: &FluidBins, key: BrickKey, f: &mut dyn FnMut(BrickKey)) {
+    if !bins.is_occupied(key) {
+        return;
+    }
+    if key.level == 0 {
+        f(key);
+        return;
+    }
+    for dz in 0..2 {
+        for dy in 0..2 {
+            for dx in 0..2 {
+                let child =
+                    BrickKey { level: key.level - 1, at: [2 * key.at[0] + dx, 2 * key.at[1] + dy, 2 * key.at[2] + dz] };
+                for_each_leaf_under(bins, child, f);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::binning::FluidSettings;
+    use voxstream_geometry::{ParticleSet, RawParticles};
+
+    fn bins(positions: Vec<[f64; 3]>, cell: f64) -> FluidBins {
+        let set = ParticleSet::new(RawParticles { positions, ..Default::default() }).unwrap();
+        FluidBins::build(&set, FluidSettings { radius: Some(cell), cell: Some(cell) }, &mut |_| {}).unwrap()
+    }
+
+    const PLAIN: BrickSettings = BrickSettings { reach: 1, foam_below: 0 };
+
+    #[test]
+    fn every_particle_sets_its_cell_at_every_level() {
+        let positions: Vec<[f64; 3]> =
+            (0..500).map(|i| [(i % 17) as f64 * 0.37, (i % 23) as f64 * 0.29, (i % 11) as f64 * 0.61]).collect();
+        let bins = bins(positions.clone(), 0.05);
+        for level in 0..bins.grid.levels {
+            let mut made = std::collections::HashMap::new();
+            for p in &positions {
+                let cell = bins.grid.cell_of(*p).unwrap().map(|c| c >> level);
+                let key = BrickKey { level, at: cell.map(|c| c / BRICK as u32) };
+                let brick = made.entry(key).or_insert_with(|| BitBrick::build(&bins, key, PLAIN));
+                let [x, y, z] = cell.map(|c| (c % BRICK as u32) as usize);
+                assert!(brick.is_set(x, y, z), "level {level} {p:?}");
+                assert!(brick.is_near(x, y, z));
+            }
+            // No more cells than particles at level 0; coarser levels hold fewer.
+            let total: u32 = made.values().map(|b| b.surface_cells).sum();
+            assert!(total as usize <= positions.len());
+        }
+    }
+
+    #[test]
+    fn the_near_mask_is_the_surface_dilated_by_the_reach() {
+        // One particle in the middle of the first brick, far from every face.
+        let bins = bins(vec![[0.0; 3], [100.0, 100.0, 100.0]], 0.5);
+        let cell = bins.grid.cell_of([0.0; 3]).unwrap();
+        let key = BrickKey::of_cell(cell);
+        let brick = BitBrick::build(&bins, key, BrickSettings { reach: 2, foam_below: 0 });
+        let [cx, cy, cz] = cell.map(|c| (c % BRICK as u32) as i32);
+        let mut near = 0;
+        for z in 0..BRICK as i32 {
+            for y in 0..BRICK as i32 {
+                for x in 0..BRICK as i32 {
+                    let inside = (x - cx).abs() <= 2 && (y - cy).abs() <= 2 && (z - cz).abs() <= 2;
+                    let marked = brick.is_near(x as usize, y as usize, z as usize);
+                    // No neighbouring brick holds particles, so no shell either.
+                    assert_eq!(marked, inside, "{x} {y} {z}");
+                    near += marked as u32;
+                }
+            }
+        }
+        assert_eq!(near, 125);
+    }
+
+    #[test]
+    fn a_face_whose_neighbour_holds_particles_is_marked_near() {
+        // Two particles in neighbouring bricks along x.
+        let bins = bins(vec![[0.0; 3], [40.0, 0.0, 0.0]], 0.5);
+        let key = BrickKey::of_cell(bins.grid.cell_of([0.0; 3]).unwrap());
+        assert!(bins.is_occupied(BrickKey { level: 0, at: [key.at[0] + 1, key.at[1], key.at[2]] }));
+        let brick = BitBrick::build(&bins, key, BrickSettings { reach: 1, foam_below: 0 });
+        assert!(brick.is_near(63, 10, 50));
+        assert!(!brick.is_near(62, 10, 50));
+        assert!(!brick.is_near(0, 10, 50));
+    }
+
+    #[test]
+    fn an_isolated_particle_is_foam_and_a_dense_block_is_not() {
+        // A dense 10³ block of particles, one per cell, and one stray particle away from it.
+        let mut positions = Vec::new();
+        for k in 0..10 {
+            for j in 0..10 {
+                for i in 0..10 {
+                    positions.push([i as f64 + 0.5, j as f64 + 0.5, k as f64 + 0.5]);
+                }
+            }
+        }
+        positions.push([20.5, 20.5, 20.5]);
+        let bins = bins(positions, 1.0);
+        let cell = bins.grid.cell_of([20.5; 3]).unwrap();
+        let key = BrickKey::of_cell(cell);
+        let brick = BitBrick::build(&bins, key, BrickSettings { reach: 1, foam_below: 25 });
+        let [x, y, z] = cell.map(|c| (c % BRICK as u32) as usize);
+        assert!(!brick.is_set(x, y, z), "the stray particle is not surface");
+        assert_eq!(brick.foam_at(x, y, z), 1);
+        assert!(brick.is_near(x, y, z), "foam is visited by rays");
+        assert_eq!(brick.foam_cells, 1);
+        // A corner of the block sees 3³ = 27 occupied cells of 125, well above 25 %.
+        assert_eq!(brick.surface_cells, 1000);
+    }
+}
