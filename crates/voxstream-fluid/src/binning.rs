@@ -35,12 +35,16 @@ pub struct FluidBins {
     pub radius: f64,
     /// Particles read.
     pub particles: u64,
+    /// Their typical spacing, estimated from a sample (0: unknown, a single particle).
+    pub spacing: f64,
     /// Particles' bounds, world units.
     pub bounds: ([f64; 3], [f64; 3]),
     /// Occupied cells of each non-empty level-0 brick (by [`BrickKey::packed`]), packed by [`pack_cell`], sorted.
     leaf: HashMap<u64, Box<[u32]>>,
     /// Non-empty bricks of each level (level 0 included), by [`BrickKey::packed`].
     occupied: Vec<HashSet<u64>>,
+    /// Bricks of each level that are non-empty or next to one (a sphere may reach into them).
+    reached: Vec<HashSet<u64>>,
 }
 
 /// A brick-local cell packed into 18 bits: x, then y, then z, 6 bits each.
@@ -198,10 +202,30 @@ impl FluidBins {
                 occupied[usize::from(level)].insert(key.ancestor(level).packed());
             }
         }
+        let reached = occupied
+            .iter()
+            .enumerate()
+            .map(|(level, set)| {
+                let bricks = grid.bricks(level as u8);
+                let mut reached = HashSet::with_capacity(set.len() * 2);
+                for &packed in set {
+                    let key = unpack_key(packed);
+                    for d in NEIGHBOURHOOD {
+                        let at: [i64; 3] = std::array::from_fn(|a| i64::from(key.at[a]) + d[a]);
+                        if (0..3).all(|a| at[a] >= 0 && at[a] < i64::from(bricks[a])) {
+                            reached.insert(BrickKey { level: key.level, at: at.map(|c| c as u32) }.packed());
+                        }
+                    }
+                }
+                reached
+            })
+            .collect();
         Ok(FluidBins {
             grid,
+            reached,
             radius,
             particles: survey.count,
+            spacing: survey.spacing,
             bounds: (survey.lower, survey.upper),
             leaf,
             occupied,
@@ -211,6 +235,11 @@ impl FluidBins {
     /// Whether any particle lies in the brick.
     pub fn is_occupied(&self, key: BrickKey) -> bool {
         self.occupied.get(usize::from(key.level)).is_some_and(|set| set.contains(&key.packed()))
+    }
+
+    /// Whether a sphere may reach into the brick (it or a neighbour holds particles).
+    pub fn is_reached(&self, key: BrickKey) -> bool {
+        self.reached.get(usize::from(key.level)).is_some_and(|set| set.contains(&key.packed()))
     }
 
     /// The occupied cells of a level-0 brick ([`pack_cell`]), empty if none.
@@ -232,10 +261,21 @@ impl FluidBins {
     /// Bytes this binning holds (cell lists and the brick sets; what a time step costs before any brick is made).
     pub fn heap_bytes(&self) -> u64 {
         let lists: u64 = self.leaf.values().map(|c| 4 * c.len() as u64 + 32).sum();
-        let sets: u64 = self.occupied.iter().map(|s| 16 * s.capacity() as u64).sum();
+        let sets: u64 = self.occupied.iter().chain(&self.reached).map(|s| 16 * s.capacity() as u64).sum();
         lists + sets
     }
 }
+
+/// The 27 offsets of a brick's neighbourhood, itself included.
+const NEIGHBOURHOOD: [[i64; 3]; 27] = {
+    let mut out = [[0i64; 3]; 27];
+    let mut i = 0;
+    while i < 27 {
+        out[i] = [(i % 3) as i64 - 1, (i / 3 % 3) as i64 - 1, (i / 9) as i64 - 1];
+        i += 1;
+    }
+    out
+};
 
 /// The key of [`BrickKey::packed`].
 pub fn unpack_key(packed: u64) -> BrickKey {

@@ -29,8 +29,10 @@ pub const JITTER: f64 = 0.25;
 pub trait Bricks: Sync {
     /// The brick if it is made.
     fn get(&self, key: BrickKey) -> Option<&BitBrick>;
-    /// Whether the brick holds particles (it is worth asking for).
+    /// Whether the brick holds particles.
     fn is_occupied(&self, key: BrickKey) -> bool;
+    /// Whether a sphere may reach into the brick (it or a neighbour holds particles): rays walk it.
+    fn is_reached(&self, key: BrickKey) -> bool;
 }
 
 /// What the caster needs to know.
@@ -211,7 +213,7 @@ impl<'a, B: Bricks> SphereCaster<'a, B> {
             let exit = box_span(origin, inverse, bl.into(), bu.into()).map_or(t, |s| s.1);
             // Guard against a brick the ray only grazes: always move forward.
             let exit = exit.max(t + edge * 1e-9).min(t_end);
-            if self.bricks.is_occupied(key) {
+            if self.bricks.is_reached(key) {
                 let mut used = None;
                 for l in level..grid.levels {
                     let k = key.ancestor(l);
@@ -378,5 +380,158 @@ impl<'a, B: Bricks> SphereCaster<'a, B> {
         };
         walk.neighbours[index] = Some(found);
         found
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::binning::{FluidBins, FluidSettings};
+    use crate::bit_brick::BrickSettings;
+    use std::collections::HashMap;
+    use voxstream_geometry::{ParticleSet, RawParticles};
+
+    struct All<'a> {
+        bins: &'a FluidBins,
+        made: HashMap<BrickKey, BitBrick>,
+    }
+
+    impl Bricks for All<'_> {
+        fn get(&self, key: BrickKey) -> Option<&BitBrick> {
+            self.made.get(&key)
+        }
+        fn is_occupied(&self, key: BrickKey) -> bool {
+            self.bins.is_occupied(key)
+        }
+        fn is_reached(&self, key: BrickKey) -> bool {
+            self.bins.is_reached(key)
+        }
+    }
+
+    fn bins(positions: Vec<[f64; 3]>, radius: f64, cell: f64) -> FluidBins {
+        let set = ParticleSet::new(RawParticles { positions, ..Default::default() }).unwrap();
+        FluidBins::build(&set, FluidSettings { radius: Some(radius), cell: Some(cell) }, &mut |_| {}).unwrap()
+    }
+
+    /// Casts until no brick is asked for, making what is asked.
+    fn cast(all: &mut All, settings: CastSettings, origin: DVec3, dir: DVec3) -> RaySample {
+        loop {
+            let mut requests = Vec::new();
+            let sample = SphereCaster::new(settings, &*all).cast(origin, dir, 0.0, &mut requests);
+            if requests.is_empty() {
+                return sample;
+            }
+            for key in requests {
+                let (_, reach) = level_radius(&all.bins.grid, all.bins.radius, key.level);
+                all.made.insert(key, BitBrick::build(all.bins, key, BrickSettings { reach, foam_below: 0 }));
+            }
+        }
+    }
+
+    fn settings(bins: &FluidBins) -> CastSettings {
+        CastSettings { grid: bins.grid, radius: bins.radius, lod_error: 1.0, time_step: 3, foam_extinction: 0.0 }
+    }
+
+    /// The sphere the caster draws for the particle at `p` (level 0).
+    fn drawn_centre(bins: &FluidBins, p: [f64; 3], time_step: u32) -> DVec3 {
+        let cell = bins.grid.cell_of(p).unwrap().map(i64::from);
+        let c = DVec3::new(cell[0] as f64, cell[1] as f64, cell[2] as f64) + 0.5 + jitter(cell, 0, time_step);
+        DVec3::from(bins.grid.origin) + c * bins.grid.cell
+    }
+
+    #[test]
+    fn rays_hit_a_particles_sphere_where_the_sphere_is() {
+        // Particles spread over several bricks; the ray towards each hits its sphere at the analytic entry.
+        let positions: Vec<[f64; 3]> = (0..12).map(|i| [i as f64 * 7.3, (i % 3) as f64 * 5.1, (i % 5) as f64 * 3.7]).collect();
+        let bins = bins(positions.clone(), 0.4, 0.4);
+        let mut all = All { bins: &bins, made: HashMap::new() };
+        let settings = settings(&bins);
+        for (i, p) in positions.iter().enumerate() {
+            let centre = drawn_centre(&bins, *p, 3);
+            // From a point off to the side, aimed a little off the centre.
+            let origin = centre + DVec3::new(-3.0, 40.0, 25.0);
+            let aim = centre + DVec3::new(0.1, -0.15, 0.05);
+            let dir = (aim - origin).normalize();
+            let sample = cast(&mut all, settings, origin, dir);
+            let expected = sphere_entry(origin, dir, centre, 0.4).unwrap();
+            // Another particle's sphere may be in front only if on the way; these are far apart.
+            assert!((sample.t - expected).abs() < 1e-9, "particle {i}: {} vs {expected}", sample.t);
+            let n = DVec3::from(sample.normal.map(f64::from));
+            let exact = (origin + dir * expected - centre).normalize();
+            assert!((n - exact).length() < 1e-5);
+        }
+        // A ray that passes between them hits nothing.
+        let miss = cast(&mut all, settings, DVec3::new(-100.0, -100.0, -100.0), DVec3::new(1.0, 0.0, 0.0));
+        assert!(miss.t.is_infinite());
+    }
+
+    #[test]
+    fn a_sphere_reaching_into_an_empty_brick_is_drawn_whole() {
+        // One particle just inside the last cell of a brick along +x: its sphere reaches into the next brick,
+        // which holds no particle. The grid's origin is at −(r + cell) = −2, so x = 61.9 is in cell 63.
+        let positions = vec![[0.0, 5.5, 5.5], [61.9, 5.5, 5.5], [200.0, 5.5, 5.5]];
+        let bins = bins(positions, 1.0, 1.0);
+        let cell = bins.grid.cell_of([61.9, 5.5, 5.5]).unwrap();
+        assert_eq!(cell[0], 63);
+        assert!(!bins.is_occupied(BrickKey { level: 0, at: [1, 0, 0] }));
+        let mut all = All { bins: &bins, made: HashMap::new() };
+        let centre = drawn_centre(&bins, [61.9, 5.5, 5.5], 3);
+        // A ray along −y through the part of the sphere beyond x = 62 (the face), from above.
+        let face_x = bins.grid.origin[0] + 64.0;
+        let x = face_x + 0.5 * (centre.x + 1.0 - face_x);
+        assert!(x > face_x && x < centre.x + 1.0);
+        let origin = DVec3::new(x, 30.0, centre.z);
+        let dir = DVec3::new(0.0, -1.0, 0.0);
+        let sample = cast(&mut all, settings(&bins), origin, dir);
+        let expected = sphere_entry(origin, dir, centre, 1.0).expect("the ray crosses the sphere");
+        assert!((sample.t - expected).abs() < 1e-9, "{} vs {expected}", sample.t);
+    }
+
+    #[test]
+    fn a_brick_not_made_is_asked_for_and_a_coarser_one_stands_in() {
+        let positions: Vec<[f64; 3]> = (0..200).map(|i| [(i % 10) as f64, (i / 10 % 10) as f64, (i / 100) as f64]).collect();
+        let bins = bins(positions, 0.05, 0.05);
+        assert!(bins.grid.levels >= 3);
+        let origin = DVec3::new(4.0, 4.0, -30.0);
+        let dir = DVec3::new(0.0, 0.0, 1.0);
+        let coarse = BrickKey { level: bins.grid.levels - 1, at: [0, 0, 0] };
+        let (_, reach) = level_radius(&bins.grid, bins.radius, coarse.level);
+        let mut made = HashMap::new();
+        made.insert(coarse, BitBrick::build(&bins, coarse, BrickSettings { reach, foam_below: 0 }));
+        let all = All { bins: &bins, made };
+        let mut requests = Vec::new();
+        let sample = SphereCaster::new(settings(&bins), &all).cast(origin, dir, 0.0, &mut requests);
+        assert!(!requests.is_empty() && requests.iter().all(|k| k.level == 0), "{requests:?}");
+        assert_eq!(sample.level, coarse.level, "the coarse brick stood in");
+        assert!(sample.t.is_finite());
+        // The coarse sphere (radius ≥ ¾ of its cell) is hit no later than the fine ones would be, roughly.
+        let mut all = all;
+        let fine = cast(&mut all, settings(&bins), origin, dir);
+        assert_eq!(fine.level, 0);
+        assert!(sample.t <= fine.t + 1e-9, "{} {}", sample.t, fine.t);
+    }
+
+    #[test]
+    fn the_level_follows_the_footprint() {
+        let bins = bins((0..100).map(|i| [i as f64 * 0.5, 0.0, 0.0]).collect(), 0.05, 0.05);
+        let mut all = All { bins: &bins, made: HashMap::new() };
+        let origin = DVec3::new(25.0, 0.0, -100.0);
+        let dir = DVec3::new(0.0, 0.0, 1.0);
+        // A footprint of 0.2 per unit at distance 100 is 20 units: cells of 0.05·2^L ≤ 20 → L = 8 or coarser.
+        let mut settings = settings(&bins);
+        settings.lod_error = 1.0;
+        let sample = loop {
+            let mut requests = Vec::new();
+            let s = SphereCaster::new(settings, &all).cast(origin, dir, 0.2, &mut requests);
+            if requests.is_empty() {
+                break s;
+            }
+            for key in requests {
+                let (_, reach) = level_radius(&bins.grid, bins.radius, key.level);
+                all.made.insert(key, BitBrick::build(&bins, key, BrickSettings { reach, foam_below: 0 }));
+            }
+        };
+        assert!(sample.t.is_finite());
+        assert_eq!(sample.level, (bins.grid.levels - 1).min(8));
     }
 }
