@@ -16,6 +16,7 @@ pub mod backend;
 pub mod camera_path;
 pub mod defaults;
 pub mod error_message;
+pub mod fluid;
 pub mod geometry_import;
 pub mod geometry_source;
 pub mod import_input;

@@ -264,11 +264,23 @@ pub fn prepare_view(view: &ViewOptions, source: &SourceMeta) -> Result<PreparedV
     };
     check_placement(&source.name, &source.placement)?;
     settings.validate().context("invalid flags")?;
-    let mut camera = match &view.camera.file {
+    let camera = apply_camera_options(source.camera, &view.camera, view.width, view.height, &source.name)?;
+    Ok(PreparedView { transfer_function, settings, camera, drawing_surfaces, volume_adaptive_step })
+}
+
+/// The camera `options` make of a source's default view `default` (named `name`): a camera file or a whole camera
+/// replaces it, then `--eye`, `--target`, `--up` and `--fov` set their parts; checked for a `width × height` image.
+pub fn apply_camera_options(
+    default: Camera,
+    options: &CameraOptions,
+    width: u32,
+    height: u32,
+    name: &str,
+) -> Result<Camera> {
+    let mut camera = match &options.file {
         Some(path) => read_camera_file(path)?,
-        None => source.camera,
+        None => default,
     };
-    let options = &view.camera;
     if let Some(given) = options.camera {
         camera = given;
     }
@@ -284,15 +296,13 @@ pub fn prepare_view(view: &ViewOptions, source: &SourceMeta) -> Result<PreparedV
     if let Some(fov) = options.fov {
         camera.fov = fov;
     }
-    camera
-        .frame(view.width, view.height)
-        .with_context(|| format!("invalid camera ({})", camera_origin(options, source)))?;
-    Ok(PreparedView { transfer_function, settings, camera, drawing_surfaces, volume_adaptive_step })
+    camera.frame(width, height).with_context(|| format!("invalid camera ({})", camera_origin(options, name)))?;
+    Ok(camera)
 }
 
 /// Where the camera came from, for its error: the options that set parts of it over a camera file or the source's
 /// default view (e.g. "--eye 1e308,0,0 over sponge's default view").
-fn camera_origin(options: &CameraOptions, source: &SourceMeta) -> String {
+fn camera_origin(options: &CameraOptions, name: &str) -> String {
     let vector = |v: [f64; 3]| v.map(shown_number).join(",");
     let flags: Vec<String> = [
         options.camera.map(|c| format!("camera eye {} target {}", vector(c.eye), vector(c.target))),
@@ -306,7 +316,7 @@ fn camera_origin(options: &CameraOptions, source: &SourceMeta) -> String {
     .collect();
     let base = match &options.file {
         Some(path) => format!("--camera {}", path.display()),
-        None => format!("{}'s default view", source.name),
+        None => format!("{name}'s default view"),
     };
     if flags.is_empty() {
         base

@@ -7,7 +7,7 @@
 //! is 64³), duplicates removed: a few bytes per particle, the particles' positions are not held. Bits are made
 //! from these lists only when a ray asks for a brick ([`crate::bit_brick`]).
 
-use std::collections::{HashMap, HashSet};
+use rustc_hash::{FxHashMap as HashMap, FxHashSet as HashSet};
 
 use rayon::prelude::*;
 use voxstream_geometry::particles::check_particles;
@@ -92,7 +92,7 @@ fn estimate_spacing(sample: &[[f64; 3]]) -> f64 {
     let mut cell = extent / 4.0;
     let mut spacing = extent / (sample.len() as f64).cbrt();
     for _ in 0..24 {
-        let mut cells = HashSet::with_capacity(sample.len());
+        let mut cells = HashSet::with_capacity_and_hasher(sample.len(), Default::default());
         for p in sample {
             cells.insert([0, 1, 2].map(|a| ((p[a] - lower[a]) / cell).floor() as i64));
         }
@@ -154,7 +154,7 @@ impl FluidBins {
         let cell = settings.cell.unwrap_or(radius);
         // Spheres reach `radius` beyond their centres, jittered within their cells.
         let grid = FluidGrid::new(survey.lower, survey.upper, radius + cell, cell)?;
-        let mut lists: HashMap<u64, Vec<u32>> = HashMap::new();
+        let mut lists: HashMap<u64, Vec<u32>> = HashMap::default();
         let mut binned = 0u64;
         chunks.for_each_chunk(&mut |first, run: &RawParticles| {
             check_particles(run, first)?;
@@ -195,7 +195,7 @@ impl FluidBins {
                 (key, cells.into_boxed_slice())
             })
             .collect();
-        let mut occupied = vec![HashSet::new(); usize::from(grid.levels)];
+        let mut occupied = vec![HashSet::default(); usize::from(grid.levels)];
         for &packed in leaf.keys() {
             let key = unpack_key(packed);
             for level in 0..grid.levels {
@@ -207,7 +207,7 @@ impl FluidBins {
             .enumerate()
             .map(|(level, set)| {
                 let bricks = grid.bricks(level as u8);
-                let mut reached = HashSet::with_capacity(set.len() * 2);
+                let mut reached = HashSet::with_capacity_and_hasher(set.len() * 2, Default::default());
                 for &packed in set {
                     let key = unpack_key(packed);
                     for d in NEIGHBOURHOOD {

@@ -13,6 +13,7 @@ pub mod screen_space;
 pub mod binning;
 pub mod bit_brick;
 pub mod grid;
+pub mod scene;
 pub mod shading;
 pub mod sphere_caster;
 

@@ -7,7 +7,7 @@
 //! Bricks are evicted least recently used first when the budget is exceeded, never one used by the current pass.
 //! The depth image is then smoothed in screen space and shaded ([`crate::shading`]).
 
-use std::collections::HashMap;
+use rustc_hash::FxHashMap as HashMap;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -132,7 +132,10 @@ struct View<'a> {
 impl Bricks for View<'_> {
     fn get(&self, key: BrickKey) -> Option<&BitBrick> {
         self.scene.bricks.get(&key).map(|r| {
-            r.used.store(self.scene.pass, Ordering::Relaxed);
+            // Written once per pass: a store on every lookup would bounce the line between the cores.
+            if r.used.load(Ordering::Relaxed) != self.scene.pass {
+                r.used.store(self.scene.pass, Ordering::Relaxed);
+            }
             &*r.brick
         })
     }
@@ -166,7 +169,7 @@ impl FluidScene {
         let foam_below = if settings.foam_fraction > 0.0 { foam_below.max(1) } else { 0 };
         Ok(FluidScene {
             bins,
-            bricks: HashMap::new(),
+            bricks: HashMap::default(),
             resident_bytes: 0,
             budget_bytes,
             pass: 0,

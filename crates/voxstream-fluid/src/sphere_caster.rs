@@ -19,7 +19,7 @@
 
 use glam::DVec3;
 
-use crate::bit_brick::{span_mask, BitBrick};
+use crate::bit_brick::{span_mask, BitBrick, SKIP_BLOCK};
 use crate::grid::{BrickKey, FluidGrid, BRICK};
 
 /// Largest jitter of a sphere's centre from its cell's centre, per axis, in cells.
@@ -278,16 +278,59 @@ impl<'a, B: Bricks> SphereCaster<'a, B> {
         walk.neighbours[13] = Some(Some(brick));
         let mut t_cell = t;
         let extinction = self.settings.foam_extinction;
+        let add_foam = |foam: &mut f64, count: u8, length: f64| {
+            let density = f64::from(count) / 64.0;
+            *foam += (1.0 - *foam) * (1.0 - (-extinction * density * length).exp());
+        };
         loop {
+            let [x, y, z] = c.to_array().map(|v| v as usize);
+            let [bx, by, bz] = [x / SKIP_BLOCK, y / SKIP_BLOCK, z / SKIP_BLOCK];
+            let block_foam = brick.foam_in_block(bx, by, bz);
+            if !brick.is_block_near(bx, by, bz) {
+                // A block no sphere reaches: step the DDA to where the ray leaves it.
+                let mut crossing = [0.0f64; 3];
+                let mut cells = [0i32; 3];
+                for a in 0..3 {
+                    let within = c[a] % SKIP_BLOCK as i32;
+                    cells[a] = if step[a] > 0 { SKIP_BLOCK as i32 - within } else { within + 1 };
+                    crossing[a] = next[a] + f64::from(cells[a] - 1) * delta[a];
+                }
+                let a = if crossing[0] < crossing[1] {
+                    if crossing[0] < crossing[2] { 0 } else { 2 }
+                } else if crossing[1] < crossing[2] {
+                    1
+                } else {
+                    2
+                };
+                if block_foam > 0 && *foam < 0.99 {
+                    add_foam(foam, block_foam, crossing[a].min(t_exit) - t_cell);
+                }
+                if crossing[a] >= t_exit {
+                    break;
+                }
+                for b in 0..3 {
+                    if b != a {
+                        while next[b] <= crossing[a] {
+                            c[b] += step[b];
+                            next[b] += delta[b];
+                        }
+                    }
+                }
+                c[a] += cells[a] * step[a];
+                next[a] = crossing[a] + delta[a];
+                t_cell = crossing[a];
+                if !(0..BRICK as i32).contains(&c[a]) || c.min_element() < 0 || c.max_element() >= BRICK as i32 {
+                    break;
+                }
+                continue;
+            }
             let a = if next[0] < next[1] { if next[0] < next[2] { 0 } else { 2 } } else if next[1] < next[2] { 1 } else { 2 };
             let t_out = next[a].min(t_exit);
-            let [x, y, z] = c.to_array().map(|v| v as usize);
+            if block_foam > 0 && *foam < 0.99 {
+                add_foam(foam, block_foam, t_out - t_cell);
+            }
             if brick.is_near(x, y, z) {
-                let f = brick.foam_at(x, y, z);
-                if f > 0 && *foam < 0.99 {
-                    let density = f64::from(f) / 64.0;
-                    *foam += (1.0 - *foam) * (1.0 - (-extinction * density * (t_out - t_cell)).exp());
-                }
+
                 self.test_spheres(&mut walk, c.to_array(), origin, dir, radius, reach, best, requests);
                 if best.is_some_and(|hit| hit.t <= t_out) {
                     return true;
@@ -325,6 +368,36 @@ impl<'a, B: Bricks> SphereCaster<'a, B> {
         let cell = grid.cell_size(level);
         let n = BRICK as i32;
         let base: [i64; 3] = std::array::from_fn(|a| i64::from(brick.key.at[a]) * BRICK as i64);
+        let mut test = |bits: u64, offset: i32, y: i32, z: i32| {
+            let mut bits = bits;
+            while bits != 0 {
+                let x = bits.trailing_zeros() as i32 + offset;
+                bits &= bits - 1;
+                let global = [base[0] + i64::from(x), base[1] + i64::from(y), base[2] + i64::from(z)];
+                let centre_cells = DVec3::new(global[0] as f64, global[1] as f64, global[2] as f64)
+                    + 0.5
+                    + jitter(global, level, self.settings.time_step);
+                let centre = DVec3::from(grid.origin) + centre_cells * cell;
+                if let Some(t) = sphere_entry(origin, dir, centre, radius) {
+                    if best.is_none_or(|b| t < b.t) {
+                        *best = Some(Hit { t, centre, radius, level });
+                    }
+                }
+            }
+        };
+        if c.iter().all(|&v| v >= reach && v < n - reach) {
+            // The whole neighbourhood is in this brick (most cells): its rows, masked.
+            let mask = span_mask(c[0] - reach, c[0] + reach);
+            for z in c[2] - reach..=c[2] + reach {
+                for y in c[1] - reach..=c[1] + reach {
+                    let bits = brick.surface[(y + n * z) as usize] & mask;
+                    if bits != 0 {
+                        test(bits, 0, y, z);
+                    }
+                }
+            }
+            return;
+        }
         for dz in -reach..=reach {
             for dy in -reach..=reach {
                 let (y, z) = (c[1] + dy, c[2] + dz);
@@ -334,20 +407,9 @@ impl<'a, B: Bricks> SphereCaster<'a, B> {
                     let Some(source) = self.neighbour(walk, [bx, by, bz], requests) else { continue };
                     let offset = bx * n;
                     let word = source.surface[(y.rem_euclid(n) + n * z.rem_euclid(n)) as usize];
-                    let mut bits = word & span_mask(c[0] - reach - offset, c[0] + reach - offset);
-                    while bits != 0 {
-                        let x = bits.trailing_zeros() as i32 + offset;
-                        bits &= bits - 1;
-                        let global = [base[0] + i64::from(x), base[1] + i64::from(y), base[2] + i64::from(z)];
-                        let centre_cells = DVec3::new(global[0] as f64, global[1] as f64, global[2] as f64)
-                            + 0.5
-                            + jitter(global, level, self.settings.time_step);
-                        let centre = DVec3::from(grid.origin) + centre_cells * cell;
-                        if let Some(t) = sphere_entry(origin, dir, centre, radius) {
-                            if best.is_none_or(|b| t < b.t) {
-                                *best = Some(Hit { t, centre, radius, level });
-                            }
-                        }
+                    let bits = word & span_mask(c[0] - reach - offset, c[0] + reach - offset);
+                    if bits != 0 {
+                        test(bits, offset, y, z);
                     }
                 }
             }

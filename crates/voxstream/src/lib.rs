@@ -15,6 +15,7 @@ pub use voxstream_api::{
 pub mod bench;
 pub mod cli;
 pub mod exit_status;
+pub mod fluid_command;
 pub mod import_command;
 pub mod info_command;
 pub mod iso_flags;

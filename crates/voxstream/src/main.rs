@@ -75,6 +75,7 @@ fn unreachable_default() -> RenderArgs {
             in_memory: false,
             brick_bits: voxstream::cli::BrickBits::Auto,
             value_range: None,
+            fluid: Default::default(),
         },
         out: "frame.png".into(),
         width: 512,

@@ -26,6 +26,11 @@ use crate::view_flags;
 
 /// Runs `voxstream render`.
 pub fn run(args: &RenderArgs) -> Result<()> {
+    if args.input.fluid.fluid {
+        check_flags(args)?;
+        return crate::fluid_command::run(args);
+    }
+    crate::fluid_command::check_no_fluid_flags(&args.input.fluid)?;
     check_flags(args)?;
     let budget = check_budget(args.budget_mb, args.width, args.height, "--width/--height")?;
     let source = open_source(args, &budget)?;

@@ -16,6 +16,10 @@ use crate::view_flags;
 
 /// Runs `voxstream view`.
 pub fn run(args: &ViewArgs) -> Result<()> {
+    if args.input.fluid.fluid {
+        bail!("view --fluid is not built yet: `voxstream render --fluid` draws the fluid (with --path for a camera path)");
+    }
+    crate::fluid_command::check_no_fluid_flags(&args.input.fluid)?;
     // `render`'s checks and messages (size, budget, requests per frame, backend flags).
     crate::backend::check_backend_flags(args.look.backend, args.look.gpu_filter)?;
     crate::render_command::check_fade_frames(args.look.fade_frames)?;
