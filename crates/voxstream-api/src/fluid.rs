@@ -59,7 +59,8 @@ const FLUID_VIEW_DIRECTION: [f64; 3] = [0.55, 0.45, 0.7];
 /// file name, sorted by name; a plain file is a series of one.
 pub fn time_steps(source: &str) -> Result<Vec<PathBuf>> {
     let path = Path::new(source);
-    let (folder, matches): (PathBuf, Box<dyn Fn(&str) -> bool>) = if path.is_dir() {
+    type NameFilter = Box<dyn Fn(&str) -> bool>;
+    let (folder, matches): (PathBuf, NameFilter) = if path.is_dir() {
         (path.to_path_buf(), Box::new(|name: &str| is_geometry_file_name(Path::new(name))))
     } else if let Some(name) = path.file_name().and_then(|n| n.to_str()).filter(|n| n.contains('*')) {
         let Some((head, tail)) = name.split_once('*') else { unreachable!("the name holds a '*'") };
@@ -68,7 +69,10 @@ pub fn time_steps(source: &str) -> Result<Vec<PathBuf>> {
         }
         let (head, tail) = (head.to_string(), tail.to_string());
         let folder = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new(".")).to_path_buf();
-        (folder, Box::new(move |n: &str| n.len() >= head.len() + tail.len() && n.starts_with(&head) && n.ends_with(&tail)))
+        (
+            folder,
+            Box::new(move |n: &str| n.len() >= head.len() + tail.len() && n.starts_with(&head) && n.ends_with(&tail)),
+        )
     } else {
         return Ok(vec![path.to_path_buf()]);
     };
@@ -76,7 +80,7 @@ pub fn time_steps(source: &str) -> Result<Vec<PathBuf>> {
     let mut steps: Vec<PathBuf> = entries
         .filter_map(|e| e.ok())
         .filter(|e| e.file_type().is_ok_and(|t| t.is_file()))
-        .filter(|e| e.file_name().to_str().is_some_and(|n| matches(n)))
+        .filter(|e| e.file_name().to_str().is_some_and(&matches))
         .map(|e| e.path())
         .collect();
     steps.sort();
@@ -100,7 +104,9 @@ fn particle_chunks(path: &Path) -> Result<Box<dyn ParticleChunks>> {
     }
     match read_geometry(path)? {
         RawGeometry::Particles(raw) => Ok(Box::new(ParticleSet::new(raw).with_context(|| format!("in {shown}"))?)),
-        RawGeometry::Mesh(_) => bail!("{shown} holds a mesh; --fluid draws particle files (drop --fluid to render the mesh)"),
+        RawGeometry::Mesh(_) => {
+            bail!("{shown} holds a mesh; --fluid draws particle files (drop --fluid to render the mesh)")
+        }
     }
 }
 
@@ -109,7 +115,11 @@ pub fn open_fluid(source: &str, options: &FluidOptions) -> Result<FluidSource> {
     let steps = time_steps(source)?;
     let index = options.time.unwrap_or(0);
     let Some(path) = steps.get(index).cloned() else {
-        bail!("--time {index} is beyond the series: {source} has {} time steps (0 to {})", steps.len(), steps.len() - 1);
+        bail!(
+            "--time {index} is beyond the series: {source} has {} time steps (0 to {})",
+            steps.len(),
+            steps.len() - 1
+        );
     };
     let shown = path.display().to_string();
     let started = Instant::now();

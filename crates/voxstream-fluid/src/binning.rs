@@ -325,8 +325,8 @@ mod tests {
     fn every_particle_lands_in_its_cell_and_coarse_levels_know_where_particles_are() {
         let points = lattice(30, 0.1);
         let particles = set(points.clone());
-        let bins = FluidBins::build(&particles, FluidSettings { radius: Some(0.05), cell: Some(0.02) }, &mut |_| {})
-            .unwrap();
+        let bins =
+            FluidBins::build(&particles, FluidSettings { radius: Some(0.05), cell: Some(0.02) }, &mut |_| {}).unwrap();
         assert_eq!(bins.particles, points.len() as u64);
         assert_eq!(bins.radius, 0.05);
         // 2.9 + 2·0.07 → 152 cells → 3 bricks a side.

@@ -28,6 +28,12 @@ pub const FOAM_REACH: i32 = 2;
 /// 1.7× fewer cells than 8); also the foam count's block, so foam is accumulated a block at a time.
 pub const SKIP_BLOCK: usize = 4;
 
+/// Edge of the coarse blocks a ray skips first (neither a sphere nor foam reaches them).
+pub const COARSE_BLOCK: usize = 16;
+
+/// Coarse blocks per axis of a brick.
+pub const COARSE_BLOCKS: usize = BRICK / COARSE_BLOCK;
+
 /// Skip blocks per axis of a brick.
 pub const SKIP_BLOCKS: usize = BRICK / SKIP_BLOCK;
 
@@ -46,6 +52,8 @@ pub struct BitBrick {
     /// Blocks of [`SKIP_BLOCK`]³ cells holding any `near` cell: bit `bx + 16·(by + 16·bz)` (the coarse level of
     /// the skip).
     pub near_blocks: [u64; 64],
+    /// Coarse blocks of [`COARSE_BLOCK`]³ cells holding any `near` cell or foam: bit `bx + 4·(by + 4·bz)`.
+    pub coarse_blocks: u64,
     /// Foam cells per 4³ block (0..=64), block `bx + 16·(by + 16·bz)`; empty when the brick has no foam.
     pub foam: Box<[u8]>,
     /// Surface cells set.
@@ -100,6 +108,7 @@ impl BitBrick {
             key,
             near: vec![0u64; ROWS].into_boxed_slice(),
             near_blocks: [0; 64],
+            coarse_blocks: 0,
             foam: Box::new([]),
             surface_cells: surface.iter().map(|r| r.count_ones()).sum(),
             foam_cells: 0,
@@ -129,6 +138,12 @@ impl BitBrick {
     pub fn is_block_near(&self, bx: usize, by: usize, bz: usize) -> bool {
         let b = bx + SKIP_BLOCKS * (by + SKIP_BLOCKS * bz);
         self.near_blocks[b / 64] >> (b % 64) & 1 == 1
+    }
+
+    /// Whether the coarse block `(bx, by, bz)` (0..4) holds a `near` cell or foam.
+    #[inline]
+    pub fn is_coarse_block_busy(&self, bx: usize, by: usize, bz: usize) -> bool {
+        self.coarse_blocks >> (bx + COARSE_BLOCKS * (by + COARSE_BLOCKS * bz)) & 1 == 1
     }
 
     /// Foam cells in the 4³ block holding cell `(x, y, z)` (0..=64).
@@ -241,8 +256,10 @@ impl BitBrick {
                 a[row(y as usize, z as usize)] = d;
             }
         }
-        // Faces with neighbours: for each occupied neighbour, the shells on the sides its offset points to.
-        let mut shell = [[false; 2]; 3];
+        // Spheres of neighbouring bricks reaching in. Across a face at level 0, exactly: the neighbour's cells
+        // within `reach` of the face, each dilated into this brick. Otherwise (edges, corners, coarser levels,
+        // whose cells would take a walk over many leaves), conservatively: every cell within `reach` of the
+        // shared face, edge or corner.
         let bricks = bins.grid.bricks(self.key.level);
         for dz in -1i32..=1 {
             for dy in -1i32..=1 {
@@ -256,28 +273,34 @@ impl BitBrick {
                         continue;
                     }
                     let neighbour = BrickKey { level: self.key.level, at: at.map(|c| c as u32) };
-                    if bins.is_occupied(neighbour) {
-                        for i in 0..3 {
-                            match d[i] {
-                                -1 => shell[i][0] = true,
-                                1 => shell[i][1] = true,
-                                _ => {}
+                    if !bins.is_occupied(neighbour) {
+                        continue;
+                    }
+                    let face = d.iter().filter(|&&v| v != 0).count() == 1;
+                    if face && self.key.level == 0 {
+                        for &packed in bins.leaf_cells(neighbour) {
+                            // The neighbour's cell in this brick's coordinates.
+                            let c = unpack_cell(packed);
+                            let p: [i32; 3] = std::array::from_fn(|i| c[i] as i32 + d[i] * n);
+                            if (0..3).all(|i| p[i] >= -reach && p[i] < n + reach) {
+                                mark_box(&mut a, p, reach);
+                            }
+                        }
+                    } else {
+                        let span = |v: i32| match v {
+                            -1 => (0, reach - 1),
+                            1 => (n - reach, n - 1),
+                            _ => (0, n - 1),
+                        };
+                        let ((x0, x1), (y0, y1), (z0, z1)) = (span(d[0]), span(d[1]), span(d[2]));
+                        let mask = span_mask(x0, x1);
+                        for z in z0..=z1 {
+                            for y in y0..=y1 {
+                                a[row(y as usize, z as usize)] |= mask;
                             }
                         }
                     }
                 }
-            }
-        }
-        let x_shell = if shell[0][0] { span_mask(0, reach - 1) } else { 0 }
-            | if shell[0][1] { span_mask(n - reach, n - 1) } else { 0 };
-        for z in 0..n {
-            for y in 0..n {
-                let in_shell = (shell[1][0] && y < reach)
-                    || (shell[1][1] && y >= n - reach)
-                    || (shell[2][0] && z < reach)
-                    || (shell[2][1] && z >= n - reach);
-                let r = &mut a[row(y as usize, z as usize)];
-                *r |= if in_shell { u64::MAX } else { x_shell };
             }
         }
         let mut blocks = [0u64; 64];
@@ -296,12 +319,38 @@ impl BitBrick {
             }
         }
         self.near_blocks = blocks;
+        let mut coarse = 0u64;
+        let ratio = COARSE_BLOCK / SKIP_BLOCK;
+        for bz in 0..SKIP_BLOCKS {
+            for by in 0..SKIP_BLOCKS {
+                for bx in 0..SKIP_BLOCKS {
+                    if self.is_block_near(bx, by, bz) || self.foam_in_block(bx, by, bz) > 0 {
+                        coarse |= 1 << (bx / ratio + COARSE_BLOCKS * (by / ratio + COARSE_BLOCKS * (bz / ratio)));
+                    }
+                }
+            }
+        }
+        self.coarse_blocks = coarse;
         self.near = a.into_boxed_slice();
     }
 
     /// Bytes this brick holds.
     pub fn heap_bytes(&self) -> u64 {
         (8 * (self.surface.len() + self.near.len()) + self.foam.len()) as u64 + std::mem::size_of::<Self>() as u64
+    }
+}
+
+/// Sets the cells of `rows` within `reach` of `p` (per axis; `p` may lie outside the brick).
+fn mark_box(rows: &mut [u64], p: [i32; 3], reach: i32) {
+    let n = BRICK as i32;
+    let mask = span_mask(p[0] - reach, p[0] + reach);
+    if mask == 0 {
+        return;
+    }
+    for z in (p[2] - reach).max(0)..=(p[2] + reach).min(n - 1) {
+        for y in (p[1] - reach).max(0)..=(p[1] + reach).min(n - 1) {
+            rows[row(y as usize, z as usize)] |= mask;
+        }
     }
 }
 
@@ -385,9 +434,8 @@ mod tests {
         for bz in 0..SKIP_BLOCKS {
             for by in 0..SKIP_BLOCKS {
                 for bx in 0..SKIP_BLOCKS {
-                    let any = (0..b).any(|k| {
-                        (0..b).any(|j| (0..b).any(|i| brick.is_near(b * bx + i, b * by + j, b * bz + k)))
-                    });
+                    let any = (0..b)
+                        .any(|k| (0..b).any(|j| (0..b).any(|i| brick.is_near(b * bx + i, b * by + j, b * bz + k))));
                     assert_eq!(brick.is_block_near(bx, by, bz), any);
                 }
             }
@@ -395,15 +443,19 @@ mod tests {
     }
 
     #[test]
-    fn a_face_whose_neighbour_holds_particles_is_marked_near() {
-        // Two particles in neighbouring bricks along x.
-        let bins = bins(vec![[0.0; 3], [40.0, 0.0, 0.0]], 0.5);
+    fn cells_a_neighbours_sphere_reaches_are_marked_near() {
+        // One particle in the first cell of the next brick along x (global cell 64: x = −1 + 64.5·0.5), and one
+        // far inside this brick.
+        let bins = bins(vec![[0.0; 3], [31.25, 0.0, 0.0]], 0.5);
         let key = BrickKey::of_cell(bins.grid.cell_of([0.0; 3]).unwrap());
-        assert!(bins.is_occupied(BrickKey { level: 0, at: [key.at[0] + 1, key.at[1], key.at[2]] }));
+        assert_eq!(bins.grid.cell_of([31.25, 0.0, 0.0]).unwrap(), [64, 2, 2]);
         let brick = BitBrick::build(&bins, key, BrickSettings { reach: 1, foam_below: 0 });
-        assert!(brick.is_near(63, 10, 50));
-        assert!(!brick.is_near(62, 10, 50));
-        assert!(!brick.is_near(0, 10, 50));
+        for (y, z) in [(1, 1), (2, 2), (3, 3), (1, 3)] {
+            assert!(brick.is_near(63, y, z), "{y} {z}");
+        }
+        assert!(!brick.is_near(63, 4, 2), "beyond the sphere's reach");
+        assert!(!brick.is_near(62, 2, 2));
+        assert!(!brick.is_near(63, 10, 50));
     }
 
     #[test]

@@ -9,11 +9,11 @@
 //! the spheres is smoothed in screen space by Rudin–Osher–Fatemi total variation ([`screen_space`]) before it is
 //! shaded ([`shading`]). [`FluidScene`] ties them together under a memory budget.
 
-pub mod screen_space;
 pub mod binning;
 pub mod bit_brick;
 pub mod grid;
 pub mod scene;
+pub mod screen_space;
 pub mod shading;
 pub mod sphere_caster;
 

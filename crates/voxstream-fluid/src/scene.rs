@@ -210,6 +210,9 @@ impl FluidScene {
                         let dir = frame.direction(x as u32, y as u32, width, height);
                         *sample = caster.cast(frame.eye, dir, frame.pixel_spread, &mut requests);
                     }
+                    // A row's rays ask for the same few bricks.
+                    requests.sort_unstable();
+                    requests.dedup();
                     requests
                 })
                 .collect();

@@ -56,7 +56,8 @@ pub fn normals_from_depth(depth: &[f32], frame: &CameraFrame, width: u32, height
             let Some(z) = at(x, y) else { continue };
             let p = unproject(frame, x, y, z, width, height);
             let side = |dx: i64, dy: i64| -> Option<DVec3> {
-                let forward = at(x + dx, y + dy).map(|zz| (zz, unproject(frame, x + dx, y + dy, zz, width, height) - p));
+                let forward =
+                    at(x + dx, y + dy).map(|zz| (zz, unproject(frame, x + dx, y + dy, zz, width, height) - p));
                 let back = at(x - dx, y - dy).map(|zz| (zz, p - unproject(frame, x - dx, y - dy, zz, width, height)));
                 match (forward, back) {
                     (Some(f), Some(b)) => Some(if (f.0 - z).abs() <= (b.0 - z).abs() { f.1 } else { b.1 }),
@@ -89,7 +90,8 @@ pub fn shade(
     height: u32,
     sphere_normals: bool,
 ) -> Image {
-    let normals = if sphere_normals { vec![None; depth.len()] } else { normals_from_depth(depth, frame, width, height) };
+    let normals =
+        if sphere_normals { vec![None; depth.len()] } else { normals_from_depth(depth, frame, width, height) };
     let forward = frame.forward;
     let right = frame.right.normalize();
     let up = frame.up.normalize();

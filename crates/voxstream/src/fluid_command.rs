@@ -60,7 +60,10 @@ fn check_fluid_values(flags: &FluidFlags) -> Result<()> {
         }
     }
     if flags.smooth_iterations == 0 || flags.smooth_iterations > 10_000 {
-        bail!("--smooth-iterations {} is out of range: give 1 to 10000 (--smooth none for no smoothing)", flags.smooth_iterations);
+        bail!(
+            "--smooth-iterations {} is out of range: give 1 to 10000 (--smooth none for no smoothing)",
+            flags.smooth_iterations
+        );
     }
     if !(flags.smooth_strength.is_finite() && flags.smooth_strength > 0.0) {
         bail!("--smooth-strength {} is out of range: give a positive factor", flags.smooth_strength);

@@ -17,7 +17,9 @@ use crate::view_flags;
 /// Runs `voxstream view`.
 pub fn run(args: &ViewArgs) -> Result<()> {
     if args.input.fluid.fluid {
-        bail!("view --fluid is not built yet: `voxstream render --fluid` draws the fluid (with --path for a camera path)");
+        bail!(
+            "view --fluid is not built yet: `voxstream render --fluid` draws the fluid (with --path for a camera path)"
+        );
     }
     crate::fluid_command::check_no_fluid_flags(&args.input.fluid)?;
     // `render`'s checks and messages (size, budget, requests per frame, backend flags).

@@ -32,7 +32,7 @@ impl<P: Producer> CacheManager<P> {
                 let key = parent_key.child(child, n);
                 if self.node_pool.node(node_id).data() == NodeData::Missing
                     && !self.failed.contains(&key)
-                    && !(self.restricted && !self.prerequisites(key).is_empty())
+                    && (!self.restricted || self.prerequisites(key).is_empty())
                 {
                     candidates.push((node_id, key));
                 }
