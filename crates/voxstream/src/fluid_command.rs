@@ -197,7 +197,8 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     }
     if incomplete > 0 {
         bail!(
-            "{incomplete} frame(s) incomplete: the bricks the view needs do not fit --budget-mb {}; give more",
+            "{incomplete} frame(s) incomplete: the bricks the view needs do not fit --budget-mb {}; give more (the \
+             image shows what fitted)",
             args.budget_mb
         );
     }
