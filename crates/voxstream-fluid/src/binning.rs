@@ -13,6 +13,7 @@ use rayon::prelude::*;
 use voxstream_geometry::particles::check_particles;
 use voxstream_geometry::{ParticleChunks, RawParticles};
 
+use crate::coarse_grid::{dense_levels, DenseLevel};
 use crate::grid::{BrickKey, FluidGrid, BRICK, BRICK_SHIFT};
 use crate::FluidError;
 
@@ -45,6 +46,8 @@ pub struct FluidBins {
     occupied: Vec<HashSet<u64>>,
     /// Bricks of each level that are non-empty or next to one (a sphere may reach into them).
     reached: Vec<HashSet<u64>>,
+    /// The coarser levels' bits where they are small ([`crate::coarse_grid`]), finest first.
+    dense: Vec<DenseLevel>,
 }
 
 /// A brick-local cell packed into 18 bits: x, then y, then z, 6 bits each.
@@ -220,9 +223,13 @@ impl FluidBins {
                 reached
             })
             .collect();
+        let leaves: Vec<(BrickKey, &[u32])> = leaf.iter().map(|(&k, cells)| (unpack_key(k), &cells[..])).collect();
+        let dense = dense_levels(&grid, &leaves, unpack_cell);
+        drop(leaves);
         Ok(FluidBins {
             grid,
             reached,
+            dense,
             radius,
             particles: survey.count,
             spacing: survey.spacing,
@@ -242,6 +249,11 @@ impl FluidBins {
         self.reached.get(usize::from(key.level)).is_some_and(|set| set.contains(&key.packed()))
     }
 
+    /// The whole grid's bits at `level`, where they are kept dense.
+    pub fn dense(&self, level: u8) -> Option<&DenseLevel> {
+        self.dense.iter().find(|d| d.level == level)
+    }
+
     /// The occupied cells of a level-0 brick ([`pack_cell`]), empty if none.
     pub fn leaf_cells(&self, key: BrickKey) -> &[u32] {
         debug_assert_eq!(key.level, 0);
@@ -258,11 +270,13 @@ impl FluidBins {
         self.leaf.values().map(|c| c.len() as u64).sum()
     }
 
-    /// Bytes this binning holds (cell lists and the brick sets; what a time step costs before any brick is made).
+    /// Bytes this binning holds (cell lists, the brick sets and the dense coarse levels; what a time step costs
+    /// before any brick is made).
     pub fn heap_bytes(&self) -> u64 {
         let lists: u64 = self.leaf.values().map(|c| 4 * c.len() as u64 + 32).sum();
         let sets: u64 = self.occupied.iter().chain(&self.reached).map(|s| 16 * s.capacity() as u64).sum();
-        lists + sets
+        let dense: u64 = self.dense.iter().map(DenseLevel::bytes).sum();
+        lists + sets + dense
     }
 }
 

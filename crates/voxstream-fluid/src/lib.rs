@@ -11,6 +11,7 @@
 
 pub mod binning;
 pub mod bit_brick;
+pub mod coarse_grid;
 pub mod grid;
 pub mod scene;
 pub mod screen_space;

@@ -286,13 +286,35 @@ impl FluidScene {
     fn make(&mut self, keys: &[BrickKey]) -> bool {
         let bins = &self.bins;
         let foam_below = self.foam_below;
-        let made: Vec<BitBrick> = keys
-            .par_iter()
-            .map(|&key| {
-                let (_, reach) = level_radius(&bins.grid, bins.radius, key.level);
-                BitBrick::build(bins, key, BrickSettings { reach, foam_below })
+        let build = |keys: &[BrickKey]| -> Vec<BitBrick> {
+            keys.par_iter()
+                .map(|&key| {
+                    let (_, reach) = level_radius(&bins.grid, bins.radius, key.level);
+                    BitBrick::build(bins, key, BrickSettings { reach, foam_below })
+                })
+                .collect()
+        };
+        let mut made = build(keys);
+        // The neighbours whose bits the new bricks' rays read: made now, not a pass later.
+        let mut neighbours: Vec<BrickKey> = made
+            .iter()
+            .flat_map(|brick| {
+                let key = brick.key;
+                let bricks = bins.grid.bricks(key.level);
+                (0..27u32).filter(move |o| brick.neighbours_read >> o & 1 == 1).filter_map(move |o| {
+                    let d = [(o % 3) as i64 - 1, (o / 3 % 3) as i64 - 1, (o / 9) as i64 - 1];
+                    let at: [i64; 3] = std::array::from_fn(|a| i64::from(key.at[a]) + d[a]);
+                    (0..3)
+                        .all(|a| at[a] >= 0 && at[a] < i64::from(bricks[a]))
+                        .then(|| BrickKey { level: key.level, at: at.map(|c| c as u32) })
+                })
             })
+            .filter(|k| bins.is_occupied(*k) && !self.bricks.contains_key(k))
             .collect();
+        neighbours.sort_unstable();
+        neighbours.dedup();
+        neighbours.retain(|k| keys.binary_search(k).is_err());
+        made.extend(build(&neighbours));
         for brick in made {
             self.resident_bytes += brick.heap_bytes();
             self.bricks.insert(brick.key, Resident { brick: Arc::new(brick), used: AtomicU32::new(self.pass) });
