@@ -98,6 +98,8 @@ def main():
     args = parser.parse_args()
     if args.particles < 1000:
         sys.exit("fluid_splash: give --particles of at least 1000")
+    folder = os.path.dirname(os.path.abspath(args.out))
+    os.makedirs(folder, exist_ok=True)
     for step in range(args.steps):
         phase = 0.5 if args.steps == 1 else step / (args.steps - 1)
         path = args.out if args.steps == 1 else args.out.replace(".ply", f"_{step:04d}.ply")
