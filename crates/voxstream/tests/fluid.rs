@@ -179,6 +179,26 @@ fn a_budget_too_small_for_the_view_is_said_and_the_image_still_written() {
     assert!(dir.join("b.png").exists());
 }
 
+#[test]
+fn a_file_too_large_to_bin_here_is_refused_before_it_is_read() {
+    // A header announcing ten billion points and a sparse file as long as they would be: nothing is read.
+    let dir = scratch("fluid", "huge");
+    let count: u64 = 10_000_000_000;
+    let header = format!(
+        "ply\nformat binary_little_endian 1.0\nelement vertex {count}\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
+    );
+    let path = dir.join("huge.ply");
+    std::fs::write(&path, &header).unwrap();
+    let file = std::fs::OpenOptions::new().write(true).open(&path).unwrap();
+    file.set_len(header.len() as u64 + 12 * count).unwrap();
+    let output = voxstream(&["render", "huge.ply", "--fluid", "--out", "h.png"], &dir);
+    assert!(!output.status.success());
+    let err = stderr(&output);
+    assert!(err.contains("10000000000 particles take about 74.5 GiB to bin"), "{err}");
+    assert!(err.contains("thin the file"), "{err}");
+    let _ = std::fs::remove_file(&path);
+}
+
 /// PySPH's dam break (a real SPH run, `scripts/fetch-real-data.sh`) drawn as a fluid: the water column fills
 /// part of the view.
 #[test]
