@@ -151,6 +151,21 @@ pub fn parse_generated_path(text: &str) -> Option<Result<(PathKind, usize)>> {
     })
 }
 
+/// The cameras `--path` asks for around the view `view`: a generated path (`orbit:N`, … when no file of that name
+/// exists), a camera path file, or `view` alone without `--path`.
+pub fn path_cameras(path: Option<&Path>, view: &Camera) -> Result<Vec<Camera>> {
+    Ok(match path {
+        Some(path) => match path.to_str().filter(|_| !path.exists()).and_then(parse_generated_path) {
+            Some(generated) => {
+                let (kind, frames) = generated?;
+                generated_path(kind, frames, view)
+            }
+            None => read_camera_path(path)?,
+        },
+        None => vec![*view],
+    })
+}
+
 /// `frames` cameras of `kind` around the view `from`.
 pub fn generated_path(kind: PathKind, frames: usize, from: &Camera) -> Vec<Camera> {
     let eye = glam::DVec3::from(from.eye);

@@ -6,7 +6,7 @@ use std::io::Write;
 
 use anyhow::{bail, Result};
 use serde_json::json;
-use voxstream_api::camera_path::{generated_path, parse_generated_path, read_camera_path};
+use voxstream_api::camera_path::path_cameras;
 use voxstream_api::fluid::{open_fluid, smoothing, FluidOptions};
 use voxstream_api::view::apply_camera_options;
 use voxstream_engine::Mode;
@@ -124,16 +124,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let view = view_flags::view_options(&args.look, args.width, args.height);
     let name = source.path.display().to_string();
     let camera = apply_camera_options(source.camera, &view.camera, args.width, args.height, &name)?;
-    let cameras = match &args.path {
-        Some(path) => match path.to_str().filter(|_| !path.exists()).and_then(parse_generated_path) {
-            Some(generated) => {
-                let (kind, frames) = generated?;
-                generated_path(kind, frames, &camera)
-            }
-            None => read_camera_path(path)?,
-        },
-        None => vec![camera],
-    };
+    let cameras = path_cameras(args.path.as_deref(), &camera)?;
     let sequence = args.path.is_some();
     let mut frames = Vec::new();
     let mut written = Vec::new();

@@ -10,7 +10,7 @@ pub use voxstream_api::defaults::{
     default_store_transfer_function, frame_box, shown_number, store_camera, store_placement, STORE_VIEW_DIRECTION,
 };
 
-use crate::camera_path::{generated_path, parse_generated_path, read_camera_path};
+use crate::camera_path::path_cameras;
 use crate::cli::{RenderArgs, Switch};
 use crate::exit_status::IncompleteImage;
 use crate::memory::{bytes_read, peak_rss_bytes};
@@ -113,16 +113,7 @@ fn render_source(args: &RenderArgs, source: Source, budget: &MemoryBudget) -> Re
     let PreparedView { transfer_function, camera: view, drawing_surfaces, .. } = &prepared;
     let (view, drawing_surfaces) = (*view, *drawing_surfaces);
     let surfaces_in_volume = prepared.settings.surfaces_in_volume;
-    let cameras = match &args.path {
-        Some(path) => match path.to_str().filter(|_| !path.exists()).and_then(parse_generated_path) {
-            Some(generated) => {
-                let (kind, frames) = generated?;
-                generated_path(kind, frames, &view)
-            }
-            None => read_camera_path(path)?,
-        },
-        None => vec![view],
-    };
+    let cameras = path_cameras(args.path.as_deref(), &view)?;
     // Before the work: a folder, a disk or a missing folder as an output is refused now, not after the render.
     check_output(&if args.path.is_some() { numbered_path(&args.out, 0) } else { args.out.clone() }, "--out")?;
     if let Some(path) = &args.stats {
