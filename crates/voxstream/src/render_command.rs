@@ -28,6 +28,8 @@ use crate::view_flags;
 pub fn run(args: &RenderArgs) -> Result<()> {
     if args.input.fluid.fluid {
         check_flags(args)?;
+        // The image's buffers are sized by --width and --height: checked against the budget and the machine first.
+        check_budget(args.budget_mb, args.width, args.height, "--width/--height")?;
         return crate::fluid_command::run(args);
     }
     crate::fluid_command::check_no_fluid_flags(&args.input.fluid)?;

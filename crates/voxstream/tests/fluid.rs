@@ -145,6 +145,7 @@ fn flags_that_do_not_apply_to_a_fluid_are_refused_with_the_fix() {
     refused(&["render", "p.ply", "--fluid", "--foam", "1.5"], "--foam 1.5 is out of range");
     refused(&["render", "p.ply", "--fluid", "--fluid-cell", "1e-9"], "give a larger --particle-radius or --fluid-cell");
     refused(&["view", "p.ply", "--fluid"], "view --fluid is not built yet");
+    refused(&["render", "p.ply", "--fluid", "--width", "200000", "--height", "200000"], "--width/--height");
     let output = voxstream(&["render", "p.ply", "--fluid", "--smooth", "none", "--out", "none.png"], &dir);
     assert!(output.status.success(), "{}", stderr(&output));
 }
