@@ -12,8 +12,10 @@
 //!   of the cells the fluid's interior would is isolated spray: its bit moves from the surface bits to the foam
 //!   count of its 4³ block (one byte per block, as the thesis keeps), drawn as a translucent volume.
 //! - **The acceleration mask** (§6.5.1's mipmap skip, at cell resolution): `near` holds every cell a sphere can
-//!   reach, so a ray tests spheres only in those cells; cells within reach of a face whose neighbouring brick holds
-//!   particles are marked too (the neighbour's spheres reach in).
+//!   reach, so a ray tests spheres only in those cells, with 4³ and 16³ block summaries skipped whole. Neighbours'
+//!   spheres reach in too: across a face at level 0 exactly (from the neighbour's cells near the face), across edges
+//!   and corners and at coarser levels conservatively (every cell within reach of the shared face, edge or corner);
+//!   the neighbours read are recorded, so that they are made with the brick.
 
 use crate::binning::{unpack_cell, FluidBins};
 use crate::coarse_grid::DenseLevel;

@@ -107,8 +107,9 @@ fn bytes_from(grid: &FluidGrid, level: u8) -> u64 {
         .sum()
 }
 
-/// The dense coarse levels of a grid whose level-0 cells `for_each_leaf` lists, brick by brick (empty when even
-/// level 1 alone would not fit, or the grid has one level).
+/// The dense coarse levels of a grid whose level-0 cells `leaves` lists, brick by brick (`unpack` gives a packed
+/// cell's coordinates in its brick); from the finest coarse level whose levels together fit [`MAX_DENSE_BYTES`]
+/// (none when the grid has one level or even the coarsest would not fit).
 pub fn dense_levels<F>(grid: &FluidGrid, leaves: &[(BrickKey, &[u32])], unpack: F) -> Vec<DenseLevel>
 where
     F: Fn(u32) -> [u32; 3] + Sync,

@@ -87,7 +87,7 @@ pub struct FrameStatistics {
     pub complete: bool,
     /// Whether the bricks this view needs exceed the budget (the frame stopped incomplete).
     pub over_budget: bool,
-    /// Bricks made for this frame.
+    /// Bricks made for this frame (those rays asked for and the neighbours they read).
     pub bricks_made: usize,
     /// Time casting, all passes.
     pub cast: Duration,
@@ -237,8 +237,8 @@ impl FluidScene {
                 break;
             }
             let started = Instant::now();
-            statistics.bricks_made += requests.len();
-            let within_budget = self.make(&requests);
+            let (made, within_budget) = self.make(&requests);
+            statistics.bricks_made += made;
             statistics.build += started.elapsed();
             if !within_budget {
                 // What this view needs does not fit: drawn with what is made, and said incomplete.
@@ -281,9 +281,10 @@ impl FluidScene {
         Ok(FluidFrame { image, depth, raw_depth, statistics })
     }
 
-    /// Makes `keys` (in parallel) and evicts what the budget cannot hold, least recently used first; false when
-    /// the bricks this pass used and made alone exceed the budget.
-    fn make(&mut self, keys: &[BrickKey]) -> bool {
+    /// Makes `keys` and the neighbours their rays read (in parallel) and evicts what the budget cannot hold, least
+    /// recently used first. Returns the bricks made, and false when the bricks this pass used and made alone
+    /// exceed the budget.
+    fn make(&mut self, keys: &[BrickKey]) -> (usize, bool) {
         let bins = &self.bins;
         let foam_below = self.foam_below;
         let build = |keys: &[BrickKey]| -> Vec<BitBrick> {
@@ -315,12 +316,13 @@ impl FluidScene {
         neighbours.dedup();
         neighbours.retain(|k| keys.binary_search(k).is_err());
         made.extend(build(&neighbours));
+        let count = made.len();
         for brick in made {
             self.resident_bytes += brick.heap_bytes();
             self.bricks.insert(brick.key, Resident { brick: Arc::new(brick), used: AtomicU32::new(self.pass) });
         }
         if self.resident_bytes <= self.budget_bytes {
-            return true;
+            return (count, true);
         }
         // Least recently used first; bricks of this pass stay.
         let mut by_use: Vec<(u32, BrickKey)> =
@@ -334,7 +336,7 @@ impl FluidScene {
                 self.resident_bytes -= r.brick.heap_bytes();
             }
         }
-        self.resident_bytes <= self.budget_bytes
+        (count, self.resident_bytes <= self.budget_bytes)
     }
 
     /// Bytes of the resident bricks.

@@ -30,9 +30,9 @@ pub fn view_depth(samples: &[RaySample], frame: &CameraFrame, width: u32, height
     depth
 }
 
-/// The world position seen at pixel `(x, y)` at view depth `z`.
+/// The world position seen at pixel `(x, y)` at view depth `z` (the inverse of [`view_depth`]).
 #[inline]
-fn unproject(frame: &CameraFrame, x: i64, y: i64, z: f64, width: u32, height: u32) -> DVec3 {
+pub fn unproject(frame: &CameraFrame, x: i64, y: i64, z: f64, width: u32, height: u32) -> DVec3 {
     let sx = 2.0 * (x as f64 + 0.5) / f64::from(width) - 1.0;
     let sy = 1.0 - 2.0 * (y as f64 + 0.5) / f64::from(height);
     frame.eye + (frame.forward + frame.right * sx + frame.up * sy) * z

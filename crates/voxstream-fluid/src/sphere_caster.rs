@@ -18,6 +18,7 @@
 //! through the nearest coarser brick that is made, or skips the brick, and the frame is marked incomplete.
 
 use glam::DVec3;
+use voxstream_render::traversal::intersect_aabb;
 
 use crate::bit_brick::{span_mask, BitBrick, COARSE_BLOCK, SKIP_BLOCK};
 use crate::grid::{BrickKey, FluidGrid, BRICK};
@@ -106,14 +107,10 @@ pub fn jitter(global: [i64; 3], level: u8, time_step: u32) -> DVec3 {
     DVec3::new(unit(a), unit(b), unit(c)) * JITTER
 }
 
-/// Entry and exit of the ray with a box, clipped to `t ≥ 0`.
+/// Entry (clipped to `t ≥ 0`) and exit of the ray with a box: the renderer's slab test.
 #[inline]
-fn box_span(origin: DVec3, inverse: DVec3, lower: DVec3, upper: DVec3) -> Option<(f64, f64)> {
-    let a = (lower - origin) * inverse;
-    let b = (upper - origin) * inverse;
-    let near = a.min(b).max_element().max(0.0);
-    let far = a.max(b).min_element();
-    (near < far).then_some((near, far))
+fn box_span(origin: DVec3, dir: DVec3, lower: DVec3, upper: DVec3) -> Option<(f64, f64)> {
+    intersect_aabb(origin, dir, lower, upper).map(|(near, far)| (near.max(0.0), far))
 }
 
 /// First entry of the ray into a sphere, `None` if it misses or the sphere is behind.
@@ -294,9 +291,8 @@ impl<'a, B: Bricks> SphereCaster<'a, B> {
     /// the ray needs that are not made are pushed to `requests`.
     pub fn cast(&self, origin: DVec3, dir: DVec3, spread: f64, requests: &mut Vec<BrickKey>) -> RaySample {
         let grid = &self.settings.grid;
-        let inverse = dir.recip();
         let (lower, upper) = grid.world_box();
-        let Some((mut t, t_end)) = box_span(origin, inverse, lower.into(), upper.into()) else {
+        let Some((mut t, t_end)) = box_span(origin, dir, lower.into(), upper.into()) else {
             return RaySample::MISS;
         };
         let mut foam = 0.0f64;
@@ -321,7 +317,7 @@ impl<'a, B: Bricks> SphereCaster<'a, B> {
             });
             let key = BrickKey { level, at };
             let (bl, bu) = grid.brick_box(key);
-            let exit = box_span(origin, inverse, bl.into(), bu.into()).map_or(t, |s| s.1);
+            let exit = box_span(origin, dir, bl.into(), bu.into()).map_or(t, |s| s.1);
             // Guard against a brick the ray only grazes: always move forward.
             let exit = exit.max(t + edge * 1e-9).min(t_end);
             if self.bricks.is_reached(key) {

@@ -5,7 +5,7 @@
 
 use glam::DVec3;
 use voxstream_fluid::scene::{FluidRenderSettings, FluidScene, Smoothing, DEFAULT_ROF_STRENGTH};
-use voxstream_fluid::shading::normals_from_depth;
+use voxstream_fluid::shading::{normals_from_depth, unproject};
 use voxstream_fluid::{FluidBins, FluidSettings};
 use voxstream_geometry::{ParticleSet, RawParticles};
 use voxstream_render::Camera;
@@ -63,9 +63,7 @@ fn render(smoothing: Smoothing) -> (Fidelity, f64) {
             if !z.is_finite() {
                 continue;
             }
-            let sx = 2.0 * (f64::from(x) + 0.5) / f64::from(w) - 1.0;
-            let sy = 1.0 - 2.0 * (f64::from(y) + 0.5) / f64::from(h);
-            let p = cam.eye + (cam.forward + cam.right * sx + cam.up * sy) * z;
+            let p = unproject(&cam, i64::from(x), i64::from(y), z, w, h);
             distances.push(p.length());
             // Away from the silhouette, where the sphere's normal is well defined on screen.
             if let Some(n) = normals[i] {
