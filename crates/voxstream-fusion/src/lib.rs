@@ -9,12 +9,22 @@
 //!
 //! - [`camera`]: pinhole intrinsics and camera-to-world poses.
 //! - [`frame`]: one RGB-D frame in metres and 8-bit colour.
+//! - [`brick`]: 8³ voxels of sign and confidence bits, with colours of surface voxels.
+//! - [`brick_map`]: the bricks by coordinate, grouped in world chunks that stream to disk ([`spill`]).
+//! - [`integrate`]: one brick from a set of cached frames (eq. 8.1–8.2).
+//! - [`fusion`]: the ring buffer, allocation, sub-cache and windows.
 
+pub mod brick;
+pub mod brick_map;
 pub mod camera;
 pub mod frame;
+pub mod fusion;
+pub mod integrate;
+pub mod spill;
 
 pub use camera::{Intrinsics, Pose};
 pub use frame::RgbdFrame;
+pub use fusion::{Fusion, FusionSettings, FusionStats};
 
 /// What can go wrong reading, generating or fusing RGB-D data.
 #[derive(Debug, thiserror::Error)]
@@ -28,6 +38,9 @@ pub enum FusionError {
     /// A setting is out of range; the message names the flag.
     #[error("{0}")]
     Settings(String),
+    /// The scene outgrew the memory budget with nowhere to stream chunks; the message names the flag.
+    #[error("{0}")]
+    Budget(String),
     /// The mesh of a synthetic sequence could not be read.
     #[error(transparent)]
     Geometry(#[from] voxstream_geometry::GeometryError),

@@ -1,0 +1,245 @@
+//! Deferred integration of one brick from a set of cached frames (seed 004 §8.3.2, §8.4.3, eq. 8.1–8.2).
+//!
+//! Every voxel centre is projected into every frame of the set; each frame that saw the surface near it gives a
+//! projective signed distance `D_i` (positive in front of the surface) with weight `W_i`: 1 in front, falling
+//! linearly to 0 at `σ` behind, and nothing deeper (the voxel is hidden there). Distances in front are truncated to
+//! `σ`, as every TSDF integration does, so free space carves away what an earlier window put there. The thesis
+//! prints the weight behind the surface as `1 − (σ + D)/σ`, which would grow with depth; we read it as
+//! `(σ + D)/σ`, the usual linear fall-off. A voxel already confident contributes its earlier result as a prior
+//! `Φ` (the distance to the nearest confident sign change found by sweeping a few voxels along the axes) with weight
+//! `Ψ`, larger for bricks of smaller error; without a sign change nearby `Ψ = 0`. Only the sign of the average is
+//! kept; the voxel is confident when the frames' weights add up to the confidence weight, and a confident voxel is
+//! replaced only by a confident one from samples no less accurate than those that set it (§8.3.4). Surface voxels
+//! (average within `voxel/√2` of the surface) get the weighted average colour (§8.5).
+
+use glam::{DVec3, IVec3, Mat3, Vec3};
+
+use crate::brick::{voxel_index, BinaryBrick, BRICK};
+use crate::brick_map::BrickMap;
+use crate::camera::{Intrinsics, Pose};
+
+/// How far (voxels) the prior's sweep looks for a confident sign change.
+const PRIOR_SWEEP: i32 = 3;
+
+/// The fusion's noise and weighting choices.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct IntegrationSettings {
+    /// Voxel edge, metres.
+    pub voxel: f64,
+    /// `σ` is this many times the sensor's depth uncertainty at the sample's depth…
+    pub sigma_factor: f32,
+    /// …but at least this many voxels.
+    pub min_band_voxels: f32,
+    /// Summed frame weight that makes a voxel confident.
+    pub confidence_weight: f32,
+    /// Weight of a confident voxel's earlier result, for a brick whose error equals the voxel size.
+    pub prior_weight: f32,
+}
+
+impl IntegrationSettings {
+    /// The Kinect v1 axial uncertainty at depth `z` (Nguyen, Izadi and Lovell 2012, the thesis' [NIL12]).
+    pub fn sensor_sigma(z: f32) -> f32 {
+        0.0012 + 0.0019 * (z - 0.4) * (z - 0.4)
+    }
+
+    /// The band `σ` of a sample at depth `z`: the truncation distance of eq. 8.2.
+    pub fn band(&self, z: f32) -> f32 {
+        (self.sigma_factor * Self::sensor_sigma(z)).max(self.min_band_voxels * self.voxel as f32)
+    }
+}
+
+/// A frame in the cache: its images, pose, and the bricks it touched.
+#[derive(Clone, Debug)]
+pub struct CachedFrame {
+    /// Position in the sequence.
+    pub index: usize,
+    pub intrinsics: Intrinsics,
+    pub depth: Vec<f32>,
+    pub colour: Vec<[u8; 3]>,
+    pub pose: Pose,
+    /// World to camera, in f32 (voxel centres are projected millions of times per window).
+    rotation: Mat3,
+    translation: Vec3,
+    /// The bricks this frame's samples allocated or touched.
+    pub bricks: Vec<IVec3>,
+}
+
+impl CachedFrame {
+    pub fn new(index: usize, intrinsics: Intrinsics, depth: Vec<f32>, colour: Vec<[u8; 3]>, pose: Pose) -> Self {
+        let inverse = pose.inverse();
+        CachedFrame {
+            index,
+            intrinsics,
+            depth,
+            colour,
+            pose,
+            rotation: inverse.matrix3.as_mat3(),
+            translation: inverse.translation.as_vec3(),
+            bricks: Vec::new(),
+        }
+    }
+
+    /// Bytes of the images.
+    pub fn bytes(&self) -> usize {
+        self.depth.len() * 4 + self.colour.len() * 3 + self.bricks.len() * 12
+    }
+
+    /// The depth and colour of the pixel that world point `p` projects to, with `p`'s own depth.
+    #[inline]
+    fn sample(&self, p: Vec3) -> Option<(f32, f32, [u8; 3])> {
+        let c = self.rotation * p + self.translation;
+        if c.z <= 0.0 {
+            return None;
+        }
+        let k = &self.intrinsics;
+        let u = (k.fx as f32 * c.x / c.z + k.cx as f32).round();
+        let v = (k.fy as f32 * c.y / c.z + k.cy as f32).round();
+        if u < 0.0 || v < 0.0 || u >= k.width as f32 || v >= k.height as f32 {
+            return None;
+        }
+        let i = v as usize * k.width as usize + u as usize;
+        let d = self.depth[i];
+        (d > 0.0).then(|| (d, c.z, self.colour.get(i).copied().unwrap_or([0; 3])))
+    }
+}
+
+/// Whether a brick is processed by a window of the cache or by the sub-cache.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Pass {
+    /// A window of the ring buffer: confident voxels may be set.
+    Window,
+    /// The most recent few frames, for immediate feedback: nothing is confident (§8.3.3).
+    SubCache,
+}
+
+/// The signed distance (metres, positive outside) from voxel `v` to the nearest confident sign change within
+/// [`PRIOR_SWEEP`] voxels along the axes, if `v` is confident and there is one.
+fn prior_distance(map: &BrickMap, v: IVec3, inside: bool, voxel: f64) -> Option<f32> {
+    let mut nearest = None;
+    for axis in [IVec3::X, IVec3::Y, IVec3::Z, -IVec3::X, -IVec3::Y, -IVec3::Z] {
+        for step in 1..=PRIOR_SWEEP {
+            if nearest.is_some_and(|n| n <= step) {
+                break;
+            }
+            let w = v + axis * step;
+            let (key, local) = BrickMap::split(w);
+            let Some(brick) = map.brick(key) else { break };
+            let i = voxel_index(local.x, local.y, local.z);
+            if !brick.confident.get(i) {
+                break;
+            }
+            if brick.inside.get(i) != inside {
+                nearest = Some(step);
+                break;
+            }
+        }
+    }
+    let steps = nearest?;
+    let distance = (steps as f32 - 0.5) * voxel as f32;
+    Some(if inside { -distance } else { distance })
+}
+
+/// Integrates brick `key` from `frames`, starting from its current state in `map` (absent: all outside).
+pub fn integrate_brick(
+    map: &BrickMap,
+    key: IVec3,
+    frames: &[&CachedFrame],
+    settings: &IntegrationSettings,
+    pass: Pass,
+) -> BinaryBrick {
+    let old = map.brick(key).cloned().unwrap_or_default();
+    let voxel = settings.voxel;
+    let prior_scale =
+        if old.error.is_finite() && old.error > 0.0 { (voxel as f32 / old.error).clamp(0.5, 4.0) } else { 0.0 };
+    let mut out = BinaryBrick { colours: Vec::new(), ..old.clone() };
+    let mut error_sum = 0.0f64;
+    let mut error_weight = 0.0f64;
+    let mut results = Vec::with_capacity(512);
+    let origin = key * BRICK;
+    for z in 0..BRICK {
+        for y in 0..BRICK {
+            for x in 0..BRICK {
+                let v = origin + IVec3::new(x, y, z);
+                let p: DVec3 = map.centre(v);
+                let p = p.as_vec3();
+                let (mut w_sum, mut wd_sum, mut sigma_sum) = (0.0f32, 0.0f32, 0.0f32);
+                let mut colour = [0.0f32; 4];
+                for frame in frames {
+                    let Some((d, z_voxel, rgb)) = frame.sample(p) else { continue };
+                    let distance = d - z_voxel;
+                    let band = settings.band(d);
+                    if distance <= -band {
+                        continue;
+                    }
+                    let w = if distance > 0.0 { 1.0 } else { (band + distance) / band };
+                    w_sum += w;
+                    wd_sum += w * distance.min(band);
+                    sigma_sum += w * IntegrationSettings::sensor_sigma(d);
+                    if distance.abs() < band {
+                        for c in 0..3 {
+                            colour[c] += w * f32::from(rgb[c]);
+                        }
+                        colour[3] += w;
+                    }
+                }
+                results.push((v, w_sum, wd_sum, sigma_sum, colour));
+                if w_sum > 0.0 {
+                    error_sum += f64::from(sigma_sum);
+                    error_weight += f64::from(w_sum);
+                }
+            }
+        }
+    }
+    let new_error = if error_weight > 0.0 { (error_sum / error_weight) as f32 } else { f32::INFINITY };
+    let may_replace_confident = pass == Pass::Window && new_error <= old.error * 1.05;
+    let mut changed_confident = false;
+    for (v, w_sum, wd_sum, _, colour) in results {
+        let local = v - origin;
+        let i = voxel_index(local.x, local.y, local.z);
+        let was_inside = old.inside.get(i);
+        let was_confident = old.confident.get(i);
+        let (prior, psi) = match (was_confident, prior_scale > 0.0) {
+            (true, true) => match prior_distance(map, v, was_inside, voxel) {
+                Some(phi) => (phi, settings.prior_weight * prior_scale),
+                None => (0.0, 0.0),
+            },
+            _ => (0.0, 0.0),
+        };
+        if w_sum + psi <= 0.0 {
+            // Unseen: keeps its state (and colour).
+            if let Some(rgb) = old.colour(local.x, local.y, local.z) {
+                out.set_colour(local.x, local.y, local.z, rgb);
+            }
+            continue;
+        }
+        let average = (psi * prior + wd_sum) / (psi + w_sum);
+        let inside = average < 0.0;
+        let confident = pass == Pass::Window && w_sum >= settings.confidence_weight;
+        if was_confident && !(confident && may_replace_confident) {
+            if let Some(rgb) = old.colour(local.x, local.y, local.z) {
+                out.set_colour(local.x, local.y, local.z, rgb);
+            }
+            continue;
+        }
+        changed_confident |= confident;
+        out.inside.set(i, inside);
+        out.confident.set(i, confident);
+        let surface = average.abs() <= voxel as f32 * std::f32::consts::FRAC_1_SQRT_2;
+        if confident && surface && colour[3] > 0.0 {
+            let rgb = [0, 1, 2].map(|c| (colour[c] / colour[3]).round().clamp(0.0, 255.0) as u8);
+            out.set_colour(local.x, local.y, local.z, rgb);
+        }
+    }
+    match pass {
+        Pass::Window => {
+            out.integrated = true;
+            if changed_confident {
+                out.error = new_error.min(old.error);
+            }
+        }
+        Pass::SubCache => {
+            out.integrated = old.integrated;
+        }
+    }
+    out
+}
