@@ -13,14 +13,18 @@
 //! - [`brick_map`]: the bricks by coordinate, grouped in world chunks that stream to disk ([`spill`]).
 //! - [`integrate`]: one brick from a set of cached frames (eq. 8.1–8.2).
 //! - [`fusion`]: the ring buffer, allocation, sub-cache and windows.
+//! - [`caster`]: rays through the bits, smoothed in screen space.
+//! - [`surface`]: the surface as points, for measuring and for saving.
 
 pub mod brick;
 pub mod brick_map;
 pub mod camera;
+pub mod caster;
 pub mod frame;
 pub mod fusion;
 pub mod integrate;
 pub mod spill;
+pub mod surface;
 
 pub use camera::{Intrinsics, Pose};
 pub use frame::RgbdFrame;

@@ -1,0 +1,94 @@
+//! The fused surface as points: the centre of every face between a confident voxel behind the surface and a voxel
+//! known to be in front of it (confident, or in a brick removed as empty, which is what an absent brick means).
+//! Faces towards voxels no window was sure of are not surface: behind the band the sensor never saw, the inside
+//! region simply ends. These points are what surface error is measured on, and what `fuse --points` writes.
+
+use std::io::Write;
+use std::path::Path;
+
+use glam::{DVec3, IVec3};
+use rayon::prelude::*;
+
+use crate::brick::{voxel_index, BRICK};
+use crate::brick_map::BrickMap;
+use crate::FusionError;
+
+/// Whether voxel `v` is known to be in front of the surface.
+fn known_outside(map: &BrickMap, v: IVec3) -> bool {
+    let (key, local) = BrickMap::split(v);
+    match map.brick(key) {
+        None => true,
+        Some(b) => {
+            let i = voxel_index(local.x, local.y, local.z);
+            !b.inside.get(i) && b.confident.get(i)
+        }
+    }
+}
+
+/// A surface point with the colour of its voxel, where it has one.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfacePoint {
+    pub position: DVec3,
+    pub normal: DVec3,
+    pub colour: Option<[u8; 3]>,
+}
+
+/// The surface points of the resident bricks.
+pub fn surface_points(map: &BrickMap) -> Vec<SurfacePoint> {
+    let keys: Vec<IVec3> = map.iter().map(|(k, _)| *k).collect();
+    let voxel = map.voxel();
+    keys.par_iter()
+        .flat_map_iter(|&key| {
+            let brick = map.brick(key).expect("listed");
+            let mut points = Vec::new();
+            let both = brick.inside.and(&brick.confident);
+            if both.is_empty() {
+                return points.into_iter();
+            }
+            for z in 0..BRICK {
+                for y in 0..BRICK {
+                    for x in 0..BRICK {
+                        if !both.get(voxel_index(x, y, z)) {
+                            continue;
+                        }
+                        let v = key * BRICK + IVec3::new(x, y, z);
+                        for axis in [IVec3::X, IVec3::Y, IVec3::Z, -IVec3::X, -IVec3::Y, -IVec3::Z] {
+                            if known_outside(map, v + axis) {
+                                let normal = axis.as_dvec3();
+                                points.push(SurfacePoint {
+                                    position: map.centre(v) + normal * (0.5 * voxel),
+                                    normal,
+                                    colour: brick.colour(x, y, z),
+                                });
+                            }
+                        }
+                    }
+                }
+            }
+            points.into_iter()
+        })
+        .collect()
+}
+
+/// Writes points as a binary little-endian PLY (x, y, z as float; nx, ny, nz; red, green, blue as uchar, grey
+/// where a voxel has no colour), readable by Open3D, MeshLab and `voxstream render`.
+pub fn write_points_ply(path: &Path, points: &[SurfacePoint]) -> Result<(), FusionError> {
+    let error = |e: std::io::Error| FusionError::File { path: path.to_path_buf(), message: e.to_string() };
+    let file = std::fs::File::create(path).map_err(error)?;
+    let mut out = std::io::BufWriter::new(file);
+    write!(
+        out,
+        "ply\nformat binary_little_endian 1.0\ncomment voxstream fuse: surface voxel faces\nelement vertex {}\n\
+         property float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\n\
+         property float nz\nproperty uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n",
+        points.len()
+    )
+    .map_err(error)?;
+    for p in points {
+        for c in p.position.to_array().into_iter().chain(p.normal.to_array()) {
+            out.write_all(&(c as f32).to_le_bytes()).map_err(error)?;
+        }
+        out.write_all(&p.colour.unwrap_or([160, 160, 160])).map_err(error)?;
+    }
+    out.flush().map_err(error)
+}
