@@ -15,11 +15,13 @@
 //! - [`fusion`]: the ring buffer, allocation, sub-cache and windows.
 //! - [`caster`]: rays through the bits, smoothed in screen space.
 //! - [`surface`]: the surface as points, for measuring and for saving.
+//! - [`export`]: the scene as a store `render` and `view` open.
 
 pub mod brick;
 pub mod brick_map;
 pub mod camera;
 pub mod caster;
+pub mod export;
 pub mod frame;
 pub mod fusion;
 pub mod integrate;

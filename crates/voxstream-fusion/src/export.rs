@@ -1,0 +1,138 @@
+//! The fused scene saved as a store that `render` and `view` open like any other (seed 004 §8.3: "once the scene
+//! has been scanned, a smooth surface can be reconstructed from the binary representation").
+//!
+//! Each sample is the share of confident voxels behind the surface in its 3×3×3 neighbourhood, as `u8` (0–255):
+//! a box filter of the bits, so the isosurface at 127.5 (`render SCENE --iso 128`) runs along the voxel faces
+//! with its stairs rounded off. The volume spans the bricks' bounds plus one voxel; slices are made one at a time
+//! from the bricks of their brick layer, and [`crate::export::FusedVolume::new`] refuses a scene whose import slab
+//! would not fit the memory it is given, naming the numbers.
+
+use glam::IVec3;
+use rustc_hash::FxHashMap;
+use voxstream_store::volume::{DType, VolumeInfo, VolumeSource};
+use voxstream_store::StoreError;
+
+use crate::brick::{voxel_index, BRICK};
+use crate::brick_map::BrickMap;
+use crate::FusionError;
+
+/// The import keeps one slab of this many slices per level (its default brick size) in ~2.4 bytes per sample.
+const SLAB_SLICES: u64 = 32;
+const SLAB_BYTES_PER_SAMPLE: f64 = 2.4;
+
+/// A fused scene as a volume of `u8` samples, made slice by slice.
+pub struct FusedVolume<'a> {
+    map: &'a BrickMap,
+    info: VolumeInfo,
+    /// The first voxel of the volume.
+    lo: IVec3,
+    /// Brick keys by brick z.
+    layers: FxHashMap<i32, Vec<IVec3>>,
+    /// The next slice to hand out.
+    next: i64,
+    /// Occupancy planes of slices `next - 1`, `next`, `next + 1` (0 or 1 per sample).
+    planes: [Vec<u8>; 3],
+}
+
+impl<'a> FusedVolume<'a> {
+    /// The volume of `map`'s resident bricks; `memory` bounds the import's slab. `None` when there is nothing
+    /// confident to save.
+    pub fn new(map: &'a BrickMap, memory: u64) -> Result<Option<FusedVolume<'a>>, FusionError> {
+        let mut bounds: Option<(IVec3, IVec3)> = None;
+        let mut layers: FxHashMap<i32, Vec<IVec3>> = FxHashMap::default();
+        for (key, brick) in map.iter() {
+            if brick.inside.and(&brick.confident).is_empty() {
+                continue;
+            }
+            layers.entry(key.z).or_default().push(*key);
+            bounds = Some(match bounds {
+                None => (*key, *key),
+                Some((lo, hi)) => (lo.min(*key), hi.max(*key)),
+            });
+        }
+        let Some((lo, hi)) = bounds else { return Ok(None) };
+        let lo = lo * BRICK - IVec3::ONE;
+        let hi = (hi + IVec3::ONE) * BRICK + IVec3::ONE;
+        let dims = (hi - lo).as_i64vec3();
+        let dims = [dims.x as u64, dims.y as u64, dims.z as u64];
+        let slab = (SLAB_SLICES * dims[0] * dims[1]) as f64 * SLAB_BYTES_PER_SAMPLE;
+        if slab > memory as f64 {
+            let voxel = map.voxel();
+            return Err(FusionError::Budget(format!(
+                "the scene spans {:.1} × {:.1} × {:.1} m ({} × {} × {} voxels): saving it as a store needs {} MiB \
+                 for one slab, over --memory {} MiB; raise --memory or fuse with a coarser --voxel",
+                dims[0] as f64 * voxel,
+                dims[1] as f64 * voxel,
+                dims[2] as f64 * voxel,
+                dims[0],
+                dims[1],
+                dims[2],
+                (slab as u64) >> 20,
+                memory >> 20
+            )));
+        }
+        let voxel = map.voxel();
+        let origin = map.centre(lo);
+        let info = VolumeInfo { dims, dtype: DType::U8, spacing: [voxel; 3], origin: origin.to_array() };
+        let area = (dims[0] * dims[1]) as usize;
+        let mut volume = FusedVolume { map, info, lo, layers, next: 0, planes: [vec![0; area], vec![0; area], vec![0; area]] };
+        volume.planes[2] = volume.plane(0);
+        Ok(Some(volume))
+    }
+
+    /// Occupancy of slice `z` of the volume (0/1 per sample).
+    fn plane(&self, z: i64) -> Vec<u8> {
+        let [nx, ny, nz] = self.info.dims;
+        let mut plane = vec![0u8; (nx * ny) as usize];
+        if z < 0 || z >= nz as i64 {
+            return plane;
+        }
+        let world_z = self.lo.z + z as i32;
+        let (brick_z, local_z) = (world_z.div_euclid(BRICK), world_z.rem_euclid(BRICK));
+        for key in self.layers.get(&brick_z).into_iter().flatten() {
+            let brick = self.map.brick(*key).expect("listed from the map");
+            let both = brick.inside.and(&brick.confident);
+            for y in 0..BRICK {
+                for x in 0..BRICK {
+                    if both.get(voxel_index(x, y, local_z)) {
+                        let v = *key * BRICK + IVec3::new(x, y, local_z) - self.lo;
+                        plane[v.y as usize * nx as usize + v.x as usize] = 1;
+                    }
+                }
+            }
+        }
+        plane
+    }
+}
+
+impl VolumeSource for FusedVolume<'_> {
+    fn info(&self) -> &VolumeInfo {
+        &self.info
+    }
+
+    fn read_slices(&mut self, count: usize, out: &mut Vec<f32>) -> Result<(), StoreError> {
+        let [nx, ny, _] = self.info.dims.map(|d| d as usize);
+        for _ in 0..count {
+            let z = self.next;
+            self.planes.rotate_left(1);
+            self.planes[2] = self.plane(z + 1);
+            // 3×3 sums within each plane, then across the three.
+            let mut sum = vec![0u8; nx * ny];
+            for plane in &self.planes {
+                for y in 0..ny {
+                    for x in 0..nx {
+                        let mut s = 0;
+                        for dy in y.saturating_sub(1)..=(y + 1).min(ny - 1) {
+                            let row = &plane[dy * nx..dy * nx + nx];
+                            s += row[x.saturating_sub(1)..=(x + 1).min(nx - 1)].iter().sum::<u8>();
+                        }
+                        sum[y * nx + x] += s;
+                    }
+                }
+            }
+            out.extend(sum.iter().map(|&s| (f32::from(s) * 255.0 / 27.0).round()));
+            self.next += 1;
+        }
+        Ok(())
+    }
+}
