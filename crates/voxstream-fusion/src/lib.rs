@@ -9,9 +9,12 @@
 //!
 //! - [`camera`]: pinhole intrinsics and camera-to-world poses.
 //! - [`frame`]: one RGB-D frame in metres and 8-bit colour.
+//! - [`tracking`]: each frame's pose by point-to-plane ICP against the surface ray-cast from the reconstruction
+//!   (§8.2, KinectFusion's frame-to-model tracking), and the benchmark's trajectory errors.
 
 pub mod camera;
 pub mod frame;
+pub mod tracking;
 
 pub use camera::{Intrinsics, Pose};
 pub use frame::RgbdFrame;
