@@ -44,7 +44,8 @@ pub struct TrackingSettings {
     /// ICP iterations per pyramid level, finest first (KinectFusion: 10, 5, 4); levels run coarsest first, and a
     /// level with 0 iterations is skipped.
     pub iterations: [usize; PYRAMID_LEVELS],
-    /// The farthest a frame vertex may lie from its model vertex to be paired (metres).
+    /// The farthest a frame vertex may lie from its model vertex to be paired at the finest level (metres); it
+    /// doubles with each coarser level, whose pixels are twice as large and whose pose is still rough.
     pub max_distance: f64,
     /// The largest angle between a frame normal and its model normal to be paired (radians).
     pub max_normal_angle: f64,
@@ -117,6 +118,8 @@ pub enum TrackingLost {
 
 /// One level of the frame's pyramid: camera-space vertices and normals.
 struct Level {
+    /// 0 for the finest.
+    index: usize,
     vertices: Vec<Option<DVec3>>,
     normals: Vec<Option<DVec3>>,
     width: usize,
@@ -127,7 +130,7 @@ struct Level {
 }
 
 impl Level {
-    fn new(depth: &[f32], k: &Intrinsics, max_jump: f64) -> Level {
+    fn new(index: usize, depth: &[f32], k: &Intrinsics, max_jump: f64) -> Level {
         let (vertices, normals) = vertex_normal_maps(depth, k, max_jump);
         let (sum, candidates) = vertices
             .iter()
@@ -135,7 +138,7 @@ impl Level {
             .filter_map(|(p, n)| p.filter(|_| n.is_some()))
             .fold((DVec3::ZERO, 0), |(s, c), p| (s + p, c + 1));
         let centroid = if candidates > 0 { sum / candidates as f64 } else { DVec3::ZERO };
-        Level { vertices, normals, width: k.width as usize, candidates, centroid }
+        Level { index, vertices, normals, width: k.width as usize, candidates, centroid }
     }
 }
 
@@ -201,7 +204,8 @@ impl Equations {
 /// equations of the pairs that pass the distance and normal tests.
 fn associate(level: &Level, model: &ModelView, pose: &Pose, pivot: DVec3, settings: &TrackingSettings) -> Equations {
     let model_from_world = model.pose.inverse();
-    let (max_d2, min_cos) = (settings.max_distance * settings.max_distance, settings.max_normal_angle.cos());
+    let max_distance = settings.max_distance * (1 << level.index) as f64;
+    let (max_d2, min_cos) = (max_distance * max_distance, settings.max_normal_angle.cos());
     let mw = model.intrinsics.width as usize;
     level
         .vertices
@@ -286,7 +290,7 @@ pub fn track(
     let mut levels = Vec::with_capacity(PYRAMID_LEVELS);
     let (mut depth, mut k) = (frame_depth.to_vec(), *intrinsics);
     for l in 0..PYRAMID_LEVELS {
-        levels.push(Level::new(&depth, &k, settings.max_depth_jump));
+        levels.push(Level::new(l, &depth, &k, settings.max_depth_jump));
         if l + 1 < PYRAMID_LEVELS {
             (depth, k) = downsample(&depth, &k, settings.max_depth_jump);
         }

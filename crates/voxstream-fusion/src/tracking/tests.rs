@@ -217,3 +217,57 @@ fn a_frame_from_elsewhere_loses_tracking() {
     let frame = scene.render(&K, &away);
     assert!(track(&frame, &K, &model, pose, &TrackingSettings::default()).is_err());
 }
+
+#[test]
+fn a_corridor_loses_tracking() {
+    // Floor and two parallel walls, open ahead: nothing fixes the motion along the corridor.
+    let corridor = Scene { planes: vec![(DVec3::Y, 1.0), (DVec3::X, -1.0), (DVec3::X, 1.0)], spheres: vec![] };
+    let from = DAffine3::from_rotation_translation(DQuat::from_rotation_x(-0.3), DVec3::ZERO);
+    let model = ModelView::from_depth(&corridor.render(&K, &from), K, from);
+    let frame = corridor.render(&K, &(from * motion()));
+    let lost = track(&frame, &K, &model, from, &TrackingSettings::default()).expect_err("the corridor slides");
+    assert!(matches!(lost, TrackingLost::IllConditioned { .. }), "{lost}");
+}
+
+#[test]
+fn a_wider_motion_needs_the_coarse_levels() {
+    // 6 cm and 5°: the full pyramid finds it.
+    let scene = Scene::room();
+    let wide = DAffine3::from_rotation_translation(
+        DQuat::from_axis_angle(DVec3::new(-0.5, 1.0, 0.3).normalize(), 5f64.to_radians()),
+        DVec3::new(0.04, 0.03, -0.03),
+    );
+    let (from, to) = (reference_pose(), reference_pose() * wide);
+    let model = ModelView::from_depth(&scene.render(&K, &from), K, from);
+    let frame = scene.render(&K, &to);
+    let result = track(&frame, &K, &model, from, &TrackingSettings::default()).expect("tracked");
+    let (dt, dr) = pose_error(&result.pose, &to);
+    assert!(dt < 1e-3 && dr < 0.1, "{dt} m, {dr}° off");
+    // The finest level alone pairs too few surfaces within its 10 cm (the back wall): it says so, and gives no pose.
+    let fine_only = TrackingSettings { iterations: [10, 0, 0], ..TrackingSettings::default() };
+    let lost = track(&frame, &K, &model, from, &fine_only).expect_err("too far for the finest level");
+    assert!(matches!(lost, TrackingLost::IllConditioned { level: 0, .. }), "{lost}");
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(12))]
+    #[test]
+    fn small_motions_are_recovered(
+        t in proptest::array::uniform3(-0.015f64..0.015),
+        axis in proptest::array::uniform3(-1.0f64..1.0),
+        degrees in 0.0f64..2.5,
+    ) {
+        let axis = DVec3::from(axis).try_normalize().unwrap_or(DVec3::Y);
+        let motion = DAffine3::from_rotation_translation(
+            DQuat::from_axis_angle(axis, degrees.to_radians()),
+            DVec3::from(t),
+        );
+        let scene = Scene::room();
+        let (from, to) = (reference_pose(), reference_pose() * motion);
+        let model = ModelView::from_depth(&scene.render(&K, &from), K, from);
+        let result = track(&scene.render(&K, &to), &K, &model, from, &TrackingSettings::default());
+        let result = result.map_err(|e| proptest::test_runner::TestCaseError::fail(e.to_string()))?;
+        let (dt, dr) = pose_error(&result.pose, &to);
+        proptest::prop_assert!(dt < 1e-3 && dr < 0.1, "{} m, {}° off", dt, dr);
+    }
+}
