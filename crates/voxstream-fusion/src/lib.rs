@@ -16,6 +16,8 @@
 //! - [`caster`]: rays through the bits, smoothed in screen space.
 //! - [`surface`]: the surface as points, for measuring and for saving.
 //! - [`export`]: the scene as a store `render` and `view` open.
+//! - [`tracking`]: each frame's pose by point-to-plane ICP against the surface ray-cast from the reconstruction
+//!   (§8.2, KinectFusion's frame-to-model tracking), and the benchmark's trajectory errors.
 
 pub mod brick;
 pub mod brick_map;
@@ -27,6 +29,7 @@ pub mod fusion;
 pub mod integrate;
 pub mod spill;
 pub mod surface;
+pub mod tracking;
 
 pub use camera::{Intrinsics, Pose};
 pub use frame::RgbdFrame;
