@@ -9,9 +9,12 @@
 //!
 //! - [`camera`]: pinhole intrinsics and camera-to-world poses.
 //! - [`frame`]: one RGB-D frame in metres and 8-bit colour.
+//! - [`rgbd`]: where frames come from: TUM RGB-D benchmark folders (read and written), and synthetic orbits around a
+//!   mesh with a Kinect v1 noise model (§8.2).
 
 pub mod camera;
 pub mod frame;
+pub mod rgbd;
 
 pub use camera::{Intrinsics, Pose};
 pub use frame::RgbdFrame;
