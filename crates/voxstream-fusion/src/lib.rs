@@ -18,6 +18,8 @@
 //! - [`export`]: the scene as a store `render` and `view` open.
 //! - [`tracking`]: each frame's pose by point-to-plane ICP against the surface ray-cast from the reconstruction
 //!   (§8.2, KinectFusion's frame-to-model tracking), and the benchmark's trajectory errors.
+//! - [`rgbd`]: where frames come from: TUM RGB-D benchmark folders (read and written), and synthetic orbits around a
+//!   mesh with a Kinect v1 noise model (§8.2).
 
 pub mod brick;
 pub mod brick_map;
@@ -27,6 +29,7 @@ pub mod export;
 pub mod frame;
 pub mod fusion;
 pub mod integrate;
+pub mod rgbd;
 pub mod spill;
 pub mod surface;
 pub mod tracking;

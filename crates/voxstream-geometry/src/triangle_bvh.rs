@@ -173,6 +173,66 @@ impl TriangleBvh {
         winding
     }
 
+    /// The nearest triangle the ray `origin + t·direction` meets with `0 < t < t_max`: its `t` (in units of
+    /// `direction`'s length, so an unnormalised direction with a camera-space z of 1 gives depth along the optical
+    /// axis) and its index, or `None`. Both faces count (Möller and Trumbore 1997). The search visits the nearer
+    /// child box first and skips boxes that start beyond the nearest hit so far.
+    pub fn first_hit(
+        &self,
+        positions: &[DVec3],
+        triangles: &[[u32; 3]],
+        origin: DVec3,
+        direction: DVec3,
+        t_max: f64,
+    ) -> Option<(f64, u32)> {
+        let inverse = direction.recip();
+        let mut best: Option<(f64, u32)> = None;
+        let mut limit = t_max;
+        // Pending nodes with the ray's entry into their boxes; at most one pending sibling per level.
+        let mut stack = [(0u32, 0.0f64); MAX_DEPTH + 2];
+        let mut depth = 0;
+        if let Some(near) = ray_box_entry(&self.nodes[0], origin, inverse, limit) {
+            stack[0] = (0, near);
+            depth = 1;
+        }
+        while depth > 0 {
+            depth -= 1;
+            let (index, near) = stack[depth];
+            if near >= limit {
+                continue;
+            }
+            let node = &self.nodes[index as usize];
+            if node.count > 0 {
+                let first = node.first as usize;
+                for &t in &self.order[first..first + node.count as usize] {
+                    let [a, b, c] = triangles[t as usize].map(|i| positions[i as usize]);
+                    if let Some(hit) = ray_triangle(origin, direction, a, b, c) {
+                        if hit < limit {
+                            limit = hit;
+                            best = Some((hit, t));
+                        }
+                    }
+                }
+                continue;
+            }
+            let left = index + 1;
+            let right = node.first;
+            let left_near = ray_box_entry(&self.nodes[left as usize], origin, inverse, limit);
+            let right_near = ray_box_entry(&self.nodes[right as usize], origin, inverse, limit);
+            let (near, far) = match (left_near, right_near) {
+                (Some(l), Some(r)) if l <= r => (Some((left, l)), Some((right, r))),
+                (Some(l), Some(r)) => (Some((right, r)), Some((left, l))),
+                (Some(l), None) => (Some((left, l)), None),
+                (None, r) => (r.map(|r| (right, r)), None),
+            };
+            for entry in [far, near].into_iter().flatten() {
+                stack[depth] = entry;
+                depth += 1;
+            }
+        }
+        best
+    }
+
     /// Depth of the hierarchy (root = 1).
     pub fn depth(&self) -> usize {
         fn depth_of(nodes: &[BvhNode], index: usize) -> usize {
@@ -357,6 +417,45 @@ fn ray_hits_box(node: &BvhNode, origin: DVec3, inverse: DVec3) -> bool {
     near <= far
 }
 
+/// Where the ray `origin + t·direction` (`inverse` the direction's reciprocal) enters the node's box, if it meets
+/// the box for some `t` in `[0, t_max)`.
+#[inline]
+fn ray_box_entry(node: &BvhNode, origin: DVec3, inverse: DVec3, t_max: f64) -> Option<f64> {
+    let (mut near, mut far) = (0.0f64, t_max);
+    for a in 0..3 {
+        let t0 = (f64::from(node.lower[a]) - origin[a]) * inverse[a];
+        let t1 = (f64::from(node.upper[a]) - origin[a]) * inverse[a];
+        near = near.max(t0.min(t1));
+        far = far.min(t0.max(t1));
+    }
+    (near <= far).then_some(near)
+}
+
+/// The `t > 0` at which the ray `origin + t·direction` meets triangle `abc` (either face), or `None` (Möller and
+/// Trumbore 1997).
+#[inline]
+pub fn ray_triangle(origin: DVec3, direction: DVec3, a: DVec3, b: DVec3, c: DVec3) -> Option<f64> {
+    let (ab, ac) = (b - a, c - a);
+    let pvec = direction.cross(ac);
+    let det = ab.dot(pvec);
+    if det == 0.0 || !det.is_finite() {
+        return None;
+    }
+    let inverse_det = 1.0 / det;
+    let tvec = origin - a;
+    let u = tvec.dot(pvec) * inverse_det;
+    if !(0.0..=1.0).contains(&u) {
+        return None;
+    }
+    let qvec = tvec.cross(ab);
+    let v = direction.dot(qvec) * inverse_det;
+    if v < 0.0 || u + v > 1.0 {
+        return None;
+    }
+    let t = ac.dot(qvec) * inverse_det;
+    (t > 0.0 && t.is_finite()).then_some(t)
+}
+
 /// +1 if the ray `origin + t·direction` (`t > 0`) leaves through triangle `abc`'s front, −1 if it enters through it,
 /// 0 if it misses (Möller and Trumbore, "Fast, minimum storage ray/triangle intersection", 1997).
 #[inline]
@@ -509,6 +608,46 @@ mod tests {
         }
         // Entering and leaving: from below along +z crosses the base (−1) and the slanted face (+1).
         assert_eq!(bvh.ray_winding(&positions, &triangles, DVec3::new(0.2, 0.2, -1.0), DVec3::new(0.01, 0.02, 1.0)), 0);
+    }
+
+    #[test]
+    fn first_hit_equals_brute_force() {
+        let (positions, triangles) = random_triangles(4000, 11);
+        let bvh = TriangleBvh::build(&positions, &triangles);
+        let mut state = 3u64;
+        let mut next = move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut hits = 0;
+        for i in 0..400 {
+            // Origins around and inside the cloud, directions towards a random point of it (some rays miss).
+            let origin = DVec3::new(next(), next(), next()) * 2.0 - DVec3::splat(0.5);
+            let target = DVec3::new(next(), next(), next());
+            let direction = (target - origin) * (0.5 + next());
+            let t_max = if i % 5 == 0 { 0.5 } else { f64::INFINITY };
+            let brute = triangles
+                .iter()
+                .enumerate()
+                .filter_map(|(t, tri)| {
+                    let [a, b, c] = tri.map(|i| positions[i as usize]);
+                    ray_triangle(origin, direction, a, b, c).filter(|&hit| hit < t_max).map(|hit| (hit, t as u32))
+                })
+                .min_by(|x, y| x.0.total_cmp(&y.0));
+            let found = bvh.first_hit(&positions, &triangles, origin, direction, t_max);
+            assert_eq!(found, brute, "ray {i} from {origin} along {direction}");
+            hits += usize::from(found.is_some());
+        }
+        assert!(hits > 100 && hits < 400, "both hits and misses are tested: {hits} hits");
+        // A known triangle: z = 1 plane hit from the origin along (0.1, 0.1, 2) at t = 0.5, from either side.
+        let positions = vec![DVec3::new(-1.0, -1.0, 1.0), DVec3::new(1.0, -1.0, 1.0), DVec3::new(0.0, 1.0, 1.0)];
+        let bvh = TriangleBvh::build(&positions, &[[0, 1, 2]]);
+        let hit = bvh.first_hit(&positions, &[[0, 1, 2]], DVec3::ZERO, DVec3::new(0.1, 0.1, 2.0), 10.0).unwrap();
+        assert!((hit.0 - 0.5).abs() < 1e-15 && hit.1 == 0, "{hit:?}");
+        let back = bvh.first_hit(&positions, &[[0, 1, 2]], DVec3::new(0.0, 0.0, 3.0), DVec3::NEG_Z, 10.0);
+        assert_eq!(back, Some((2.0, 0)));
+        assert_eq!(bvh.first_hit(&positions, &[[0, 1, 2]], DVec3::ZERO, DVec3::Z, 0.99), None, "beyond t_max");
+        assert_eq!(bvh.first_hit(&positions, &[[0, 1, 2]], DVec3::ZERO, DVec3::NEG_Z, 10.0), None, "behind");
     }
 
     #[test]
