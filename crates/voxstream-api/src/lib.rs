@@ -6,6 +6,7 @@
 //! - [`source::open`] opens a built-in scene, a mesh or particle file, or a store (a folder or an `http(s)://`,
 //!   `s3://`, `gs://`, `az://` URL) with [`SourceOptions`], and gives its producer and defaults ([`Source`]);
 //! - [`view::prepare_view`] applies [`ViewOptions`] (transfer function, isosurfaces, shading, camera) over them;
+//! - [`depth_fusion::fuse_dataset`] fuses an RGB-D sequence into binary bricks and saves them as a store;
 //! - [`session::start_session`] builds the frame loop ([`voxstream_engine::Session`]) on the chosen backend within the
 //!   memory budget; [`Volume`] keeps one per source and renders frames.
 //!
@@ -15,6 +16,7 @@
 pub mod backend;
 pub mod camera_path;
 pub mod defaults;
+pub mod depth_fusion;
 pub mod error_message;
 pub mod fluid;
 pub mod geometry_import;

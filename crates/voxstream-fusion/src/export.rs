@@ -75,7 +75,8 @@ impl<'a> FusedVolume<'a> {
         let origin = map.centre(lo);
         let info = VolumeInfo { dims, dtype: DType::U8, spacing: [voxel; 3], origin: origin.to_array() };
         let area = (dims[0] * dims[1]) as usize;
-        let mut volume = FusedVolume { map, info, lo, layers, next: 0, planes: [vec![0; area], vec![0; area], vec![0; area]] };
+        let mut volume =
+            FusedVolume { map, info, lo, layers, next: 0, planes: [vec![0; area], vec![0; area], vec![0; area]] };
         volume.planes[2] = volume.plane(0);
         Ok(Some(volume))
     }

@@ -34,6 +34,12 @@ pub enum Command {
     /// Open a window on a built-in scene, a store, or a mesh or particle file: orbit, zoom and fly through it while
     /// data streams in, edit the transfer function, save screenshots, cameras and transfer functions for `render`.
     View(ViewArgs),
+    /// Fuse an RGB-D sequence (a TUM RGB-D benchmark folder) into binary bricks and save it as a store: windowed
+    /// fusion of sign and confidence bits (Reichl ch. 8), poses from ground truth or ICP tracking.
+    Fuse(crate::fuse_command::FuseArgs),
+    /// Render a synthetic RGB-D sequence from a mesh on a floor along an orbit, with Kinect-like noise, ground-truth
+    /// poses and the true scene, in the TUM RGB-D layout `fuse` reads.
+    SynthRgbd(crate::fuse_command::SynthArgs),
 }
 
 /// `voxstream view`.

@@ -16,6 +16,7 @@ pub mod bench;
 pub mod cli;
 pub mod exit_status;
 pub mod fluid_command;
+pub mod fuse_command;
 pub mod import_command;
 pub mod info_command;
 pub mod iso_flags;

@@ -6,7 +6,7 @@ use std::process::ExitCode;
 
 use clap::Parser;
 use voxstream::cli::{Cli, Command, RenderArgs};
-use voxstream::{bench, import_command, info_command, render_command, scenes};
+use voxstream::{bench, fuse_command, import_command, info_command, render_command, scenes};
 
 fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
@@ -43,6 +43,8 @@ fn main() -> ExitCode {
         Some(Command::Bench(args)) => bench::run(&args),
         Some(Command::Import(args)) => import_command::run(&args),
         Some(Command::Info(args)) => info_command::run(&args),
+        Some(Command::Fuse(args)) => fuse_command::run_fuse(&args),
+        Some(Command::SynthRgbd(args)) => fuse_command::run_synth(&args),
         #[cfg(feature = "viewer")]
         Some(Command::View(args)) => voxstream::view_command::run(&args),
         #[cfg(not(feature = "viewer"))]

@@ -53,6 +53,10 @@ pub struct SyntheticSettings {
     pub noise: NoiseModel,
     /// The noise's seed.
     pub seed: u64,
+    /// Where the scene (floor at z = 0, object on it) and its cameras are placed in the world written to
+    /// `groundtruth.txt` and `scene.ply` (default identity). A tilt and an offset keep the floor off the voxel
+    /// faces of a fusion grid, which a real scan's floor never lies on either ([`SyntheticSettings::tilted_world`]).
+    pub world: Pose,
 }
 
 impl Default for SyntheticSettings {
@@ -71,7 +75,19 @@ impl Default for SyntheticSettings {
             start_time: 0.0,
             noise: NoiseModel::KINECT_V1,
             seed: 0x5EED,
+            world: Pose::IDENTITY,
         }
+    }
+}
+
+impl SyntheticSettings {
+    /// A world 7° tilted about the axis (1, 2, 3) and moved by (12.3, 45.6, 37.1) mm: no plane of the scene on a
+    /// voxel face or along a grid axis.
+    pub fn tilted_world() -> Pose {
+        Pose::from_rotation_translation(
+            DQuat::from_axis_angle(DVec3::new(1.0, 2.0, 3.0).normalize(), 7f64.to_radians()),
+            DVec3::new(0.0123, 0.0456, 0.0371),
+        )
     }
 }
 
@@ -198,8 +214,13 @@ impl SyntheticSequence {
             DVec3::new(-half, half, 0.0),
         ]);
         triangles.extend([[first, first + 1, first + 2], [first, first + 2, first + 3]]);
+        let poses: Vec<Pose> =
+            (0..settings.frames).map(|i| settings.world * orbit_pose(&settings, centre, i)).collect();
+        for p in &mut positions {
+            *p = settings.world.transform_point3(*p);
+        }
+        let centre = settings.world.transform_point3(centre);
         let bvh = TriangleBvh::build(&positions, &triangles);
-        let poses = (0..settings.frames).map(|i| orbit_pose(&settings, centre, i)).collect();
         Ok(SyntheticSequence { settings, positions, triangles, object_triangles, bvh, centre, poses })
     }
 
