@@ -103,6 +103,8 @@ pub struct FusionStats {
     pub peak_brick_bytes: usize,
     /// Bytes of the frame ring when full.
     pub ring_bytes: usize,
+    /// After every window: the frames fused so far and the bytes of the resident bricks.
+    pub memory_trace: Vec<(usize, usize)>,
 }
 
 /// An online fusion of RGB-D frames into binary bricks.
@@ -218,6 +220,7 @@ impl Fusion {
         self.map.stream_out(self.last_camera, self.settings.keep_radius, self.settings.memory_budget)?;
         self.map.recount();
         self.stats.peak_brick_bytes = self.stats.peak_brick_bytes.max(self.map.resident_bytes());
+        self.stats.memory_trace.push((self.stats.frames, self.map.resident_bytes()));
         Ok(())
     }
 

@@ -226,6 +226,8 @@ pub fn run_fuse(args: &FuseArgs) -> Result<()> {
             "surface_points": report.surface_points,
             "ate_rmse": report.ate_rmse,
             "store_levels": report.store.as_ref().map(|r| r.levels),
+            "peak_rss_bytes": crate::memory::peak_rss_bytes(),
+            "memory_trace": s.memory_trace.iter().map(|(f, b)| [*f, *b]).collect::<Vec<_>>(),
         });
         std::fs::write(path, serde_json::to_string_pretty(&json)? + "\n")
             .map_err(|e| anyhow::anyhow!("writing {}: {e}", path.display()))?;

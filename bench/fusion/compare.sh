@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# Depth-camera fusion against Open3D (issue 49, BENCHMARKS.md "Depth fusion"): synthetic Kinect-like sequences of
+# the two real meshes (the CGAL bunny and the Stanford dragon) fused by `voxstream fuse` and by Open3D's tensor TSDF
+# (VoxelBlockGrid) on the same frames and voxel size, both with ground-truth poses and with tracking; surfaces
+# measured against the true scene by surface_error.py. Prints a markdown table; everything else lands in $WORK.
+#
+#   bash bench/fusion/compare.sh [FRAMES]        (default 300: one orbit of 10 s at 30 Hz)
+#
+# Needs target/release/voxstream (cargo build --release), data/real (scripts/fetch-real-data.sh) and the Open3D
+# venv of bench/fusion/README.md (O3D_PYTHON, default bench/fusion/venv/bin/python).
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+FRAMES=${1:-300}
+VOXEL=${VOXEL:-0.01}
+VOXSTREAM=${VOXSTREAM:-target/release/voxstream}
+PY=${O3D_PYTHON:-bench/fusion/venv/bin/python}
+WORK=${WORK:-/tmp/voxstream-fusion-bench}
+mkdir -p "$WORK"
+for mesh in bunny:data/real/bunny00.off dragon:data/real/dragon_vrip.ply.gz; do
+    name=${mesh%%:*}; file=${mesh#*:}
+    seq="$WORK/$name"
+    echo "== $name: $FRAMES frames" >&2
+    "$VOXSTREAM" synth-rgbd "$file" --out "$seq" --frames "$FRAMES" --overwrite --quiet
+    "$VOXSTREAM" fuse "$seq" --voxel "$VOXEL" --points "$WORK/$name-vx.ply" --stats "$WORK/$name-vx.json" --quiet
+    "$VOXSTREAM" fuse "$seq" --voxel "$VOXEL" --poses track --points "$WORK/$name-vx-track.ply" \
+        --trajectory "$WORK/$name-vx-track.txt" --stats "$WORK/$name-vx-track.json" --quiet
+    "$PY" bench/fusion/open3d_peer.py "$seq" --voxel "$VOXEL" --depth-max 5 --half-pixel-fix --odometry \
+        --json "$WORK/$name-o3d.json" --points "$WORK/$name-o3d.ply" --trajectory "$WORK/$name-o3d-track.txt" >/dev/null
+    for run in vx vx-track o3d; do
+        "$PY" bench/fusion/surface_error.py --truth "$seq/scene.ply" --points "$WORK/$name-$run.ply" \
+            --dataset "$seq" --json "$WORK/$name-$run-err.json" >/dev/null
+    done
+done
+"$PY" bench/fusion/summarise.py "$WORK"
