@@ -3,6 +3,7 @@
 //! against the surface fused so far (§8.2); the scene is saved as a store `render` and `view` open, and optionally as
 //! surface points and a trajectory.
 
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -10,7 +11,7 @@ use anyhow::{bail, Context, Result};
 use voxstream_fusion::caster::{self, Surface};
 use voxstream_fusion::export::FusedVolume;
 use voxstream_fusion::rgbd::TumDataset;
-use voxstream_fusion::surface::{surface_points, write_points_ply};
+use voxstream_fusion::surface::{smooth_points, surface_points, write_points_ply};
 use voxstream_fusion::tracking::{ate_rmse, track, ModelView, TrackingSettings};
 use voxstream_fusion::{Fusion, FusionSettings, FusionStats, Intrinsics, Pose};
 use voxstream_store::{import_volume, ImportOptions, ImportReport};
@@ -38,6 +39,8 @@ pub struct FuseOptions {
     pub overwrite: bool,
     /// Surface points (PLY) to write.
     pub points: Option<PathBuf>,
+    /// Write the voxel faces' centres as they are, without [`smooth_points`].
+    pub raw_points: bool,
     /// The estimated trajectory (TUM format) to write.
     pub trajectory: Option<PathBuf>,
 }
@@ -90,11 +93,12 @@ fn track_frame(fusion: &Fusion, depth: &[f32], k: &Intrinsics, previous: Pose) -
     track(depth, k, &model, previous, &TrackingSettings::default()).ok().map(|r| r.pose)
 }
 
-/// Fuses the sequence in `dataset`; `progress(done, total)` is called after every frame.
+/// Fuses the sequence in `dataset`; `progress(done, total)` is called after every frame, and stops the fusion
+/// (an error, nothing saved) by answering `Break`.
 pub fn fuse_dataset(
     dataset: &Path,
     options: &FuseOptions,
-    progress: &mut dyn FnMut(usize, usize),
+    progress: &mut dyn FnMut(usize, usize) -> ControlFlow<()>,
 ) -> Result<FuseReport> {
     let mut data = TumDataset::open(dataset)?;
     if let Some(k) = options.intrinsics {
@@ -128,7 +132,7 @@ fn fuse_into(
     data: &TumDataset,
     options: &FuseOptions,
     settings: FusionSettings,
-    progress: &mut dyn FnMut(usize, usize),
+    progress: &mut dyn FnMut(usize, usize) -> ControlFlow<()>,
 ) -> Result<FuseReport> {
     let memory = settings.memory_budget as u64;
     let mut fusion = Fusion::new(settings)?;
@@ -168,7 +172,9 @@ fn fuse_into(
             fused.push((frame.timestamp, pose, frame.pose));
         }
         fuse_seconds += start.elapsed().as_secs_f64();
-        progress(i + 1, total);
+        if progress(i + 1, total).is_break() {
+            bail!("fusion stopped after {} of {total} frames; nothing was saved", i + 1);
+        }
     }
     let start = Instant::now();
     fusion.finish()?;
@@ -182,7 +188,10 @@ fn fuse_into(
     fusion.map_mut().read_all_back()?;
     let surface = match &options.points {
         Some(path) => {
-            let points = surface_points(fusion.map());
+            let mut points = surface_points(fusion.map());
+            if !options.raw_points {
+                points = smooth_points(&points, 1.5 * fusion.settings().integration.voxel);
+            }
             write_points_ply(path, &points)?;
             Some(points.len())
         }

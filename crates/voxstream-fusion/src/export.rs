@@ -1,9 +1,10 @@
 //! The fused scene saved as a store that `render` and `view` open like any other (seed 004 §8.3: "once the scene
 //! has been scanned, a smooth surface can be reconstructed from the binary representation").
 //!
-//! Each sample is the share of confident voxels behind the surface in its 3×3×3 neighbourhood, as `u8` (0–255):
-//! a box filter of the bits, so the isosurface at 127.5 (`render SCENE --iso 128`) runs along the voxel faces
-//! with its stairs rounded off. The volume spans the bricks' bounds plus one voxel; slices are made one at a time
+//! Each sample is a weighted share of confident voxels behind the surface around it, as `u8` (0–255): the voxel
+//! itself weighs 6, its six face neighbours 1 each. The isosurface at 127.5 (`render SCENE --iso 128`) then runs
+//! along the voxel faces with its stairs rounded off, and a sheet one voxel thick (a floor seen from above, whose
+//! inside the sensor never saw deeper) keeps its surface: a 3×3×3 box filter would lower it to 9/27 and lose it. The volume spans the bricks' bounds plus one voxel; slices are made one at a time
 //! from the bricks of their brick layer, and [`crate::export::FusedVolume::new`] refuses a scene whose import slab
 //! would not fit the memory it is given, naming the numbers.
 
@@ -32,6 +33,8 @@ pub struct FusedVolume<'a> {
     next: i64,
     /// Occupancy planes of slices `next - 1`, `next`, `next + 1` (0 or 1 per sample).
     planes: [Vec<u8>; 3],
+    /// Class planes of slices `next`, `next + 1`, `next + 2` (see [`FusedVolume::classes`]).
+    classes: [Vec<u8>; 3],
 }
 
 impl<'a> FusedVolume<'a> {
@@ -75,16 +78,27 @@ impl<'a> FusedVolume<'a> {
         let origin = map.centre(lo);
         let info = VolumeInfo { dims, dtype: DType::U8, spacing: [voxel; 3], origin: origin.to_array() };
         let area = (dims[0] * dims[1]) as usize;
-        let mut volume =
-            FusedVolume { map, info, lo, layers, next: 0, planes: [vec![0; area], vec![0; area], vec![0; area]] };
-        volume.planes[2] = volume.plane(0);
+        let mut volume = FusedVolume {
+            map,
+            info,
+            lo,
+            layers,
+            next: 0,
+            planes: [vec![0; area], vec![0; area], vec![0; area]],
+            classes: [vec![OUTSIDE; area], vec![OUTSIDE; area], vec![OUTSIDE; area]],
+        };
+        // Occupancy of slice 0 needs the classes of slices -1, 0 and 1.
+        volume.classes = [volume.classes(-1), volume.classes(0), volume.classes(1)];
+        volume.planes[2] = volume.occupancy(&volume.classes);
+        volume.classes = [volume.classes(0), volume.classes(1), volume.classes(2)];
         Ok(Some(volume))
     }
 
-    /// Occupancy of slice `z` of the volume (0/1 per sample).
-    fn plane(&self, z: i64) -> Vec<u8> {
+    /// Classes of slice `z`'s samples: [`OUTSIDE`] (known to be in front of the surface: confident, or in no
+    /// brick), [`UNSURE`] (in a brick, not confident) or [`INSIDE`] (confident, behind the surface).
+    fn classes(&self, z: i64) -> Vec<u8> {
         let [nx, ny, nz] = self.info.dims;
-        let mut plane = vec![0u8; (nx * ny) as usize];
+        let mut plane = vec![OUTSIDE; (nx * ny) as usize];
         if z < 0 || z >= nz as i64 {
             return plane;
         }
@@ -92,19 +106,56 @@ impl<'a> FusedVolume<'a> {
         let (brick_z, local_z) = (world_z.div_euclid(BRICK), world_z.rem_euclid(BRICK));
         for key in self.layers.get(&brick_z).into_iter().flatten() {
             let brick = self.map.brick(*key).expect("listed from the map");
-            let both = brick.inside.and(&brick.confident);
             for y in 0..BRICK {
                 for x in 0..BRICK {
-                    if both.get(voxel_index(x, y, local_z)) {
-                        let v = *key * BRICK + IVec3::new(x, y, local_z) - self.lo;
-                        plane[v.y as usize * nx as usize + v.x as usize] = 1;
-                    }
+                    let i = voxel_index(x, y, local_z);
+                    let class = match (brick.confident.get(i), brick.inside.get(i)) {
+                        (true, true) => INSIDE,
+                        (true, false) => OUTSIDE,
+                        (false, _) => UNSURE,
+                    };
+                    let v = *key * BRICK + IVec3::new(x, y, local_z) - self.lo;
+                    plane[v.y as usize * nx as usize + v.x as usize] = class;
                 }
             }
         }
         plane
     }
+
+    /// Occupancy (0/1) of the middle of three class planes: confident inside voxels, thickened by one voxel into
+    /// unsure neighbours. An unsure voxel next to an inside one lies behind the surface (in front of it the voxels
+    /// are known outside), so this never moves the surface the sensor saw; it closes the cracks a sheet one voxel
+    /// thick shows where a tilted floor steps from one layer to the next.
+    fn occupancy(&self, classes: &[Vec<u8>]) -> Vec<u8> {
+        let [nx, ny, _] = self.info.dims.map(|d| d as usize);
+        let [below, here, above] = [&classes[0], &classes[1], &classes[2]];
+        let mut plane = vec![0u8; nx * ny];
+        for y in 0..ny {
+            for x in 0..nx {
+                let i = y * nx + x;
+                plane[i] = match here[i] {
+                    INSIDE => 1,
+                    UNSURE => {
+                        let near = below[i] == INSIDE
+                            || above[i] == INSIDE
+                            || (x > 0 && here[i - 1] == INSIDE)
+                            || (x + 1 < nx && here[i + 1] == INSIDE)
+                            || (y > 0 && here[i - nx] == INSIDE)
+                            || (y + 1 < ny && here[i + nx] == INSIDE);
+                        u8::from(near)
+                    }
+                    _ => 0,
+                };
+            }
+        }
+        plane
+    }
 }
+
+/// Sample classes of [`FusedVolume::classes`].
+const OUTSIDE: u8 = 0;
+const UNSURE: u8 = 1;
+const INSIDE: u8 = 2;
 
 impl VolumeSource for FusedVolume<'_> {
     fn info(&self) -> &VolumeInfo {
@@ -115,23 +166,33 @@ impl VolumeSource for FusedVolume<'_> {
         let [nx, ny, _] = self.info.dims.map(|d| d as usize);
         for _ in 0..count {
             let z = self.next;
+            // Now: classes of z, z + 1, z + 2; occupancy of z + 1 from them, then the classes move on.
             self.planes.rotate_left(1);
-            self.planes[2] = self.plane(z + 1);
-            // 3×3 sums within each plane, then across the three.
-            let mut sum = vec![0u8; nx * ny];
-            for plane in &self.planes {
-                for y in 0..ny {
-                    for x in 0..nx {
-                        let mut s = 0;
-                        for dy in y.saturating_sub(1)..=(y + 1).min(ny - 1) {
-                            let row = &plane[dy * nx..dy * nx + nx];
-                            s += row[x.saturating_sub(1)..=(x + 1).min(nx - 1)].iter().sum::<u8>();
-                        }
-                        sum[y * nx + x] += s;
+            self.planes[2] = self.occupancy(&self.classes);
+            self.classes.rotate_left(1);
+            self.classes[2] = self.classes(z + 3);
+            // 6 × the voxel + its six face neighbours, of 12 (the volume's one-voxel margin is empty, so edges
+            // read zeros).
+            let [below, here, above] = &self.planes;
+            for y in 0..ny {
+                for x in 0..nx {
+                    let i = y * nx + x;
+                    let mut s = 6 * here[i] + below[i] + above[i];
+                    if x > 0 {
+                        s += here[i - 1];
                     }
+                    if x + 1 < nx {
+                        s += here[i + 1];
+                    }
+                    if y > 0 {
+                        s += here[i - nx];
+                    }
+                    if y + 1 < ny {
+                        s += here[i + nx];
+                    }
+                    out.push((f32::from(s) * 255.0 / 12.0).round());
                 }
             }
-            out.extend(sum.iter().map(|&s| (f32::from(s) * 255.0 / 27.0).round()));
             self.next += 1;
         }
         Ok(())

@@ -46,7 +46,7 @@ impl Default for FusionSettings {
             integration: IntegrationSettings {
                 voxel: 0.01,
                 sigma_factor: 3.0,
-                min_band_voxels: 2.0,
+                min_band_voxels: 3.0,
                 confidence_weight: 3.0,
                 prior_weight: 4.0,
             },
@@ -79,6 +79,10 @@ impl FusionSettings {
                 "--sub-cache {}: give 1 to --window ({}) frames",
                 self.sub_cache, self.window
             )));
+        }
+        let t = self.integration.min_band_voxels;
+        if !(t.is_finite() && (1.0..=32.0).contains(&t)) {
+            return Err(FusionError::Settings(format!("--truncation {t}: give 1 to 32 voxels")));
         }
         let c = self.integration.confidence_weight;
         if !(c.is_finite() && c > 0.0 && c <= self.window as f32) {

@@ -2,6 +2,12 @@
 //! known to be in front of it (confident, or in a brick removed as empty, which is what an absent brick means).
 //! Faces towards voxels no window was sure of are not surface: behind the band the sensor never saw, the inside
 //! region simply ends. These points are what surface error is measured on, and what `fuse --points` writes.
+//!
+//! Face centres make stairs: a plane at a slant is drawn as voxel faces up to half a voxel from it.
+//! [`smooth_points`] moves every point to the average of the points within 1.5 voxels that face its way (normals
+//! no more than 90° apart, so the two sides of a thin wall never mix), which puts the stairs' points on the plane
+//! they approximate: the object-space counterpart of the screen-space smoothing rendered views get, and what the
+//! thesis suggests for extracting a surface from the bits ("mesh-based smoothing algorithms", §8.3).
 
 use std::io::Write;
 use std::path::Path;
@@ -66,6 +72,41 @@ pub fn surface_points(map: &BrickMap) -> Vec<SurfacePoint> {
                 }
             }
             points.into_iter()
+        })
+        .collect()
+}
+
+/// Each point moved to the average position (and normal) of the points within `radius` (metres) whose normals
+/// are within 90° of its own, itself included.
+pub fn smooth_points(points: &[SurfacePoint], radius: f64) -> Vec<SurfacePoint> {
+    let cell = |p: DVec3| (p / radius).floor().as_ivec3();
+    let mut grid: rustc_hash::FxHashMap<IVec3, Vec<u32>> = rustc_hash::FxHashMap::default();
+    for (i, p) in points.iter().enumerate() {
+        grid.entry(cell(p.position)).or_default().push(i as u32);
+    }
+    let radius_squared = radius * radius;
+    points
+        .par_iter()
+        .map(|p| {
+            let c = cell(p.position);
+            let (mut sum, mut normal, mut count) = (DVec3::ZERO, DVec3::ZERO, 0.0);
+            for dz in -1..=1 {
+                for dy in -1..=1 {
+                    for dx in -1..=1 {
+                        for &j in grid.get(&(c + IVec3::new(dx, dy, dz))).into_iter().flatten() {
+                            let q = &points[j as usize];
+                            if q.normal.dot(p.normal) >= 0.0
+                                && q.position.distance_squared(p.position) <= radius_squared
+                            {
+                                sum += q.position;
+                                normal += q.normal;
+                                count += 1.0;
+                            }
+                        }
+                    }
+                }
+            }
+            SurfacePoint { position: sum / count, normal: normal.normalize_or(p.normal), colour: p.colour }
         })
         .collect()
 }

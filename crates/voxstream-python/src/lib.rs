@@ -2,10 +2,12 @@
 //!
 //! A thin layer over the library facade ([`voxstream_api`]): [`volume::PyVolume`] opens any source the CLI opens
 //! and renders it into numpy arrays that own Rust's pixel buffer (no copy), with the GIL released and Ctrl-C
-//! honoured; [`import::import_volume`] writes a store from a file or a numpy array. The Python package
-//! (`python/voxstream/`) wraps it with cameras, transfer functions, sessions and Jupyter display.
+//! honoured; [`import::import_volume`] writes a store from a file or a numpy array; [`fusion::fuse`] fuses an
+//! RGB-D sequence into a store. The Python package (`python/voxstream/`) wraps it with cameras, transfer functions,
+//! sessions and Jupyter display.
 
 mod errors;
+mod fusion;
 mod import;
 mod volume;
 
@@ -18,5 +20,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<volume::PyVolume>()?;
     m.add_function(wrap_pyfunction!(import::import_volume, m)?)?;
     m.add_function(wrap_pyfunction!(volume::scene_names, m)?)?;
+    m.add_function(wrap_pyfunction!(fusion::fuse, m)?)?;
+    m.add_function(wrap_pyfunction!(fusion::synthesize_rgbd, m)?)?;
     Ok(())
 }

@@ -47,6 +47,10 @@ pub struct FuseArgs {
     /// Summed frame weight that makes a voxel confident (at most --window).
     #[arg(long, default_value_t = 3.0)]
     pub confidence: f32,
+    /// The band around each depth sample within which voxels are updated (the truncation of eq. 8.2), in voxels:
+    /// at least this many, more where the sensor's noise is larger (3σ).
+    #[arg(long, default_value_t = 3.0, value_name = "VOXELS")]
+    pub truncation: f32,
     /// Fuse only the first N frames.
     #[arg(long, value_name = "N")]
     pub frames: Option<usize>,
@@ -56,9 +60,14 @@ pub struct FuseArgs {
     /// Memory for the bricks, MiB: beyond it, chunks far from the camera are streamed to disk next to --out.
     #[arg(long, default_value_t = 1024)]
     pub memory_mb: u64,
-    /// Also write the surface as points (binary PLY with normals and colours).
+    /// Also write the surface as points (binary PLY with normals and colours): the centres of the faces between
+    /// voxels behind and in front of it, smoothed (see --raw-points).
     #[arg(long, value_name = "PLY")]
     pub points: Option<PathBuf>,
+    /// With --points: write the voxel faces' centres as they are (stairs on slanted surfaces), not moved to the
+    /// average of their neighbours within 1.5 voxels.
+    #[arg(long)]
+    pub raw_points: bool,
     /// Also write the poses used (TUM trajectory format).
     #[arg(long, value_name = "FILE")]
     pub trajectory: Option<PathBuf>,
@@ -140,6 +149,7 @@ pub fn run_fuse(args: &FuseArgs) -> Result<()> {
     let mut settings = FusionSettings::default();
     settings.integration.voxel = args.voxel;
     settings.integration.confidence_weight = args.confidence;
+    settings.integration.min_band_voxels = args.truncation;
     settings.window = args.window;
     settings.sub_cache = args.sub_cache;
     settings.memory_budget = usize::try_from(args.memory_mb.saturating_mul(1 << 20)).unwrap_or(usize::MAX);
@@ -170,12 +180,14 @@ pub fn run_fuse(args: &FuseArgs) -> Result<()> {
         out: args.out.clone(),
         overwrite: args.overwrite,
         points: args.points.clone(),
+        raw_points: args.raw_points,
         trajectory: args.trajectory.clone(),
     };
     let progress = bar(args.quiet, 0, format!("fusing {}", args.dataset.display()));
     let report = fuse_dataset(&args.dataset, &options, &mut |done, total| {
         progress.set_length(total as u64);
         progress.set_position(done as u64);
+        std::ops::ControlFlow::Continue(())
     })?;
     progress.finish_and_clear();
     let s = &report.stats;

@@ -173,7 +173,11 @@ impl TumDataset {
     /// [`TumDataset::with_intrinsics`] says otherwise.
     pub fn open(dir: &Path) -> Result<TumDataset, FusionError> {
         if !dir.is_dir() {
-            return Err(file_error(dir, "not a folder: give the folder of a TUM RGB-D sequence (holding depth.txt)"));
+            let problem = if dir.exists() { "not a folder" } else { "does not exist" };
+            return Err(file_error(
+                dir,
+                format!("{problem}: give the folder of a TUM RGB-D sequence (holding depth.txt)"),
+            ));
         }
         let depth = read_list(dir, "depth.txt")?;
         let colour = read_list(dir, "rgb.txt")?;

@@ -11,13 +11,15 @@ full resolution within a memory budget: only the bricks the rays need are read, 
 (256, 256, 4)
 
 ``Session`` renders progressive frames for interactive loops, ``import_volume`` writes a store from a file or a
-numpy array, ``Camera`` and ``TransferFunction`` describe the view.
+numpy array, ``fuse`` fuses an RGB-D sequence into a store, ``Camera`` and ``TransferFunction`` describe the view.
 """
 
 from ._camera import Camera
 from ._transfer import TransferFunction
 from ._volume import Session, Volume, open, scenes
 from ._import import import_volume
+from ._fusion import fuse, synthesize_rgbd
 from ._native import __version__
 
-__all__ = ["Camera", "Session", "TransferFunction", "Volume", "import_volume", "open", "scenes", "__version__"]
+__all__ = ["Camera", "Session", "TransferFunction", "Volume", "fuse", "import_volume", "open", "scenes",
+           "synthesize_rgbd", "__version__"]
