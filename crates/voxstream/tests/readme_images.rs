@@ -1,7 +1,7 @@
 //! The README's pictures are what the build renders: every `voxstream … --out docs/images/NAME.png` command in
-//! README.md is run (after the `voxstream import` commands it depends on), and its image is compared with the
-//! committed one. `scripts/make-readme-images.sh` regenerates them (this test with
-//! `VOXSTREAM_UPDATE_README_IMAGES=1`).
+//! README.md is run (after the `voxstream import`, `synth-rgbd` and `fuse` commands writing to `/tmp/` it depends
+//! on), and its image is compared with the committed one. `scripts/make-readme-images.sh` regenerates them (this
+//! test with `VOXSTREAM_UPDATE_README_IMAGES=1`).
 //!
 //! The commands that read `data/real/` need `scripts/fetch-real-data.sh`; with `VOXSTREAM_SKIP_REAL_DATA=1` and no
 //! data they are skipped (and said to be).
@@ -47,7 +47,11 @@ fn readme_commands(readme: &str) -> Vec<String> {
     commands
         .into_iter()
         .map(|c| c.trim().trim_start_matches("./target/release/").to_string())
-        .filter(|c| c.starts_with("voxstream import ") || c.starts_with("voxstream render "))
+        .filter(|c| {
+            ["voxstream import ", "voxstream render ", "voxstream synth-rgbd ", "voxstream fuse "]
+                .iter()
+                .any(|start| c.starts_with(start))
+        })
         .collect()
 }
 
@@ -85,7 +89,11 @@ fn readme_pictures_match_what_the_build_renders() {
     let mut failures = Vec::new();
     for command in &commands {
         let is_picture = command.starts_with("voxstream render ") && command.contains("--out docs/images/");
-        let is_store_import = command.starts_with("voxstream import ") && command.contains("--out /tmp/");
+        // Imports, and the synthetic RGB-D sequence and fused store a picture of depth fusion is rendered from.
+        let is_store_import = ["voxstream import ", "voxstream synth-rgbd ", "voxstream fuse "]
+            .iter()
+            .any(|start| command.starts_with(start))
+            && command.contains("--out /tmp/");
         if !is_picture && !is_store_import {
             continue;
         }
