@@ -12,7 +12,7 @@ use voxstream_fusion::caster::{self, Surface};
 use voxstream_fusion::export::FusedVolume;
 use voxstream_fusion::rgbd::TumDataset;
 use voxstream_fusion::surface::{smooth_points, surface_points, write_points_ply};
-use voxstream_fusion::tracking::{ate_rmse, track, ModelView, TrackingSettings};
+use voxstream_fusion::tracking::{ate_rmse, prepare_frame, track, ModelView, TrackingSettings};
 use voxstream_fusion::{Fusion, FusionSettings, FusionStats, Intrinsics, Pose};
 use voxstream_store::{import_volume, ImportOptions, ImportReport};
 
@@ -90,7 +90,8 @@ fn track_frame(fusion: &Fusion, depth: &[f32], k: &Intrinsics, previous: Pose) -
     let view = caster::render(fusion.map(), &previous, &half, Surface::Any, far);
     let smoothed = caster::smooth_depth(&view, fusion.settings().integration.voxel, 30);
     let model = ModelView::from_depth(&smoothed, half, previous);
-    track(depth, k, &model, previous, &TrackingSettings::default()).ok().map(|r| r.pose)
+    let frame = prepare_frame(depth, k);
+    track(&frame, k, &model, previous, &TrackingSettings::default()).ok().map(|r| r.pose)
 }
 
 /// Fuses the sequence in `dataset`; `progress(done, total)` is called after every frame, and stops the fusion

@@ -105,6 +105,10 @@ pub struct SynthArgs {
     /// The camera's height above the floor, metres.
     #[arg(long, default_value_t = 0.5)]
     pub height: f64,
+    /// Walls of this height (metres) around the floor: a room, which gives tracking more than a floor to hold
+    /// on to (0: none).
+    #[arg(long, default_value_t = 0.0)]
+    pub walls: f64,
     /// The angle the orbit sweeps, degrees.
     #[arg(long, default_value_t = 360.0)]
     pub sweep: f64,
@@ -261,6 +265,7 @@ pub fn run_synth(args: &SynthArgs) -> Result<()> {
         radius: args.radius,
         height: args.height,
         sweep_degrees: args.sweep,
+        walls: args.walls,
         up_axis,
         seed: args.seed,
         world: if args.level { voxstream_fusion::Pose::IDENTITY } else { SyntheticSettings::tilted_world() },

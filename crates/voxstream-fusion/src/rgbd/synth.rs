@@ -35,6 +35,8 @@ pub struct SyntheticSettings {
     pub object_size: f64,
     /// The side of the floor square under it, metres (3); at least `object_size`.
     pub floor_size: f64,
+    /// Height of four walls around the floor (a room, as indoor scans see), metres; 0 (the default): no walls.
+    pub walls: f64,
     /// The orbit's radius around the object's vertical axis, metres (1.2); more than `object_size / 2`.
     pub radius: f64,
     /// The camera's height above the floor, metres (0.5).
@@ -66,6 +68,7 @@ impl Default for SyntheticSettings {
             frames: 300,
             object_size: 0.5,
             floor_size: 3.0,
+            walls: 0.0,
             radius: 1.2,
             height: 0.5,
             bob: 0.05,
@@ -127,6 +130,9 @@ impl SyntheticSettings {
             if !(value.is_finite() && value > 0.0) {
                 return Err(setting_error(name, value, "a finite value > 0"));
             }
+        }
+        if !(self.walls.is_finite() && (0.0..=100.0).contains(&self.walls)) {
+            return Err(setting_error("walls", self.walls, "a height from 0 to 100 metres"));
         }
         if self.floor_size < self.object_size {
             return Err(setting_error("floor_size", self.floor_size, "at least object_size"));
@@ -214,6 +220,16 @@ impl SyntheticSequence {
             DVec3::new(-half, half, 0.0),
         ]);
         triangles.extend([[first, first + 1, first + 2], [first, first + 2, first + 3]]);
+        if settings.walls > 0.0 {
+            // Four walls on the floor's edges, each a quad from the floor corner i to corner i + 1, up to `walls`.
+            for i in 0..4u32 {
+                let (a, b) = (first + i, first + (i + 1) % 4);
+                let top = positions.len() as u32;
+                positions.push(positions[a as usize] + DVec3::Z * settings.walls);
+                positions.push(positions[b as usize] + DVec3::Z * settings.walls);
+                triangles.extend([[a, b, top + 1], [a, top + 1, top]]);
+            }
+        }
         let poses: Vec<Pose> =
             (0..settings.frames).map(|i| settings.world * orbit_pose(&settings, centre, i)).collect();
         for p in &mut positions {
@@ -270,7 +286,7 @@ impl SyntheticSequence {
     }
 
     /// The true scene in world coordinates (metres, z up): vertex positions and triangles, the object's first and
-    /// the floor's two last.
+    /// the floor's (and walls') last.
     pub fn scene_triangles(&self) -> (&[DVec3], &[[u32; 3]]) {
         (&self.positions, &self.triangles)
     }
