@@ -55,7 +55,7 @@ pub struct FuseArgs {
     #[arg(long, value_name = "N")]
     pub frames: Option<usize>,
     /// Intrinsics instead of the benchmark's defaults (525,525,319.5,239.5 at 640x480): fx,fy,cx,cy.
-    #[arg(long, value_delimiter = ',', num_args = 4, value_name = "FX,FY,CX,CY")]
+    #[arg(long, value_delimiter = ',', value_name = "FX,FY,CX,CY")]
     pub intrinsics: Option<Vec<f64>>,
     /// Memory for the bricks, MiB: beyond it, chunks far from the camera are streamed to disk next to --out.
     #[arg(long, default_value_t = 1024)]
@@ -164,7 +164,9 @@ pub fn run_fuse(args: &FuseArgs) -> Result<()> {
     let intrinsics = match &args.intrinsics {
         None => None,
         Some(v) => {
-            let [fx, fy, cx, cy] = [v[0], v[1], v[2], v[3]];
+            let &[fx, fy, cx, cy] = v.as_slice() else {
+                bail!("--intrinsics: give four numbers fx,fy,cx,cy (e.g. 525,525,319.5,239.5), not {}", v.len());
+            };
             if ![fx, fy, cx, cy].iter().all(|x| x.is_finite()) || fx <= 0.0 || fy <= 0.0 {
                 bail!(
                     "--intrinsics {fx},{fy},{cx},{cy}: give finite focal lengths above 0 and a finite principal point"
