@@ -202,10 +202,11 @@ fn a_synthetic_orbit_fuses_into_a_store_that_info_and_render_open() {
         &dir,
     );
     assert!(render.status.success(), "{}", stderr(&render));
-    // The bunny shows (measured: 9 of 19200 pixels; the thin confident shell rarely fills half of the store's
-    // 3×3×3 box filter, so little of the scene reaches 128).
+    // The bunny and the floor show (measured: 9.8% of the pixels from the default camera, which frames the whole
+    // 2.4 m store): the store holds the confident bits thickened into the unsure voxels behind them, so a floor one
+    // voxel thick reaches 128 too (with a 3×3×3 box filter instead, 9 pixels of 19200 did).
     let coverage = covered(&dir.join("scene.png"));
-    assert!(coverage > 0.0, "{coverage}");
+    assert!(coverage > 0.05, "{coverage}");
 }
 
 #[test]
@@ -251,9 +252,10 @@ fn tracked_poses_lose_no_frame_and_stay_near_the_ground_truth() {
     assert_eq!(s["frames_lost"], 0);
     assert!(s["track_seconds"].as_f64().unwrap() > 0.0);
     let ate = s["ate_rmse"].as_f64().expect("an ATE with ground truth");
-    // Measured 16 to 24 mm (tracking runs in parallel and varies from run to run; the error is drift along the
-    // orbit). A tracker that stood still would be off by about 0.18 m over the 0.63 m the camera travels.
-    assert!(ate > 0.0 && ate < 0.035, "ATE RMSE {ate} m");
+    // Measured 5 to 7 mm with the frames bilateral-filtered before tracking (16 to 24 mm without: the noisy
+    // normals held ICP near its start). A tracker that stood still would be off by about 0.18 m over the 0.63 m the
+    // camera travels.
+    assert!(ate > 0.0 && ate < 0.02, "ATE RMSE {ate} m");
     let trajectory = std::fs::read_to_string(dir.join("poses.txt")).unwrap();
     let lines: Vec<&str> = trajectory.lines().collect();
     assert_eq!(lines.len(), 25, "a header and a line a frame: {trajectory}");
@@ -300,7 +302,7 @@ fn bad_input_is_refused_in_one_line_and_nothing_is_written() {
         assert!(!dir.join("new.fusion-chunks").exists(), "{args:?} left chunks");
         assert!(!dir.join("p.ply").exists() && !dir.join("s.json").exists(), "{args:?} wrote --points or --stats");
     };
-    fuse_refused(&["fuse", "missing", "--out", "new"], "missing: not a folder");
+    fuse_refused(&["fuse", "missing", "--out", "new"], "missing: does not exist");
     fuse_refused(
         &["fuse", "no-truth", "--out", "new", "--points", "p.ply"],
         "no groundtruth.txt; fuse with --poses track",
