@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Depth-camera fusion against Open3D (issue 49, BENCHMARKS.md "Depth fusion"): synthetic Kinect-like sequences of
-# the two real meshes (the CGAL bunny and the Stanford dragon) fused by `voxstream fuse` and by Open3D's tensor TSDF
+# the two real meshes (the CGAL bunny and the Stanford dragon, on a floor and in a room) fused by `voxstream fuse` and by Open3D's tensor TSDF
 # (VoxelBlockGrid) on the same frames and voxel size, both with ground-truth poses and with tracking; surfaces
 # measured against the true scene by surface_error.py. Prints a markdown table; everything else lands in $WORK.
 #
@@ -16,11 +16,13 @@ VOXSTREAM=${VOXSTREAM:-target/release/voxstream}
 PY=${O3D_PYTHON:-bench/fusion/venv/bin/python}
 WORK=${WORK:-/tmp/voxstream-fusion-bench}
 mkdir -p "$WORK"
-for mesh in bunny:data/real/bunny00.off dragon:data/real/dragon_vrip.ply.gz; do
-    name=${mesh%%:*}; file=${mesh#*:}
+# Each mesh on a bare floor, and in a room (walls 1.5 m high around the 3 m floor), which gives tracking more to hold.
+for case in bunny:data/real/bunny00.off:0 dragon:data/real/dragon_vrip.ply.gz:0 \
+            bunny-room:data/real/bunny00.off:1.5 dragon-room:data/real/dragon_vrip.ply.gz:1.5; do
+    name=${case%%:*}; rest=${case#*:}; file=${rest%%:*}; walls=${rest#*:}
     seq="$WORK/$name"
     echo "== $name: $FRAMES frames" >&2
-    "$VOXSTREAM" synth-rgbd "$file" --out "$seq" --frames "$FRAMES" --overwrite --quiet
+    "$VOXSTREAM" synth-rgbd "$file" --out "$seq" --frames "$FRAMES" --walls "$walls" --overwrite --quiet
     "$VOXSTREAM" fuse "$seq" --voxel "$VOXEL" --points "$WORK/$name-vx.ply" --stats "$WORK/$name-vx.json" --quiet
     "$VOXSTREAM" fuse "$seq" --voxel "$VOXEL" --poses track --points "$WORK/$name-vx-track.ply" \
         --trajectory "$WORK/$name-vx-track.txt" --stats "$WORK/$name-vx-track.json" --quiet

@@ -22,7 +22,7 @@ def main(work):
     print("| sequence, fusion | accuracy mean mm | p95 mm | visible surface within 2 voxels % | frames/s | "
           "scene MiB | scene + frame cache MiB | peak RSS MiB | ATE RMSE mm (tracked) |")
     print("|---|---|---|---|---|---|---|---|---|")
-    for name in ("bunny", "dragon"):
+    for name in ("bunny", "dragon", "bunny-room", "dragon-room"):
         if not (work / f"{name}-vx.json").exists():
             continue
         vx = load(work / f"{name}-vx.json")
