@@ -130,11 +130,14 @@ fn sign(x: f64) -> i32 {
     }
 }
 
+/// One image row: depths and colours.
+type Row = (Vec<f32>, Vec<Option<[u8; 3]>>);
+
 /// Renders the surface from `pose` as seen by a camera of `intrinsics`, up to depth `max_depth`.
 pub fn render(map: &BrickMap, pose: &Pose, intrinsics: &Intrinsics, surface: Surface, max_depth: f64) -> SurfaceView {
     let (w, h) = (intrinsics.width as usize, intrinsics.height as usize);
     let origin = pose.translation;
-    let rows: Vec<(Vec<f32>, Vec<Option<[u8; 3]>>)> = (0..h)
+    let rows: Vec<Row> = (0..h)
         .into_par_iter()
         .map(|v| {
             let mut depth = vec![0.0f32; w];

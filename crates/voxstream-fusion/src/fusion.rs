@@ -68,7 +68,7 @@ impl FusionSettings {
         if !(voxel.is_finite() && (1e-4..=1.0).contains(&voxel)) {
             return Err(FusionError::Settings(format!("--voxel {voxel}: give an edge between 0.0001 and 1 metre")));
         }
-        if !(2..=240).contains(&self.window) || self.window % 2 != 0 {
+        if !(2..=240).contains(&self.window) || !self.window.is_multiple_of(2) {
             return Err(FusionError::Settings(format!(
                 "--window {}: give an even number of frames from 2 to 240",
                 self.window

@@ -163,11 +163,10 @@ fn the_ray_cast_surface_lies_on_the_true_one() {
     let truth = frame(&p, 0.0, 0);
     let mut raw_errors = Vec::new();
     let mut smooth_errors = Vec::new();
-    for i in 0..k.pixel_count() {
-        let t = truth.depth[i];
-        if t > 0.0 && view.depth[i] > 0.0 {
-            raw_errors.push((view.depth[i] - t).abs());
-            smooth_errors.push((smoothed[i] - t).abs());
+    for ((&t, &raw), &smooth) in truth.depth.iter().zip(&view.depth).zip(&smoothed) {
+        if t > 0.0 && raw > 0.0 {
+            raw_errors.push((raw - t).abs());
+            smooth_errors.push((smooth - t).abs());
         }
     }
     let hit = raw_errors.len() as f64 / truth.depth.iter().filter(|&&d| d > 0.0).count() as f64;
