@@ -43,6 +43,9 @@ pub struct FuseOptions {
     pub raw_points: bool,
     /// The estimated trajectory (TUM format) to write.
     pub trajectory: Option<PathBuf>,
+    /// Render the fused surface from the last frame's pose (confident voxels, ROF-smoothed, shaded) into
+    /// [`FuseReport::image`].
+    pub image: bool,
 }
 
 /// What `fuse` did.
@@ -66,6 +69,8 @@ pub struct FuseReport {
     /// ATE RMSE (metres) of the tracked poses against ground truth, where both exist.
     pub ate_rmse: Option<f64>,
     pub store: Option<ImportReport>,
+    /// RGB8 pixels, width and height of the view asked for by [`FuseOptions::image`].
+    pub image: Option<(Vec<u8>, u32, u32)>,
 }
 
 /// The scratch folder chunks stream to while fusing into `out`.
@@ -187,6 +192,16 @@ fn fuse_into(
     let ate = (options.poses == PoseSource::Track && estimated.len() >= 2).then(|| ate_rmse(&estimated, &truth));
     let (chunks_written, chunks_read) = (fusion.map().chunks_written, fusion.map().chunks_read);
     fusion.map_mut().read_all_back()?;
+    let image = match (options.image, fused.last()) {
+        (true, Some((_, pose, _))) => {
+            let k = data.intrinsics();
+            let far = f64::from(fusion.settings().depth_range[1]);
+            let view = caster::render(fusion.map(), pose, &k, Surface::Confident, far);
+            let smoothed = caster::smooth_depth(&view, fusion.settings().integration.voxel, 75);
+            Some((caster::shade(&view, &smoothed), k.width, k.height))
+        }
+        _ => None,
+    };
     let surface = match &options.points {
         Some(path) => {
             let mut points = surface_points(fusion.map());
@@ -222,6 +237,7 @@ fn fuse_into(
         surface_points: surface,
         ate_rmse: ate,
         store,
+        image,
     })
 }
 

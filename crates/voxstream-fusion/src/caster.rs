@@ -178,6 +178,49 @@ pub fn smooth_depth(view: &SurfaceView, voxel: f64, iterations: u32) -> Vec<f32>
     smoothed.depth.into_iter().map(|d| if d.is_finite() { d } else { 0.0 }).collect()
 }
 
+/// Shades a view for display (§8.4.4: deferred shading with normals from finite differences of the smoothed
+/// depth): each pixel's colour is its voxel's (grey where it has none) lit by a light at the camera, the
+/// background black. Returns RGB8 pixels, row by row.
+pub fn shade(view: &SurfaceView, smoothed: &[f32]) -> Vec<u8> {
+    let k = &view.intrinsics;
+    let (w, h) = (k.width as i64, k.height as i64);
+    let point = |x: i64, y: i64| -> Option<DVec3> {
+        if x < 0 || y < 0 || x >= w || y >= h {
+            return None;
+        }
+        let d = smoothed[(y * w + x) as usize];
+        (d > 0.0).then(|| k.unproject(x as f64, y as f64, f64::from(d)))
+    };
+    let mut pixels = vec![0u8; (w * h * 3) as usize];
+    for y in 0..h {
+        for x in 0..w {
+            let Some(p) = point(x, y) else { continue };
+            // Central differences where both neighbours are on the same surface, one-sided otherwise.
+            let near = |a: Option<DVec3>| a.filter(|q| (q.z - p.z).abs() < 0.05 * p.z);
+            let dx = match (near(point(x + 1, y)), near(point(x - 1, y))) {
+                (Some(a), Some(b)) => a - b,
+                (Some(a), None) => a - p,
+                (None, Some(b)) => p - b,
+                (None, None) => continue,
+            };
+            let dy = match (near(point(x, y + 1)), near(point(x, y - 1))) {
+                (Some(a), Some(b)) => a - b,
+                (Some(a), None) => a - p,
+                (None, Some(b)) => p - b,
+                (None, None) => continue,
+            };
+            let normal = dy.cross(dx).normalize_or_zero();
+            let lambert = normal.dot(-p.normalize()).abs();
+            let albedo = view.colour[(y * w + x) as usize].unwrap_or([190, 190, 190]);
+            let i = ((y * w + x) * 3) as usize;
+            for c in 0..3 {
+                pixels[i + c] = (f64::from(albedo[c]) * (0.15 + 0.85 * lambert)).round().clamp(0.0, 255.0) as u8;
+            }
+        }
+    }
+    pixels
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -227,6 +270,23 @@ mod tests {
         // From behind the camera's far limit, nothing.
         let view = render(&map, &Pose::from_translation(DVec3::new(0.0, 0.0, -5.0)), &k, Surface::Confident, 1.0);
         assert!(view.depth.iter().all(|&d| d == 0.0));
+        assert!(shade(&view, &view.depth).iter().all(|&c| c == 0), "nothing hit: all background");
+    }
+
+    #[test]
+    fn a_wall_seen_head_on_is_lit_fully_and_tilted_less() {
+        let map = wall_map(30);
+        let k = Intrinsics { width: 32, height: 24, fx: 80.0, fy: 80.0, cx: 15.5, cy: 11.5 };
+        let head_on = render(&map, &Pose::from_translation(DVec3::new(0.0, 0.0, -0.5)), &k, Surface::Confident, 5.0);
+        let lit = shade(&head_on, &head_on.depth);
+        // The centre pixel: grey (no colours stored) at full light.
+        let centre = ((12 * 32 + 16) * 3) as usize;
+        assert!(lit[centre] >= 185, "{}", lit[centre]);
+        let pose = Pose::from_rotation_translation(glam::DQuat::from_rotation_y(0.1), DVec3::new(0.0, 0.0, -0.5));
+        let tilted = render(&map, &pose, &k, Surface::Confident, 5.0);
+        let smoothed = smooth_depth(&tilted, 0.01, 75);
+        let dim = shade(&tilted, &smoothed);
+        assert!(dim[centre] < lit[centre] && dim[centre] > 150, "{} vs {}", dim[centre], lit[centre]);
     }
 
     #[test]

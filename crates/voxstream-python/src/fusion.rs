@@ -64,6 +64,7 @@ pub fn fuse<'py>(
         points,
         raw_points: false,
         trajectory,
+        image: false,
     };
     let mut raised: Option<PyErr> = None;
     let report = py.detach(|| {

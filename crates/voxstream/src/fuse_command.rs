@@ -71,6 +71,10 @@ pub struct FuseArgs {
     /// Also write the poses used (TUM trajectory format).
     #[arg(long, value_name = "FILE")]
     pub trajectory: Option<PathBuf>,
+    /// Also render the fused surface as the thesis shows it, from the last frame's pose at the frames' size:
+    /// rays through the confident bits, the depth smoothed in screen space (ROF), shaded with the voxels' colours.
+    #[arg(long, value_name = "PNG")]
+    pub image: Option<PathBuf>,
     /// Write what was done as JSON (frames, windows, memory, times, ATE).
     #[arg(long, value_name = "FILE")]
     pub stats: Option<PathBuf>,
@@ -147,8 +151,26 @@ fn bar(quiet: bool, total: usize, message: String) -> ProgressBar {
 
 /// Runs `voxstream fuse`.
 pub fn run_fuse(args: &FuseArgs) -> Result<()> {
-    if args.out.is_none() && args.points.is_none() && args.stats.is_none() && args.trajectory.is_none() {
-        bail!("give --out SCENE (and/or --points, --trajectory, --stats): fusing without saving anything does nothing");
+    if args.out.is_none()
+        && args.points.is_none()
+        && args.stats.is_none()
+        && args.trajectory.is_none()
+        && args.image.is_none()
+    {
+        bail!(
+            "give --out SCENE (and/or --points, --trajectory, --image, --stats): fusing without saving anything does \
+             nothing"
+        );
+    }
+    for (path, flag) in [
+        (&args.image, "--image"),
+        (&args.points, "--points"),
+        (&args.stats, "--stats"),
+        (&args.trajectory, "--trajectory"),
+    ] {
+        if let Some(path) = path {
+            crate::output_file::check_output(path, flag)?;
+        }
     }
     let mut settings = FusionSettings::default();
     settings.integration.voxel = args.voxel;
@@ -188,6 +210,7 @@ pub fn run_fuse(args: &FuseArgs) -> Result<()> {
         points: args.points.clone(),
         raw_points: args.raw_points,
         trajectory: args.trajectory.clone(),
+        image: args.image.is_some(),
     };
     let progress = bar(args.quiet, 0, format!("fusing {}", args.dataset.display()));
     let report = fuse_dataset(&args.dataset, &options, &mut |done, total| {
@@ -196,6 +219,9 @@ pub fn run_fuse(args: &FuseArgs) -> Result<()> {
         std::ops::ControlFlow::Continue(())
     })?;
     progress.finish_and_clear();
+    if let (Some(path), Some((pixels, width, height))) = (&args.image, &report.image) {
+        crate::png_output::write_rgb8_png(pixels, *width, *height, path)?;
+    }
     let s = &report.stats;
     let fps = s.frames as f64 / report.fuse_seconds.max(1e-9);
     if !args.quiet {

@@ -167,10 +167,24 @@ fn a_synthetic_orbit_fuses_into_a_store_that_info_and_render_open() {
     let Some(sequence) = bunny_sequence() else { return };
     let dir = scratch("fuse", "store");
     let output = voxstream(
-        &["fuse", sequence.to_str().unwrap(), "--out", "scene", "--points", "points.ply", "--stats", "stats.json"],
+        &[
+            "fuse",
+            sequence.to_str().unwrap(),
+            "--out",
+            "scene",
+            "--points",
+            "points.ply",
+            "--stats",
+            "stats.json",
+            "--image",
+            "bits.png",
+        ],
         &dir,
     );
     assert!(output.status.success(), "{}", stderr(&output));
+    // The surface drawn from the bits at the last frame's pose: the bunny and the floor before the camera.
+    let drawn = covered(&dir.join("bits.png"));
+    assert!(drawn > 0.3, "{drawn}");
     let err = stderr(&output);
     assert!(err.contains("fused 36 frames (0 lost)") && err.contains("saved scene"), "{err}");
     let s = stats(&dir.join("stats.json"));
@@ -314,7 +328,7 @@ fn bad_input_is_refused_in_one_line_and_nothing_is_written() {
         "--intrinsics 0,525,319.5,239.5: give finite focal lengths above 0",
     );
     fuse_refused(&["fuse", seq, "--out", "new", "--intrinsics", "525,525,319.5"], "--intrinsics: give four numbers");
-    fuse_refused(&["fuse", seq], "give --out SCENE (and/or --points, --trajectory, --stats)");
+    fuse_refused(&["fuse", seq], "give --out SCENE (and/or --points, --trajectory, --image, --stats)");
     fuse_refused(&["fuse", seq, "--out", "new", "--stats", "s.json", "--memory-mb", "8"], "--memory-mb 8");
 
     // An existing store is left as it was without --overwrite.
