@@ -157,7 +157,7 @@ impl Fusion {
         let index = self.stats.frames;
         let [near, far] = self.settings.depth_range;
         let depth: Vec<f32> = frame.depth.iter().map(|&d| if d >= near && d <= far { d } else { 0.0 }).collect();
-        let mut cached = CachedFrame::new(index, frame.intrinsics, depth, frame.colour.clone(), pose);
+        let mut cached = CachedFrame::new(index, frame.intrinsics, &depth, frame.colour.clone(), pose);
         let keys = self.allocation_keys(&cached);
         self.map.allocate(&keys)?;
         cached.bricks = keys.into_iter().collect();
@@ -247,9 +247,10 @@ impl Fusion {
             .fold(FxHashSet::default, |mut set, &v| {
                 for u in (0..k.width as usize).step_by(stride) {
                     let d = frame.depth[v * k.width as usize + u];
-                    if d <= 0.0 {
+                    if d == 0 {
                         continue;
                     }
+                    let d = f32::from(d) * crate::integrate::DEPTH_UNIT;
                     let band = f64::from(settings.band(d));
                     let z0 = (f64::from(d) - band).max(1e-3);
                     let z1 = f64::from(d) + band;

@@ -48,13 +48,20 @@ impl IntegrationSettings {
     }
 }
 
-/// A frame in the cache: its images, pose, and the bricks it touched.
+/// The unit of cached depths, metres: the TUM benchmark's 1/5000 m.
+pub const DEPTH_UNIT: f32 = 1.0 / 5000.0;
+/// The farthest depth a cached frame keeps, metres (65535 units).
+pub const MAX_DEPTH: f32 = 65535.0 * DEPTH_UNIT;
+
+/// A frame in the cache: its images, pose, and the bricks it touched. The ring holds 2n of them, so they are
+/// kept small: 2 bytes of depth and 3 of colour a pixel.
 #[derive(Clone, Debug)]
 pub struct CachedFrame {
     /// Position in the sequence.
     pub index: usize,
     pub intrinsics: Intrinsics,
-    pub depth: Vec<f32>,
+    /// Depth in units of [`DEPTH_UNIT`] (the TUM benchmark's 1/5000 m, so its PNGs are kept exactly); 0 = none.
+    pub depth: Vec<u16>,
     pub colour: Vec<[u8; 3]>,
     pub pose: Pose,
     /// World to camera, in f32 (voxel centres are projected millions of times per window).
@@ -65,7 +72,12 @@ pub struct CachedFrame {
 }
 
 impl CachedFrame {
-    pub fn new(index: usize, intrinsics: Intrinsics, depth: Vec<f32>, colour: Vec<[u8; 3]>, pose: Pose) -> Self {
+    /// A cached frame of `depth` in metres (0 = none; depths beyond [`MAX_DEPTH`] are dropped).
+    pub fn new(index: usize, intrinsics: Intrinsics, depth: &[f32], colour: Vec<[u8; 3]>, pose: Pose) -> Self {
+        let depth = depth
+            .iter()
+            .map(|&d| if d > 0.0 && d <= MAX_DEPTH { (d / DEPTH_UNIT).round() as u16 } else { 0 })
+            .collect();
         let inverse = pose.inverse();
         CachedFrame {
             index,
@@ -81,7 +93,7 @@ impl CachedFrame {
 
     /// Bytes of the images.
     pub fn bytes(&self) -> usize {
-        self.depth.len() * 4 + self.colour.len() * 3 + self.bricks.len() * 12
+        self.depth.len() * 2 + self.colour.len() * 3 + self.bricks.len() * 12
     }
 
     /// Whether any point of the sphere at world `centre` with `radius` may project into the image (a conservative
@@ -127,7 +139,7 @@ impl CachedFrame {
         }
         let i = v as usize * k.width as usize + u as usize;
         let d = self.depth[i];
-        (d > 0.0).then(|| (d, c.z, self.colour.get(i).copied().unwrap_or([0; 3])))
+        (d > 0).then(|| (f32::from(d) * DEPTH_UNIT, c.z, self.colour.get(i).copied().unwrap_or([0; 3])))
     }
 }
 
