@@ -73,10 +73,11 @@ pub struct FuseReport {
     pub image: Option<(Vec<u8>, u32, u32)>,
 }
 
-/// The scratch folder chunks stream to while fusing into `out`.
+/// The scratch folder chunks stream to while this process fuses into `out`: `OUT.fusion-chunks-PID`, unique to the
+/// process, so that nothing of anyone else's is ever reused or deleted.
 pub fn chunk_folder(out: &Path) -> PathBuf {
     let mut name = out.file_name().map(|n| n.to_os_string()).unwrap_or_default();
-    name.push(".fusion-chunks");
+    name.push(format!(".fusion-chunks-{}", std::process::id()));
     out.with_file_name(name)
 }
 
@@ -124,7 +125,13 @@ pub fn fuse_dataset(
     let mut settings = options.settings.clone();
     let scratch = options.out.as_ref().map(|out| chunk_folder(out));
     if let Some(dir) = &scratch {
-        let _ = std::fs::remove_dir_all(dir);
+        // Never someone else's: a folder of this name left by an earlier process of the same number is an error.
+        std::fs::create_dir(dir).with_context(|| {
+            format!(
+                "creating the scratch folder {} for streamed chunks (remove it if a crashed fuse left it)",
+                dir.display()
+            )
+        })?;
     }
     settings.spill_dir = scratch.clone();
     let result = fuse_into(&data, options, settings, progress);
@@ -191,6 +198,18 @@ fn fuse_into(
     let (estimated, truth): (Vec<Pose>, Vec<Pose>) = fused.iter().filter_map(|(_, p, t)| t.map(|t| (*p, t))).unzip();
     let ate = (options.poses == PoseSource::Track && estimated.len() >= 2).then(|| ate_rmse(&estimated, &truth));
     let (chunks_written, chunks_read) = (fusion.map().chunks_written, fusion.map().chunks_read);
+    // Saving reads every streamed chunk back: refuse before that if the bricks cannot fit this machine.
+    let all_bricks = fusion.map().resident_bytes() as u64 + fusion.map().spilled_bytes();
+    if let Some(machine) = voxstream_engine::machine_memory_bytes() {
+        if all_bricks > machine / 4 * 3 {
+            bail!(
+                "the fused scene holds {:.1} GiB of bricks, more than three quarters of this machine's {:.1} GiB: \
+                 saving it needs them all in memory; fuse with a coarser --voxel or fewer --frames",
+                all_bricks as f64 / f64::from(1u32 << 30),
+                machine as f64 / f64::from(1u32 << 30)
+            );
+        }
+    }
     fusion.map_mut().read_all_back()?;
     let image = match (options.image, fused.last()) {
         (true, Some((_, pose, _))) => {

@@ -110,6 +110,16 @@ impl BrickMap {
         self.spilled.len()
     }
 
+    /// Bytes of the chunk files on disk (about what their bricks take back in memory).
+    pub fn spilled_bytes(&self) -> u64 {
+        let Some(dir) = &self.spill_dir else { return 0 };
+        self.spilled
+            .iter()
+            .filter_map(|&chunk| std::fs::metadata(spill::chunk_path(dir, chunk)).ok())
+            .map(|m| m.len())
+            .sum()
+    }
+
     /// Resident bricks' keys and bricks.
     pub fn iter(&self) -> impl Iterator<Item = (&IVec3, &BinaryBrick)> {
         self.bricks.iter()
