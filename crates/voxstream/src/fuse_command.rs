@@ -54,8 +54,9 @@ pub struct FuseArgs {
     /// Fuse only the first N frames.
     #[arg(long, value_name = "N")]
     pub frames: Option<usize>,
-    /// Intrinsics instead of the benchmark's defaults (525,525,319.5,239.5 at 640x480): fx,fy,cx,cy.
-    #[arg(long, value_delimiter = ',', value_name = "FX,FY,CX,CY")]
+    /// Intrinsics instead of the benchmark's defaults (525,525,319.5,239.5 at 640x480): fx,fy,cx,cy, and the
+    /// image's width,height where it is not 640x480.
+    #[arg(long, value_delimiter = ',', value_name = "FX,FY,CX,CY[,W,H]")]
     pub intrinsics: Option<Vec<f64>>,
     /// Memory for the bricks, MiB: beyond it, chunks far from the camera are streamed to disk next to --out.
     #[arg(long, default_value_t = 1024)]
@@ -186,15 +187,33 @@ pub fn run_fuse(args: &FuseArgs) -> Result<()> {
     let intrinsics = match &args.intrinsics {
         None => None,
         Some(v) => {
-            let &[fx, fy, cx, cy] = v.as_slice() else {
-                bail!("--intrinsics: give four numbers fx,fy,cx,cy (e.g. 525,525,319.5,239.5), not {}", v.len());
+            let (fx, fy, cx, cy, size) = match *v.as_slice() {
+                [fx, fy, cx, cy] => (fx, fy, cx, cy, None),
+                [fx, fy, cx, cy, w, h] => (fx, fy, cx, cy, Some([w, h])),
+                _ => bail!(
+                    "--intrinsics: give four numbers fx,fy,cx,cy (e.g. 525,525,319.5,239.5), or six with the image's \
+                     width and height, not {}",
+                    v.len()
+                ),
             };
             if ![fx, fy, cx, cy].iter().all(|x| x.is_finite()) || fx <= 0.0 || fy <= 0.0 {
                 bail!(
                     "--intrinsics {fx},{fy},{cx},{cy}: give finite focal lengths above 0 and a finite principal point"
                 );
             }
-            Some(voxstream_fusion::Intrinsics { fx, fy, cx, cy, ..voxstream_fusion::Intrinsics::TUM_DEFAULT })
+            let [width, height] = match size {
+                None => [640, 480],
+                Some([w, h])
+                    if w.fract() == 0.0
+                        && h.fract() == 0.0
+                        && (1.0..=16384.0).contains(&w)
+                        && (1.0..=16384.0).contains(&h) =>
+                {
+                    [w as u32, h as u32]
+                }
+                Some([w, h]) => bail!("--intrinsics: image size {w}x{h}: give whole numbers of pixels, 1 to 16384"),
+            };
+            Some(voxstream_fusion::Intrinsics { fx, fy, cx, cy, width, height })
         }
     };
     let options = FuseOptions {

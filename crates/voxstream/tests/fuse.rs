@@ -334,6 +334,12 @@ fn bad_input_is_refused_in_one_line_and_nothing_is_written() {
         "--intrinsics 0,525,319.5,239.5: give finite focal lengths above 0",
     );
     fuse_refused(&["fuse", seq, "--out", "new", "--intrinsics", "525,525,319.5"], "--intrinsics: give four numbers");
+    // Six numbers name the image size; images of another size are refused from their header, naming the flag.
+    fuse_refused(
+        &["fuse", seq, "--out", "new", "--intrinsics", "262.5,262.5,159.5,119.5,320,240"],
+        "the image is 640×480 but the intrinsics are 320×240",
+    );
+    fuse_refused(&["fuse", seq, "--out", "new", "--intrinsics", "525,525,319.5,239.5,640.5,480"], "whole numbers");
     fuse_refused(&["fuse", seq], "give --out SCENE (and/or --points, --trajectory, --image, --stats)");
     fuse_refused(&["fuse", seq, "--out", "new", "--stats", "s.json", "--memory-mb", "8"], "--memory-mb 8");
 

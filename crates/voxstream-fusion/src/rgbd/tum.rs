@@ -310,8 +310,8 @@ fn open_png(path: &Path, intrinsics: &Intrinsics) -> Result<(PngHeader, Vec<u8>)
         return Err(file_error(
             path,
             format!(
-                "the image is {}×{} but the intrinsics are {}×{}: give the sequence's intrinsics (with_intrinsics) or \
-                 resize the images",
+                "the image is {}×{} but the intrinsics are {}×{}: give the sequence's intrinsics and image size \
+                 (`fuse --intrinsics FX,FY,CX,CY,WIDTH,HEIGHT`)",
                 header.width, header.height, intrinsics.width, intrinsics.height
             ),
         ));
