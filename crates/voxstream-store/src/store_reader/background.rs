@@ -16,8 +16,36 @@ pub(super) struct Background {
     pub(super) pool: std::sync::OnceLock<Option<rayon::ThreadPool>>,
     /// Bricks being fetched.
     pub(super) fetching: Mutex<std::collections::HashSet<(usize, [u64; 3])>>,
-    /// Bricks whose background fetch failed: produced in the foreground, which reports the failure.
+    /// Bricks whose background fetch failed: produced in the foreground, which reports the failure. An entry
+    /// leaves the set as soon as a read of its brick succeeds (the foreground read from the store, or a later
+    /// background fetch; see [`Background::forget_failure`]), so that a transient fault does not send the brick to
+    /// the foreground for the rest of the session once the cache lets it go again.
     pub(super) failed: Mutex<std::collections::HashSet<(usize, [u64; 3])>>,
+    /// Whether `failed` holds entries (changed only under its lock): while it is empty, reads and
+    /// [`StoreReader::region_ready`] take no lock for it.
+    pub(super) any_failed: std::sync::atomic::AtomicBool,
+}
+
+impl Background {
+    /// Remembers that the background fetch of `key` failed.
+    fn note_failure(&self, key: (usize, [u64; 3])) {
+        let mut failed = self.failed.lock().unwrap_or_else(|p| p.into_inner());
+        failed.insert(key);
+        self.any_failed.store(true, std::sync::atomic::Ordering::Release);
+    }
+
+    /// A read of `key` succeeded: it leaves `failed`, so that [`StoreReader::region_ready`] fetches it in the
+    /// background again once the cache lets it go. Takes no lock while `failed` is empty.
+    pub(super) fn forget_failure(&self, key: (usize, [u64; 3])) {
+        use std::sync::atomic::Ordering;
+        if !self.any_failed.load(Ordering::Acquire) {
+            return;
+        }
+        let mut failed = self.failed.lock().unwrap_or_else(|p| p.into_inner());
+        if failed.remove(&key) && failed.is_empty() {
+            self.any_failed.store(false, Ordering::Release);
+        }
+    }
 }
 
 impl StoreReader {
@@ -56,11 +84,14 @@ impl StoreReader {
         if missing.is_empty() {
             return true;
         }
-        let failed = self.background.failed.lock().unwrap_or_else(|p| p.into_inner());
-        if missing.iter().any(|&ijk| failed.contains(&(level, ijk))) {
-            return true;
+        // A brick whose background fetch failed (and that no read has got since) is produced in the foreground,
+        // which reports the failure if it persists.
+        if self.background.any_failed.load(Ordering::Acquire) {
+            let failed = self.background.failed.lock().unwrap_or_else(|p| p.into_inner());
+            if missing.iter().any(|&ijk| failed.contains(&(level, ijk))) {
+                return true;
+            }
         }
-        drop(failed);
         // A region is fetched whole or not yet: started in the rays' order, regions complete one after another,
         // rather than every region of the frame getting a few of its bricks, which the cache would let go before the
         // rest arrive.
@@ -72,7 +103,8 @@ impl StoreReader {
     /// Starts reading `bricks` on the remote store's fetch threads (each at most once at a time), so that no worker
     /// of the shared pool, which draws the frames, waits on the network; with `whole`, all of them or (when they
     /// would not fit under the bound of bricks in flight) none. Failures are remembered (see
-    /// [`StoreReader::region_ready`]). Returns `false` when no thread could be made (nothing started).
+    /// [`StoreReader::region_ready`]) until a read of the brick succeeds. Returns `false` when no thread could be
+    /// made (nothing started).
     fn fetch_in_background(self: &Arc<Self>, bricks: Vec<(usize, [u64; 3])>, whole: bool) -> bool {
         let threads = self.remote.as_ref().map_or(1, |r| r.concurrency()).max(1);
         let pool = self.background.pool.get_or_init(|| {
@@ -101,8 +133,9 @@ impl StoreReader {
             if fetching.insert(key) {
                 let reader = Arc::clone(self);
                 pool.spawn(move || {
-                    if reader.brick(key.0, key.1).is_err() {
-                        reader.background.failed.lock().unwrap_or_else(|p| p.into_inner()).insert(key);
+                    match reader.brick(key.0, key.1) {
+                        Ok(_) => reader.background.forget_failure(key),
+                        Err(_) => reader.background.note_failure(key),
                     }
                     reader.background.fetching.lock().unwrap_or_else(|p| p.into_inner()).remove(&key);
                 });
@@ -144,5 +177,97 @@ impl StoreReader {
             }
             reader.prefetching.store(false, Ordering::Release);
         });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+    use std::time::Duration;
+
+    use crate::import::{import_volume, ImportOptions};
+    use crate::store_reader::StoreReader;
+    use crate::volume::{DType, VolumeInfo, VolumeSource};
+
+    /// 16×16×8 u16 samples in 100..150 (no brick holds only 0): bricks of 8, two by two per shard.
+    struct Ramp {
+        info: VolumeInfo,
+        z: u64,
+    }
+
+    impl VolumeSource for Ramp {
+        fn info(&self) -> &VolumeInfo {
+            &self.info
+        }
+
+        fn read_slices(&mut self, count: usize, out: &mut Vec<f32>) -> Result<(), crate::StoreError> {
+            let [nx, ny, _] = self.info.dims;
+            for z in self.z..self.z + count as u64 {
+                for i in 0..nx * ny {
+                    out.push((100 + (i + z * 7) % 50) as f32);
+                }
+            }
+            self.z += count as u64;
+            Ok(())
+        }
+    }
+
+    /// Polls `done` every 10 ms for at most 30 s (a bound on a background read of one small brick, generous for
+    /// a loaded machine); whether it came true.
+    fn eventually(mut done: impl FnMut() -> bool) -> bool {
+        for _ in 0..3000 {
+            if done() {
+                return true;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        done()
+    }
+
+    #[test]
+    fn a_brick_read_after_a_failed_background_fetch_is_fetched_in_the_background_again() {
+        let dir = std::env::temp_dir().join(format!("voxstream-background-failed-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let store = dir.join("ramp.zarr");
+        let info = VolumeInfo { dims: [16, 16, 8], dtype: DType::U16, spacing: [1.0; 3], origin: [0.0; 3] };
+        let mut source = Ramp { info, z: 0 };
+        let options = ImportOptions { brick_size: 8, shard_bricks: 2, ..ImportOptions::default() };
+        import_volume(&mut source, &store, &options, &mut |_, _| {}).unwrap();
+        let reader = Arc::new(StoreReader::open(&store).unwrap());
+        // `set_nonblocking` turns on for remote stores only: a local one stands in for it here.
+        reader.background.on.store(true, std::sync::atomic::Ordering::Relaxed);
+
+        // Brick (1, 0, 0) of level 0 (not read yet, so cached nowhere) lies in the shard of bricks (0..2, 0..2, 0):
+        // without it the read fails (its min/max says it holds data).
+        let key = (0, [1, 0, 0]);
+        let (lower, size) = ([8, 0, 0], [8, 8, 8]);
+        let shard = store.join("0/c/0/0/0");
+        let bytes = std::fs::read(&shard).unwrap();
+        std::fs::remove_file(&shard).unwrap();
+
+        assert!(!reader.region_ready(0, lower, size), "a missing brick is fetched in the background first");
+        let background = &reader.background;
+        let finished = eventually(|| !background.fetching.lock().unwrap().contains(&key));
+        assert!(finished, "the background fetch did not finish");
+        assert!(background.failed.lock().unwrap().contains(&key), "the failed fetch is remembered");
+        assert!(reader.region_ready(0, lower, size), "a brick whose fetch failed is produced in the foreground");
+        assert!(reader.brick(key.0, key.1).is_err(), "the foreground read reports the failure");
+        assert!(background.failed.lock().unwrap().contains(&key), "a failed read leaves it in the set");
+
+        // The fault passes: a foreground read succeeds, and the brick leaves the set.
+        std::fs::write(&shard, &bytes).unwrap();
+        assert!(reader.brick(key.0, key.1).is_ok(), "the repaired brick reads");
+        assert!(!background.failed.lock().unwrap().contains(&key), "a successful read clears the failure");
+
+        // Once the cache lets the brick go, it is fetched in the background again, not in the foreground.
+        assert!(reader.brick_cache.lock().unwrap().pop(&key).is_some(), "the brick was cached");
+        assert!(!reader.region_ready(0, lower, size), "the brick is fetched in the background again");
+        let finished = eventually(|| reader.brick_cache.lock().unwrap().contains(&key));
+        assert!(finished, "the background fetch did not bring the brick");
+        assert!(reader.region_ready(0, lower, size), "the fetched brick is ready");
+        assert!(!background.failed.lock().unwrap().contains(&key));
+
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -114,7 +114,9 @@ impl StoreReader {
             && minmax[level][((ijk[2] * b[1] + ijk[1]) * b[0] + ijk[0]) as usize] == [0.0, 0.0]
     }
 
-    /// The samples of brick `ijk` of `level` (clipped to the level), x fastest, from the cache or the disk.
+    /// The samples of brick `ijk` of `level` (clipped to the level), x fastest, from the cache or the disk. A read
+    /// from the store that succeeds takes the brick out of the failed background fetches (see
+    /// `Background::failed`); a cache hit touches nothing but the cache.
     pub(super) fn brick(&self, level: usize, ijk: [u64; 3]) -> Result<Arc<Vec<f32>>, StoreError> {
         let key = (level, ijk);
         if let Some(brick) = self.brick_cache.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {
@@ -125,7 +127,11 @@ impl StoreReader {
             if let Some(brick) = self.brick_cache.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {
                 return Ok(brick.clone());
             }
-            self.read_brick(level, ijk)
+            let read = self.read_brick(level, ijk);
+            if read.is_ok() {
+                self.background.forget_failure(key);
+            }
+            read
         })
     }
 
