@@ -154,10 +154,9 @@ impl Fusion {
     /// Adds a frame taken at `pose`: allocates its bricks, updates new bricks from the sub-cache, and processes a
     /// window when one is due.
     pub fn add_frame(&mut self, frame: &RgbdFrame, pose: Pose) -> Result<(), FusionError> {
-        let index = self.stats.frames;
         let [near, far] = self.settings.depth_range;
         let depth: Vec<f32> = frame.depth.iter().map(|&d| if d >= near && d <= far { d } else { 0.0 }).collect();
-        let mut cached = CachedFrame::new(index, frame.intrinsics, &depth, frame.colour.clone(), pose);
+        let mut cached = CachedFrame::new(frame.intrinsics, &depth, frame.colour.clone(), pose);
         let keys = self.allocation_keys(&cached);
         self.map.allocate(&keys)?;
         cached.bricks = keys.into_iter().collect();

@@ -57,8 +57,6 @@ pub const MAX_DEPTH: f32 = 65535.0 * DEPTH_UNIT;
 /// kept small: 2 bytes of depth and 3 of colour a pixel.
 #[derive(Clone, Debug)]
 pub struct CachedFrame {
-    /// Position in the sequence.
-    pub index: usize,
     pub intrinsics: Intrinsics,
     /// Depth in units of [`DEPTH_UNIT`] (the TUM benchmark's 1/5000 m, so its PNGs are kept exactly); 0 = none.
     pub depth: Vec<u16>,
@@ -73,14 +71,13 @@ pub struct CachedFrame {
 
 impl CachedFrame {
     /// A cached frame of `depth` in metres (0 = none; depths beyond [`MAX_DEPTH`] are dropped).
-    pub fn new(index: usize, intrinsics: Intrinsics, depth: &[f32], colour: Vec<[u8; 3]>, pose: Pose) -> Self {
+    pub fn new(intrinsics: Intrinsics, depth: &[f32], colour: Vec<[u8; 3]>, pose: Pose) -> Self {
         let depth = depth
             .iter()
             .map(|&d| if d > 0.0 && d <= MAX_DEPTH { (d / DEPTH_UNIT).round() as u16 } else { 0 })
             .collect();
         let inverse = pose.inverse();
         CachedFrame {
-            index,
             intrinsics,
             depth,
             colour,
@@ -230,10 +227,7 @@ pub fn integrate_brick(
             }
         }
     }
-    let mut results = Vec::with_capacity(BRICK_VOXELS);
     for i in 0..BRICK_VOXELS {
-        let v = origin + IVec3::new(i as i32 % BRICK, (i as i32 / BRICK) % BRICK, i as i32 / (BRICK * BRICK));
-        results.push((v, w_sums[i], wd_sums[i], sigma_sums[i], colours[i]));
         if w_sums[i] > 0.0 {
             error_sum += f64::from(sigma_sums[i]);
             error_weight += f64::from(w_sums[i]);
@@ -242,9 +236,10 @@ pub fn integrate_brick(
     let new_error = if error_weight > 0.0 { (error_sum / error_weight) as f32 } else { f32::INFINITY };
     let may_replace_confident = pass == Pass::Window && new_error <= old.error * 1.05;
     let mut changed_confident = false;
-    for (v, w_sum, wd_sum, _, colour) in results {
-        let local = v - origin;
-        let i = voxel_index(local.x, local.y, local.z);
+    for i in 0..BRICK_VOXELS {
+        let (w_sum, wd_sum, colour) = (w_sums[i], wd_sums[i], colours[i]);
+        let local = IVec3::new(i as i32 % BRICK, (i as i32 / BRICK) % BRICK, i as i32 / (BRICK * BRICK));
+        let v = origin + local;
         let was_inside = old.inside.get(i);
         let was_confident = old.confident.get(i);
         let (prior, psi) = match (was_confident, prior_scale > 0.0) {
@@ -286,9 +281,8 @@ pub fn integrate_brick(
                 out.error = new_error.min(old.error);
             }
         }
-        Pass::SubCache => {
-            out.integrated = old.integrated;
-        }
+        // The sub-cache leaves `integrated` and the error as they were (`out` started as a copy of `old`).
+        Pass::SubCache => {}
     }
     out
 }
