@@ -26,3 +26,27 @@ pub fn incomplete(failed: usize, first: &str) -> PyErr {
         "{failed} bricks could not be read ({first}); coarser data stood in: the image is incomplete"
     ))
 }
+
+/// One step of a long call's progress, on a thread without the GIL: takes it to run Python's signal handlers
+/// (Ctrl-C) and `progress(done, total)`, and answers `Break` (keeping the exception in `raised`) when either raised.
+pub fn progress_step<T: for<'py> pyo3::IntoPyObject<'py> + Copy>(
+    progress: &Option<pyo3::Py<pyo3::PyAny>>,
+    raised: &mut Option<PyErr>,
+    done: T,
+    total: T,
+) -> std::ops::ControlFlow<()> {
+    let answer = pyo3::Python::attach(|py| -> pyo3::PyResult<()> {
+        py.check_signals()?;
+        if let Some(callback) = progress {
+            callback.call1(py, (done, total))?;
+        }
+        Ok(())
+    });
+    match answer {
+        Ok(()) => std::ops::ControlFlow::Continue(()),
+        Err(error) => {
+            *raised = Some(error);
+            std::ops::ControlFlow::Break(())
+        }
+    }
+}

@@ -3,7 +3,6 @@
 //! released; `fuse`'s callback (frames done, of the total) and Python's signal handlers run after every frame, and
 //! Ctrl-C or an exception in the callback stops the fusion with nothing saved.
 
-use std::ops::ControlFlow;
 use std::path::PathBuf;
 
 use pyo3::exceptions::PyValueError;
@@ -13,7 +12,7 @@ use voxstream_api::depth_fusion::{fuse_dataset, FuseOptions, PoseSource};
 use voxstream_fusion::rgbd::{write_sequence, NoiseModel, SyntheticSequence, SyntheticSettings};
 use voxstream_fusion::FusionSettings;
 
-use crate::errors::to_py_err;
+use crate::errors::{progress_step, to_py_err};
 
 /// Fuses the TUM RGB-D folder `dataset` into the store `out` (and/or surface `points`, a PLY); returns what was done.
 #[pyfunction]
@@ -68,22 +67,7 @@ pub fn fuse<'py>(
     };
     let mut raised: Option<PyErr> = None;
     let report = py.detach(|| {
-        fuse_dataset(&dataset, &options, &mut |done, total| {
-            let answer = Python::attach(|py| -> PyResult<()> {
-                py.check_signals()?;
-                if let Some(callback) = &progress {
-                    callback.call1(py, (done, total))?;
-                }
-                Ok(())
-            });
-            match answer {
-                Ok(()) => ControlFlow::Continue(()),
-                Err(error) => {
-                    raised = Some(error);
-                    ControlFlow::Break(())
-                }
-            }
-        })
+        fuse_dataset(&dataset, &options, &mut |done, total| progress_step(&progress, &mut raised, done, total))
     });
     if let Some(error) = raised {
         return Err(error);

@@ -6,7 +6,6 @@
 //! taken for each). Ctrl-C (or an exception in the callback) stops the import at the next slab: the partial store is
 //! removed and an existing store at `out` is left as it was.
 
-use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 
 use numpy::PyReadonlyArray3;
@@ -16,7 +15,7 @@ use pyo3::types::PyDict;
 use voxstream_api::import_input::{open_input, ImportInput, ImportSettings};
 use voxstream_store::{DType, StoreError, VolumeInfo, VolumeSource};
 
-use crate::errors::to_py_err;
+use crate::errors::{progress_step, to_py_err};
 
 /// Samples of a numpy array, x fastest (the array is indexed `[z, y, x]`).
 enum Samples {
@@ -104,21 +103,8 @@ pub fn import_volume<'py>(
     let report = py.detach(|| {
         input.import(&out, &settings, &mut |done, total| {
             last = done;
-            // Between slabs: Python's signal handlers (Ctrl-C) and the callback, with the GIL taken for them.
-            let answer = Python::attach(|py| -> PyResult<()> {
-                py.check_signals()?;
-                if let Some(callback) = &progress {
-                    callback.call1(py, (done, total))?;
-                }
-                Ok(())
-            });
-            match answer {
-                Ok(()) => ControlFlow::Continue(()),
-                Err(error) => {
-                    raised = Some(error);
-                    ControlFlow::Break(())
-                }
-            }
+            // Between slabs: Python's signal handlers (Ctrl-C) and the callback.
+            progress_step(&progress, &mut raised, done, total)
         })
     });
     if let Some(error) = raised {
