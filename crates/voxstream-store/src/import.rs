@@ -96,38 +96,14 @@ fn import_into_partial(
     options: &ImportOptions,
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<ImportReport, StoreError> {
-    if !(4..=256).contains(&options.brick_size) || options.brick_size % 2 != 0 {
-        return Err(StoreError::store(
-            out,
-            format!("brick size must be even and in 4..=256, got {}", options.brick_size),
-        ));
-    }
-    if options.nan_as.is_some_and(|v| !v.is_finite()) {
-        return Err(StoreError::store(out, "the replacement for NaN and ±inf must itself be finite"));
-    }
-    if out.exists() && !options.overwrite {
-        return Err(StoreError::store(out, "already exists (use --overwrite to replace it)"));
-    }
-    // This import holds the lock, so aside folders beside a store in place are leftovers of killed imports (with
-    // the store missing, one of them is its only whole copy: kept until the new store is in place).
-    if out.is_dir() {
-        remove_asides(out, &aside_paths(out))?;
-    }
     let info = source.info().clone();
-    let layout =
-        PyramidLayout::new(info.dims, options.brick_size).map_err(|e| StoreError::store(out, e.to_string()))?;
-    let partial = partial_path(out);
-    if partial.exists() {
-        std::fs::remove_dir_all(&partial).map_err(|e| StoreError::io(&partial, e))?;
-    }
-    std::fs::create_dir_all(&partial).map_err(|e| StoreError::io(&partial, e))?;
-    let store = Arc::new(FilesystemStore::new(&partial).map_err(|e| StoreError::store(&partial, e.to_string()))?);
+    let (store, partial, layout) = prepare_partial(out, &info, options)?;
     let zarr = |e: &dyn std::fmt::Display| StoreError::store(&partial, e.to_string());
 
     let mut levels: Vec<LevelWriter> = Vec::new();
     for level in 0..layout.levels() {
+        // The metadata is in place (prepare_partial wrote it).
         let array = build_level_array(&store, &layout, level, info.dtype, options).map_err(|e| zarr(&e))?;
-        array.store_metadata().map_err(|e| zarr(&e))?;
         levels.push(LevelWriter::new(array, &layout, level, info.dtype));
     }
 
@@ -161,17 +137,88 @@ fn import_into_partial(
             push_planes(&mut levels, level, &[], 0, true).map_err(|e| zarr(&e))?;
         }
     }
+    let minmax: Vec<Vec<[f32; 2]>> = levels.iter_mut().map(|l| std::mem::take(&mut l.minmax)).collect();
+    let counts = BrickCounts {
+        written: levels.iter().map(|l| l.written).collect(),
+        empty: levels.iter().map(|l| l.empty).collect(),
+    };
+    drop(levels);
+    finish_store(&store, &partial, out, &info, &layout, minmax, value_range, &histogram, counts)
+}
+
+/// Checks an import's choices, clears what killed imports left, and creates `STORE.partial` with every level's
+/// array metadata (no chunks yet). The caller holds the import lock.
+pub(crate) fn prepare_partial(
+    out: &Path,
+    info: &crate::volume::VolumeInfo,
+    options: &ImportOptions,
+) -> Result<(Arc<FilesystemStore>, PathBuf, PyramidLayout), StoreError> {
+    if !(4..=256).contains(&options.brick_size) || options.brick_size % 2 != 0 {
+        return Err(StoreError::store(
+            out,
+            format!("brick size must be even and in 4..=256, got {}", options.brick_size),
+        ));
+    }
+    if options.nan_as.is_some_and(|v| !v.is_finite()) {
+        return Err(StoreError::store(out, "the replacement for NaN and ±inf must itself be finite"));
+    }
+    if out.exists() && !options.overwrite {
+        return Err(StoreError::store(out, "already exists (use --overwrite to replace it)"));
+    }
+    // This import holds the lock, so aside folders beside a store in place are leftovers of killed imports (with
+    // the store missing, one of them is its only whole copy: kept until the new store is in place).
+    if out.is_dir() {
+        remove_asides(out, &aside_paths(out))?;
+    }
+    let layout =
+        PyramidLayout::new(info.dims, options.brick_size).map_err(|e| StoreError::store(out, e.to_string()))?;
+    let partial = partial_path(out);
+    if partial.exists() {
+        std::fs::remove_dir_all(&partial).map_err(|e| StoreError::io(&partial, e))?;
+    }
+    std::fs::create_dir_all(&partial).map_err(|e| StoreError::io(&partial, e))?;
+    let store = Arc::new(FilesystemStore::new(&partial).map_err(|e| StoreError::store(&partial, e.to_string()))?);
+    let zarr = |e: &dyn std::fmt::Display| StoreError::store(&partial, e.to_string());
+
+    for level in 0..layout.levels() {
+        let array = build_level_array(&store, &layout, level, info.dtype, options).map_err(|e| zarr(&e))?;
+        array.store_metadata().map_err(|e| zarr(&e))?;
+    }
+    Ok((store, partial, layout))
+}
+
+/// Bricks per level that hold data and that are empty (all 0).
+pub(crate) struct BrickCounts {
+    pub written: Vec<u64>,
+    pub empty: Vec<u64>,
+}
+
+/// Everything after the bricks, the same for a single-process and a distributed import
+/// ([`crate::shard_import`]): per-brick min/max made hierarchical and written, the group's attributes, and the
+/// partial store renamed into place. `minmax` holds each level's per-brick ranges of its own samples (x fastest).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn finish_store(
+    store: &Arc<FilesystemStore>,
+    partial: &Path,
+    out: &Path,
+    info: &crate::volume::VolumeInfo,
+    layout: &PyramidLayout,
+    mut minmax: Vec<Vec<[f32; 2]>>,
+    mut value_range: [f64; 2],
+    histogram: &ValueHistogram,
+    counts: BrickCounts,
+) -> Result<ImportReport, StoreError> {
+    let zarr = |e: &dyn std::fmt::Display| StoreError::store(partial, e.to_string());
     if !value_range[0].is_finite() {
         value_range = [0.0, 0.0];
     }
-
     // Per-brick min/max, hierarchical: a coarse brick's range covers every full-resolution sample below it.
-    for level in 1..levels.len() {
-        let (finer, coarser) = levels.split_at_mut(level);
-        coarser[0].aggregate_minmax_from(&finer[level - 1]);
+    for level in 1..minmax.len() {
+        let (finer, coarser) = minmax.split_at_mut(level);
+        aggregate_minmax(&mut coarser[0], layout.bricks(level), &finer[level - 1], layout.bricks(level - 1));
     }
-    for (level, writer) in levels.iter().enumerate() {
-        write_minmax(&store, &layout, level, &writer.minmax).map_err(|e| zarr(&e))?;
+    for (level, ranges) in minmax.iter().enumerate() {
+        write_minmax(store, layout, level, ranges).map_err(|e| zarr(&e))?;
     }
     GroupBuilder::new()
         .build(store.clone(), &format!("/{MINMAX_GROUP}"))
@@ -183,19 +230,32 @@ fn import_into_partial(
         levels: layout.levels(),
         value_range,
         value_percentiles: histogram.stored_percentiles(),
-        bricks_written: levels.iter().map(|l| l.written).collect(),
-        bricks_empty: levels.iter().map(|l| l.empty).collect(),
+        bricks_written: counts.written,
+        bricks_empty: counts.empty,
     };
     let name = out.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let mut attributes = StoreAttributes::new(&info, &layout, value_range, true);
+    let mut attributes = StoreAttributes::new(info, layout, value_range, true);
     attributes.value_percentiles = Some(histogram.stored_percentiles());
     let mut group = GroupBuilder::new().build(store.clone(), "/").map_err(|e| zarr(&e))?;
-    group.attributes_mut().insert("ome".into(), ome_multiscales(&name, &info, &layout));
+    group.attributes_mut().insert("ome".into(), ome_multiscales(&name, info, layout));
     group.attributes_mut().insert("voxstream".into(), serde_json::to_value(&attributes).map_err(|e| zarr(&e))?);
     group.store_metadata().map_err(|e| zarr(&e))?;
-    drop(store);
-    commit(&partial, out)?;
+    commit(partial, out)?;
     Ok(report)
+}
+
+/// Merges the ranges of a finer level's bricks (`finer`, `fb` bricks per axis) into their parents' (`coarse`).
+fn aggregate_minmax(coarse: &mut [[f32; 2]], cb: [u64; 3], finer: &[[f32; 2]], fb: [u64; 3]) {
+    for z in 0..fb[2] {
+        for y in 0..fb[1] {
+            for x in 0..fb[0] {
+                let child = finer[((z * fb[1] + y) * fb[0] + x) as usize];
+                let entry = &mut coarse[((z / 2 * cb[1] + y / 2) * cb[0] + x / 2) as usize];
+                entry[0] = entry[0].min(child[0]);
+                entry[1] = entry[1].max(child[1]);
+            }
+        }
+    }
 }
 
 /// Puts the complete store `partial` at `out`. An existing store is first renamed aside (`STORE.old-<pid>`), the
@@ -218,7 +278,7 @@ fn commit(partial: &Path, out: &Path) -> Result<(), StoreError> {
 }
 
 /// Deletes aside folders of `out` (under the import lock: none of them belongs to a running import).
-fn remove_asides(out: &Path, asides: &[PathBuf]) -> Result<(), StoreError> {
+pub(crate) fn remove_asides(out: &Path, asides: &[PathBuf]) -> Result<(), StoreError> {
     for stale in asides {
         std::fs::remove_dir_all(stale).map_err(|e| {
             StoreError::store(
@@ -284,14 +344,16 @@ fn data_type(dtype: DType) -> DataType {
     }
 }
 
-fn build_level_array(
+pub(crate) fn build_level_array(
     store: &Arc<FilesystemStore>,
     layout: &PyramidLayout,
     level: usize,
     dtype: DType,
     options: &ImportOptions,
 ) -> Result<Array<FilesystemStore>, Box<dyn std::error::Error>> {
-    use zarrs::array::codec::array_to_bytes::sharding::ShardingCodecBuilder;
+    use zarrs::array::codec::array_to_bytes::sharding::{
+        ShardingCodecBuilder, ShardingCodecOptions, SubchunkWriteOrder,
+    };
     use zarrs::array::codec::ZstdCodec;
     let [x, y, z] = layout.level_dims[level];
     let b = layout.brick_size;
@@ -310,8 +372,11 @@ fn build_level_array(
         DType::I16 => zarrs::array::FillValue::from(0i16),
         DType::F32 => zarrs::array::FillValue::from(0f32),
     };
+    // Bricks in C order within a shard (zarrs' default is the order their parallel encoders finish in): the same
+    // input gives the same bytes, run after run and task by task (`crate::shard_import`).
+    let ordered = ShardingCodecOptions::default().with_subchunk_write_order(SubchunkWriteOrder::C);
     let array = ArrayBuilder::new(vec![z, y, x], shard, data_type(dtype), fill)
-        .array_to_bytes_codec(Arc::new(sharding.build()))
+        .array_to_bytes_codec(Arc::new(sharding.build().with_options(ordered)))
         .dimension_names(["z", "y", "x"].into())
         .build(store.clone(), &format!("/{level}"))?;
     Ok(array)
@@ -351,21 +416,6 @@ impl LevelWriter {
             minmax: vec![[f32::INFINITY, f32::NEG_INFINITY]; bricks.iter().product::<u64>() as usize],
             written: 0,
             empty: 0,
-        }
-    }
-
-    fn aggregate_minmax_from(&mut self, finer: &LevelWriter) {
-        let fb = finer.bricks;
-        for z in 0..fb[2] {
-            for y in 0..fb[1] {
-                for x in 0..fb[0] {
-                    let child = finer.minmax[((z * fb[1] + y) * fb[0] + x) as usize];
-                    let parent = ((z / 2 * self.bricks[1] + y / 2) * self.bricks[0] + x / 2) as usize;
-                    let entry = &mut self.minmax[parent];
-                    entry[0] = entry[0].min(child[0]);
-                    entry[1] = entry[1].max(child[1]);
-                }
-            }
         }
     }
 
@@ -446,7 +496,7 @@ impl LevelWriter {
     }
 }
 
-fn store_shard(
+pub(crate) fn store_shard(
     array: &Array<FilesystemStore>,
     indices: &[u64],
     elements: &[f32],
@@ -489,7 +539,7 @@ fn push_planes(
 }
 
 /// Samples of a slab, in the input's type at level 0 (so a u8 slab takes 1 byte per sample) or in f32.
-enum Samples {
+pub(crate) enum Samples {
     U8(Vec<u8>),
     U16(Vec<u16>),
     I16(Vec<i16>),
@@ -497,7 +547,7 @@ enum Samples {
 }
 
 impl Samples {
-    fn new(dtype: DType) -> Samples {
+    pub(crate) fn new(dtype: DType) -> Samples {
         match dtype {
             DType::U8 => Samples::U8(Vec::new()),
             DType::U16 => Samples::U16(Vec::new()),
@@ -507,7 +557,7 @@ impl Samples {
     }
 
     /// Appends values that are exact in this type (the importers' f32 holds integer inputs exactly).
-    fn extend_from_f32(&mut self, values: &[f32]) {
+    pub(crate) fn extend_from_f32(&mut self, values: &[f32]) {
         match self {
             // Integer inputs are exact in f32: a cast (no rounding call) restores them.
             Samples::U8(v) => v.extend(values.iter().map(|&x| x as u8)),
@@ -517,7 +567,7 @@ impl Samples {
         }
     }
 
-    fn copy_to_f32(&self, start: usize, out: &mut [f32]) {
+    pub(crate) fn copy_to_f32(&self, start: usize, out: &mut [f32]) {
         let n = out.len();
         match self {
             Samples::U8(v) => out.iter_mut().zip(&v[start..start + n]).for_each(|(o, &x)| *o = x as f32),
@@ -548,7 +598,7 @@ impl Samples {
 }
 
 /// Averages 2×2×2 blocks of `planes` (dims x, y, z); odd edges average the samples that exist.
-fn downsample(planes: &Samples, dims: [u64; 3]) -> Vec<f32> {
+pub(crate) fn downsample(planes: &Samples, dims: [u64; 3]) -> Vec<f32> {
     let [nx, ny, nz] = dims.map(|d| d as usize);
     let [ox, oy, oz] = [nx.div_ceil(2), ny.div_ceil(2), nz.div_ceil(2)];
     let mut out = vec![0f32; ox * oy * oz];

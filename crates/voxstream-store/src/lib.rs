@@ -29,6 +29,7 @@ pub mod metadata_check;
 pub mod metadata_files;
 pub mod non_finite;
 pub mod remote_access;
+pub mod shard_import;
 pub mod single_flight;
 pub mod store_lock;
 pub mod store_producer;

@@ -9,6 +9,15 @@
 
 use crate::volume::DType;
 
+/// The non-empty bins of a [`ValueHistogram`] (`keys[i]` counted `counts[i]` times) and its samples' range.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct HistogramParts {
+    pub keys: Vec<u32>,
+    pub counts: Vec<u64>,
+    pub low: f32,
+    pub high: f32,
+}
+
 /// Bins of the histogram: one per 16-bit key.
 const BINS: usize = 1 << 16;
 
@@ -71,6 +80,31 @@ impl ValueHistogram {
     /// `[percent, value]` for each of [`STORED_PERCENTILES`], or empty when nothing was counted.
     pub fn stored_percentiles(&self) -> Vec<[f64; 2]> {
         STORED_PERCENTILES.iter().filter_map(|&p| self.percentile(p).map(|v| [p, v])).collect()
+    }
+
+    /// The counted bins and the samples' range, as a task of a distributed import sends them to be merged.
+    pub fn parts(&self) -> HistogramParts {
+        let (keys, counts) =
+            self.counts.iter().enumerate().filter(|(_, &c)| c > 0).map(|(key, &count)| (key as u32, count)).unzip();
+        HistogramParts { keys, counts, low: self.low, high: self.high }
+    }
+
+    /// Adds another histogram's [`parts`](Self::parts) (of samples of the same type). Keys past the last bin and
+    /// totals that overflow are refused: the parts crossed a process boundary.
+    pub fn merge(&mut self, parts: &HistogramParts) -> Result<(), String> {
+        if parts.keys.len() != parts.counts.len() {
+            return Err(format!("{} bins but {} counts", parts.keys.len(), parts.counts.len()));
+        }
+        for (&key, &count) in parts.keys.iter().zip(&parts.counts) {
+            let bin = self.counts.get_mut(key as usize).ok_or_else(|| format!("bin {key} does not exist"))?;
+            *bin = bin.checked_add(count).ok_or("a bin's count overflows")?;
+            self.total = self.total.checked_add(count).ok_or("the total count overflows")?;
+        }
+        if !parts.keys.is_empty() {
+            self.low = self.low.min(parts.low);
+            self.high = self.high.max(parts.high);
+        }
+        Ok(())
     }
 
     fn key(&self, value: f32) -> usize {
@@ -146,6 +180,23 @@ mod tests {
             // The lower edge of its bin (towards −∞): within 2^-7 of the value.
             assert!((got - want).abs() <= want.abs() / 128.0 + 1e-30, "{got} for {want}");
         }
+    }
+
+    #[test]
+    fn merged_parts_give_the_histogram_of_all_samples() {
+        let samples: Vec<f32> = (0..5000).map(|i| ((i * 7919) % 1013) as f32 - 300.0).collect();
+        let mut whole = ValueHistogram::new(DType::I16);
+        whole.add(&samples);
+        let mut merged = ValueHistogram::new(DType::I16);
+        for piece in samples.chunks(777) {
+            let mut part = ValueHistogram::new(DType::I16);
+            part.add(piece);
+            merged.merge(&part.parts()).unwrap();
+        }
+        assert_eq!(merged.parts(), whole.parts());
+        assert_eq!(merged.stored_percentiles(), whole.stored_percentiles());
+        let forged = HistogramParts { keys: vec![1 << 16], counts: vec![1], low: 0.0, high: 0.0 };
+        assert!(merged.merge(&forged).is_err());
     }
 
     #[test]
