@@ -344,13 +344,13 @@ fn data_type(dtype: DType) -> DataType {
     }
 }
 
-pub(crate) fn build_level_array(
-    store: &Arc<FilesystemStore>,
+pub(crate) fn build_level_array<S: ?Sized>(
+    store: &Arc<S>,
     layout: &PyramidLayout,
     level: usize,
     dtype: DType,
     options: &ImportOptions,
-) -> Result<Array<FilesystemStore>, Box<dyn std::error::Error>> {
+) -> Result<Array<S>, Box<dyn std::error::Error>> {
     use zarrs::array::codec::array_to_bytes::sharding::{
         ShardingCodecBuilder, ShardingCodecOptions, SubchunkWriteOrder,
     };
@@ -496,8 +496,8 @@ impl LevelWriter {
     }
 }
 
-pub(crate) fn store_shard(
-    array: &Array<FilesystemStore>,
+pub(crate) fn store_shard<S: ?Sized + zarrs::storage::ReadableWritableStorageTraits + 'static>(
+    array: &Array<S>,
     indices: &[u64],
     elements: &[f32],
     dtype: DType,

@@ -23,6 +23,8 @@ use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 use zarrs::filesystem::FilesystemStore;
+use zarrs::storage::store::MemoryStore;
+use zarrs::storage::ReadableStorageTraits;
 
 use crate::error::StoreError;
 use crate::import::{build_level_array, downsample, finish_store, partial_path, prepare_partial, store_shard};
@@ -256,10 +258,8 @@ impl ShardSpec {
                 ranges.push(range);
             }
         }
-        let store =
-            Arc::new(FilesystemStore::new(&self.partial).map_err(|e| StoreError::store(&self.partial, e.to_string()))?);
-        let zarr = |e: &dyn std::fmt::Display| StoreError::store(&self.partial, e.to_string());
-        // Built as the import built it (not read back from its metadata): the same codecs with the same options.
+        // Encoded in memory with the codecs the import built (not read back from its metadata: the same codecs
+        // with the same options), then written into the level's folder by `write_shard_file`.
         let options = ImportOptions {
             brick_size: b,
             shard_bricks: self.shard_bricks,
@@ -268,10 +268,51 @@ impl ShardSpec {
             brick_checksums: self.brick_checksums,
             overwrite: false,
         };
-        let array = build_level_array(&store, &layout, level, dtype, &options).map_err(|e| zarr(&e))?;
-        store_shard(&array, &[shard[2], shard[1], shard[0]], &elements, dtype).map_err(|e| zarr(&e))?;
+        let zarr = |e: &dyn std::fmt::Display| StoreError::store(&self.partial, e.to_string());
+        let memory = Arc::new(MemoryStore::new());
+        let array = build_level_array(&memory, &layout, level, dtype, &options).map_err(|e| zarr(&e))?;
+        let indices = [shard[2], shard[1], shard[0]];
+        store_shard(&array, &indices, &elements, dtype).map_err(|e| zarr(&e))?;
+        let key = array.chunk_key(&indices);
+        // A shard of zeros only is not stored (as zarrs does not store it in a single-process import).
+        if let Some(bytes) = memory.get(&key).map_err(|e| zarr(&e))? {
+            self.write_shard_file(level, key.as_str(), &bytes)?;
+        }
         let coarse = if level + 1 < layout.levels() { downsample(&Samples::F32(values), extent) } else { Vec::new() };
         Ok(ShardOutput { coarse, summary: ShardSummary { level, shard, bricks, ranges, value_range, histogram } })
+    }
+
+    /// Writes a shard's bytes at `key` under the level's folder, which must exist: folders below it are made one by
+    /// one, never the level's own, so a task still running after its import was aborted (the partial store
+    /// deleted) fails instead of making a new one. The file appears whole (written aside, then renamed), and a task
+    /// that runs twice writes the same bytes twice.
+    fn write_shard_file(&self, level: usize, key: &str, bytes: &[u8]) -> Result<(), StoreError> {
+        let level_dir = self.partial.join(level.to_string());
+        let relative = key.strip_prefix(&format!("{level}/")).ok_or_else(|| self.error(format!("shard key {key}")))?;
+        let path = level_dir.join(relative);
+        if !level_dir.join("zarr.json").is_file() {
+            return Err(self.error(format!(
+                "level {level} is gone from the partial store: the import was aborted or finished elsewhere"
+            )));
+        }
+        let mut dir = level_dir.clone();
+        let parents: Vec<&str> = relative.split('/').collect();
+        for part in &parents[..parents.len() - 1] {
+            dir.push(part);
+            match std::fs::create_dir(&dir) {
+                Ok(()) => {}
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+                Err(e) => return Err(StoreError::io(&dir, e)),
+            }
+        }
+        let mut aside = path.clone().into_os_string();
+        aside.push(format!(".writing-{}-{:?}", std::process::id(), std::thread::current().id()));
+        let aside = PathBuf::from(aside);
+        std::fs::write(&aside, bytes).map_err(|e| StoreError::io(&aside, e))?;
+        std::fs::rename(&aside, &path).map_err(|e| {
+            let _ = std::fs::remove_file(&aside);
+            StoreError::io(&path, e)
+        })
     }
 
     /// A coarser shard's samples from its children's halves, each checked against the child it claims to be.
@@ -366,6 +407,11 @@ impl ShardImport {
         &self.spec
     }
 
+    /// Where the store goes.
+    pub fn out(&self) -> &Path {
+        &self.out
+    }
+
     /// The pyramid being written.
     pub fn layout(&self) -> &PyramidLayout {
         &self.layout
@@ -440,7 +486,14 @@ impl ShardImport {
 impl Drop for ShardImport {
     fn drop(&mut self) {
         if !self.finished {
-            let _ = std::fs::remove_dir_all(&self.spec.partial);
+            // A task still running may add a folder while this deletes (the deletion then fails): try again. Once
+            // a level's folder is gone, tasks refuse to write ([`ShardSpec::write_shard_file`]).
+            for _ in 0..5 {
+                if std::fs::remove_dir_all(&self.spec.partial).is_ok() || !self.spec.partial.exists() {
+                    break;
+                }
+                std::thread::sleep(std::time::Duration::from_millis(20));
+            }
         }
     }
 }

@@ -27,7 +27,26 @@ fn the_python_package_builds_installs_and_passes_pytest() {
     let stdout = String::from_utf8_lossy(&output.stdout);
     let stderr = String::from_utf8_lossy(&output.stderr);
     println!("{stdout}");
-    assert!(output.status.success(), "scripts/python-tests.sh failed:\n{stdout}\n{stderr}");
+    if !output.status.success() {
+        // Long linker and build logs get cut in the middle by CI's summaries: the lines that say why come first,
+        // with the disk space left (a cold CI build once ran out of it while linking the module).
+        let why: Vec<&str> = stderr
+            .lines()
+            .filter(|l| {
+                let l = l.to_ascii_lowercase();
+                l.contains("error") || l.contains("no space") || l.contains("ld:") || l.contains("killed")
+            })
+            .map(|l| if l.len() > 300 { &l[..l.floor_char_boundary(300)] } else { l })
+            .take(20)
+            .collect();
+        let space = Command::new("df").arg("-h").arg(&target).output().map(|o| o.stdout).unwrap_or_default();
+        panic!(
+            "scripts/python-tests.sh failed:\n{}\n\ndisk space at {}:\n{}\nfull output:\n{stdout}\n{stderr}",
+            why.join("\n"),
+            target.display(),
+            String::from_utf8_lossy(&space)
+        );
+    }
     let summary = stdout.lines().rev().find(|l| l.contains(" passed")).unwrap_or_default();
     assert!(
         !summary.contains("failed") && !summary.contains("error") && !summary.contains("skipped"),

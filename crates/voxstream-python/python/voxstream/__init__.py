@@ -11,7 +11,8 @@ full resolution within a memory budget: only the bricks the rays need are read, 
 (256, 256, 4)
 
 ``Session`` renders progressive frames for interactive loops, ``import_volume`` writes a store from a file or a
-numpy array, ``fuse`` fuses an RGB-D sequence into a store, ``Camera`` and ``TransferFunction`` describe the view.
+numpy array (or, on a Dask cluster, a dask array), ``render_frames`` renders a camera path (``orbit``) on a Dask
+cluster, ``fuse`` fuses an RGB-D sequence into a store, ``Camera`` and ``TransferFunction`` describe the view.
 """
 
 from ._camera import Camera
@@ -19,7 +20,8 @@ from ._transfer import TransferFunction
 from ._volume import Session, Volume, open, scenes
 from ._import import import_volume
 from ._fusion import fuse, synthesize_rgbd
+from ._distributed import orbit, render_frames
 from ._native import __version__
 
-__all__ = ["Camera", "Session", "TransferFunction", "Volume", "fuse", "import_volume", "open", "scenes",
-           "synthesize_rgbd", "__version__"]
+__all__ = ["Camera", "Session", "TransferFunction", "Volume", "fuse", "import_volume", "open", "orbit",
+           "render_frames", "scenes", "synthesize_rgbd", "__version__"]

@@ -6,6 +6,7 @@ import os
 from typing import Any, Callable, Dict, Optional, Sequence
 
 from . import _native
+from ._distributed import import_dask, is_dask_array
 
 
 def import_volume(source, out, *, spacing: Optional[Sequence[float]] = None,
@@ -19,9 +20,18 @@ def import_volume(source, out, *, spacing: Optional[Sequence[float]] = None,
     uint8, uint16, int16 or float32. ``progress(done, total)`` is called with input bytes read (tqdm-friendly:
     ``lambda done, total: bar.update(done - bar.n)``). An existing store is replaced only with ``overwrite=True``,
     and only once the new one is complete; Ctrl-C or an exception raised by ``progress`` stops the import and
-    removes what was written. Returns dims, dtype, levels, bricks written and empty, and the value range."""
+    removes what was written. Returns dims, dtype, levels, bricks written and empty, and the value range.
+
+    A dask array is imported on the active Dask cluster (``distributed.Client``; without one, Dask's local
+    scheduler), one task per shard, into the same store byte for byte; ``out`` must then be on a filesystem every
+    worker sees, and ``progress(done, total)`` counts finished shards."""
+    if is_dask_array(source):
+        if resolution is not None or amplify is not None:
+            raise ValueError("resolution and amplify apply to meshes and particle files, not to arrays")
+        return import_dask(source, out, spacing=spacing, origin=origin, brick_size=brick_size, overwrite=overwrite,
+                           nan_as=nan_as, progress=progress)
     if not isinstance(source, (str, os.PathLike)) and not hasattr(source, "__array_interface__"):
-        raise ValueError("source must be a file's path or a 3-D numpy array")
+        raise ValueError("source must be a file's path or a 3-D numpy or dask array")
     if isinstance(source, (str, os.PathLike)):
         source = os.fspath(source)
     return dict(_native.import_volume(

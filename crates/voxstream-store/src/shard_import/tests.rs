@@ -252,5 +252,9 @@ fn forged_specs_pieces_and_summaries_are_refused_with_a_reason() {
     let error = import.finish(Vec::new()).unwrap_err();
     assert!(error.to_string().contains("were not reported"), "{error}");
     assert!(!out.exists() && !partial_path(&out).exists());
+    // A task still running after the abort writes nothing, and makes no new partial store.
+    let late = spec.write_shard(0, [0, 0, 0], ShardInput::Samples(vec![1.0; 8 * 8 * 4])).unwrap_err();
+    assert!(late.to_string().contains("is gone from the partial store"), "{late}");
+    assert!(!partial_path(&out).exists());
     std::fs::remove_dir_all(&dir).unwrap();
 }
