@@ -105,6 +105,8 @@ struct SessionKey {
     options: SessionOptions,
     width: u32,
     height: u32,
+    /// The view's region: it narrows the placement's clip box, which a session keeps.
+    region: Option<[[u64; 3]; 2]>,
 }
 
 impl Volume {
@@ -131,8 +133,8 @@ impl Volume {
 
     /// Renders one frame of `view` in `mode`. `observe` hears after each pass and may stop the frame
     /// ([`ControlFlow::Break`]: the result is then marked interrupted). The session is kept for the next frame
-    /// with the same budget, image size and options; a different budget or image size opens the source again (as
-    /// a new `voxstream render` would), so that the image is the CLI's for the same arguments.
+    /// with the same budget, image size, options and region; a different budget, image size or region opens the
+    /// source again (as a new `voxstream render` would), so that the image is the CLI's for the same arguments.
     pub fn render(
         &mut self,
         view: &ViewOptions,
@@ -140,7 +142,7 @@ impl Volume {
         mode: Mode,
         observe: &mut dyn FnMut(&PassProgress) -> ControlFlow<()>,
     ) -> Result<(FrameResult, PreparedView)> {
-        let key = SessionKey { options: options.clone(), width: view.width, height: view.height };
+        let key = SessionKey { options: options.clone(), width: view.width, height: view.height, region: view.region };
         if !matches!(&self.session, Some((old, _)) if *old == key) {
             let budget = check_budget(options.budget_mb, view.width, view.height, "size")?;
             let wanted = (options.budget_mb, view.width, view.height);

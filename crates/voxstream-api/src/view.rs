@@ -9,7 +9,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use voxstream_core::json_limits::read_json_file;
-use voxstream_render::{Camera, IsoSurface, RenderSettings, Shading, SurfaceNormals, TransferFunction, MAX_SURFACES};
+use voxstream_render::{
+    Camera, IsoSurface, RenderSettings, Shading, SurfaceNormals, TransferFunction, VolumePlacement, MAX_SURFACES,
+};
 
 use crate::camera_path::read_camera_file;
 use crate::defaults::{check_placement, shown_number};
@@ -103,6 +105,11 @@ pub struct ViewOptions {
     pub colour_by_level: bool,
     /// The camera.
     pub camera: CameraOptions,
+    /// Only this box of a store's level-0 samples, `[lower, upper)` along x, y, z (`None`: all of it): the rays
+    /// are clipped to it, so a render of one piece of a volume leaves the rest transparent (sort-last rendering,
+    /// `voxstream.render_sort_last`). Pieces split at faces of the tree's nodes sample where a render of the whole
+    /// volume samples.
+    pub region: Option<[[u64; 3]; 2]>,
 }
 
 impl Default for ViewOptions {
@@ -122,6 +129,7 @@ impl Default for ViewOptions {
             lod_bias: RenderSettings::default().lod_bias,
             colour_by_level: false,
             camera: CameraOptions::default(),
+            region: None,
         }
     }
 }
@@ -259,13 +267,38 @@ pub fn prepare_view(view: &ViewOptions, source: &SourceMeta) -> Result<PreparedV
         adaptive_step,
         lod_bias: view.lod_bias,
         colour_by_level: view.colour_by_level,
-        placement: source.placement,
+        placement: region_placement(source, view.region)?,
         ..RenderSettings::default()
     };
     check_placement(&source.name, &source.placement)?;
     settings.validate().context("invalid flags")?;
     let camera = apply_camera_options(source.camera, &view.camera, view.width, view.height, &source.name)?;
     Ok(PreparedView { transfer_function, settings, camera, drawing_surfaces, volume_adaptive_step })
+}
+
+/// The source's placement with its clip box narrowed to `region` (level-0 samples, `[lower, upper)`).
+fn region_placement(source: &SourceMeta, region: Option<[[u64; 3]; 2]>) -> Result<VolumePlacement> {
+    let mut placement = source.placement;
+    let Some([lower, upper]) = region else {
+        return Ok(placement);
+    };
+    let Some(store) = &source.store else {
+        bail!("{}: a region applies to stores, not to scenes, meshes or particles", source.name);
+    };
+    let (info, layout) = (store.info(), store.layout());
+    if (0..3).any(|a| lower[a] >= upper[a] || lower[a] >= info.dims[a]) {
+        bail!(
+            "the region {lower:?} to {upper:?} holds none of {}'s samples ({:?}): give lower < upper within them",
+            source.name,
+            info.dims
+        );
+    }
+    let span = (layout.brick_size << layout.max_tree_level()) as f64;
+    for a in 0..3 {
+        placement.clip_lower[a] = placement.clip_lower[a].max(lower[a] as f64 / span);
+        placement.clip_upper[a] = placement.clip_upper[a].min(upper[a] as f64 / span);
+    }
+    Ok(placement)
 }
 
 /// The camera `options` make of a source's default view `default` (named `name`): a camera file or a whole camera

@@ -210,7 +210,7 @@ impl PyVolume {
     #[pyo3(signature = (*, width=512, height=512, budget_mb=256, backend="cpu", mode="converged", camera=None,
         tf_points=None, tf_file=None, iso=Vec::new(), iso_colors=Vec::new(), iso_opacities=Vec::new(),
         shadows=false, light=None, background=[0.0; 3], step=0.5, lod_bias=0.0, shading=None, blending=true,
-        preintegrate=false, adaptive_step=None, faithful=false, float32=false))]
+        preintegrate=false, adaptive_step=None, faithful=false, float32=false, region=None))]
     #[allow(clippy::too_many_arguments)]
     fn render<'py>(
         &self,
@@ -237,6 +237,7 @@ impl PyVolume {
         adaptive_step: Option<f64>,
         faithful: bool,
         float32: bool,
+        region: Option<[[u64; 3]; 2]>,
     ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyDict>)> {
         let mode = match mode {
             "converged" => Mode::Converged,
@@ -284,6 +285,7 @@ impl PyVolume {
                 camera: camera.map(|(eye, target, up, fov)| Camera { eye, target, up, fov }),
                 ..CameraOptions::default()
             },
+            region,
         };
         let session = SessionOptions { budget_mb, backend, blending, ..SessionOptions::default() };
         let rendered = self.render_on_thread(py, view, session, mode, float32)?;

@@ -60,6 +60,7 @@ pub fn view_options(look: &LookFlags, width: u32, height: u32) -> ViewOptions {
             up: look.up,
             fov: look.fov,
         },
+        region: None,
     }
 }
 

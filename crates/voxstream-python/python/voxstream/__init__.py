@@ -20,8 +20,8 @@ from ._transfer import TransferFunction
 from ._volume import Session, Volume, open, scenes
 from ._import import import_volume
 from ._fusion import fuse, synthesize_rgbd
-from ._distributed import orbit, render_frames
+from ._distributed import orbit, render_frames, render_sort_last
 from ._native import __version__
 
 __all__ = ["Camera", "Session", "TransferFunction", "Volume", "fuse", "import_volume", "open", "orbit",
-           "render_frames", "scenes", "synthesize_rgbd", "__version__"]
+           "render_frames", "render_sort_last", "scenes", "synthesize_rgbd", "__version__"]

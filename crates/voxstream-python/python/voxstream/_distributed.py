@@ -77,21 +77,40 @@ def _run(tasks: List[Any], progress: Optional[Callable[[int, int], Any]], on_res
 _SHARDS_WRITTEN = 0
 
 
-def _write_shard(spec: str, level: int, shard, samples, pieces):
-    """One shard's task (runs on a worker)."""
+def _write_band(spec: str, level: int, shards, origin, block, predecessors):
+    """One task (runs on a worker): writes ``shards`` (``(shard, region, children)`` of ``level``, a band of one z
+    row) from ``block`` (level 0: the band's region of the source, whose corner is ``origin``) or from the halves
+    the ``predecessors`` (the child bands' tasks) returned as their first value. Returns ``({shard: halves}, [summary, …])``."""
     global _SHARDS_WRITTEN
-    _SHARDS_WRITTEN += 1
-    if pieces is not None:
-        # Arrays that crossed the network may sit unaligned in their message's buffer: aligned copies where so.
-        pieces = [(tuple(child), np.require(halves, np.float32, "CA")) for child, halves in pieces]
-    return _native.write_shard(spec, level, tuple(shard), samples=samples, pieces=pieces)
+    halves_by_child: Dict[Any, Any] = {}
+    for returned in predecessors or ():
+        halves_by_child.update(returned)
+    halves, summaries = {}, []
+    for shard, region, children in shards:
+        if level == 0:
+            (ox, oy, oz), (ex, ey, ez) = region
+            x0, y0, z0 = ox - origin[0], oy - origin[1], oz - origin[2]
+            coarse, summary = _native.write_shard(spec, 0, shard, samples=block[z0:z0 + ez, y0:y0 + ey, x0:x0 + ex])
+        else:
+            # Arrays that crossed the network may sit unaligned in their message's buffer: aligned copies where so.
+            pieces = [(child, np.require(halves_by_child.pop(child), np.float32, "CA")) for child in children]
+            coarse, summary = _native.write_shard(spec, level, shard, pieces=pieces)
+        _SHARDS_WRITTEN += 1
+        halves[shard] = coarse
+        summaries.append(summary)
+    return halves, summaries
+
+
+# Samples (as float32) a task of the import takes at most, when its level's shards allow: big enough that Dask's
+# per-task cost (about a millisecond) is small beside it, small enough for many workers' memory.
+_TASK_BYTES = 64 << 20
 
 
 def import_dask(array, out, *, spacing=None, origin=None, brick_size: int = 32, overwrite: bool = False,
                 nan_as: Optional[float] = None,
                 progress: Optional[Callable[[int, int], Any]] = None) -> Dict[str, Any]:
     """Imports a 3-D dask array indexed ``[z, y, x]`` into the store ``out`` on the active Dask cluster (see the
-    module's documentation); ``progress(done, total)`` counts finished shard tasks."""
+    module's documentation); ``progress(done, total)`` counts finished tasks (each a band of whole shards)."""
     from dask import delayed
 
     if array.ndim != 3:
@@ -107,24 +126,38 @@ def import_dask(array, out, *, spacing=None, origin=None, brick_size: int = 32, 
         overwrite=bool(overwrite), nan_as=nan_as)
     try:
         spec = job.spec()
-        task = delayed(_write_shard, nout=2, pure=True)
-        halves: Dict[Any, Any] = {}
+        task = delayed(_write_band, nout=2, pure=True)
+        tag = f"{abs(hash(spec)):x}"
+        # Tasks own bands of whole shards: one z row, `band` rows of shards along y (the same at every level, so a
+        # band's children are two bands of each of two z rows of the level below).
+        gx, gy, _ = job.shards(0)
+        _, (sx, sy, sz) = job.region(0, (0, 0, 0))
+        band = max(1, min(gy, _TASK_BYTES // max(1, sx * sy * sz * 4 * gx)))
+        previous: Dict[Any, Any] = {}
         summaries = []
         for level in range(job.levels()):
             gx, gy, gz = job.shards(level)
-            for sz, sy, sx in itertools.product(range(gz), range(gy), range(gx)):
-                shard = (sx, sy, sz)
-                name = f"voxstream-shard-{level}-{sx}-{sy}-{sz}-{abs(hash(spec)):x}"
+            current: Dict[Any, Any] = {}
+            for z, first in itertools.product(range(gz), range(0, gy, band)):
+                shards = []
+                for y, x in itertools.product(range(first, min(gy, first + band)), range(gx)):
+                    children = [tuple(c) for c in job.children(level, (x, y, z))] if level > 0 else []
+                    shards.append(((x, y, z), job.region(level, (x, y, z)), children))
+                name = f"voxstream-band-{level}-{z}-{first}-{tag}"
                 if level == 0:
-                    (ox, oy, oz), (ex, ey, ez) = job.region(0, shard)
-                    block = array[oz:oz + ez, oy:oy + ey, ox:ox + ex]
-                    coarse, summary = task(spec, 0, shard, block, None, dask_key_name=name)
+                    (ox, oy, oz), _ = shards[0][1]
+                    lo, extent = shards[-1][1]
+                    ux, uy, uz = (o + e for o, e in zip(lo, extent))
+                    block = array[oz:uz, oy:uy, ox:ux]
+                    halves, summary = task(spec, 0, shards, (ox, oy, oz), block, None, dask_key_name=name)
                 else:
-                    pieces = [(child, halves.pop((level - 1, tuple(child)))) for child in job.children(level, shard)]
-                    coarse, summary = task(spec, level, shard, None, pieces, dask_key_name=name)
-                halves[(level, shard)] = coarse
+                    keys = sorted({(2 * z + dz, 2 * (first // band) + k) for dz in (0, 1) for k in (0, 1)})
+                    inputs = [previous.pop(key) for key in keys if key in previous]
+                    halves, summary = task(spec, level, shards, None, None, inputs, dask_key_name=name)
+                current[(z, first // band)] = halves
                 summaries.append(summary)
-        results = _run(summaries, progress)
+            previous = current
+        results = [summary for band_summaries in _run(summaries, progress) for summary in band_summaries]
         aligned = [{k: np.require(v, requirements="CA") if isinstance(v, np.ndarray) else v for k, v in r.items()}
                    for r in results]
         return dict(job.finish(aligned))
@@ -138,18 +171,109 @@ _OPENED: Dict[Any, Any] = {}
 _OPENED_LOCK = threading.Lock()
 
 
-def _render_frame(source: str, open_options: Dict[str, Any], camera, options: Dict[str, Any], keep_pixels: bool):
-    """One frame's task (runs on a worker): the PNG's bytes, and the pixels when a video is made."""
-    from ._volume import open as open_volume, png_bytes
+def _opened(source: str, open_options: Dict[str, Any], region=None):
+    """This worker's opened copy of ``source`` (one for each region it renders) and its lock (opened on first
+    use)."""
+    from ._volume import open as open_volume
 
-    key = (source, repr(sorted(open_options.items())))
+    key = (source, repr(sorted(open_options.items())), repr(region))
     with _OPENED_LOCK:
         if key not in _OPENED:
             _OPENED[key] = (open_volume(source, **open_options), threading.Lock())
-        volume, lock = _OPENED[key]
+        return _OPENED[key]
+
+
+def _render_frame(source: str, open_options: Dict[str, Any], camera, options: Dict[str, Any], keep_pixels: bool):
+    """One frame's task (runs on a worker): the PNG's bytes, and the pixels when a video is made."""
+    from ._volume import png_bytes
+
+    volume, lock = _opened(source, open_options)
     with lock:
         image = volume.render(camera, **options)
     return png_bytes(image), (np.array(image[:, :, :3]) if keep_pixels else None)
+
+
+def _render_piece(source: str, open_options: Dict[str, Any], camera, options: Dict[str, Any], region):
+    """One piece's task (runs on a worker): its premultiplied linear RGBA over nothing, float32."""
+    volume, lock = _opened(source, open_options, region)
+    with lock:
+        return volume.render(camera, region=region, dtype=np.float32, background=(0.0, 0.0, 0.0), **options)
+
+
+def kd_pieces(info: Dict[str, Any], pieces: int):
+    """The k-d tree of ``pieces`` (a power of two) boxes of a store's level-0 samples: the tree's cube halved along
+    x, y, z in turn, so every cut is a face of the nodes of all but the coarsest levels (rays sample there as a
+    render of the whole volume does). Returns nested ``(axis, plane, lower, upper)`` splits with ``(lower, upper)``
+    boxes at the leaves; boxes outside the volume are None."""
+    if pieces < 1 or pieces & (pieces - 1):
+        raise ValueError(f"pieces must be a power of two, got {pieces}")
+    dims = [int(v) for v in info["dims"]]
+    span = int(info["brick_size"]) << (int(info["levels"]) - 1)
+    depth = pieces.bit_length() - 1
+
+    def split(lower, upper, level):
+        if level == depth:
+            lo = [max(0, v) for v in lower]
+            hi = [min(d, v) for d, v in zip(dims, upper)]
+            return (tuple(lo), tuple(hi)) if all(a < b for a, b in zip(lo, hi)) else None
+        axis = level % 3
+        plane = (lower[axis] + upper[axis]) // 2
+        below, above = list(upper), list(lower)
+        below[axis], above[axis] = plane, plane
+        return (axis, plane, split(lower, below, level + 1), split(above, upper, level + 1))
+
+    return split([0, 0, 0], [span] * 3, 0)
+
+
+def _view_order(tree, eye_voxel) -> List[Any]:
+    """The leaves of ``tree`` front to back as seen from ``eye_voxel`` (in level-0 sample units)."""
+    if tree is None:
+        return []
+    if len(tree) == 2:
+        return [tree]
+    axis, plane, lower, upper = tree
+    near, far = (lower, upper) if eye_voxel[axis] < plane else (upper, lower)
+    return _view_order(near, eye_voxel) + _view_order(far, eye_voxel)
+
+
+def render_sort_last(source, camera=None, *, pieces: int = 4, size=(512, 512), budget_mb: int = 256,
+                     background=(0.0, 0.0, 0.0), dtype=np.uint8, open_options: Optional[Dict[str, Any]] = None,
+                     **render_options) -> np.ndarray:
+    """Renders one frame of a store split into ``pieces`` boxes (:func:`kd_pieces`) on the active Dask cluster:
+    each worker renders its box alone (premultiplied RGBA, float32, within its own ``budget_mb``), and the client
+    composites them front to back with "over" in the camera's view order, then the background. Returns what
+    :meth:`voxstream.Volume.render` returns (``dtype`` uint8 or float32). Rays sample where one render of the whole
+    volume samples except at the cut planes; ``faithful=True`` (fixed steps) keeps the samples the same."""
+    from ._camera import Camera
+    from ._volume import _size, open as open_volume
+    from dask import delayed
+
+    width, height = _size(size)
+    opened = dict(open_options or {})
+    opened.update(size=(width, height), budget_mb=int(budget_mb))
+    local = open_volume(source, **opened)
+    info = local.info
+    if info.get("kind") != "store":
+        raise ValueError(f"{local.name}: sort-last rendering splits a store; scenes, meshes and particles are "
+                         "rendered whole (Volume.render)")
+    camera = local.camera if camera is None else Camera.from_value(camera)
+    eye = [(camera.eye[a] - info["origin"][a]) / info["spacing"][a] + 0.5 for a in range(3)]
+    order = _view_order(kd_pieces(info, pieces), eye)
+    task = delayed(_render_piece, pure=True)
+    name = os.fspath(source)
+    tasks = [task(name, opened, camera, dict(render_options), box,
+                  dask_key_name=f"voxstream-piece-{i}-{abs(hash((name, repr(camera), repr(box), repr(render_options)))):x}")
+             for i, box in enumerate(order)]
+    layers = _run(tasks, None)
+    colour = np.zeros((height, width, 3), np.float32)
+    transmittance = np.ones((height, width, 1), np.float32)
+    for layer in layers:
+        colour += transmittance * layer[:, :, :3]
+        transmittance *= 1.0 - layer[:, :, 3:4]
+    image = np.concatenate([colour + transmittance * np.asarray(background, np.float32), 1.0 - transmittance], axis=2)
+    if np.dtype(dtype) == np.dtype(np.float32):
+        return image
+    return (np.clip(image, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
 
 
 def orbit(source, frames: int, *, degrees: float = 360.0, elevation: float = 0.0, size=(512, 512)) -> List[Any]:

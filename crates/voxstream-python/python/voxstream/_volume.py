@@ -82,7 +82,7 @@ class Volume:
                shadows: bool = False, light=None, background=(0.0, 0.0, 0.0), step: float = 0.5,
                lod_bias: float = 0.0, shading: Optional[str] = None, blending: bool = True,
                preintegrate: bool = False, adaptive_step: Optional[float] = None,
-               faithful: bool = False) -> np.ndarray:
+               faithful: bool = False, region=None) -> np.ndarray:
         """Renders the volume; returns an (height, width, 4) array, RGBA: ``uint8`` (the CLI's PNG, plus alpha) or
         ``float32`` (linear, unclamped). The array's memory is Rust's buffer, handed over without a copy.
 
@@ -96,7 +96,9 @@ class Volume:
         - ``step``: the ray-march step in voxels of the sampled level; ``preintegrate``: integrate the transfer
           function between samples (the CLI's ``--preintegrate``); ``adaptive_step``: the error-bounded adaptive
           step's tolerance (``--adaptive-step``; None: the default, 0.05, for volumes); ``faithful``: fixed steps
-          of ``step`` everywhere (``--faithful``) (pre-integration: CPU only).
+          of ``step`` everywhere (``--faithful``) (pre-integration: CPU only);
+        - ``region``: ``((x0, y0, z0), (x1, y1, z1))``, only the store's level-0 samples in ``[x0, x1) × …``; the rest
+          is transparent (what :func:`voxstream.render_sort_last` gives each worker).
 
         The GIL is released while rendering; Ctrl-C raises ``KeyboardInterrupt`` at once. Statistics of the frame
         are in ``last_stats``. A converged render whose bricks could not all be read raises ``RuntimeError``."""
@@ -115,7 +117,8 @@ class Volume:
             preintegrate=bool(preintegrate),
             adaptive_step=None if adaptive_step is None else float(adaptive_step),
             faithful=bool(faithful),
-            float32=np.dtype(dtype) == np.dtype(np.float32))
+            float32=np.dtype(dtype) == np.dtype(np.float32),
+            region=None if region is None else tuple(tuple(int(v) for v in corner) for corner in region))
         self.last_stats = dict(stats)
         return pixels
 
