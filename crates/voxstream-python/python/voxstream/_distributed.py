@@ -133,6 +133,9 @@ def import_dask(array, out, *, spacing=None, origin=None, brick_size: int = 32, 
         gx, gy, _ = job.shards(0)
         _, (sx, sy, sz) = job.region(0, (0, 0, 0))
         band = max(1, min(gy, _TASK_BYTES // max(1, sx * sy * sz * 4 * gx)))
+        # The array in chunks of one band each (a no-op where they are already): each level-0 task takes one chunk.
+        # (Slicing bands out of other chunks in the graph cost Dask 4× the import itself.)
+        blocks = array.rechunk((sz, band * sy, x)).to_delayed()
         previous: Dict[Any, Any] = {}
         summaries = []
         for level in range(job.levels()):
@@ -145,11 +148,9 @@ def import_dask(array, out, *, spacing=None, origin=None, brick_size: int = 32, 
                     shards.append(((x, y, z), job.region(level, (x, y, z)), children))
                 name = f"voxstream-band-{level}-{z}-{first}-{tag}"
                 if level == 0:
-                    (ox, oy, oz), _ = shards[0][1]
-                    lo, extent = shards[-1][1]
-                    ux, uy, uz = (o + e for o, e in zip(lo, extent))
-                    block = array[oz:uz, oy:uy, ox:ux]
-                    halves, summary = task(spec, 0, shards, (ox, oy, oz), block, None, dask_key_name=name)
+                    origin = (0, first * sy, z * sz)
+                    block = blocks[z, first // band, 0]
+                    halves, summary = task(spec, 0, shards, origin, block, None, dask_key_name=name)
                 else:
                     keys = sorted({(2 * z + dz, 2 * (first // band) + k) for dz in (0, 1) for k in (0, 1)})
                     inputs = [previous.pop(key) for key in keys if key in previous]
