@@ -121,7 +121,7 @@ impl ShardSpec {
 
     /// The pyramid's levels.
     pub fn layout(&self) -> Result<PyramidLayout, StoreError> {
-        if !(4..=256).contains(&self.brick_size) || self.brick_size % 2 != 0 {
+        if !(4..=256).contains(&self.brick_size) || !self.brick_size.is_multiple_of(2) {
             return Err(self.error(format!("brick size must be even and in 4..=256, got {}", self.brick_size)));
         }
         PyramidLayout::new(self.dims, self.brick_size).map_err(|e| self.error(e.to_string()))
