@@ -153,3 +153,47 @@ def test_one_frame_split_over_two_workers_composites_to_the_render_of_the_whole(
         vs.render_sort_last(store, camera, pieces=3, size=size)
     with pytest.raises(ValueError, match="splits a store"):
         vs.render_sort_last("sponge", None, pieces=2, size=size)
+
+
+def test_a_scheduler_and_workers_started_apart_import_over_tcp(tmp_path):
+    """What a cluster of several machines runs: `dask scheduler` and `dask worker` as their own processes, the client
+    connecting by the scheduler's tcp:// address (here all on this machine, as the test must start them itself)."""
+    import subprocess
+    import sys
+    import time
+
+    bin_dir = pathlib.Path(sys.executable).parent
+    scheduler_file = tmp_path / "scheduler.json"
+    started = [subprocess.Popen([str(bin_dir / "dask"), "scheduler", "--host", "127.0.0.1", "--port", "0",
+                                 "--no-dashboard", "--scheduler-file", str(scheduler_file)],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    try:
+        deadline = time.monotonic() + 60
+        while not scheduler_file.exists() and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert scheduler_file.exists(), "the scheduler did not start within 60 s"
+        for _ in range(2):
+            started.append(subprocess.Popen([str(bin_dir / "dask"), "worker", "--scheduler-file", str(scheduler_file),
+                                             "--nworkers", "1", "--nthreads", "1", "--no-dashboard"],
+                                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        import json
+        address = json.loads(scheduler_file.read_text())["address"]
+        assert address.startswith("tcp://127.0.0.1:")
+        with Client(address) as remote:
+            remote.wait_for_workers(2, timeout=60)
+            samples = volume(dtype=np.uint16)
+            (tmp_path / "one").mkdir()
+            (tmp_path / "tcp").mkdir()
+            vs.import_volume(samples, tmp_path / "one" / "store", brick_size=8)
+            vs.import_volume(da.from_array(samples, chunks=(16, 70, 83)), tmp_path / "tcp" / "store", brick_size=8)
+            assert_same_store(tmp_path / "one" / "store", tmp_path / "tcp" / "store")
+            written = shards_written(remote)
+            assert len(written) == 2 and sum(written.values()) > 0, written
+    finally:
+        for process in reversed(started):
+            process.terminate()
+        for process in reversed(started):
+            try:
+                process.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                process.kill()
