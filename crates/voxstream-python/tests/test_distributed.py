@@ -151,6 +151,8 @@ def test_one_frame_split_over_two_workers_composites_to_the_render_of_the_whole(
         whole.render(camera, region=((500, 0, 0), (600, 10, 10)))
     with pytest.raises(ValueError, match="power of two"):
         vs.render_sort_last(store, camera, pieces=3, size=size)
+    with pytest.raises(ValueError, match="sets region itself"):
+        vs.render_sort_last(store, camera, pieces=2, size=size, region=((0, 0, 0), (8, 8, 8)))
     with pytest.raises(ValueError, match="splits a store"):
         vs.render_sort_last("sponge", None, pieces=2, size=size)
 

@@ -249,6 +249,10 @@ def render_sort_last(source, camera=None, *, pieces: int = 4, size=(512, 512), b
     from ._volume import _size, open as open_volume
     from dask import delayed
 
+    taken = {"region", "dtype", "background", "camera"} & set(render_options)
+    if taken:
+        raise ValueError(f"render_sort_last sets {', '.join(sorted(taken))} itself: give background= and dtype= "
+                         "as its own arguments")
     width, height = _size(size)
     opened = dict(open_options or {})
     opened.update(size=(width, height), budget_mb=int(budget_mb))
