@@ -13,7 +13,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use voxstream_api::import_input::{open_input, ImportInput, ImportSettings};
-use voxstream_store::{DType, StoreError, VolumeInfo, VolumeSource};
+use voxstream_store::{DType, ImportReport, StoreError, VolumeInfo, VolumeSource};
 
 use crate::errors::{progress_step, to_py_err};
 
@@ -115,18 +115,39 @@ pub fn import_volume<'py>(
     if let (Some(callback), true) = (&progress, last < total) {
         callback.call1(py, (total, total))?;
     }
-    let result = PyDict::new(py);
-    result.set_item("out", &out)?;
-    result.set_item("dims", info.dims)?;
-    result.set_item("dtype", info.dtype.name())?;
-    result.set_item("levels", report.levels)?;
-    result.set_item("bricks_written", report.bricks_written.iter().sum::<u64>())?;
-    result.set_item("bricks_empty", report.bricks_empty.iter().sum::<u64>())?;
-    result.set_item("value_range", report.value_range)?;
+    let result = report_dict(py, &out, info.dims, info.dtype, &report)?;
     if let Some(description) = description {
         result.set_item("description", description)?;
     }
     Ok(result)
+}
+
+/// What an import returns to Python: where, dims, sample type, levels, bricks written and empty, value range (for a
+/// single-process import and a distributed one alike).
+pub fn report_dict<'py>(
+    py: Python<'py>,
+    out: &Path,
+    dims: [u64; 3],
+    dtype: DType,
+    report: &ImportReport,
+) -> PyResult<Bound<'py, PyDict>> {
+    let result = PyDict::new(py);
+    result.set_item("out", out)?;
+    result.set_item("dims", dims)?;
+    result.set_item("dtype", dtype.name())?;
+    result.set_item("levels", report.levels)?;
+    result.set_item("bricks_written", report.bricks_written.iter().sum::<u64>())?;
+    result.set_item("bricks_empty", report.bricks_empty.iter().sum::<u64>())?;
+    result.set_item("value_range", report.value_range)?;
+    Ok(result)
+}
+
+/// The error for an array of a sample type no store holds (`name` as numpy spells it).
+pub fn unsupported_dtype(name: &str) -> PyErr {
+    PyValueError::new_err(format!(
+        "arrays of {name} cannot be imported: convert to uint8, uint16, int16 or float32 (e.g. \
+         array.astype(numpy.float32))"
+    ))
 }
 
 /// The array's samples as a source, if `source` is a numpy array (copied once, in x-fastest order).
@@ -162,11 +183,7 @@ fn array_source(
     } else if let Some(v) = samples::<f32>(source) {
         (DType::F32, Samples::F32(v))
     } else {
-        let dtype = source.getattr("dtype")?.str()?.to_string();
-        return Err(PyValueError::new_err(format!(
-            "arrays of {dtype} cannot be imported: convert to uint8, uint16, int16 or float32 (e.g. \
-             array.astype(numpy.float32))"
-        )));
+        return Err(unsupported_dtype(&source.getattr("dtype")?.str()?.to_string()));
     };
     let info = VolumeInfo {
         dims: [x as u64, y as u64, z as u64],

@@ -13,6 +13,7 @@ use voxstream_store::value_histogram::HistogramParts;
 use voxstream_store::{DType, ImportOptions, VolumeInfo};
 
 use crate::errors::to_py_err;
+use crate::import::{report_dict, unsupported_dtype};
 
 /// A distributed import in progress: the store's import lock and `STORE.partial`. `finish` puts the store in
 /// place; `abort` (or the object's end) removes the partial store and leaves an existing one as it was.
@@ -94,17 +95,10 @@ impl ShardImport {
     fn finish<'py>(&mut self, py: Python<'py>, summaries: &Bound<'py, PyList>) -> PyResult<Bound<'py, PyDict>> {
         let parsed = summaries.iter().map(|s| summary_from_py(&s)).collect::<PyResult<Vec<_>>>()?;
         let import = self.import.take().ok_or_else(|| PyValueError::new_err("this import has already finished"))?;
-        let (dims, dtype, out) = (import.spec().dims, import.spec().dtype.clone(), import.out().to_path_buf());
+        let (dims, out) = (import.spec().dims, import.out().to_path_buf());
+        let dtype = sample_type(&import.spec().dtype)?;
         let report = py.detach(|| import.finish(parsed)).map_err(|e| to_py_err(e.into()))?;
-        let result = PyDict::new(py);
-        result.set_item("out", out)?;
-        result.set_item("dims", dims)?;
-        result.set_item("dtype", dtype)?;
-        result.set_item("levels", report.levels)?;
-        result.set_item("bricks_written", report.bricks_written.iter().sum::<u64>())?;
-        result.set_item("bricks_empty", report.bricks_empty.iter().sum::<u64>())?;
-        result.set_item("value_range", report.value_range)?;
-        Ok(result)
+        report_dict(py, &out, dims, dtype, &report)
     }
 
     /// Removes the partial store and releases the lock (an existing store at `out` is left as it was).
@@ -172,12 +166,7 @@ fn sample_type(name: &str) -> PyResult<DType> {
         "float32" => Some(DType::F32),
         other => DType::from_name(other),
     };
-    dtype.ok_or_else(|| {
-        PyValueError::new_err(format!(
-            "arrays of {name} cannot be imported: convert to uint8, uint16, int16 or float32 (e.g. \
-             array.astype(numpy.float32))"
-        ))
-    })
+    dtype.ok_or_else(|| unsupported_dtype(name))
 }
 
 fn summary_to_py<'py>(py: Python<'py>, summary: &ShardSummary) -> PyResult<Bound<'py, PyDict>> {

@@ -451,25 +451,10 @@ impl LevelWriter {
                         buffer.copy_to_f32(start, &mut elements[dst..dst + len]);
                     }
                 }
-                // Min/max of the valid samples of each brick of the shard.
-                for by in 0..shard_y / b {
-                    for bx in 0..shard_x / b {
-                        let (gbx, gby) = (sx * shard_x / b + bx, sy * shard_y / b + by);
-                        if gbx * b >= nx || gby * b >= ny {
-                            continue;
-                        }
-                        let mut range = [f32::INFINITY, f32::NEG_INFINITY];
-                        for z in 0..planes as u64 {
-                            for y in by * b..((by + 1) * b).min(ny - sy * shard_y) {
-                                for x in bx * b..((bx + 1) * b).min(nx - sx * shard_x) {
-                                    let v = elements[((z * shard_y + y) * shard_x + x) as usize];
-                                    range[0] = range[0].min(v);
-                                    range[1] = range[1].max(v);
-                                }
-                            }
-                        }
-                        brick_ranges.push((gby * (nx.div_ceil(b)) + gbx, range, range == [0.0, 0.0]));
-                    }
+                let valid = [shard_x.min(nx - sx * shard_x), shard_y.min(ny - sy * shard_y), planes as u64];
+                for ([bx, by], range) in shard_brick_ranges(&elements, [shard_x, shard_y], valid, b) {
+                    let (gbx, gby) = (sx * shard_x / b + bx, sy * shard_y / b + by);
+                    brick_ranges.push((gby * (nx.div_ceil(b)) + gbx, range, range == [0.0, 0.0]));
                 }
                 store_shard(array, &[row, sy, sx], &elements, dtype).map_err(|e| e.to_string())?;
                 Ok(brick_ranges)
@@ -494,6 +479,35 @@ impl LevelWriter {
         self.row += 1;
         Ok((coarse, planes.div_ceil(2)))
     }
+}
+
+/// Min and max of the samples of each brick of one shard that lie in the volume: `elements` is the whole shard (x
+/// fastest, `edge` samples along x and y), `valid` its samples inside the volume along x, y, z. Bricks (x, y within
+/// the shard, y outer) with no valid sample are left out.
+pub(crate) fn shard_brick_ranges(
+    elements: &[f32],
+    edge: [u64; 2],
+    valid: [u64; 3],
+    b: u64,
+) -> Vec<([u64; 2], [f32; 2])> {
+    let [vx, vy, vz] = valid;
+    let mut ranges = Vec::new();
+    for by in 0..vy.div_ceil(b) {
+        for bx in 0..vx.div_ceil(b) {
+            let mut range = [f32::INFINITY, f32::NEG_INFINITY];
+            for z in 0..vz {
+                for y in by * b..((by + 1) * b).min(vy) {
+                    let row = ((z * edge[1] + y) * edge[0]) as usize;
+                    for &v in &elements[row + (bx * b) as usize..row + ((bx + 1) * b).min(vx) as usize] {
+                        range[0] = range[0].min(v);
+                        range[1] = range[1].max(v);
+                    }
+                }
+            }
+            ranges.push(([bx, by], range));
+        }
+    }
+    ranges
 }
 
 pub(crate) fn store_shard<S: ?Sized + zarrs::storage::ReadableWritableStorageTraits + 'static>(

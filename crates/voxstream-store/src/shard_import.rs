@@ -27,7 +27,8 @@ use zarrs::storage::store::MemoryStore;
 use zarrs::storage::ReadableStorageTraits;
 
 use crate::error::StoreError;
-use crate::import::{build_level_array, downsample, finish_store, partial_path, prepare_partial, store_shard};
+use crate::import::{build_level_array, downsample, finish_store, partial_path, prepare_partial};
+use crate::import::{shard_brick_ranges, store_shard};
 use crate::import::{BrickCounts, Samples};
 use crate::import::{ImportOptions, ImportReport};
 use crate::layout::PyramidLayout;
@@ -240,24 +241,13 @@ impl ShardSpec {
         }
         let b = self.brick_size;
         let bricks_per_axis = layout.bricks(level);
-        let (mut bricks, mut ranges) = (Vec::new(), Vec::new());
-        for by in 0..ey.div_ceil(b) {
-            for bx in 0..ex.div_ceil(b) {
-                let mut range = [f32::INFINITY, f32::NEG_INFINITY];
-                for z in 0..ez {
-                    for y in by * b..((by + 1) * b).min(ey) {
-                        let row = ((z * ey + y) * ex) as usize;
-                        for &v in &values[row + (bx * b) as usize..row + ((bx + 1) * b).min(ex) as usize] {
-                            range[0] = range[0].min(v);
-                            range[1] = range[1].max(v);
-                        }
-                    }
-                }
+        let (bricks, ranges) = shard_brick_ranges(&elements, [edge[0], edge[1]], extent, b)
+            .into_iter()
+            .map(|([bx, by], range)| {
                 let [gx, gy, gz] = [origin[0] / b + bx, origin[1] / b + by, origin[2] / b];
-                bricks.push((gz * bricks_per_axis[1] + gy) * bricks_per_axis[0] + gx);
-                ranges.push(range);
-            }
-        }
+                ((gz * bricks_per_axis[1] + gy) * bricks_per_axis[0] + gx, range)
+            })
+            .unzip();
         // Encoded in memory with the codecs the import built (not read back from its metadata: the same codecs
         // with the same options), then written into the level's folder by `write_shard_file`.
         let options = ImportOptions {
