@@ -208,6 +208,15 @@ impl GpuRenderer {
             let (what, instead) = ("pre-integration (--preintegrate)", "--backend cpu, or drop --preintegrate");
             return Err(GpuError::Unsupported { what, instead }.into());
         }
+        // Nor projections and clipping planes (issue 42): refused, never ignored.
+        if settings.projection != voxstream_render::Projection::Composite {
+            let (what, instead) = ("intensity projections (--projection)", "--backend cpu, or drop --projection");
+            return Err(GpuError::Unsupported { what, instead }.into());
+        }
+        if !settings.clip_planes.is_empty() {
+            let (what, instead) = ("clipping planes (--clip-plane)", "--backend cpu, or --crop for a box");
+            return Err(GpuError::Unsupported { what, instead }.into());
+        }
         let (width, height) = (settings.width, settings.height);
         if progressive.image.width != width || progressive.image.height != height {
             return Err(RenderError::InvalidSetting("progressive image size differs from the settings".into()));

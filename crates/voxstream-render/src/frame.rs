@@ -11,6 +11,7 @@ use crate::camera::{Camera, CameraFrame};
 use crate::error::RenderError;
 use crate::image::Image;
 use crate::isosurface::SurfaceSettings;
+use crate::projection::{Projection, ProjectionCaster};
 use crate::ray_caster::RayCaster;
 use crate::sampler::LANES;
 use crate::settings::RenderSettings;
@@ -174,7 +175,10 @@ pub fn render_pass(
     let tiles_y = height.div_ceil(edge);
     let pending = &progressive.pending;
     let grid = TileGrid { tiles_x, tiles_y, edge };
-    let results = if settings.surfaces.is_empty() {
+    let results = if settings.projection != Projection::Composite {
+        let caster = ProjectionCaster::new(view, feedback, lut, settings);
+        trace_tiles(&caster, grid, &frame, settings, feedback, pending)
+    } else if settings.surfaces.is_empty() {
         let caster = RayCaster::new(view, feedback, lut, settings);
         trace_tiles(&caster, grid, &frame, settings, feedback, pending)
     } else {

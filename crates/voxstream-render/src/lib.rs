@@ -15,7 +15,8 @@
 //!   [`Integrand`]; [`emission_absorption`] is the volume-rendering integrand, with tables pre-corrected for the
 //!   step ([`step_table`]); [`isosurface`] is the exact first-hit integrand (Knoll et al.), which takes whole brick
 //!   segments and intersects each trilinear cell ([`cell_walk`], [`cell_intersection`]); [`surfaces_in_volume`]
-//!   draws those surfaces inside the volume rendering.
+//!   draws those surfaces inside the volume rendering; [`projection`] keeps the largest, smallest or mean value
+//!   along each ray (MIP, MinIP); [`clip_plane`] cuts rays to half-spaces before they start.
 //! - [`render_frame`]: rayon over 16×16 image tiles, one ray per pixel: [`RayCaster`] for volumes,
 //!   [`surface_caster::SurfaceCaster`] when the settings name isosurfaces.
 //!
@@ -31,6 +32,7 @@ pub mod block_visibility;
 pub mod camera;
 pub mod cell_intersection;
 pub mod cell_walk;
+pub mod clip_plane;
 pub mod emission_absorption;
 pub mod error;
 pub mod frame;
@@ -42,6 +44,7 @@ pub mod isosurface;
 pub mod lighting;
 pub mod paraview_colormap;
 pub mod preintegration;
+pub mod projection;
 pub mod ray_caster;
 pub mod sampler;
 pub mod settings;
@@ -53,6 +56,7 @@ pub mod traversal;
 
 pub use block_visibility::BlockVisibility;
 pub use camera::{Camera, CameraFrame};
+pub use clip_plane::{ClipPlane, MAX_CLIP_PLANES};
 pub use error::RenderError;
 pub use frame::{
     frame_buffer_bytes, render_frame, render_pass, PassInputs, ProgressiveImage, RenderedFrame, FRAME_BYTES_PER_PIXEL,
@@ -62,6 +66,7 @@ pub use image::{psnr, Image};
 pub use instruction_set::{InstructionSet, RayLoopBuild};
 pub use integrand::{BrickSpan, Integrand, Sample};
 pub use isosurface::{IsoSurface, SurfaceNormals, SurfaceParameters, SurfaceSettings, MAX_SURFACES};
+pub use projection::{Projection, ProjectionCaster};
 pub use ray_caster::RayCaster;
 pub use settings::{level_colour, PhongCoefficients, RenderSettings, Shading, VolumePlacement};
 pub use transfer_function::{TransferFunction, TransferLut};

@@ -2,9 +2,11 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::clip_plane::{ClipPlane, MAX_CLIP_PLANES};
 use crate::error::RenderError;
 use crate::instruction_set::InstructionSet;
 use crate::isosurface::{IsoSurface, SurfaceNormals, MAX_SURFACES};
+use crate::projection::Projection;
 
 /// How samples are lit.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -152,6 +154,11 @@ pub struct RenderSettings {
     /// ([`level_colour`]) instead of the transfer function's (opacity and shading stay), so the image shows which
     /// level each part of each pixel used.
     pub colour_by_level: bool,
+    /// How the samples along a ray make its pixel: compositing (volume rendering, or isosurfaces), or the largest,
+    /// smallest or mean value along it ([`crate::projection`]).
+    pub projection: Projection,
+    /// Half-spaces the view keeps ([`crate::clip_plane`]); at most [`MAX_CLIP_PLANES`].
+    pub clip_planes: Vec<ClipPlane>,
 }
 
 /// The colour [`RenderSettings::colour_by_level`] gives tree level `level`: eight hues around the colour wheel,
@@ -216,6 +223,8 @@ impl Default for RenderSettings {
             steps_ignore_stand_ins: false,
             focus: None,
             colour_by_level: false,
+            projection: Projection::Composite,
+            clip_planes: Vec::new(),
         }
     }
 }
@@ -274,6 +283,21 @@ impl RenderSettings {
             if !(surface.opacity > 0.0 && surface.opacity <= 1.0) {
                 return bad(format!("isosurface {} opacity must be in (0, 1], got {}", i + 1, surface.opacity));
             }
+        }
+        if self.projection != Projection::Composite && !self.surfaces.is_empty() {
+            return bad(format!(
+                "an intensity projection (--projection {}) draws values, not isosurfaces: drop --iso or the projection",
+                self.projection.name()
+            ));
+        }
+        if self.projection != Projection::Composite && self.preintegrated {
+            return bad("pre-integration is for compositing: drop --preintegrate with --projection".into());
+        }
+        if self.clip_planes.len() > MAX_CLIP_PLANES {
+            return bad(format!("at most {MAX_CLIP_PLANES} clipping planes, got {}", self.clip_planes.len()));
+        }
+        if let Some(i) = self.clip_planes.iter().position(|p| !p.is_valid()) {
+            return bad(format!("clipping plane {} needs a finite point and a non-zero finite normal", i + 1));
         }
         let p = &self.placement;
         if !(p.scale.iter().all(|s| s.is_finite() && *s > 0.0) && p.origin.iter().all(|v| v.is_finite())) {

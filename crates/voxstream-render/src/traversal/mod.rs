@@ -48,6 +48,7 @@ mod test_tree;
 use glam::DVec3;
 use voxstream_core::{Dequantize, FeedbackBuffer, Request, TreeView};
 
+use crate::clip_plane::VolumePlane;
 use crate::gathered_corners::CornerGather;
 use crate::integrand::Integrand;
 use crate::settings::RenderSettings;
@@ -118,6 +119,8 @@ pub struct Traversal<'a> {
     world_per_volume: f64,
     clip_lower: DVec3,
     clip_upper: DVec3,
+    /// The view's clipping planes in unit-cube coordinates ([`crate::clip_plane`]).
+    clip_planes: Vec<VolumePlane>,
     max_requests_per_ray: u32,
     skip_empty_space: bool,
     sample_batches: bool,
@@ -166,6 +169,7 @@ impl<'a> Traversal<'a> {
             world_per_volume: settings.placement.mean_scale(),
             clip_lower: DVec3::from(settings.placement.clip_lower),
             clip_upper: DVec3::from(settings.placement.clip_upper),
+            clip_planes: settings.clip_planes.iter().map(|p| VolumePlane::new(p, &settings.placement)).collect(),
             max_requests_per_ray: settings.max_requests_per_ray,
             skip_empty_space: settings.skip_empty_space,
             sample_batches: settings.sample_batches,

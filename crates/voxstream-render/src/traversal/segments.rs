@@ -13,6 +13,7 @@ use super::boxes::{exit_distance, intersect_aabb};
 use super::bricks::{Blend, WeightRamp};
 use super::descent::{BrickRef, DescentPath, RequestSink, SegmentData};
 use super::{Ray, RayStats, Traversal, MAX_SEGMENTS};
+use crate::clip_plane::clip_to_planes;
 use crate::integrand::Integrand;
 use crate::step_table::StepLength;
 
@@ -22,7 +23,11 @@ impl<'a> Traversal<'a> {
     #[inline(always)]
     pub(super) fn begin(&self, ray: &Ray, stats: &mut RayStats, path: &mut DescentPath) -> Option<RayWalk> {
         stats.rays += 1;
-        let (t_enter, t_leave) = intersect_aabb(ray.origin, ray.direction, self.clip_lower, self.clip_upper)?;
+        let mut interval = intersect_aabb(ray.origin, ray.direction, self.clip_lower, self.clip_upper)?;
+        if !self.clip_planes.is_empty() {
+            interval = clip_to_planes(ray.origin, ray.direction, interval, &self.clip_planes)?;
+        }
+        let (t_enter, t_leave) = interval;
         let t = t_enter.max(ray.start);
         // Kept nodes are found again exactly only where an ancestor's coordinates are the point's shifted (N a
         // power of two); with N = 3 a point within a rounding of a node's face could keep a neighbour's node where
