@@ -140,30 +140,86 @@ pub const MAX_GENERATED_FRAMES: usize = 100_000;
 
 /// Parses `orbit:N`, `zoom:N` or `fly:N`; `None` if `text` is not of that form, an error if `N` is not a count.
 pub fn parse_generated_path(text: &str) -> Option<Result<(PathKind, usize)>> {
-    let (kind, frames) = text.split_once(':')?;
-    let kind = PathKind::ALL.into_iter().find(|k| k.name() == kind)?;
-    Some(match frames.parse::<usize>() {
-        Ok(n) if (2..=MAX_GENERATED_FRAMES).contains(&n) => Ok((kind, n)),
-        _ => Err(anyhow!(
-            "--path {text}: the frame count must be a whole number from 2 to {MAX_GENERATED_FRAMES} (e.g. {}:60)",
-            kind.name()
-        )),
-    })
+    Some(parse_generated(text)?.map(|(kind, frames, _)| (kind, frames)))
+}
+
+/// Parses `KIND:N`, or `orbit:N:DEGREES` (an orbit of that many degrees; `orbit:N` is a quarter turn); `None` if
+/// `text` is not of that form, an error if `N` is not a count or the degrees not a number.
+pub fn parse_generated(text: &str) -> Option<Result<(PathKind, usize, Option<f64>)>> {
+    let mut parts = text.split(':');
+    let name = parts.next()?;
+    let kind = PathKind::ALL.into_iter().find(|k| k.name() == name)?;
+    let frames = parts.next()?;
+    let degrees = parts.next();
+    if parts.next().is_some() {
+        return Some(Err(anyhow!("--path {text}: expected {}:N{}", kind.name(), orbit_suffix(kind))));
+    }
+    let frames = match frames.parse::<usize>() {
+        Ok(n) if (2..=MAX_GENERATED_FRAMES).contains(&n) => n,
+        _ => {
+            return Some(Err(anyhow!(
+                "--path {text}: the frame count must be a whole number from 2 to {MAX_GENERATED_FRAMES} (e.g. {}:60)",
+                kind.name()
+            )))
+        }
+    };
+    let degrees = match degrees {
+        None => None,
+        Some(_) if kind != PathKind::Orbit => {
+            return Some(Err(anyhow!(
+                "--path {text}: only orbit takes degrees (orbit:N:360); {}:N takes none",
+                kind.name()
+            )))
+        }
+        Some(d) => match d.parse::<f64>() {
+            Ok(v) if v.is_finite() && v != 0.0 && v.abs() <= 3600.0 => Some(v),
+            _ => {
+                return Some(Err(anyhow!(
+                    "--path {text}: the orbit's degrees must be a non-zero number up to 3600, e.g. orbit:120:360"
+                )))
+            }
+        },
+    };
+    Some(Ok((kind, frames, degrees)))
+}
+
+fn orbit_suffix(kind: PathKind) -> &'static str {
+    if kind == PathKind::Orbit {
+        " or orbit:N:DEGREES"
+    } else {
+        ""
+    }
 }
 
 /// The cameras `--path` asks for around the view `view`: a generated path (`orbit:N`, … when no file of that name
 /// exists), a camera path file, or `view` alone without `--path`.
 pub fn path_cameras(path: Option<&Path>, view: &Camera) -> Result<Vec<Camera>> {
     Ok(match path {
-        Some(path) => match path.to_str().filter(|_| !path.exists()).and_then(parse_generated_path) {
-            Some(generated) => {
-                let (kind, frames) = generated?;
-                generated_path(kind, frames, view)
-            }
+        Some(path) => match path.to_str().filter(|_| !path.exists()).and_then(parse_generated) {
+            Some(generated) => match generated? {
+                (PathKind::Orbit, frames, Some(degrees)) => orbit_path(frames, degrees, view),
+                (kind, frames, _) => generated_path(kind, frames, view),
+            },
             None => read_camera_path(path)?,
         },
         None => vec![*view],
     })
+}
+
+/// `frames` cameras turning `degrees` about the view's up direction through its target. A whole number of turns
+/// (360, 720, …) leaves out the last camera, which would repeat the first: the frames then loop as a movie.
+pub fn orbit_path(frames: usize, degrees: f64, from: &Camera) -> Vec<Camera> {
+    let target = glam::DVec3::from(from.target);
+    let up = glam::DVec3::from(from.up).normalize_or(glam::DVec3::Y);
+    let offset = glam::DVec3::from(from.eye) - target;
+    let whole_turns = (degrees / 360.0).fract() == 0.0;
+    let last = if whole_turns { frames } else { frames.max(2) - 1 } as f64;
+    (0..frames)
+        .map(|i| {
+            let rotation = glam::DQuat::from_axis_angle(up, (i as f64 / last * degrees).to_radians());
+            Camera { eye: (target + rotation * offset).to_array(), ..*from }
+        })
+        .collect()
 }
 
 /// `frames` cameras of `kind` around the view `from`.
@@ -224,6 +280,24 @@ mod tests {
         let error = parse_generated_path("fly:x").unwrap().unwrap_err().to_string();
         assert!(error.contains("fly:60"), "{error}");
         assert!(parse_generated_path("orbit:1").unwrap().is_err());
+    }
+
+    #[test]
+    fn a_full_orbit_loops_without_repeating_its_first_camera() {
+        let view = Camera { eye: [0.5, 0.5, 3.0], target: [0.5, 0.5, 0.5], up: [0.0, 1.0, 0.0], fov: 30.0 };
+        assert!(matches!(parse_generated("orbit:8:360"), Some(Ok((PathKind::Orbit, 8, Some(d)))) if d == 360.0));
+        assert!(matches!(parse_generated("orbit:8"), Some(Ok((PathKind::Orbit, 8, None)))));
+        for bad in ["zoom:8:90", "orbit:8:x", "orbit:8:0", "orbit:8:90:1"] {
+            assert!(parse_generated(bad).unwrap().is_err(), "{bad}");
+        }
+        let path = path_cameras(Some(Path::new("orbit:8:360")), &view).unwrap();
+        assert_eq!(path.len(), 8);
+        // 45° a frame: the fifth camera is opposite the first, and none repeats it.
+        assert!((path[4].eye[2] - (0.5 - 2.5)).abs() < 1e-9, "{:?}", path[4].eye);
+        assert!(path[1..].iter().all(|c| glam::DVec3::from(c.eye).distance(glam::DVec3::from(view.eye)) > 1.0));
+        // Not a whole turn: the last camera is at the end of the arc.
+        let half = orbit_path(5, 180.0, &view);
+        assert!((half[4].eye[2] - (0.5 - 2.5)).abs() < 1e-9, "{:?}", half[4].eye);
     }
 
     #[test]

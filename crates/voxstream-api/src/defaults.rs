@@ -44,11 +44,23 @@ pub fn frame_box(
     towards_eye: [f64; 3],
     up: [f64; 3],
 ) -> Camera {
+    frame_box_with_fov(lower, upper, width, height, towards_eye, up, 30.0)
+}
+
+/// [`frame_box`] with a vertical field of view of `fov` degrees.
+pub fn frame_box_with_fov(
+    lower: [f64; 3],
+    upper: [f64; 3],
+    width: u32,
+    height: u32,
+    towards_eye: [f64; 3],
+    up: [f64; 3],
+    fov: f64,
+) -> Camera {
     use glam::DVec3;
     let lower = DVec3::from(lower);
     let upper = DVec3::from(upper);
     let centre = (lower + upper) * 0.5;
-    let fov: f64 = 30.0;
     let up_hint = DVec3::from(up);
     let towards_eye = DVec3::from(towards_eye).normalize();
     // The camera's basis (as `Camera::frame` builds it): forward = −towards_eye, right = forward × up.

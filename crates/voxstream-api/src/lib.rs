@@ -15,6 +15,7 @@
 
 pub mod backend;
 pub mod camera_path;
+pub mod camera_presets;
 pub mod defaults;
 pub mod depth_fusion;
 pub mod error_message;

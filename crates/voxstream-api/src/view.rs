@@ -10,10 +10,12 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use voxstream_core::json_limits::read_json_file;
 use voxstream_render::{
-    Camera, IsoSurface, RenderSettings, Shading, SurfaceNormals, TransferFunction, VolumePlacement, MAX_SURFACES,
+    Camera, ClipPlane, IsoSurface, Projection, RenderSettings, Shading, SurfaceNormals, TransferFunction,
+    VolumePlacement, MAX_SURFACES,
 };
 
 use crate::camera_path::read_camera_file;
+use crate::camera_presets::{preset_camera, CameraTurn, ViewDirection};
 use crate::defaults::{check_placement, shown_number};
 use crate::source::SourceMeta;
 
@@ -71,6 +73,10 @@ pub struct CameraOptions {
     pub up: Option<[f64; 3]>,
     /// The vertical field of view, degrees (`--fov`).
     pub fov: Option<f64>,
+    /// Frame the volume looking along an axis (`--view`), in place of the file or the default.
+    pub preset: Option<ViewDirection>,
+    /// Turns and moves it around its target, last (`--azimuth`, `--elevation`, `--zoom`).
+    pub turn: CameraTurn,
 }
 
 /// What a view asks of a source; the defaults are `voxstream render`'s.
@@ -110,6 +116,10 @@ pub struct ViewOptions {
     /// `voxstream.render_sort_last`). Pieces split at faces of the tree's nodes sample where a render of the whole
     /// volume samples.
     pub region: Option<[[u64; 3]; 2]>,
+    /// Compositing, or the largest, smallest or mean value along each ray (`--projection`).
+    pub projection: Projection,
+    /// Half-spaces of the world that are kept (`--clip-plane`).
+    pub clip_planes: Vec<ClipPlane>,
 }
 
 impl Default for ViewOptions {
@@ -130,6 +140,8 @@ impl Default for ViewOptions {
             colour_by_level: false,
             camera: CameraOptions::default(),
             region: None,
+            projection: Projection::Composite,
+            clip_planes: Vec::new(),
         }
     }
 }
@@ -231,6 +243,12 @@ pub fn prepare_view(view: &ViewOptions, source: &SourceMeta) -> Result<PreparedV
     if view.width == 0 || view.height == 0 {
         bail!("image size must be positive, got {}x{}", view.width, view.height);
     }
+    if view.projection != Projection::Composite && !view.iso.values.is_empty() {
+        bail!(
+            "--projection {} draws values along rays, not isosurfaces: drop --iso or --projection",
+            view.projection.name()
+        );
+    }
     let (transfer_function, tf_given) = match &view.transfer_function {
         TransferFunctionChoice::Default => (source.transfer_function.clone(), false),
         TransferFunctionChoice::File(path) => (read_transfer_function(path, source.value_range)?, true),
@@ -268,11 +286,19 @@ pub fn prepare_view(view: &ViewOptions, source: &SourceMeta) -> Result<PreparedV
         lod_bias: view.lod_bias,
         colour_by_level: view.colour_by_level,
         placement: region_placement(source, view.region)?,
+        projection: view.projection,
+        clip_planes: view.clip_planes.clone(),
         ..RenderSettings::default()
     };
     check_placement(&source.name, &source.placement)?;
     settings.validate().context("invalid flags")?;
-    let camera = apply_camera_options(source.camera, &view.camera, view.width, view.height, &source.name)?;
+    let camera = apply_camera_options_framing(
+        source.camera,
+        &view.camera,
+        (view.width, view.height),
+        &source.name,
+        Some(placement_bounds(&settings.placement)),
+    )?;
     Ok(PreparedView { transfer_function, settings, camera, drawing_surfaces, volume_adaptive_step })
 }
 
@@ -293,6 +319,17 @@ fn region_placement(source: &SourceMeta, region: Option<[[u64; 3]; 2]>) -> Resul
             info.dims
         );
     }
+    if let Some(a) = (0..3).find(|&a| upper[a] > info.dims[a]) {
+        bail!(
+            "the region's upper bound {} along {} lies beyond {}'s {} samples there ({:?}): give at most the \
+             dimensions `voxstream info` shows",
+            upper[a],
+            ["x", "y", "z"][a],
+            source.name,
+            info.dims[a],
+            info.dims
+        );
+    }
     let span = (layout.brick_size << layout.max_tree_level()) as f64;
     for a in 0..3 {
         placement.clip_lower[a] = placement.clip_lower[a].max(lower[a] as f64 / span);
@@ -310,10 +347,35 @@ pub fn apply_camera_options(
     height: u32,
     name: &str,
 ) -> Result<Camera> {
+    apply_camera_options_framing(default, options, (width, height), name, None)
+}
+
+/// The world box a placement's clip box covers, `[lower, upper]`.
+pub fn placement_bounds(placement: &VolumePlacement) -> [[f64; 3]; 2] {
+    let corner = |v: [f64; 3]| -> [f64; 3] { std::array::from_fn(|a| placement.origin[a] + placement.scale[a] * v[a]) };
+    [corner(placement.clip_lower), corner(placement.clip_upper)]
+}
+
+/// [`apply_camera_options`] where a preset (`--view`) frames `bounds` (the volume's world box; `None`: a preset
+/// is refused).
+pub fn apply_camera_options_framing(
+    default: Camera,
+    options: &CameraOptions,
+    (width, height): (u32, u32),
+    name: &str,
+    bounds: Option<[[f64; 3]; 2]>,
+) -> Result<Camera> {
     let mut camera = match &options.file {
         Some(path) => read_camera_file(path)?,
         None => default,
     };
+    if let Some(preset) = options.preset {
+        if options.file.is_some() || options.camera.is_some() || options.eye.is_some() || options.target.is_some() {
+            bail!("--view {} places the camera itself: drop --camera, --eye and --target, or --view", preset.name());
+        }
+        let Some(bounds) = bounds else { bail!("--view {}: {name} has no box to frame", preset.name()) };
+        camera = preset_camera(preset, bounds, width, height, options.fov.unwrap_or(camera.fov));
+    }
     if let Some(given) = options.camera {
         camera = given;
     }
@@ -330,6 +392,8 @@ pub fn apply_camera_options(
         camera.fov = fov;
     }
     camera.frame(width, height).with_context(|| format!("invalid camera ({})", camera_origin(options, name)))?;
+    camera = options.turn.apply(camera)?;
+    camera.frame(width, height).with_context(|| format!("invalid camera ({})", camera_origin(options, name)))?;
     Ok(camera)
 }
 
@@ -343,6 +407,10 @@ fn camera_origin(options: &CameraOptions, name: &str) -> String {
         options.target.map(|v| format!("--target {}", vector(v))),
         options.up.map(|v| format!("--up {}", vector(v))),
         options.fov.map(|f| format!("--fov {}", shown_number(f))),
+        options.preset.map(|p| format!("--view {}", p.name())),
+        options.turn.azimuth.map(|v| format!("--azimuth {}", shown_number(v))),
+        options.turn.elevation.map(|v| format!("--elevation {}", shown_number(v))),
+        options.turn.zoom.map(|v| format!("--zoom {}", shown_number(v))),
     ]
     .into_iter()
     .flatten()

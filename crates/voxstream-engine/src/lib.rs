@@ -56,6 +56,6 @@ pub use level_pace::level_rate;
 pub use memory_budget::{
     machine_memory_bytes, BudgetError, MemoryBudget, MemoryPlan, MAX_BUDGET_MB, STORE_CACHE_SHARE,
 };
-pub use output_file::{output_target, write_output, OutputError, OutputFile, OutputTarget};
+pub use output_file::{output_target, temporary_path, write_output, OutputError, OutputFile, OutputTarget};
 pub use popping::{frame_popping, seam_error, PoppingSummary, Rgb8};
 pub use session::{FrameResult, LoopLimits, Mode, PassProgress, Session, CONVERGED_REQUESTS_PER_RAY};

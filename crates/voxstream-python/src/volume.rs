@@ -15,11 +15,13 @@ use numpy::{PyArray1, PyArrayMethods};
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use voxstream_api::camera_presets::{CameraTurn, ViewDirection};
 use voxstream_api::scenes::SCENE_NAMES;
 use voxstream_api::{
     Backend, Camera, CameraOptions, IsoOptions, Mode, SessionOptions, Shading, SourceMeta, SourceOptions,
     TransferFunction, TransferFunctionChoice, ViewOptions, Volume,
 };
+use voxstream_render::{ClipPlane, Projection};
 use voxstream_store::remote_access::RemoteAccess;
 use voxstream_store::DType;
 
@@ -210,7 +212,8 @@ impl PyVolume {
     #[pyo3(signature = (*, width=512, height=512, budget_mb=256, backend="cpu", mode="converged", camera=None,
         tf_points=None, tf_file=None, iso=Vec::new(), iso_colors=Vec::new(), iso_opacities=Vec::new(),
         shadows=false, light=None, background=[0.0; 3], step=0.5, lod_bias=0.0, shading=None, blending=true,
-        preintegrate=false, adaptive_step=None, faithful=false, float32=false, region=None))]
+        preintegrate=false, adaptive_step=None, faithful=false, float32=false, region=None, projection="composite",
+        clip_planes=Vec::new(), view=None, azimuth=None, elevation=None, zoom=None))]
     #[allow(clippy::too_many_arguments)]
     fn render<'py>(
         &self,
@@ -238,6 +241,12 @@ impl PyVolume {
         faithful: bool,
         float32: bool,
         region: Option<[[u64; 3]; 2]>,
+        projection: &str,
+        clip_planes: Vec<([f64; 3], [f64; 3])>,
+        view: Option<&str>,
+        azimuth: Option<f64>,
+        elevation: Option<f64>,
+        zoom: Option<f64>,
     ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyDict>)> {
         let mode = match mode {
             "converged" => Mode::Converged,
@@ -261,6 +270,19 @@ impl PyVolume {
             Some("phong") => Some(Shading::Phong),
             Some(other) => return Err(PyValueError::new_err(format!("shading '{other}' is not one of none, phong"))),
         };
+        let projection = match projection {
+            "composite" => Projection::Composite,
+            "max" => Projection::Maximum,
+            "min" => Projection::Minimum,
+            "mean" => Projection::Mean,
+            other => {
+                return Err(PyValueError::new_err(format!(
+                    "projection '{other}' is not one of composite, max, min, mean"
+                )))
+            }
+        };
+        let preset = view.map(ViewDirection::parse).transpose().map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let clip_planes = clip_planes.into_iter().map(|(point, normal)| ClipPlane { point, normal }).collect();
         let view = ViewOptions {
             width,
             height,
@@ -283,9 +305,13 @@ impl PyVolume {
             colour_by_level: false,
             camera: CameraOptions {
                 camera: camera.map(|(eye, target, up, fov)| Camera { eye, target, up, fov }),
+                preset,
+                turn: CameraTurn { azimuth, elevation, zoom },
                 ..CameraOptions::default()
             },
             region,
+            projection,
+            clip_planes,
         };
         let session = SessionOptions { budget_mb, backend, blending, ..SessionOptions::default() };
         let rendered = self.render_on_thread(py, view, session, mode, float32)?;

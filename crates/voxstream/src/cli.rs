@@ -228,6 +228,35 @@ pub struct LookFlags {
     /// Vertical field of view in degrees.
     #[arg(long)]
     pub fov: Option<f64>,
+    /// Frame the volume looking along an axis of the data (ParaView's view-direction buttons): +x, -x, +y, -y (+z
+    /// up), +z, -z (+y up), or iso (a three-quarter view from the +x, -y, +z corner). Replaces --camera and the
+    /// default view; --fov, --azimuth, --elevation and --zoom apply over it.
+    #[arg(long, value_name = "DIR", value_parser = parse_view_direction, allow_hyphen_values = true)]
+    pub view: Option<voxstream_api::camera_presets::ViewDirection>,
+    /// Turn the camera this many degrees about its up direction through the point looked at (positive: the eye
+    /// moves to its right), keeping its distance.
+    #[arg(long, value_name = "DEGREES", allow_negative_numbers = true)]
+    pub azimuth: Option<f64>,
+    /// Raise the camera this many degrees towards its up direction (90: straight down on the target; negative:
+    /// from below), keeping its distance and its up direction (no roll).
+    #[arg(long, value_name = "DEGREES", allow_negative_numbers = true)]
+    pub elevation: Option<f64>,
+    /// Move the camera towards what it looks at: 2 is twice as close, 0.5 twice as far (applied last).
+    #[arg(long, value_name = "FACTOR", allow_negative_numbers = true)]
+    pub zoom: Option<f64>,
+    /// How the samples along each ray make its pixel: composite (volume rendering, the default), max (maximum
+    /// intensity projection, MIP), min (minimum intensity projection) or mean. A projection shows its value in the
+    /// transfer function's colour, with the function's opacity relative to its most opaque point. CPU backend.
+    #[arg(long, value_enum, default_value_t = ProjectionArg::Composite)]
+    pub projection: ProjectionArg,
+    /// Cut the volume open: keep the side of the plane through the point X,Y,Z (world units) that the normal
+    /// NX,NY,NZ points to. Repeat for up to 6 planes. CPU backend.
+    #[arg(long, value_name = "X,Y,Z,NX,NY,NZ", value_parser = parse_clip_plane, allow_hyphen_values = true)]
+    pub clip_plane: Vec<voxstream_render::ClipPlane>,
+    /// Stores: draw only the box of level-0 samples X0..X1, Y0..Y1, Z0..Z1 (sample indices as `voxstream info`
+    /// gives the dimensions, upper bounds excluded); the rest stays transparent.
+    #[arg(long, value_name = "X0,Y0,Z0,X1,Y1,Z1", value_parser = parse_crop)]
+    pub crop: Option<[[u64; 3]; 2]>,
     /// Transfer function JSON: {"points": [[value, r, g, b, alpha], ...], "unit_distance": u}, or a ParaView
     /// colour-map preset (RGBPoints, optional Points), rescaled onto the data's value range.
     #[arg(long)]
@@ -333,10 +362,17 @@ pub struct RenderArgs {
     #[arg(long, default_value_t = 1024)]
     pub requests_per_frame: usize,
     /// Camera path JSON (a list of cameras), rendered in sequence reusing the cache; or a path generated around the
-    /// view: rest:N (the view N times), orbit:N (a quarter turn), zoom:N (down to a thousandth of the distance),
-    /// fly:N (through the volume).
+    /// view: rest:N (the view N times), orbit:N (a quarter turn), orbit:N:DEGREES (e.g. orbit:120:360, a whole
+    /// turn whose frames loop), zoom:N (down to a thousandth of the distance), fly:N (through the volume).
     #[arg(long)]
     pub path: Option<PathBuf>,
+    /// With --path: encode the frames as a movie here (.mp4, .mov, .mkv: H.264; .webm: VP9) instead of numbered
+    /// PNGs, through ffmpeg (on PATH, or named by VOXSTREAM_FFMPEG), e.g. --path orbit:120:360 --video spin.mp4.
+    #[arg(long, value_name = "FILE")]
+    pub video: Option<PathBuf>,
+    /// With --video: frames per second.
+    #[arg(long, default_value_t = 30.0, value_name = "FPS")]
+    pub fps: f64,
     /// Interactive mode: measure popping and seams against the converged images at the same cameras (rendered after
     /// the run), into the --stats file. Keeps every frame as 8-bit RGB until then, outside --budget-mb.
     #[arg(long)]
@@ -350,6 +386,31 @@ pub struct RenderArgs {
     /// How it is drawn.
     #[command(flatten)]
     pub look: LookFlags,
+}
+
+/// `--projection`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ProjectionArg {
+    /// Emission-absorption compositing (volume rendering), or isosurfaces.
+    Composite,
+    /// The largest value along each ray (MIP).
+    Max,
+    /// The smallest value along each ray (MinIP).
+    Min,
+    /// The mean value along each ray.
+    Mean,
+}
+
+impl ProjectionArg {
+    /// The renderer's projection.
+    pub fn projection(self) -> voxstream_render::Projection {
+        match self {
+            ProjectionArg::Composite => voxstream_render::Projection::Composite,
+            ProjectionArg::Max => voxstream_render::Projection::Maximum,
+            ProjectionArg::Min => voxstream_render::Projection::Minimum,
+            ProjectionArg::Mean => voxstream_render::Projection::Mean,
+        }
+    }
 }
 
 /// `view --refine`.
@@ -533,6 +594,56 @@ pub fn parse_color(text: &str) -> Result<[f64; 3], String> {
         return Err(format!("colour components must be in [0, 1], got '{}'", text.trim()));
     }
     Ok(color)
+}
+
+/// Parses a `--view` preset.
+pub fn parse_view_direction(text: &str) -> Result<voxstream_api::camera_presets::ViewDirection, String> {
+    voxstream_api::camera_presets::ViewDirection::parse(text).map_err(|e| {
+        let message = e.to_string();
+        message.split_once(": ").map_or(message.clone(), |(_, rest)| rest.to_string())
+    })
+}
+
+/// Parses comma-separated finite numbers, exactly `count` of them.
+fn parse_numbers(text: &str, count: usize, form: &str) -> Result<Vec<f64>, String> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    if parts.len() != count {
+        return Err(format!("expected {count} comma-separated numbers {form}, got '{text}'"));
+    }
+    parts
+        .iter()
+        .map(|part| match part.parse::<f64>() {
+            Ok(value) if value.is_finite() => Ok(value),
+            _ => Err(format!("'{part}' is not a finite number (expected {form})")),
+        })
+        .collect()
+}
+
+/// Parses `--clip-plane X,Y,Z,NX,NY,NZ`.
+pub fn parse_clip_plane(text: &str) -> Result<voxstream_render::ClipPlane, String> {
+    let v = parse_numbers(text, 6, "X,Y,Z,NX,NY,NZ")?;
+    let plane = voxstream_render::ClipPlane { point: [v[0], v[1], v[2]], normal: [v[3], v[4], v[5]] };
+    if !plane.is_valid() {
+        return Err(format!("the normal {},{},{} must not be zero", v[3], v[4], v[5]));
+    }
+    Ok(plane)
+}
+
+/// Parses `--crop X0,Y0,Z0,X1,Y1,Z1` (sample indices, upper bounds excluded).
+pub fn parse_crop(text: &str) -> Result<[[u64; 3]; 2], String> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    if parts.len() != 6 {
+        return Err(format!("expected six comma-separated sample indices X0,Y0,Z0,X1,Y1,Z1, got '{text}'"));
+    }
+    let mut v = [0u64; 6];
+    for (slot, part) in v.iter_mut().zip(&parts) {
+        *slot = part.parse().map_err(|_| format!("'{part}' is not a sample index (a whole number from 0)"))?;
+    }
+    let (lower, upper) = ([v[0], v[1], v[2]], [v[3], v[4], v[5]]);
+    if (0..3).any(|a| lower[a] >= upper[a]) {
+        return Err(format!("each lower index must be below its upper one, got {lower:?} to {upper:?}"));
+    }
+    Ok([lower, upper])
 }
 
 /// Parses `x,y,z`.

@@ -30,6 +30,7 @@ pub mod render_progress;
 pub mod render_warnings;
 pub mod stats;
 pub mod trilinear_bound;
+pub mod video_output;
 #[cfg(feature = "viewer")]
 pub mod view_command;
 pub mod view_flags;

@@ -22,6 +22,7 @@ use crate::render_progress::RenderProgress;
 use crate::render_warnings::{empty_image, transfer_function_mismatch};
 use crate::stats::RemoteStats;
 use crate::stats::RunStats;
+use crate::video_output::VideoWriter;
 use crate::view_flags;
 
 /// Runs `voxstream render`.
@@ -95,6 +96,15 @@ pub fn check_flags(args: &RenderArgs) -> Result<()> {
     if args.requests_per_frame == 0 {
         bail!("--requests-per-frame must be at least 1");
     }
+    if let Some(video) = &args.video {
+        if args.path.is_none() {
+            bail!("--video encodes a camera path's frames: add --path (e.g. --path orbit:120:360), or drop --video");
+        }
+        if !(args.fps.is_finite() && args.fps > 0.0 && args.fps <= 1000.0) {
+            bail!("--fps {} must be a number of frames a second in (0, 1000]", args.fps);
+        }
+        crate::video_output::check_video(video)?;
+    }
     if args.popping && (args.mode != Mode::Interactive || args.stats.is_none()) {
         bail!("--popping measures interactive frames into the stats file: add --mode interactive and --stats FILE");
     }
@@ -117,7 +127,9 @@ fn render_source(args: &RenderArgs, source: Source, budget: &MemoryBudget) -> Re
     let surfaces_in_volume = prepared.settings.surfaces_in_volume;
     let cameras = path_cameras(args.path.as_deref(), &view)?;
     // Before the work: a folder, a disk or a missing folder as an output is refused now, not after the render.
-    check_output(&if args.path.is_some() { numbered_path(&args.out, 0) } else { args.out.clone() }, "--out")?;
+    if args.video.is_none() {
+        check_output(&if args.path.is_some() { numbered_path(&args.out, 0) } else { args.out.clone() }, "--out")?;
+    }
     if let Some(path) = &args.stats {
         check_output(path, "--stats")?;
     }
@@ -154,6 +166,10 @@ fn render_source(args: &RenderArgs, source: Source, budget: &MemoryBudget) -> Re
     let mut empty_images = 0usize;
     let mut reported_failures = 0usize;
     let mut written = Vec::new();
+    let mut video = match &args.video {
+        Some(path) => Some(VideoWriter::start(path, args.width, args.height, args.fps)?),
+        None => None,
+    };
     for (index, camera) in cameras.iter().enumerate() {
         for repeat in 0..repeats {
             let result = session.render_observed(camera, args.mode, &mut |pass| progress.pass(pass))?;
@@ -179,8 +195,17 @@ fn render_source(args: &RenderArgs, source: Source, budget: &MemoryBudget) -> Re
             // A single camera stops early once a frame is final (nothing missing, nothing blending): later frames
             // would be identical.
             if repeat + 1 == repeats || (!sequence && result.is_final()) {
-                let out = if sequence { numbered_path(&args.out, index) } else { args.out.clone() };
-                write_png(&result.image, &out)?;
+                let out = match (&mut video, sequence) {
+                    (Some(video), _) => {
+                        video.push(&result.image)?;
+                        args.video.clone().expect("a video path")
+                    }
+                    (None, true) => numbered_path(&args.out, index),
+                    (None, false) => args.out.clone(),
+                };
+                if video.is_none() {
+                    write_png(&result.image, &out)?;
+                }
                 let volume = !drawing_surfaces || surfaces_in_volume;
                 if let Some(warning) = empty_image(&result.image, drawing_surfaces, volume) {
                     if empty_images == 0 {
@@ -189,13 +214,19 @@ fn render_source(args: &RenderArgs, source: Source, budget: &MemoryBudget) -> Re
                     empty_images += 1;
                 }
                 stats.frames += 1;
-                // A sequence lists each file as it is written; a single image is named in the summary.
-                progress.frame_done(sequence.then_some(out.as_path()));
-                written.push(out);
+                // A sequence lists each file as it is written; a single image or a movie is named in the summary.
+                progress.frame_done((sequence && video.is_none()).then_some(out.as_path()));
+                if video.is_none() {
+                    written.push(out);
+                }
                 break;
             }
             progress.frame_done(None);
         }
+    }
+    if let (Some(video), Some(path)) = (video, &args.video) {
+        video.finish()?;
+        written.push(path.clone());
     }
     if let Some(recorder) = &recorder {
         stats.popping = Some(recorder.measure(&mut session)?);
@@ -241,6 +272,7 @@ fn render_source(args: &RenderArgs, source: Source, budget: &MemoryBudget) -> Re
 /// `wrote frame.png (512x512, converged, 10 passes, 6198 bricks loaded)`, or for a sequence the first and last file.
 fn summary_line(written: &[std::path::PathBuf], args: &RenderArgs, stats: &RunStats) -> String {
     let files = match written {
+        [one] if args.video.is_some() => format!("{} frames into {}", stats.frames, one.display()),
         [one] => one.display().to_string(),
         [first, .., last] => format!("{} frames, {} … {}", written.len(), first.display(), last.display()),
         [] => "nothing".into(),

@@ -1,6 +1,7 @@
 //! The flags `render` and `view` share ([`SourceFlags`], [`LookFlags`]) as the facade's typed options: one
 //! translation for both commands, so the same flag means the same thing and fails with the same message in each.
 
+use voxstream_api::camera_presets::CameraTurn;
 use voxstream_api::{CameraOptions, IsoOptions, SessionOptions, SourceOptions, TransferFunctionChoice, ViewOptions};
 use voxstream_render::Shading;
 
@@ -59,8 +60,12 @@ pub fn view_options(look: &LookFlags, width: u32, height: u32) -> ViewOptions {
             target: look.target,
             up: look.up,
             fov: look.fov,
+            preset: look.view,
+            turn: CameraTurn { azimuth: look.azimuth, elevation: look.elevation, zoom: look.zoom },
         },
-        region: None,
+        region: look.crop,
+        projection: look.projection.projection(),
+        clip_planes: look.clip_plane.clone(),
     }
 }
 

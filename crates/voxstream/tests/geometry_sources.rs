@@ -8,7 +8,7 @@ use std::process::{Command, Output};
 
 mod common;
 
-use common::real_data_dir;
+use common::{read_png, real_data_dir};
 use glam::DVec3;
 use voxstream_geometry::formats::{read_geometry, RawGeometry};
 use voxstream_geometry::triangle_bvh::closest_on_triangle;
@@ -33,16 +33,6 @@ fn run(args: &[&str]) -> Output {
 
 fn stderr(output: &Output) -> String {
     String::from_utf8_lossy(&output.stderr).into_owned()
-}
-
-fn read_png(path: &Path) -> (u32, u32, Vec<u8>) {
-    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
-    let mut reader = decoder.read_info().unwrap();
-    let mut buffer = vec![0; reader.output_buffer_size()];
-    let info = reader.next_frame(&mut buffer).unwrap();
-    assert_eq!(info.color_type, png::ColorType::Rgb);
-    buffer.truncate(info.buffer_size());
-    (info.width, info.height, buffer)
 }
 
 /// A UV sphere of radius 1 around (0.2, −0.1, 0.3): vertices and outward triangles.

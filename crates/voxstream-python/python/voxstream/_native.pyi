@@ -8,6 +8,7 @@ import numpy as np
 __version__: str
 
 _Vec3 = Tuple[float, float, float]
+_Vec3i = Tuple[int, int, int]
 _CameraTuple = Tuple[_Vec3, _Vec3, _Vec3, float]
 
 class Volume:
@@ -34,7 +35,10 @@ class Volume:
                shadows: bool = False, light: Optional[_Vec3] = None, background: _Vec3 = ..., step: float = 0.5,
                lod_bias: float = 0.0, shading: Optional[str] = None, blending: bool = True,
                preintegrate: bool = False, adaptive_step: Optional[float] = None, faithful: bool = False,
-               float32: bool = False) -> Tuple[np.ndarray, Dict[str, Any]]: ...
+               float32: bool = False, region: Optional[Tuple[_Vec3i, _Vec3i]] = None,
+               projection: str = "composite", clip_planes: Sequence[Tuple[_Vec3, _Vec3]] = ...,
+               view: Optional[str] = None, azimuth: Optional[float] = None, elevation: Optional[float] = None,
+               zoom: Optional[float] = None) -> Tuple[np.ndarray, Dict[str, Any]]: ...
 
 def import_volume(source: Union[str, np.ndarray], out: str, *, spacing: Optional[_Vec3] = None,
                   origin: Optional[_Vec3] = None, brick_size: int = 32, overwrite: bool = False,

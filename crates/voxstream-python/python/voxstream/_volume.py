@@ -82,7 +82,9 @@ class Volume:
                shadows: bool = False, light=None, background=(0.0, 0.0, 0.0), step: float = 0.5,
                lod_bias: float = 0.0, shading: Optional[str] = None, blending: bool = True,
                preintegrate: bool = False, adaptive_step: Optional[float] = None,
-               faithful: bool = False, region=None) -> np.ndarray:
+               faithful: bool = False, region=None, projection: str = "composite", clip_planes=(),
+               view: Optional[str] = None, azimuth: Optional[float] = None, elevation: Optional[float] = None,
+               zoom: Optional[float] = None) -> np.ndarray:
         """Renders the volume; returns an (height, width, 4) array, RGBA: ``uint8`` (the CLI's PNG, plus alpha) or
         ``float32`` (linear, unclamped). The array's memory is Rust's buffer, handed over without a copy.
 
@@ -98,7 +100,15 @@ class Volume:
           step's tolerance (``--adaptive-step``; None: the default, 0.05, for volumes); ``faithful``: fixed steps
           of ``step`` everywhere (``--faithful``) (pre-integration: CPU only);
         - ``region``: ``((x0, y0, z0), (x1, y1, z1))``, only the store's level-0 samples in ``[x0, x1) × …``; the rest
-          is transparent (what :func:`voxstream.render_sort_last` gives each worker).
+          is transparent (what :func:`voxstream.render_sort_last` gives each worker);
+        - ``projection``: ``"composite"`` (volume rendering), ``"max"`` (MIP), ``"min"`` (MinIP) or ``"mean"``
+          (``--projection``; CPU backend);
+        - ``clip_planes``: ``[((x, y, z), (nx, ny, nz)), ...]``, each keeping the side of the plane through the
+          point that the normal points to (world units; ``--clip-plane``; CPU backend);
+        - ``view``: ``"+x"``, ``"-x"``, ``"+y"``, ``"-y"``, ``"+z"``, ``"-z"`` or ``"iso"``, framing the volume
+          looking along that axis in place of ``camera`` (``--view``); ``azimuth``, ``elevation`` (degrees) and
+          ``zoom`` (a factor) turn and move the camera around its target (``--azimuth``, ``--elevation``,
+          ``--zoom``).
 
         The GIL is released while rendering; Ctrl-C raises ``KeyboardInterrupt`` at once. Statistics of the frame
         are in ``last_stats``. A converged render whose bricks could not all be read raises ``RuntimeError``."""
@@ -118,7 +128,11 @@ class Volume:
             adaptive_step=None if adaptive_step is None else float(adaptive_step),
             faithful=bool(faithful),
             float32=np.dtype(dtype) == np.dtype(np.float32),
-            region=None if region is None else tuple(tuple(int(v) for v in corner) for corner in region))
+            region=None if region is None else tuple(tuple(int(v) for v in corner) for corner in region),
+            projection=str(projection),
+            clip_planes=[(tuple(float(v) for v in p), tuple(float(v) for v in n)) for p, n in clip_planes],
+            view=view, azimuth=None if azimuth is None else float(azimuth),
+            elevation=None if elevation is None else float(elevation), zoom=None if zoom is None else float(zoom))
         self.last_stats = dict(stats)
         return pixels
 

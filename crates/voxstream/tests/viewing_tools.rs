@@ -1,0 +1,177 @@
+//! The viewing tools of issue 42 from the command line: camera presets and turns (`--view`, `--azimuth`,
+//! `--elevation`, `--zoom`), a full orbit, intensity projections, clipping planes and the crop box, and movies
+//! (`--video`, through Debian's ffmpeg, which `.ci/run` installs).
+
+mod common;
+
+use std::path::Path;
+use std::process::Command;
+
+use common::{import_ball, read_png, scratch, stderr, voxstream};
+use glam::DVec3;
+
+/// The first camera a render used, from its `--stats` file.
+fn stats_camera(stats: &Path) -> (DVec3, DVec3, DVec3) {
+    let text = std::fs::read_to_string(stats).expect("stats written");
+    let json: serde_json::Value = serde_json::from_str(&text).expect("stats JSON");
+    let vector = |name: &str| {
+        let v: Vec<f64> = json["camera"][name].as_array().expect(name).iter().map(|x| x.as_f64().unwrap()).collect();
+        DVec3::new(v[0], v[1], v[2])
+    };
+    (vector("eye"), vector("target"), vector("up"))
+}
+
+fn run_ok(args: &[&str], dir: &Path) {
+    let output = voxstream(args, dir);
+    assert!(output.status.success(), "voxstream {args:?} failed: {}", stderr(&output));
+}
+
+fn run_fails(args: &[&str], dir: &Path, expected: &str) {
+    let output = voxstream(args, dir);
+    let message = stderr(&output);
+    assert!(!output.status.success(), "voxstream {args:?} succeeded");
+    assert!(message.contains(expected), "voxstream {args:?}: expected `{expected}` in: {message}");
+    assert!(!message.contains("panicked"), "{message}");
+}
+
+#[test]
+fn presets_and_turns_place_the_camera_where_they_say() {
+    let dir = scratch("viewing_tools", "presets");
+    import_ball(&dir, "ball.zarr");
+    let size = ["--width", "48", "--height", "32"];
+    // Looking along +x: the eye on the −x side of the ball's centre, at its height, +z up.
+    let mut args = vec!["render", "ball.zarr", "--view", "+x", "--out", "x.png", "--stats", "x.json"];
+    args.extend(size);
+    run_ok(&args, &dir);
+    let (eye, target, up) = stats_camera(&dir.join("x.json"));
+    let along = (target - eye).normalize();
+    assert!((along - DVec3::X).length() < 1e-9, "looks along {along}");
+    assert!((up - DVec3::Z).length() < 1e-9, "up {up}");
+    // Samples 0..47 along x at spacing 1: the centre is at 23.5.
+    assert!((target.x - 23.5).abs() < 1e-9, "{target}");
+
+    // The same preset turned 90° (the eye to its right: from −x to −y), raised 90° (straight down), and twice as
+    // close: the eye above the centre, the image's top towards +y, at half the distance.
+    let mut args = vec!["render", "ball.zarr", "--view", "+x", "--azimuth", "90", "--elevation", "90", "--zoom", "2"];
+    args.extend(["--out", "top.png", "--stats", "top.json"]);
+    args.extend(size);
+    run_ok(&args, &dir);
+    let (top_eye, top_target, top_up) = stats_camera(&dir.join("top.json"));
+    assert!((top_target - target).length() < 1e-9);
+    let offset = top_eye - top_target;
+    assert!((offset.normalize() - DVec3::Z).length() < 1e-9, "eye at {top_eye}");
+    assert!((offset.length() - (eye - target).length() / 2.0).abs() < 1e-6, "distance {}", offset.length());
+    assert!((top_up - DVec3::Y).length() < 1e-9, "up {top_up}");
+    assert_ne!(std::fs::read(dir.join("x.png")).unwrap(), std::fs::read(dir.join("top.png")).unwrap());
+
+    run_fails(&["render", "ball.zarr", "--view", "top"], &dir, "+x, -x, +y, -y, +z, -z, iso");
+    run_fails(&["render", "ball.zarr", "--view", "+z", "--eye", "1,2,3"], &dir, "drop --camera, --eye and --target");
+    run_fails(&["render", "ball.zarr", "--elevation", "120"], &dir, "pass over the pole");
+    run_fails(&["render", "ball.zarr", "--zoom", "-1"], &dir, "--zoom");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn projections_crops_and_planes_draw_and_refuse_as_they_say() {
+    let dir = scratch("viewing_tools", "projections");
+    import_ball(&dir, "ball.zarr");
+    // Looking down −z with +y up (x grows to the right), from the camera `--view -z` frames the whole ball with:
+    // a crop with --view would frame the crop box instead.
+    run_ok(&["render", "ball.zarr", "--view", "-z", "--stats", "view.json", "--out", "view.png"], &dir);
+    let (eye, target, up) = stats_camera(&dir.join("view.json"));
+    let vector = |v: DVec3| format!("{},{},{}", v.x, v.y, v.z);
+    let (eye, target, up) = (vector(eye), vector(target), vector(up));
+    let size = ["--width", "40", "--height", "40", "--eye", &eye, "--target", &target, "--up", &up];
+    for (name, extra) in [
+        ("composite", vec![]),
+        ("max", vec!["--projection", "max"]),
+        ("min", vec!["--projection", "min"]),
+        ("crop", vec!["--projection", "max", "--crop", "0,0,0,24,40,36"]),
+        ("plane", vec!["--projection", "max", "--clip-plane", "23.5,0,0,-1,0,0"]),
+    ] {
+        let out = format!("{name}.png");
+        let mut args = vec!["render", "ball.zarr", "--out", &out];
+        args.extend(size);
+        args.extend(extra);
+        run_ok(&args, &dir);
+    }
+    let image = |name: &str| read_png(&dir.join(format!("{name}.png")));
+    let bright = |img: &(u32, u32, Vec<u8>)| img.2.chunks(3).filter(|p| p[0] > 40).count();
+    let lit = |img: &(u32, u32, Vec<u8>), columns: std::ops::Range<u32>, above: u8| {
+        img.2.chunks(3).enumerate().filter(|(i, p)| columns.contains(&(*i as u32 % img.0)) && p[0] > above).count()
+    };
+    let (composite, max, min) = (image("composite"), image("max"), image("min"));
+    assert_ne!(composite.2, max.2, "the maximum is not the composite");
+    assert!(bright(&max) > 100, "the MIP shows the ball: {} bright pixels", bright(&max));
+    // The crop (x < 24) and the plane (keeping x ≤ 23.5) leave the left half; the right half is the background.
+    for name in ["crop", "plane"] {
+        let cut = image(name);
+        let (right, left) = (lit(&cut, 25..40, 10), lit(&cut, 0..16, 40));
+        assert!(right == 0 && left > 50, "{name}: {right} lit pixels on the right, {left} on the left");
+    }
+    // The ball is brightest inside: its minimum along each ray through it (the samples outside are 0) is dark.
+    assert!(bright(&min) < bright(&max) / 4, "min {} vs max {}", bright(&min), bright(&max));
+
+    run_fails(&["render", "ball.zarr", "--projection", "max", "--iso", "1000"], &dir, "drop --iso or --projection");
+    run_fails(&["render", "ball.zarr", "--crop", "0,0,0,100,40,36"], &dir, "beyond");
+    run_fails(&["render", "ball.zarr", "--crop", "5,0,0,5,10,10"], &dir, "lower index must be below");
+    run_fails(&["render", "shell", "--crop", "0,0,0,8,8,8"], &dir, "applies to stores");
+    run_fails(&["render", "ball.zarr", "--clip-plane", "0,0,0,0,0,0"], &dir, "must not be zero");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Frames of a movie as raw RGB, by ffmpeg.
+fn decoded_frames(movie: &Path, width: usize, height: usize) -> Vec<Vec<u8>> {
+    let output = Command::new("ffmpeg")
+        .args(["-hide_banner", "-loglevel", "error", "-i"])
+        .arg(movie)
+        .args(["-f", "rawvideo", "-pix_fmt", "rgb24", "pipe:1"])
+        .output()
+        .expect("ffmpeg runs (installed by .ci/run: apt-get install ffmpeg)");
+    assert!(output.status.success(), "ffmpeg could not decode: {}", String::from_utf8_lossy(&output.stderr));
+    output.stdout.chunks(width * height * 3).map(<[u8]>::to_vec).collect()
+}
+
+#[test]
+fn a_full_orbit_becomes_a_movie_of_its_frames() {
+    let dir = scratch("viewing_tools", "movie");
+    let (width, height) = (64usize, 48usize);
+    let common = ["--width", "64", "--height", "48", "--path", "orbit:6:360"];
+    let mut args = vec!["render", "hypertexture", "--video", "spin.mp4", "--fps", "12"];
+    args.extend(common);
+    run_ok(&args, &dir);
+    let mut args = vec!["render", "hypertexture", "--out", "still.png"];
+    args.extend(common);
+    run_ok(&args, &dir);
+    let frames = decoded_frames(&dir.join("spin.mp4"), width, height);
+    assert_eq!(frames.len(), 6, "six frames in the movie");
+    assert!(frames.iter().all(|f| f.len() == width * height * 3));
+    // Each frame is its PNG within the codec's loss; frames differ from each other (the orbit turns).
+    for (index, frame) in frames.iter().enumerate() {
+        let (_, _, still) = read_png(&dir.join(format!("still_{index:04}.png")));
+        let error: f64 =
+            frame.iter().zip(&still).map(|(a, b)| (*a as f64 - *b as f64).abs()).sum::<f64>() / frame.len() as f64;
+        assert!(error < 3.0, "frame {index}: mean error {error:.2} against its PNG");
+    }
+    assert_ne!(frames[0], frames[3], "the orbit's opposite frames are the same");
+    // No temporary left beside it, and no PNG written by the movie's run.
+    let names: Vec<String> =
+        std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    assert!(names.iter().all(|n| !n.contains("partial")), "{names:?}");
+    assert_eq!(names.iter().filter(|n| n.ends_with(".png")).count(), 6, "{names:?}");
+
+    // Without an ffmpeg: one line before any rendering, nothing written.
+    let output = Command::new(env!("CARGO_BIN_EXE_voxstream"))
+        .args(["render", "hypertexture", "--video", "none.mp4", "--path", "orbit:4:360"])
+        .env("VOXSTREAM_FFMPEG", dir.join("no-such-ffmpeg"))
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    let message = stderr(&output);
+    assert!(!output.status.success() && message.contains("--video needs ffmpeg"), "{message}");
+    assert_eq!(message.trim().lines().count(), 1, "{message}");
+    assert!(!dir.join("none.mp4").exists());
+    run_fails(&["render", "hypertexture", "--video", "a.mp4"], &dir, "add --path");
+    run_fails(&["render", "hypertexture", "--video", "a.avi", "--path", "orbit:4"], &dir, ".mp4");
+    let _ = std::fs::remove_dir_all(&dir);
+}
