@@ -70,6 +70,30 @@ def test_a_store_with_camera_tf_and_isosurfaces_renders_as_the_cli_does(cli, tmp
     assert (image[..., :3].reshape(-1, 3) != 0).any(axis=1).mean() > 0.05
 
 
+def test_viewing_tools_render_as_the_clis(cli, tmp_path, ball_store):
+    """Presets, turns, projections, crops and clipping planes: the same pixels as the CLI's flags."""
+    volume = vs.open(ball_store)
+    for kwargs, flags in [
+        (dict(view="-z", azimuth=30.0, elevation=20.0, zoom=1.5),
+         ["--view", "-z", "--azimuth", "30", "--elevation", "20", "--zoom", "1.5"]),
+        (dict(view="+x", projection="max"), ["--view", "+x", "--projection", "max"]),
+        (dict(view="iso", projection="min", region=((0, 0, 0), (30, 48, 40))),
+         ["--view", "iso", "--projection", "min", "--crop", "0,0,0,30,48,40"]),
+        (dict(clip_planes=[((28.0, 24.0, 30.0), (0.0, -1.0, 1.0))], projection="mean"),
+         ["--clip-plane", "28,24,30,0,-1,1", "--projection", "mean"]),
+    ]:
+        expected = cli_png(cli, tmp_path, str(ball_store), "--width", "96", "--height", "80", *flags)
+        image = volume.render(size=(96, 80), **kwargs)
+        assert np.array_equal(image[..., :3], expected), flags
+        if kwargs.get("projection") in (None, "max"):
+            # Not empty pictures: the comparison means something (a minimum or a mean may well be dark).
+            assert image[..., :3].std() > 5, flags
+    with pytest.raises(ValueError, match="projection 'loudest'"):
+        volume.render(projection="loudest")
+    with pytest.raises(ValueError, match="-z, iso"):
+        volume.render(view="top")
+
+
 def test_float32_pixels_are_the_linear_colours(ball_store):
     volume = vs.open(ball_store, size=(64, 64))
     bytes_ = volume.render()
