@@ -11,8 +11,9 @@ use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context, Result};
-use voxstream_store::formats::{open_volume, Endian, RawLayout, WithGeometry};
-use voxstream_store::{import_volume, DType, ImportOptions, ImportReport, StoreError, VolumeInfo, VolumeSource};
+use voxstream_store::formats::sample_type::DTYPE_NAMES;
+use voxstream_store::formats::{open_volume, Endian, RawLayout, SampleConversion, SampleType, WithGeometry};
+use voxstream_store::{import_volume, ImportOptions, ImportReport, SpaceUnit, StoreError, VolumeInfo, VolumeSource};
 
 use crate::geometry_import::{BakedGeometry, DEFAULT_BAKE_RESOLUTION};
 use crate::geometry_source::{self, GeometryOptions};
@@ -23,7 +24,8 @@ use crate::source_path::missing_geometry_file;
 pub struct RawSettings {
     /// Samples per axis, x fastest.
     pub dims: [u64; 3],
-    /// Sample type's name: u8, u16, i16 or f32.
+    /// Sample type's name: u8, u16, i16 or f32, or i8, i32, u32 or f64 (converted: see
+    /// `voxstream_store::formats::sample_type`).
     pub dtype: String,
     /// Most significant byte first.
     pub big_endian: bool,
@@ -40,6 +42,8 @@ pub struct ImportSettings {
     pub spacing: Option<[f64; 3]>,
     /// Origin over the file's (`--origin`).
     pub origin: Option<[f64; 3]>,
+    /// Unit of the spacing and origin over the file's (`--unit`): an OME-Zarr space unit or an abbreviation of one.
+    pub unit: Option<String>,
     /// Value written for NaN samples (`--nan-as`).
     pub nan_as: Option<f32>,
     /// Brick edge in samples (`--brick-size`).
@@ -62,6 +66,7 @@ impl Default for ImportSettings {
             raw: None,
             spacing: None,
             origin: None,
+            unit: None,
             nan_as: None,
             brick_size: ImportOptions::default().brick_size,
             overwrite: false,
@@ -91,8 +96,12 @@ pub fn open_input(input: &Path, settings: &ImportSettings) -> Result<ImportInput
         bail!("--resolution and --amplify apply to mesh and particle files; {} is not one", input.display());
     }
     if is_geometry {
-        if settings.spacing.is_some() || settings.origin.is_some() || settings.nan_as.is_some() {
-            bail!("--dtype, --spacing, --origin and --nan-as apply to volume files; a mesh or particle file keeps its own units");
+        if settings.spacing.is_some()
+            || settings.origin.is_some()
+            || settings.nan_as.is_some()
+            || settings.unit.is_some()
+        {
+            bail!("--dtype, --spacing, --origin, --unit and --nan-as apply to volume files; a mesh or particle file keeps its own units");
         }
         if !input.is_file() {
             return Err(missing_geometry_file(input));
@@ -117,17 +126,20 @@ pub fn open_input(input: &Path, settings: &ImportSettings) -> Result<ImportInput
             description: Some(geometry.description),
         });
     }
+    let unit = settings.unit.as_deref().map(SpaceUnit::parse).transpose().map_err(|e| anyhow!("--unit: {e}"))?;
     let raw = match &settings.raw {
         Some(raw) => {
-            let dtype = DType::from_name(&raw.dtype)
-                .with_context(|| format!("unknown --dtype '{}': expected u8, u16, i16 or f32", raw.dtype))?;
+            let file_type = SampleType::from_name(&raw.dtype)
+                .with_context(|| format!("unknown --dtype '{}': expected {DTYPE_NAMES}", raw.dtype))?;
             Some(RawLayout {
                 info: VolumeInfo {
                     dims: raw.dims,
-                    dtype,
+                    dtype: file_type.stored(),
                     spacing: settings.spacing.unwrap_or([1.0; 3]),
                     origin: settings.origin.unwrap_or([0.0; 3]),
+                    unit,
                 },
+                file_type: Some(file_type),
                 endian: if raw.big_endian { Endian::Big } else { Endian::Little },
                 header_bytes: raw.header_bytes,
             })
@@ -137,8 +149,9 @@ pub fn open_input(input: &Path, settings: &ImportSettings) -> Result<ImportInput
     if let (Some(layout), Some(raw)) = (&raw, &settings.raw) {
         check_raw_dims_against_header(input, raw.dims, layout.header_bytes)?;
     }
-    let source: Box<dyn VolumeSource> =
-        Box::new(WithGeometry::new(open_volume(input, raw.as_ref())?, settings.spacing, settings.origin));
+    let source: Box<dyn VolumeSource> = Box::new(
+        WithGeometry::new(open_volume(input, raw.as_ref())?, settings.spacing, settings.origin).with_unit(unit),
+    );
     if let Some(s) = settings.spacing.filter(|s| s.iter().any(|v| *v <= 0.0)) {
         bail!("--spacing must be positive, got {s:?}");
     }
@@ -219,6 +232,10 @@ impl VolumeSource for Stoppable<'_> {
         }
         self.read += count as u64 * self.slice_bytes;
         self.inner.read_slices(count, out)
+    }
+
+    fn conversion(&self) -> Option<SampleConversion> {
+        self.inner.conversion()
     }
 }
 

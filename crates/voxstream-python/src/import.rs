@@ -190,6 +190,7 @@ fn array_source(
         dtype,
         spacing: spacing.unwrap_or([1.0; 3]),
         origin: origin.unwrap_or([0.0; 3]),
+        unit: None,
     };
     Ok(Some(ArraySource { info, samples, next_slice: 0 }))
 }

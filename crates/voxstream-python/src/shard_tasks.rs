@@ -52,7 +52,13 @@ impl ShardImport {
         if dims.contains(&0) {
             return Err(PyValueError::new_err(format!("the volume has shape {dims:?}: a volume needs samples")));
         }
-        let info = VolumeInfo { dims, dtype, spacing: spacing.unwrap_or([1.0; 3]), origin: origin.unwrap_or([0.0; 3]) };
+        let info = VolumeInfo {
+            dims,
+            dtype,
+            spacing: spacing.unwrap_or([1.0; 3]),
+            origin: origin.unwrap_or([0.0; 3]),
+            unit: None,
+        };
         let options = ImportOptions { brick_size, overwrite, nan_as, ..ImportOptions::default() };
         let import =
             py.detach(|| shard_import::ShardImport::begin(info, &out, &options)).map_err(|e| to_py_err(e.into()))?;

@@ -25,7 +25,7 @@ use zarrs::storage::ReadableStorageTraits;
 
 use crate::chunk_keys::{stored_chunks_in, ChunkSource};
 use crate::error::StoreError;
-use crate::foreign_axes::{check_axes, transform_xyz};
+use crate::foreign_axes::{check_axes, space_unit, transform_xyz};
 use crate::layout::PyramidLayout;
 use crate::level_source::LevelSource;
 use crate::metadata::StoreAttributes;
@@ -147,7 +147,7 @@ pub(crate) fn open_foreign(
     let spacing = transform("scale")?.unwrap_or([1.0; 3]);
     let origin = transform("translation")?.unwrap_or([0.0; 3]);
 
-    let info = crate::volume::VolumeInfo { dims, dtype, spacing, origin };
+    let info = crate::volume::VolumeInfo { dims, dtype, spacing, origin, unit: space_unit(ms) };
     info.validate(path)?;
     let layout = PyramidLayout::new(dims, FOREIGN_BRICK_SIZE).map_err(|e| bad(e.to_string()))?;
     let mut levels = Vec::new();

@@ -5,6 +5,8 @@
 
 use serde_json::Value;
 
+use crate::space_unit::SpaceUnit;
+
 /// An axis' name from OME-NGFF 0.4+ (`{"name": "z", "type": "space"}`) or 0.3 (`"z"`), lower case.
 fn axis_name(axis: &Value) -> Option<String> {
     axis.as_str().or_else(|| axis.get("name").and_then(Value::as_str)).map(str::to_ascii_lowercase)
@@ -37,6 +39,20 @@ pub(crate) fn check_axes(multiscale: &Value, dimensions: usize) -> Result<(), St
         ));
     }
     Ok(())
+}
+
+/// The unit of the last three (space) axes, when all three name the same OME-Zarr unit; otherwise none (an image
+/// is read whatever units it gives, as before units were shown).
+pub(crate) fn space_unit(multiscale: &Value) -> Option<SpaceUnit> {
+    let axes = multiscale.get("axes")?.as_array()?;
+    let units: Vec<Option<SpaceUnit>> = axes
+        .iter()
+        .rev()
+        .take(3)
+        .map(|a| a.get("unit").and_then(Value::as_str).and_then(SpaceUnit::from_name))
+        .collect();
+    let first = *units.first()?;
+    (units.len() == 3 && units.iter().all(|u| *u == first)).then_some(first).flatten()
 }
 
 /// The first `kind` ("scale" or "translation") transform of `dataset` as (x, y, z), `None` when it has none; a
@@ -78,6 +94,17 @@ mod tests {
         let transposed = check_axes(&json!({"axes": ["x", "y", "z"]}), 3).unwrap_err();
         assert!(transposed.contains("[x, y, z]") && transposed.contains("z, y, x"), "{transposed}");
         assert!(check_axes(&json!({"axes": ["z", "y", "x"]}), 4).unwrap_err().contains("3 axes"));
+    }
+
+    #[test]
+    fn the_unit_is_the_one_all_three_space_axes_share() {
+        let axis = |name: &str, unit: &str| json!({"name": name, "type": "space", "unit": unit});
+        let ms = json!({"axes": [{"name": "c", "type": "channel"}, axis("z", "micrometer"), axis("y", "micrometer"),
+                                 axis("x", "micrometer")]});
+        assert_eq!(space_unit(&ms).map(SpaceUnit::name), Some("micrometer"));
+        let mixed = json!({"axes": [axis("z", "millimeter"), axis("y", "micrometer"), axis("x", "micrometer")]});
+        assert_eq!(space_unit(&mixed), None);
+        assert_eq!(space_unit(&json!({"axes": ["z", "y", "x"]})), None);
         assert!(check_axes(&json!({"axes": ["z", "c", "y", "x"]}), 4).is_err());
         assert!(check_axes(&json!({"axes": [{"name": "z", "type": "time"}, "y", "x"]}), 3).is_err());
     }

@@ -18,6 +18,7 @@ use zarrs::filesystem::FilesystemStore;
 use zarrs::group::GroupBuilder;
 
 use crate::error::StoreError;
+use crate::formats::SampleConversion;
 use crate::layout::PyramidLayout;
 use crate::metadata::{ome_multiscales, StoreAttributes, MINMAX_GROUP};
 use crate::non_finite;
@@ -69,6 +70,9 @@ pub struct ImportReport {
     pub bricks_written: Vec<u64>,
     /// Bricks per level skipped because all their samples are 0 (the fill value).
     pub bricks_empty: Vec<u64>,
+    /// What converting the input's samples did, when the store keeps another type than the input's (see
+    /// [`crate::formats::sample_type`]); displayed, it is the note a front end prints.
+    pub conversion: Option<SampleConversion>,
 }
 
 /// Imports `source` into a new store at `out`. `progress(done, total)` is called with input bytes. On failure the
@@ -143,7 +147,8 @@ fn import_into_partial(
         empty: levels.iter().map(|l| l.empty).collect(),
     };
     drop(levels);
-    finish_store(&store, &partial, out, &info, &layout, minmax, value_range, &histogram, counts)
+    let report = finish_store(&store, &partial, out, &info, &layout, minmax, value_range, &histogram, counts)?;
+    Ok(ImportReport { conversion: source.conversion(), ..report })
 }
 
 /// Checks an import's choices, clears what killed imports left, and creates `STORE.partial` with every level's
@@ -232,6 +237,7 @@ pub(crate) fn finish_store(
         value_percentiles: histogram.stored_percentiles(),
         bricks_written: counts.written,
         bricks_empty: counts.empty,
+        conversion: None,
     };
     let name = out.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let mut attributes = StoreAttributes::new(info, layout, value_range, true);

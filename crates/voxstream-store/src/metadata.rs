@@ -25,6 +25,10 @@ pub struct StoreAttributes {
     pub spacing: [f64; 3],
     /// World origin of sample (0, 0, 0).
     pub origin: [f64; 3],
+    /// Unit of `spacing` and `origin`, an OME-Zarr space unit name (`millimeter`); absent when the input did not
+    /// say it, and in stores written before units were kept.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unit: Option<String>,
     /// Brick (inner chunk) edge.
     pub brick_size: u64,
     /// Levels, 0 = full resolution.
@@ -50,6 +54,7 @@ impl StoreAttributes {
             dtype: info.dtype.name().into(),
             spacing: info.spacing,
             origin: info.origin,
+            unit: info.unit.map(|u| u.name().to_string()),
             brick_size: layout.brick_size,
             levels: layout.levels(),
             value_range,
@@ -78,7 +83,8 @@ impl StoreAttributes {
     }
 }
 
-/// The `ome` attribute: axes z, y, x and one dataset per level with its scale and translation.
+/// The `ome` attribute: axes z, y, x (with the volume's unit, when known) and one dataset per level with its scale
+/// and translation.
 pub fn ome_multiscales(name: &str, info: &VolumeInfo, layout: &PyramidLayout) -> Value {
     let datasets: Vec<Value> = (0..layout.levels())
         .map(|level| {
@@ -96,15 +102,18 @@ pub fn ome_multiscales(name: &str, info: &VolumeInfo, layout: &PyramidLayout) ->
             })
         })
         .collect();
+    let axes: Vec<Value> = ["z", "y", "x"]
+        .iter()
+        .map(|axis| match info.unit {
+            Some(unit) => json!({"name": axis, "type": "space", "unit": unit.name()}),
+            None => json!({"name": axis, "type": "space"}),
+        })
+        .collect();
     json!({
         "version": "0.5",
         "multiscales": [{
             "name": name,
-            "axes": [
-                {"name": "z", "type": "space"},
-                {"name": "y", "type": "space"},
-                {"name": "x", "type": "space"}
-            ],
+            "axes": axes,
             "datasets": datasets,
             "type": "mean"
         }]

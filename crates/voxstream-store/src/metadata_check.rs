@@ -12,6 +12,7 @@ use serde_json::Value;
 use crate::error::StoreError;
 use crate::layout::{PyramidLayout, MAX_BRICK_SIZE, MIN_BRICK_SIZE};
 use crate::metadata::{StoreAttributes, FORMAT_VERSION};
+use crate::space_unit::SpaceUnit;
 use crate::volume::{DType, VolumeInfo};
 use crate::world_extent::check_world_extent;
 
@@ -121,7 +122,12 @@ pub fn validate_attributes(
             );
         }
     }
-    let info = VolumeInfo { dims, dtype, spacing: attributes.spacing, origin: attributes.origin };
+    let unit = match attributes.unit.as_deref().map(SpaceUnit::parse) {
+        None => None,
+        Some(Ok(unit)) => Some(unit),
+        Some(Err(problem)) => return bad("unit", problem),
+    };
+    let info = VolumeInfo { dims, dtype, spacing: attributes.spacing, origin: attributes.origin, unit };
     Ok((info, layout))
 }
 
@@ -168,6 +174,7 @@ mod tests {
             dtype: "u16".into(),
             spacing: [1.0, 1.0, 2.0],
             origin: [0.0; 3],
+            unit: Some("millimeter".into()),
             brick_size: 32,
             levels: 3,
             value_range: [0.0, 4000.0],
@@ -196,6 +203,7 @@ mod tests {
             ("spacing", Box::new(|a| a.spacing = [f64::NAN, 1.0, 1.0])),
             ("spacing", Box::new(|a| a.spacing = [0.0, 1.0, 1.0])),
             ("origin", Box::new(|a| a.origin = [f64::INFINITY, 0.0, 0.0])),
+            ("unit", Box::new(|a| a.unit = Some("furlong".into()))),
             ("spacing", Box::new(|a| a.spacing = [1.0, 1e308, 1.0])),
             ("origin", Box::new(|a| a.origin = [0.0, 0.0, 1e308])),
             ("brick_size", Box::new(|a| a.brick_size = 0)),

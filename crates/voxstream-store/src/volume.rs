@@ -1,7 +1,9 @@
 //! What an imported volume is: dimensions, sample type, spacing and origin (VTK/ITK convention: sample `(i, j, k)`
-//! lies at `origin + spacing·(i, j, k)`), and a source that yields it slab by slab.
+//! lies at `origin + spacing·(i, j, k)`) and their unit, and a source that yields it slab by slab.
 
 use crate::error::StoreError;
+use crate::formats::SampleConversion;
+use crate::space_unit::SpaceUnit;
 
 /// Sample types kept from the input.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -59,6 +61,8 @@ pub struct VolumeInfo {
     pub spacing: [f64; 3],
     /// World position of sample (0, 0, 0).
     pub origin: [f64; 3],
+    /// Unit of `spacing` and `origin`, when the file (or the user) says it.
+    pub unit: Option<SpaceUnit>,
 }
 
 impl VolumeInfo {
@@ -101,4 +105,10 @@ pub trait VolumeSource: Send {
     /// Appends the next `count` z slices to `out` (x fastest, then y, then z), as `f32` (exact for every supported
     /// type).
     fn read_slices(&mut self, count: usize, out: &mut Vec<f32>) -> Result<(), StoreError>;
+
+    /// For a file whose sample type the store does not keep: what converting its samples did so far (complete once
+    /// every slice is read). `None` when the samples are stored as they are.
+    fn conversion(&self) -> Option<SampleConversion> {
+        None
+    }
 }

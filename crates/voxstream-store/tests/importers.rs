@@ -265,7 +265,14 @@ fn npy_and_raw() {
     raw.extend(encode(DType::U16, Endian::Big));
     std::fs::write(dir.join("b.den"), raw).unwrap();
     let layout = RawLayout {
-        info: VolumeInfo { dims: DIMS, dtype: DType::U16, spacing: [2.0, 2.0, 3.0], origin: [5.0, 0.0, -5.0] },
+        info: VolumeInfo {
+            dims: DIMS,
+            dtype: DType::U16,
+            spacing: [2.0, 2.0, 3.0],
+            origin: [5.0, 0.0, -5.0],
+            unit: None,
+        },
+        file_type: None,
         endian: Endian::Big,
         header_bytes: 62,
     };
@@ -306,7 +313,8 @@ fn bad_files_fail_naming_the_file_and_the_problem() {
     // Header and size disagree: a raw file larger than its layout.
     std::fs::write(dir.join("big.raw"), vec![0u8; 100_000]).unwrap();
     let layout = RawLayout {
-        info: VolumeInfo { dims: DIMS, dtype: DType::U8, spacing: [1.0; 3], origin: [0.0; 3] },
+        info: VolumeInfo { dims: DIMS, dtype: DType::U8, spacing: [1.0; 3], origin: [0.0; 3], unit: None },
+        file_type: None,
         endian: Endian::Little,
         header_bytes: 0,
     };
@@ -314,11 +322,11 @@ fn bad_files_fail_naming_the_file_and_the_problem() {
     assert!(e.contains("big.raw") && e.contains("--dims"), "{e}");
 
     // Unsupported type, wrong magic, nonsense dimensions.
-    let mut double = nrrd_header("double", "raw", None).into_bytes();
-    double.extend(vec![0u8; 8]);
-    std::fs::write(dir.join("double.nrrd"), double).unwrap();
-    let e = import_error(&dir.join("double.nrrd"), None).to_string();
-    assert!(e.contains("unsupported") && e.contains("double"), "{e}");
+    let mut long = nrrd_header("int64", "raw", None).into_bytes();
+    long.extend(vec![0u8; 8]);
+    std::fs::write(dir.join("long.nrrd"), long).unwrap();
+    let e = import_error(&dir.join("long.nrrd"), None).to_string();
+    assert!(e.contains("unsupported") && e.contains("int64"), "{e}");
     std::fs::write(dir.join("fake.nii"), vec![1u8; 400]).unwrap();
     assert!(import_error(&dir.join("fake.nii"), None).to_string().contains("not a NIfTI-1 file"));
     let zero = "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 0 4 4\nencoding: raw\n\n";

@@ -468,7 +468,8 @@ pub struct ImportArgs {
     /// (z, y, x) in C order is --dims x,y,z).
     #[arg(long, value_parser = parse_dims)]
     pub dims: Option<[u64; 3]>,
-    /// Raw input: sample type u8, u16, i16 or f32.
+    /// Raw input: sample type u8, u16, i16 or f32 (stored as they are), or i8, i32, u32 or f64 (converted: i8 to
+    /// i16, the others to f32; the import prints a note saying what the conversion did).
     #[arg(long)]
     pub dtype: Option<String>,
     /// Raw input: byte order.
@@ -484,6 +485,10 @@ pub struct ImportArgs {
     /// World position of sample (0,0,0): default 0,0,0 for raw input; replaces the file's otherwise.
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     pub origin: Option<[f64; 3]>,
+    /// Unit of --spacing and --origin, written to the store's OME-Zarr axes: an OME-Zarr space unit (millimeter,
+    /// micrometer, nanometer, meter, …) or mm, µm, nm, cm, m. Replaces the file's (NIfTI and NRRD give one).
+    #[arg(long)]
+    pub unit: Option<String>,
     /// Brick edge in samples (even, 4..=256).
     #[arg(long, default_value_t = 32)]
     pub brick_size: u64,

@@ -12,7 +12,7 @@ use crate::cli::{EndianArg, ImportArgs};
 pub fn run(args: &ImportArgs) -> Result<()> {
     let is_geometry = voxstream_geometry::formats::is_geometry_file_name(&args.input) && args.dims.is_none();
     if is_geometry && args.dtype.is_some() {
-        bail!("--dtype, --spacing, --origin and --nan-as apply to volume files; a mesh or particle file keeps its own units");
+        bail!("--dtype, --spacing, --origin, --unit and --nan-as apply to volume files; a mesh or particle file keeps its own units");
     }
     let raw = match (&args.dims, &args.dtype) {
         (Some(dims), Some(dtype)) => Some(RawSettings {
@@ -28,6 +28,7 @@ pub fn run(args: &ImportArgs) -> Result<()> {
         raw,
         spacing: args.spacing,
         origin: args.origin,
+        unit: args.unit.clone(),
         nan_as: args.nan_as,
         brick_size: args.brick_size,
         overwrite: args.overwrite,
@@ -53,6 +54,10 @@ pub fn run(args: &ImportArgs) -> Result<()> {
         ControlFlow::Continue(())
     })?;
     bar.finish_and_clear();
+    // Said even with --quiet: the store holds other values than the file's type could suggest.
+    if let Some(conversion) = &report.conversion {
+        eprintln!("note: {conversion}");
+    }
     if !args.quiet {
         eprintln!(
             "imported {} ({}x{}x{} {}) into {}: {} levels, {} bricks written, {} empty, values {} to {}",

@@ -87,6 +87,9 @@ struct StoreInfo {
     dtype: String,
     spacing: [f64; 3],
     origin: [f64; 3],
+    /// Unit of the spacing and origin (an OME-Zarr name); absent when the store has none.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    unit: Option<String>,
     brick_size: u64,
     value_range: [f64; 2],
     /// `[percent, value]` pairs; absent for stores that do not keep them.
@@ -114,6 +117,7 @@ pub fn run(args: &InfoArgs) -> Result<()> {
         dtype: attributes.dtype.clone(),
         spacing: attributes.spacing,
         origin: attributes.origin,
+        unit: reader.info().unit.map(|u| u.name().to_string()),
         brick_size: attributes.brick_size,
         value_range: attributes.value_range,
         value_percentiles: attributes.value_percentiles.clone(),
@@ -127,8 +131,9 @@ pub fn run(args: &InfoArgs) -> Result<()> {
     println!("store        {}", info.path);
     println!("dimensions   {} x {} x {}", info.dims[0], info.dims[1], info.dims[2]);
     println!("type         {}", info.dtype);
-    println!("spacing      {} {} {}", info.spacing[0], info.spacing[1], info.spacing[2]);
-    println!("origin       {} {} {}", info.origin[0], info.origin[1], info.origin[2]);
+    let unit = info.unit.as_ref().map(|u| format!(" {u}")).unwrap_or_default();
+    println!("spacing      {} {} {}{unit}", info.spacing[0], info.spacing[1], info.spacing[2]);
+    println!("origin       {} {} {}{unit}", info.origin[0], info.origin[1], info.origin[2]);
     println!("value range  {} to {}", info.value_range[0], info.value_range[1]);
     if let Some(percentiles) = &info.value_percentiles {
         let text: Vec<String> = percentiles.iter().map(|[p, v]| format!("{p}%: {v}")).collect();

@@ -316,7 +316,8 @@ fn a_stores_subtree_ranges_bound_every_value_below_them() {
     let raw = dir.join("volume.raw");
     std::fs::write(&raw, &samples).unwrap();
     let layout = RawLayout {
-        info: VolumeInfo { dims, dtype: DType::U8, spacing: [1.0; 3], origin: [0.0; 3] },
+        info: VolumeInfo { dims, dtype: DType::U8, spacing: [1.0; 3], origin: [0.0; 3], unit: None },
+        file_type: None,
         endian: Endian::Little,
         header_bytes: 0,
     };

@@ -28,7 +28,14 @@ fn volumes() -> Vec<(&'static str, &'static str, Option<RawLayout>)> {
             "brainsmall.den",
             "brainsmall",
             Some(RawLayout {
-                info: VolumeInfo { dims: [128, 128, 84], dtype: DType::U8, spacing: [1.0; 3], origin: [0.0; 3] },
+                info: VolumeInfo {
+                    dims: [128, 128, 84],
+                    dtype: DType::U8,
+                    spacing: [1.0; 3],
+                    origin: [0.0; 3],
+                    unit: None,
+                },
+                file_type: None,
                 endian: Endian::Little,
                 header_bytes: 62,
             }),

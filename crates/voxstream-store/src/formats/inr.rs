@@ -1,12 +1,14 @@
-//! INRIMAGE-4 (`.inr`, `.inr.gz`), as written by CGAL: a text header padded to a multiple of 256 bytes.
+//! INRIMAGE-4 (`.inr`, `.inr.gz`), as written by CGAL: a text header padded to a multiple of 256 bytes. 8-bit signed,
+//! 32-bit integer and 64-bit float samples are converted ([`super::sample_type`]).
 
 use std::io::Read;
 use std::path::Path;
 
 use super::header_text::numbers;
 use super::sample_stream::{Compression, Endian, SampleStream};
+use super::sample_type::SampleType;
 use crate::error::StoreError;
-use crate::volume::{DType, VolumeInfo};
+use crate::volume::VolumeInfo;
 
 /// Opens an INR volume.
 pub fn open(path: &Path, is_gzip: bool) -> Result<SampleStream, StoreError> {
@@ -54,19 +56,23 @@ pub fn open(path: &Path, is_gzip: bool) -> Result<SampleStream, StoreError> {
         return Err(StoreError::Unsupported { path: path.into(), message: format!("VDIM={vdim} (vector images)") });
     }
     let dtype = match (kind.as_str(), bits) {
-        ("unsigned fixed", 8) => DType::U8,
-        ("unsigned fixed", 16) => DType::U16,
-        ("signed fixed", 16) => DType::I16,
-        ("float", 32) => DType::F32,
+        ("unsigned fixed", 8) => SampleType::U8,
+        ("unsigned fixed", 16) => SampleType::U16,
+        ("signed fixed", 16) => SampleType::I16,
+        ("float", 32) => SampleType::F32,
+        ("signed fixed", 8) => SampleType::I8,
+        ("signed fixed", 32) => SampleType::I32,
+        ("unsigned fixed", 32) => SampleType::U32,
+        ("float", 64) => SampleType::F64,
         (k, b) => {
             return Err(StoreError::Unsupported { path: path.into(), message: format!("TYPE={k} PIXSIZE={b} bits") })
         }
     };
-    let info = VolumeInfo { dims, dtype, spacing, origin };
+    let info = VolumeInfo { dims, dtype: dtype.stored(), spacing, origin, unit: None };
     let header_len = header.len() as u64;
     if is_gzip {
-        SampleStream::open(path, 0, Compression::Gzip, header_len, info, endian)
+        SampleStream::open(path, 0, Compression::Gzip, header_len, info, dtype, endian)
     } else {
-        SampleStream::open(path, header_len, Compression::None, 0, info, endian)
+        SampleStream::open(path, header_len, Compression::None, 0, info, dtype, endian)
     }
 }

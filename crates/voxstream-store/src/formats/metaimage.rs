@@ -1,4 +1,5 @@
 //! MetaImage (`.mha` with local data, `.mhd` with a data file), ITK's text-header format, raw or zlib-compressed.
+//! `MET_CHAR`, `MET_INT`, `MET_UINT` and `MET_DOUBLE` samples are converted ([`super::sample_type`]).
 
 use std::fs::File;
 use std::io::BufReader;
@@ -6,8 +7,9 @@ use std::path::Path;
 
 use super::header_text::{read_line, three};
 use super::sample_stream::{Compression, Endian, SampleStream};
+use super::sample_type::SampleType;
 use crate::error::StoreError;
-use crate::volume::{DType, VolumeInfo};
+use crate::volume::VolumeInfo;
 
 /// Opens a MetaImage volume.
 pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
@@ -45,14 +47,21 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
             }
             "ElementType" => {
                 dtype = Some(match value {
-                    "MET_UCHAR" => DType::U8,
-                    "MET_USHORT" => DType::U16,
-                    "MET_SHORT" => DType::I16,
-                    "MET_FLOAT" => DType::F32,
+                    "MET_UCHAR" => SampleType::U8,
+                    "MET_USHORT" => SampleType::U16,
+                    "MET_SHORT" => SampleType::I16,
+                    "MET_FLOAT" => SampleType::F32,
+                    "MET_CHAR" => SampleType::I8,
+                    "MET_INT" => SampleType::I32,
+                    "MET_UINT" => SampleType::U32,
+                    "MET_DOUBLE" => SampleType::F64,
                     other => {
                         return Err(StoreError::Unsupported {
                             path: path.into(),
-                            message: format!("ElementType {other} (MET_UCHAR, MET_USHORT, MET_SHORT, MET_FLOAT)"),
+                            message: format!(
+                                "ElementType {other} (MET_UCHAR, MET_USHORT, MET_SHORT, MET_FLOAT; converted: \
+                                 MET_CHAR, MET_INT, MET_UINT, MET_DOUBLE)"
+                            ),
                         })
                     }
                 })
@@ -67,11 +76,11 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
     let dims = dims.ok_or_else(|| StoreError::format(path, "header has no DimSize"))?;
     let dtype = dtype.ok_or_else(|| StoreError::format(path, "header has no ElementType"))?;
     let data_file = data_file.ok_or_else(|| StoreError::format(path, "header has no ElementDataFile"))?;
-    let info = VolumeInfo { dims, dtype, spacing, origin };
+    let info = VolumeInfo { dims, dtype: dtype.stored(), spacing, origin, unit: None };
     if data_file == "LOCAL" {
-        SampleStream::open(path, header_bytes, compression, 0, info, endian)
+        SampleStream::open(path, header_bytes, compression, 0, info, dtype, endian)
     } else {
         let data_path = path.parent().unwrap_or(Path::new(".")).join(data_file);
-        SampleStream::open(&data_path, 0, compression, 0, info, endian)
+        SampleStream::open(&data_path, 0, compression, 0, info, dtype, endian)
     }
 }

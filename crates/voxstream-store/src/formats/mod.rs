@@ -11,6 +11,9 @@
 //! | TIFF stack | `.tif`, `.tiff`, or a folder of them | as the tiff crate decodes |
 //! | OpenVDB | `.vdb` (first float grid: fog volume or level set) | via Debian's python3-openvdb |
 //! | VTK XML ImageData | `.vti` | inline binary/ascii, appended raw/base64, zlib |
+//!
+//! Samples are stored as u8, u16, i16 or f32; raw, NRRD, NIfTI, MetaImage, INR and NumPy files of int8, int32,
+//! uint32 or float64 are converted on the way ([`sample_type`]).
 
 pub mod header_text;
 pub mod inr;
@@ -20,6 +23,7 @@ pub mod npy;
 pub mod nrrd;
 pub mod raw;
 pub mod sample_stream;
+pub mod sample_type;
 pub mod tiff_stack;
 pub mod vdb;
 pub mod vti;
@@ -28,8 +32,10 @@ use std::path::Path;
 
 pub use raw::RawLayout;
 pub use sample_stream::{Compression, Endian, SampleStream};
+pub use sample_type::{SampleConversion, SampleType};
 
 use crate::error::StoreError;
+use crate::space_unit::SpaceUnit;
 use crate::volume::{VolumeInfo, VolumeSource};
 
 /// Opens `path` by its extension (a folder is a TIFF stack); `raw` describes headerless files (required for them,
@@ -66,7 +72,7 @@ pub fn open_volume(path: &Path, raw: Option<&RawLayout>) -> Result<Box<dyn Volum
     Ok(Box::new(stream))
 }
 
-/// A source whose spacing and origin are replaced (for formats that carry none, or a user's correction).
+/// A source whose spacing, origin and unit are replaced (for formats that carry none, or a user's correction).
 pub struct WithGeometry {
     inner: Box<dyn VolumeSource>,
     info: VolumeInfo,
@@ -84,6 +90,14 @@ impl WithGeometry {
         }
         WithGeometry { inner, info }
     }
+
+    /// The same, with the spacing's unit replaced where `unit` is given.
+    pub fn with_unit(mut self, unit: Option<SpaceUnit>) -> WithGeometry {
+        if unit.is_some() {
+            self.info.unit = unit;
+        }
+        self
+    }
 }
 
 impl VolumeSource for WithGeometry {
@@ -93,5 +107,9 @@ impl VolumeSource for WithGeometry {
 
     fn read_slices(&mut self, count: usize, out: &mut Vec<f32>) -> Result<(), StoreError> {
         self.inner.read_slices(count, out)
+    }
+
+    fn conversion(&self) -> Option<SampleConversion> {
+        self.inner.conversion()
     }
 }

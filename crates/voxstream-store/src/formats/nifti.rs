@@ -1,17 +1,20 @@
 //! NIfTI-1 (`.nii`, `.nii.gz`): the 348-byte header, then samples at `vox_offset`.
 //!
-//! Spacing comes from `pixdim[1..3]`, the origin from the qform offsets (or the sform translation). Rotations in
+//! Spacing comes from `pixdim[1..3]`, in the unit `xyzt_units` names (meter, millimeter or micrometer; none when it
+//! says "unknown"), the origin from the qform offsets (or the sform translation). Rotations in
 //! the qform/sform are not applied: the volume is axis-aligned in voxstream's world, as in VTK's image data. Values
 //! are kept as stored, unless the header sets a `scl_slope`/`scl_inter` scaling other than the identity: then the
-//! scaled values are imported, as f32. `datatype` and `bitpix` must agree: a header where they do not is refused,
-//! never read by either one.
+//! scaled values are imported, as f32. int8, int32, uint32 and float64 data are converted ([`super::sample_type`]).
+//! `datatype` and `bitpix` must agree: a header where they do not is refused, never read by either one.
 
 use std::io::Read;
 use std::path::Path;
 
 use super::sample_stream::{Compression, Endian, SampleStream};
+use super::sample_type::SampleType;
 use crate::error::StoreError;
-use crate::volume::{DType, VolumeInfo};
+use crate::space_unit::SpaceUnit;
+use crate::volume::VolumeInfo;
 
 /// Opens a NIfTI-1 volume.
 pub fn open(path: &Path, is_gzip: bool) -> Result<SampleStream, StoreError> {
@@ -52,21 +55,29 @@ pub fn open(path: &Path, is_gzip: bool) -> Result<SampleStream, StoreError> {
     if dim.iter().any(|&d| d <= 0) {
         return Err(StoreError::format(path, format!("dimensions must be positive, got {dim:?}")));
     }
-    let (dtype, name) = match i16_at(70) {
-        2 => (DType::U8, "uint8"),
-        4 => (DType::I16, "int16"),
-        16 => (DType::F32, "float32"),
-        512 => (DType::U16, "uint16"),
+    let file_type = match i16_at(70) {
+        2 => SampleType::U8,
+        4 => SampleType::I16,
+        8 => SampleType::I32,
+        16 => SampleType::F32,
+        64 => SampleType::F64,
+        256 => SampleType::I8,
+        512 => SampleType::U16,
+        768 => SampleType::U32,
         code => {
             return Err(StoreError::Unsupported {
                 path: path.into(),
-                message: format!("datatype code {code} (supported: 2 uint8, 4 int16, 16 float32, 512 uint16)"),
+                message: format!(
+                    "datatype code {code} (supported: 2 uint8, 4 int16, 16 float32, 512 uint16; converted: 8 int32, \
+                     64 float64, 256 int8, 768 uint32)"
+                ),
             })
         }
     };
+    let name = file_type.name();
     // The samples' size is said twice; when the two disagree, either reading reads the wrong bytes.
     let bitpix = i16_at(72);
-    let bits = 8 * dtype.size() as i16;
+    let bits = 8 * file_type.size() as i16;
     if bitpix != bits {
         return Err(StoreError::format(
             path,
@@ -90,11 +101,12 @@ pub fn open(path: &Path, is_gzip: bool) -> Result<SampleStream, StoreError> {
         return Err(StoreError::format(path, format!("vox_offset {vox_offset} is before the end of the header")));
     }
     let (slope, intercept) = (f32_at(112), f32_at(116));
-    let info = VolumeInfo { dims: dim.map(|d| d as u64), dtype, spacing, origin };
+    let unit = SpaceUnit::from_nifti(h[123]);
+    let info = VolumeInfo { dims: dim.map(|d| d as u64), dtype: file_type.stored(), spacing, origin, unit };
     let stream = if is_gzip {
-        SampleStream::open(path, 0, Compression::Gzip, vox_offset as u64, info, endian)?
+        SampleStream::open(path, 0, Compression::Gzip, vox_offset as u64, info, file_type, endian)?
     } else {
-        SampleStream::open(path, vox_offset as u64, Compression::None, 0, info, endian)?
+        SampleStream::open(path, vox_offset as u64, Compression::None, 0, info, file_type, endian)?
     };
     // As nibabel: a zero or non-finite slope means "not scaled".
     let is_identity = slope == 0.0 || !slope.is_finite() || (slope == 1.0 && intercept == 0.0);

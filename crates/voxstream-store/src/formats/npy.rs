@@ -1,5 +1,5 @@
-//! NumPy `.npy` (format versions 1–3) and `.npz` (its first array): a 3-D array of `u1`, `u2`, `i2` or `f4`, C or
-//! Fortran order.
+//! NumPy `.npy` (format versions 1–3) and `.npz` (its first array): a 3-D array of `u1`, `u2`, `i2` or `f4`, or of
+//! `i1`, `i4`, `u4` or `f8` (converted: [`super::sample_type`]), C or Fortran order.
 //!
 //! A C-order array of shape `(Z, Y, X)` (NumPy's usual `volume[z, y, x]`) and a Fortran-order array of shape
 //! `(X, Y, Z)` both have x fastest in the file, which is voxstream's order. Spacing 1, origin 0.
@@ -8,14 +8,15 @@ use std::io::Read;
 use std::path::Path;
 
 use super::sample_stream::{check_deflate_capacity, Compression, Endian, SampleStream};
+use super::sample_type::SampleType;
 use crate::error::StoreError;
-use crate::volume::{DType, VolumeInfo};
+use crate::volume::VolumeInfo;
 
 /// Opens a `.npy` array.
 pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
     let mut file = std::fs::File::open(path).map_err(|e| StoreError::io(path, e))?;
-    let (info, endian, header_bytes) = parse_header(&mut file, path)?;
-    SampleStream::open(path, header_bytes, Compression::None, 0, info, endian)
+    let (info, file_type, endian, header_bytes) = parse_header(&mut file, path)?;
+    SampleStream::open(path, header_bytes, Compression::None, 0, info, file_type, endian)
 }
 
 /// Opens the first array of a `.npz` archive (stored or deflated), streaming it without extracting.
@@ -81,20 +82,19 @@ pub fn open_npz(path: &Path) -> Result<SampleStream, StoreError> {
         }
     };
     let mut reader = Crc32Checked::new(decoded, entry.crc32, entry.size);
-    let (info, endian, header_bytes) = parse_header(&mut reader, path)?;
-    if header_bytes.checked_add(info.byte_len()) != Some(entry.size) {
+    let (info, file_type, endian, header_bytes) = parse_header(&mut reader, path)?;
+    let array_bytes = info.dims.iter().product::<u64>() * file_type.size() as u64;
+    if header_bytes.checked_add(array_bytes) != Some(entry.size) {
         return Err(StoreError::format(
             path,
             format!(
                 "{name}: the array header's shape {:?} needs {} bytes after its {header_bytes}-byte header, but the \
                  entry holds {} bytes",
-                info.dims,
-                info.byte_len(),
-                entry.size
+                info.dims, array_bytes, entry.size
             ),
         ));
     }
-    SampleStream::from_reader(path, Box::new(reader), info, endian)
+    SampleStream::from_reader(path, Box::new(reader), info, file_type, endian)
 }
 
 /// Where the first array of a `.npz` lies, as the central directory says.
@@ -147,8 +147,9 @@ impl Read for Crc32Checked {
 /// The longest `.npy` header read: NumPy itself refuses headers over 10,000 bytes unless told otherwise.
 pub const MAX_NPY_HEADER_BYTES: u64 = 1 << 16;
 
-/// Reads a `.npy` header; returns the geometry, the byte order and the header's length in bytes.
-fn parse_header(file: &mut dyn Read, path: &Path) -> Result<(VolumeInfo, Endian, u64), StoreError> {
+/// Reads a `.npy` header; returns the geometry (validated), the sample type, the byte order and the header's length
+/// in bytes.
+fn parse_header(file: &mut dyn Read, path: &Path) -> Result<(VolumeInfo, SampleType, Endian, u64), StoreError> {
     let mut magic = [0u8; 8];
     file.read_exact(&mut magic).map_err(|_| StoreError::format(path, "too short for a .npy file"))?;
     if &magic[..6] != b"\x93NUMPY" {
@@ -195,19 +196,27 @@ fn parse_header(file: &mut dyn Read, path: &Path) -> Result<(VolumeInfo, Endian,
         });
     }
     let endian = if descr.starts_with('>') { Endian::Big } else { Endian::Little };
-    let dtype = match descr.trim_start_matches(['<', '>', '|', '=']) {
-        "u1" => DType::U8,
-        "u2" => DType::U16,
-        "i2" => DType::I16,
-        "f4" => DType::F32,
+    let file_type = match descr.trim_start_matches(['<', '>', '|', '=']) {
+        "u1" => SampleType::U8,
+        "u2" => SampleType::U16,
+        "i2" => SampleType::I16,
+        "f4" => SampleType::F32,
+        "i1" => SampleType::I8,
+        "i4" => SampleType::I32,
+        "u4" => SampleType::U32,
+        "f8" => SampleType::F64,
         other => {
             return Err(StoreError::Unsupported {
                 path: path.into(),
-                message: format!("dtype '{other}' (u1, u2, i2, f4)"),
+                message: format!(
+                    "dtype '{other}' (u1, u2, i2, f4 are stored as they are; i1, i4, u4, f8 converted): convert the \
+                     array first, e.g. array.astype(numpy.float32)"
+                ),
             })
         }
     };
     let dims = if fortran { [shape[0], shape[1], shape[2]] } else { [shape[2], shape[1], shape[0]] };
-    let info = VolumeInfo { dims, dtype, spacing: [1.0; 3], origin: [0.0; 3] };
-    Ok((info, endian, prefix + header_len))
+    let info = VolumeInfo { dims, dtype: file_type.stored(), spacing: [1.0; 3], origin: [0.0; 3], unit: None };
+    info.validate(path)?;
+    Ok((info, file_type, endian, prefix + header_len))
 }

@@ -1,5 +1,8 @@
 //! NRRD (`.nrrd` with attached data, `.nhdr` with a detached data file), raw and gzip encodings
 //! (http://teem.sourceforge.net/nrrd/format.html).
+//!
+//! `signed char`, `int`, `unsigned int` and `double` samples are converted ([`super::sample_type`]). `space units`
+//! gives the spacing's unit when all three are one OME-Zarr unit (`"mm" "mm" "mm"`); other units are left out.
 
 use std::fs::File;
 use std::io::BufReader;
@@ -7,8 +10,10 @@ use std::path::Path;
 
 use super::header_text::{numbers, read_line, three};
 use super::sample_stream::{Compression, Endian, SampleStream};
+use super::sample_type::SampleType;
 use crate::error::StoreError;
-use crate::volume::{DType, VolumeInfo};
+use crate::space_unit::SpaceUnit;
+use crate::volume::VolumeInfo;
 
 /// Opens a NRRD volume.
 pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
@@ -19,6 +24,7 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
     let mut first = true;
     let (mut dtype, mut dims, mut encoding, mut endian) = (None, None, None, Endian::Little);
     let (mut spacing, mut origin, mut data_file) = ([1.0; 3], [0.0; 3], None::<String>);
+    let mut unit = None;
     loop {
         let read = read_line(path, &mut reader, &mut line, &mut header_bytes)?;
         if read == 0 {
@@ -48,14 +54,23 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
         match key.trim().to_ascii_lowercase().as_str() {
             "type" => {
                 dtype = Some(match value {
-                    "uchar" | "unsigned char" | "uint8" | "uint8_t" => DType::U8,
-                    "ushort" | "unsigned short" | "unsigned short int" | "uint16" | "uint16_t" => DType::U16,
-                    "short" | "short int" | "signed short" | "signed short int" | "int16" | "int16_t" => DType::I16,
-                    "float" => DType::F32,
+                    "uchar" | "unsigned char" | "uint8" | "uint8_t" => SampleType::U8,
+                    "ushort" | "unsigned short" | "unsigned short int" | "uint16" | "uint16_t" => SampleType::U16,
+                    "short" | "short int" | "signed short" | "signed short int" | "int16" | "int16_t" => {
+                        SampleType::I16
+                    }
+                    "float" => SampleType::F32,
+                    "signed char" | "int8" | "int8_t" => SampleType::I8,
+                    "int" | "signed int" | "int32" | "int32_t" => SampleType::I32,
+                    "uint" | "unsigned int" | "uint32" | "uint32_t" => SampleType::U32,
+                    "double" => SampleType::F64,
                     other => {
                         return Err(StoreError::Unsupported {
                             path: path.into(),
-                            message: format!("sample type '{other}' (supported: uchar, ushort, short, float)"),
+                            message: format!(
+                                "sample type '{other}' (supported: uchar, ushort, short, float; converted: signed \
+                                 char, int, uint, double)"
+                            ),
                         })
                     }
                 })
@@ -77,6 +92,7 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
                 spacing = [0, 1, 2].map(|a| (v[3 * a].powi(2) + v[3 * a + 1].powi(2) + v[3 * a + 2].powi(2)).sqrt());
             }
             "space origin" => origin = three(path, "space origin", value)?,
+            "space units" => unit = space_units(value),
             "data file" | "datafile" => data_file = Some(value.to_string()),
             _ => {}
         }
@@ -94,12 +110,33 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
         }
         None => return Err(StoreError::format(path, "header has no 'encoding'")),
     };
-    let info = VolumeInfo { dims, dtype, spacing, origin };
+    let info = VolumeInfo { dims, dtype: dtype.stored(), spacing, origin, unit };
     match data_file {
         Some(name) => {
             let data_path = path.parent().unwrap_or(Path::new(".")).join(name);
-            SampleStream::open(&data_path, 0, compression, 0, info, endian)
+            SampleStream::open(&data_path, 0, compression, 0, info, dtype, endian)
         }
-        None => SampleStream::open(path, header_bytes, compression, 0, info, endian),
+        None => SampleStream::open(path, header_bytes, compression, 0, info, dtype, endian),
+    }
+}
+
+/// The unit of a `space units` field (`"mm" "mm" "mm"`): one OME-Zarr unit shared by every axis, else none.
+fn space_units(value: &str) -> Option<SpaceUnit> {
+    let units: Vec<&str> = value.split('"').skip(1).step_by(2).collect();
+    let first = SpaceUnit::from_name(units.first()?)?;
+    units.iter().all(|u| SpaceUnit::from_name(u) == Some(first)).then_some(first)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn space_units_must_be_one_known_unit() {
+        assert_eq!(space_units(r#""mm" "mm" "mm""#).map(SpaceUnit::name), Some("millimeter"));
+        assert_eq!(space_units(r#""microns" "µm" "micrometer""#).map(SpaceUnit::name), Some("micrometer"));
+        assert_eq!(space_units(r#""mm" "mm" "cm""#), None);
+        assert_eq!(space_units(r#""furlong" "furlong" "furlong""#), None);
+        assert_eq!(space_units("mm mm mm"), None);
     }
 }

@@ -1,9 +1,12 @@
 //! Headerless raw volumes: geometry and type come from the command line (`--dims --dtype --endian --spacing
-//! --origin`), optionally after a fixed-size header (`--header-bytes`, e.g. 62 for volpack's `brainsmall.den`).
+//! --origin --unit`), optionally after a fixed-size header (`--header-bytes`, e.g. 62 for volpack's `brainsmall.den`).
+//! A `--dtype` the store does not keep (i8, i32, u32, f64) is converted as in every other format
+//! ([`super::sample_type`]).
 
 use std::path::Path;
 
 use super::sample_stream::{Compression, Endian, SampleStream};
+use super::sample_type::SampleType;
 use crate::error::StoreError;
 use crate::volume::VolumeInfo;
 
@@ -12,6 +15,9 @@ use crate::volume::VolumeInfo;
 pub struct RawLayout {
     /// Geometry and type.
     pub info: VolumeInfo,
+    /// The file's sample type when the store keeps another (`i8`, `i32`, `u32`, `f64`): it replaces `info`'s dtype,
+    /// which becomes the type it is stored as. `None`: `info`'s dtype is the file's.
+    pub file_type: Option<SampleType>,
     /// Byte order.
     pub endian: Endian,
     /// Bytes to skip before the samples.
@@ -22,8 +28,9 @@ pub struct RawLayout {
 /// dimensions or type are probably wrong).
 pub fn open(path: &Path, layout: &RawLayout) -> Result<SampleStream, StoreError> {
     layout.info.validate(path)?;
+    let file_type = layout.file_type.unwrap_or(layout.info.dtype.into());
     let size = std::fs::metadata(path).map_err(|e| StoreError::io(path, e))?.len();
-    let expected = layout.header_bytes + layout.info.byte_len();
+    let expected = layout.header_bytes + layout.info.dims.iter().product::<u64>() * file_type.size() as u64;
     if size > expected {
         return Err(StoreError::format(
             path,
@@ -31,10 +38,10 @@ pub fn open(path: &Path, layout: &RawLayout) -> Result<SampleStream, StoreError>
                 "file has {size} bytes but {:?} {} samples after {} header bytes need {expected}: check --dims, \
                  --dtype and --header-bytes",
                 layout.info.dims,
-                layout.info.dtype.name(),
+                file_type.name(),
                 layout.header_bytes
             ),
         ));
     }
-    SampleStream::open(path, layout.header_bytes, Compression::None, 0, layout.info.clone(), layout.endian)
+    SampleStream::open(path, layout.header_bytes, Compression::None, 0, layout.info.clone(), file_type, layout.endian)
 }

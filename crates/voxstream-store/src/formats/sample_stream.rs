@@ -7,11 +7,15 @@
 //! only with data that actually arrives. A compressed (or otherwise streamed) input is read to its very end once the
 //! last sample is in: that is where gzip's CRC32 and ISIZE trailers, zlib's adler32 and a zip entry's CRC are checked,
 //! and where data beyond the announced samples (the header's sizes are wrong) or garbage after the stream is refused.
+//!
+//! Samples of a type a store does not keep (int8, int32, uint32, float64) are converted here, as they stream, to the
+//! type [`SampleType::stored`] names; [`SampleStream`] counts what the conversion rounded ([`SampleConversion`]).
 
 use std::fs::File;
 use std::io::{BufRead, BufReader, Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 
+use super::sample_type::{decode, SampleConversion, SampleType};
 use crate::error::StoreError;
 use crate::volume::{DType, VolumeInfo, VolumeSource};
 
@@ -81,8 +85,10 @@ impl Read for Decoded {
 /// Samples following a header, read slice by slice.
 pub struct SampleStream {
     info: VolumeInfo,
-    /// Sample type in the file (the reported type becomes f32 when a scaling applies).
-    file_dtype: DType,
+    /// Sample type in the file (the reported type is the one it is stored as, and f32 when a scaling applies).
+    file_type: SampleType,
+    /// What converting a type the store does not keep has done so far.
+    conversion: Option<SampleConversion>,
     /// `value · slope + intercept`, if the header asks for it.
     scaling: Option<(f32, f32)>,
     endian: Endian,
@@ -98,7 +104,8 @@ pub struct SampleStream {
 }
 
 impl SampleStream {
-    /// Samples of `info` in `path`. For [`Compression::None`] they start at byte `offset` and the file size is checked
+    /// Samples of `info`'s dimensions and `file_type` in `path` (`info`'s dtype becomes the type they are stored as,
+    /// [`SampleType::stored`]). For [`Compression::None`] they start at byte `offset` and the file size is checked
     /// against the header now; compressed data starts at the file's byte `offset` and, once decompressed, skips
     /// `decompressed_offset` bytes; its compressed length is checked against the header with
     /// [`check_deflate_capacity`] now, its checksums and exact length once the last sample is read.
@@ -107,10 +114,13 @@ impl SampleStream {
         offset: u64,
         compression: Compression,
         decompressed_offset: u64,
-        info: VolumeInfo,
+        mut info: VolumeInfo,
+        file_type: SampleType,
         endian: Endian,
     ) -> Result<SampleStream, StoreError> {
         info.validate(path)?;
+        info.dtype = file_type.stored();
+        let file_bytes = file_bytes(&info, file_type);
         let mut file = File::open(path).map_err(|e| StoreError::io(path, e))?;
         let size = file.metadata().map_err(|e| StoreError::io(path, e))?.len();
         let available = size.checked_sub(offset).ok_or_else(|| {
@@ -120,17 +130,13 @@ impl SampleStream {
         let buffered = BufReader::with_capacity(READ_CHUNK_BYTES, file);
         let reader = match compression {
             Compression::None => {
-                if available < info.byte_len() {
-                    return Err(StoreError::Truncated {
-                        path: path.into(),
-                        expected: info.byte_len(),
-                        found: available,
-                    });
+                if available < file_bytes {
+                    return Err(StoreError::Truncated { path: path.into(), expected: file_bytes, found: available });
                 }
                 Decoded::Plain(buffered)
             }
             Compression::Gzip | Compression::Zlib => {
-                check_deflate_capacity(path, available, decompressed_offset.saturating_add(info.byte_len()))?;
+                check_deflate_capacity(path, available, decompressed_offset.saturating_add(file_bytes))?;
                 let mut decoder = match compression {
                     Compression::Gzip => Decoded::Gzip(flate2::bufread::MultiGzDecoder::new(buffered)),
                     _ => Decoded::Zlib(flate2::bufread::ZlibDecoder::new(buffered)),
@@ -140,14 +146,14 @@ impl SampleStream {
                 if skipped < decompressed_offset {
                     return Err(StoreError::Truncated {
                         path: path.into(),
-                        expected: decompressed_offset + info.byte_len(),
+                        expected: decompressed_offset + file_bytes,
                         found: skipped,
                     });
                 }
                 decoder
             }
         };
-        let mut stream = SampleStream::from_decoded(path, reader, info, endian)?;
+        let mut stream = SampleStream::from_decoded(path, reader, info, file_type, endian)?;
         stream.verify_end = compression != Compression::None;
         Ok(stream)
     }
@@ -156,19 +162,24 @@ impl SampleStream {
     pub fn with_scaling(mut self, slope: f32, intercept: f32) -> SampleStream {
         self.scaling = Some((slope, intercept));
         self.info.dtype = DType::F32;
+        // int8 becomes float32 by the scaling, exactly: no int16 in between to speak of.
+        if self.file_type == SampleType::I8 {
+            self.conversion = None;
+        }
         self
     }
 
-    /// Samples of `info` from any reader (a decoded in-memory buffer, a zip entry, a converter's output), reported
-    /// under `path`. The reader must hold exactly the samples: it is read to its end after the last one, so a
-    /// checksumming reader gets to check, and anything more is refused.
+    /// Samples of `info`'s dimensions and `file_type` from any reader (a decoded in-memory buffer, a zip entry, a
+    /// converter's output), reported under `path`. The reader must hold exactly the samples: it is read to its end
+    /// after the last one, so a checksumming reader gets to check, and anything more is refused.
     pub fn from_reader(
         path: &Path,
         reader: Box<dyn Read + Send>,
         info: VolumeInfo,
+        file_type: SampleType,
         endian: Endian,
     ) -> Result<SampleStream, StoreError> {
-        let mut stream = SampleStream::from_decoded(path, Decoded::Other(reader), info, endian)?;
+        let mut stream = SampleStream::from_decoded(path, Decoded::Other(reader), info, file_type, endian)?;
         stream.verify_end = true;
         Ok(stream)
     }
@@ -176,15 +187,17 @@ impl SampleStream {
     fn from_decoded(
         path: &Path,
         reader: Decoded,
-        info: VolumeInfo,
+        mut info: VolumeInfo,
+        file_type: SampleType,
         endian: Endian,
     ) -> Result<SampleStream, StoreError> {
         info.validate(path)?;
-        let file_dtype = info.dtype;
+        info.dtype = file_type.stored();
         Ok(SampleStream {
-            total: info.byte_len(),
+            total: file_bytes(&info, file_type),
             info,
-            file_dtype,
+            file_type,
+            conversion: file_type.is_converted().then(|| SampleConversion::new(file_type)),
             scaling: None,
             endian,
             reader,
@@ -268,6 +281,11 @@ impl SampleStream {
     }
 }
 
+/// Bytes of `info`'s samples as `file_type` (validated dimensions: at most 2^60 samples of at most 8 bytes).
+fn file_bytes(info: &VolumeInfo, file_type: SampleType) -> u64 {
+    info.dims.iter().product::<u64>() * file_type.size() as u64
+}
+
 fn compression_name(reader: &Decoded) -> &'static str {
     match reader {
         Decoded::Gzip(_) => "gzip",
@@ -285,8 +303,12 @@ impl VolumeSource for SampleStream {
         &self.info
     }
 
+    fn conversion(&self) -> Option<SampleConversion> {
+        self.conversion
+    }
+
     fn read_slices(&mut self, count: usize, out: &mut Vec<f32>) -> Result<(), StoreError> {
-        let size = self.file_dtype.size();
+        let size = self.file_type.size();
         let wanted = (count as u64).saturating_mul(self.info.slice_len() as u64).saturating_mul(size as u64);
         if wanted > self.total - self.consumed {
             return Err(StoreError::format(&self.path, "asked for slices past the last one"));
@@ -298,27 +320,24 @@ impl VolumeSource for SampleStream {
         while remaining > 0 {
             let chunk = remaining.min(READ_CHUNK_BYTES as u64) as usize;
             self.bytes.resize(chunk, 0);
+            let first_sample = self.consumed / size as u64;
             self.fill()?;
             remaining -= chunk as u64;
-            match self.file_dtype {
-                DType::U8 => out.extend(self.bytes.iter().map(|&b| b as f32)),
-                DType::U16 => out.extend(self.bytes.chunks_exact(2).map(|c| {
-                    let a = [c[0], c[1]];
-                    (if big { u16::from_be_bytes(a) } else { u16::from_le_bytes(a) }) as f32
-                })),
-                DType::I16 => out.extend(self.bytes.chunks_exact(2).map(|c| {
-                    let a = [c[0], c[1]];
-                    (if big { i16::from_be_bytes(a) } else { i16::from_le_bytes(a) }) as f32
-                })),
-                DType::F32 => out.extend(self.bytes.chunks_exact(4).map(|c| {
-                    let a = [c[0], c[1], c[2], c[3]];
-                    if big {
-                        f32::from_be_bytes(a)
-                    } else {
-                        f32::from_le_bytes(a)
-                    }
-                })),
-            }
+            decode(&self.bytes, self.file_type, big, self.conversion.as_mut(), out).map_err(|(index, value)| {
+                let [x, y, _] = self.info.dims;
+                let i = first_sample + index as u64;
+                StoreError::format(
+                    &self.path,
+                    format!(
+                        "sample ({}, {}, {}) is {value:e}, beyond float32's range (±{:e}): float64 samples are stored \
+                         as float32; rescale the data (e.g. to other units) before importing",
+                        i % x,
+                        i / x % y,
+                        i / (x * y),
+                        f32::MAX
+                    ),
+                )
+            })?;
         }
         if let Some((slope, intercept)) = self.scaling {
             out[start..].iter_mut().for_each(|v| *v = *v * slope + intercept);

@@ -124,8 +124,13 @@ impl TiffStack {
             members.push((file.clone(), pages));
         }
         let depth = members.iter().map(|(_, pages)| pages).sum::<u64>();
-        let info =
-            VolumeInfo { dims: [width as u64, height as u64, depth], dtype, spacing: [1.0; 3], origin: [0.0; 3] };
+        let info = VolumeInfo {
+            dims: [width as u64, height as u64, depth],
+            dtype,
+            spacing: [1.0; 3],
+            origin: [0.0; 3],
+            unit: None,
+        };
         info.validate(path)?;
         // The page size is checked now, not when the first page is decoded: the importer sizes its slabs by it.
         let page_bytes = width as u64 * height as u64 * dtype.size() as u64;

@@ -78,7 +78,8 @@ pub fn parse_converter_header(path: &Path, line: &str) -> Result<VolumeInfo, Sto
             ),
         });
     }
-    let info = VolumeInfo { dims, dtype: DType::F32, spacing: triple("spacing")?, origin: triple("origin")? };
+    let info =
+        VolumeInfo { dims, dtype: DType::F32, spacing: triple("spacing")?, origin: triple("origin")?, unit: None };
     info.validate(path)?;
     Ok(info)
 }
@@ -124,5 +125,5 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
     std::thread::spawn(move || {
         let _ = child.wait();
     });
-    SampleStream::from_reader(path, Box::new(reader), info, Endian::Little)
+    SampleStream::from_reader(path, Box::new(reader), info, DType::F32.into(), Endian::Little)
 }

@@ -149,7 +149,7 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
         }
     };
     let origin = [0, 1, 2].map(|a| h.origin[a] + h.spacing[a] * extent[2 * a] as f64);
-    let info = VolumeInfo { dims, dtype, spacing: h.spacing, origin };
+    let info = VolumeInfo { dims, dtype, spacing: h.spacing, origin, unit: None };
     info.validate(path)?;
     if info.byte_len() > MAX_VTI_SAMPLE_BYTES {
         return Err(bad(format!(
@@ -198,7 +198,7 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
         )));
     }
     let endian = if h.encoding.big_endian { Endian::Big } else { Endian::Little };
-    SampleStream::from_reader(path, Box::new(std::io::Cursor::new(data)), info, endian)
+    SampleStream::from_reader(path, Box::new(std::io::Cursor::new(data)), info, dtype.into(), endian)
 }
 
 /// Ascii samples: exactly `count` of them, each a value of `dtype` (integers in range; any float for Float32, whose
