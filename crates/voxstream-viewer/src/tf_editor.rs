@@ -4,22 +4,26 @@
 //! [`TransferFunction`]) is separate from its drawing ([`TransferFunctionEditor::show`]), so the window and
 //! scripted sessions edit the same way, and the model is tested without a window.
 //!
-//! In the plot ([`Plot`]), x is the data value over the source's value range, y the opacity on a square-root axis
-//! (the opacities that matter in translucent volumes are small).
+//! In the plot ([`Plot`]), x is the data value over the source's value range (labelled in data units below it:
+//! [`value_axis`]), y the opacity on a square-root axis (the opacities that matter in translucent volumes are small).
 //! Drag a point to move it (the point under the press, however far the pointer went before egui saw a drag),
 //! double-click empty space to add one (its colour interpolated), right-click a point to delete it, click a point to
 //! pick its colour below.
 
-use eframe::egui::{self, Color32, Pos2, Rect, Sense, Stroke, Vec2};
+use eframe::egui::{self, Align2, Color32, Pos2, Rect, Sense, Stroke, Vec2};
 use voxstream_render::TransferFunction;
 
 use crate::histogram::SampledHistogram;
+use crate::value_axis;
 
 /// Pixels within which a click picks a point.
 pub const PICK_RADIUS: f32 = 8.0;
 
 /// Height of the plot, points.
 const PLOT_HEIGHT: f32 = 150.0;
+
+/// Height of the value axis under it, points.
+const AXIS_HEIGHT: f32 = 16.0;
 
 /// Editable control points, kept valid: values strictly increasing, colours and opacities in `[0, 1]`.
 #[derive(Clone, Debug, PartialEq)]
@@ -127,8 +131,12 @@ impl TransferFunctionEditor {
     pub fn show(&mut self, ui: &mut egui::Ui, histogram: Option<&SampledHistogram>, value_range: [f64; 2]) -> bool {
         let before = self.points.clone();
         let width = ui.available_width().max(120.0);
-        let (response, painter) = ui.allocate_painter(Vec2::new(width, PLOT_HEIGHT), Sense::click_and_drag());
-        let plot_area = response.rect;
+        let (response, painter) =
+            ui.allocate_painter(Vec2::new(width, PLOT_HEIGHT + AXIS_HEIGHT), Sense::click_and_drag());
+        let plot_area = Rect::from_min_max(
+            response.rect.min,
+            Pos2::new(response.rect.right(), response.rect.bottom() - AXIS_HEIGHT),
+        );
         let lo = value_range[0].min(self.points[0][0]);
         let hi = value_range[1].max(self.points[self.points.len() - 1][0]);
         let plot = Plot::new(plot_area.shrink(6.0), lo, hi);
@@ -137,6 +145,7 @@ impl TransferFunctionEditor {
         if let Some(histogram) = histogram {
             draw_histogram(&painter, &plot, histogram);
         }
+        draw_value_axis(&painter, &plot, ui.visuals().weak_text_color());
         // The colour strip along the bottom, and the opacity curve.
         let strip = 64;
         let transfer_function = self.transfer_function();
@@ -288,6 +297,23 @@ fn draw_histogram(painter: &egui::Painter, plot: &Plot, histogram: &SampledHisto
             0.0,
             Color32::from_gray(70),
         );
+    }
+}
+
+/// Tick marks and labels in data units under the plot ([`value_axis::value_ticks`]).
+fn draw_value_axis(painter: &egui::Painter, plot: &Plot, text: Color32) {
+    let rect = plot.rect;
+    let font = egui::FontId::proportional(11.0);
+    let y = rect.bottom() + 6.0;
+    for tick in value_axis::value_ticks(plot.lo, plot.lo + plot.span, rect.width()) {
+        let x = rect.left() + tick.position * rect.width();
+        painter.line_segment([Pos2::new(x, y - 3.0), Pos2::new(x, y + 1.0)], Stroke::new(1.0, text));
+        let anchor = match (tick.is_end, tick.position < 0.5) {
+            (true, true) => Align2::LEFT_TOP,
+            (true, false) => Align2::RIGHT_TOP,
+            (false, _) => Align2::CENTER_TOP,
+        };
+        painter.text(Pos2::new(x, y + 1.0), anchor, tick.label, font.clone(), text);
     }
 }
 
