@@ -9,6 +9,7 @@
 //! - [`app`]: the window (image, controls, status line), reduced resolution while moving, full size at rest;
 //! - [`orbit`]: orbit, pan, zoom and fly, converted to and from the renderer's camera;
 //! - [`tf_editor`] over [`histogram`]: control points drawn over the source's value histogram;
+//! - [`value_axis`]: that histogram's value axis, labelled in data units;
 //! - [`files`]: screenshots, cameras and transfer functions saved for `voxstream render --camera/--tf`;
 //! - [`script`]: scripted sessions for demonstrations and end-to-end tests.
 //!
@@ -23,6 +24,7 @@ pub mod orbit;
 pub mod render_worker;
 pub mod script;
 pub mod tf_editor;
+pub mod value_axis;
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};

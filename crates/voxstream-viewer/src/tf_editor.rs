@@ -4,17 +4,26 @@
 //! [`TransferFunction`]) is separate from its drawing ([`TransferFunctionEditor::show`]), so the window and
 //! scripted sessions edit the same way, and the model is tested without a window.
 //!
-//! In the plot, x is the data value over the source's value range, y the opacity on a square-root axis (the
-//! opacities that matter in translucent volumes are small). Drag a point to move it, double-click empty space to add
-//! one (its colour interpolated), right-click a point to delete it, click a point to pick its colour below.
+//! In the plot ([`Plot`]), x is the data value over the source's value range (labelled in data units below it:
+//! [`value_axis`]), y the opacity on a square-root axis (the opacities that matter in translucent volumes are small).
+//! Drag a point to move it (the point under the press, however far the pointer went before egui saw a drag),
+//! double-click empty space to add one (its colour interpolated), right-click a point to delete it, click a point to
+//! pick its colour below.
 
-use eframe::egui::{self, Color32, Pos2, Rect, Sense, Stroke, Vec2};
+use eframe::egui::{self, Align2, Color32, Pos2, Rect, Sense, Stroke, Vec2};
 use voxstream_render::TransferFunction;
 
 use crate::histogram::SampledHistogram;
+use crate::value_axis;
 
 /// Pixels within which a click picks a point.
-const PICK_RADIUS: f32 = 8.0;
+pub const PICK_RADIUS: f32 = 8.0;
+
+/// Height of the plot, points.
+const PLOT_HEIGHT: f32 = 150.0;
+
+/// Height of the value axis under it, points.
+const AXIS_HEIGHT: f32 = 16.0;
 
 /// Editable control points, kept valid: values strictly increasing, colours and opacities in `[0, 1]`.
 #[derive(Clone, Debug, PartialEq)]
@@ -122,31 +131,26 @@ impl TransferFunctionEditor {
     pub fn show(&mut self, ui: &mut egui::Ui, histogram: Option<&SampledHistogram>, value_range: [f64; 2]) -> bool {
         let before = self.points.clone();
         let width = ui.available_width().max(120.0);
-        let (response, painter) = ui.allocate_painter(Vec2::new(width, 150.0), Sense::click_and_drag());
-        let rect = response.rect.shrink(6.0);
+        let (response, painter) =
+            ui.allocate_painter(Vec2::new(width, PLOT_HEIGHT + AXIS_HEIGHT), Sense::click_and_drag());
+        let plot_area = Rect::from_min_max(
+            response.rect.min,
+            Pos2::new(response.rect.right(), response.rect.bottom() - AXIS_HEIGHT),
+        );
         let lo = value_range[0].min(self.points[0][0]);
         let hi = value_range[1].max(self.points[self.points.len() - 1][0]);
-        let span = if hi > lo { hi - lo } else { 1.0 };
-        let to_screen = |value: f64, alpha: f64| {
-            Pos2::new(
-                rect.left() + ((value - lo) / span) as f32 * rect.width(),
-                rect.bottom() - (alpha.max(0.0).sqrt() as f32) * rect.height(),
-            )
-        };
-        let from_screen = |p: Pos2| {
-            let value = lo + ((p.x - rect.left()) / rect.width()) as f64 * span;
-            let height = ((rect.bottom() - p.y) / rect.height()).clamp(0.0, 1.0) as f64;
-            (value, height * height)
-        };
-        painter.rect_filled(response.rect, 2.0, Color32::from_gray(24));
+        let plot = Plot::new(plot_area.shrink(6.0), lo, hi);
+        let rect = plot.rect;
+        painter.rect_filled(plot_area, 2.0, Color32::from_gray(24));
         if let Some(histogram) = histogram {
-            draw_histogram(&painter, rect, histogram, lo, span);
+            draw_histogram(&painter, &plot, histogram);
         }
+        draw_value_axis(&painter, &plot, ui.visuals().weak_text_color());
         // The colour strip along the bottom, and the opacity curve.
         let strip = 64;
         let transfer_function = self.transfer_function();
         for i in 0..strip {
-            let value = lo + span * (i as f64 + 0.5) / strip as f64;
+            let value = plot.lo + plot.span * (i as f64 + 0.5) / strip as f64;
             let [r, g, b, _] = transfer_function.evaluate(value);
             let x0 = rect.left() + rect.width() * i as f32 / strip as f32;
             let x1 = rect.left() + rect.width() * (i + 1) as f32 / strip as f32;
@@ -156,44 +160,43 @@ impl TransferFunctionEditor {
                 color(r, g, b),
             );
         }
-        let mut curve = vec![to_screen(lo, self.points[0][4])];
-        curve.extend(self.points.iter().map(|p| to_screen(p[0], p[4])));
-        curve.push(to_screen(hi, self.points[self.points.len() - 1][4]));
+        let mut curve = vec![plot.to_screen(lo, self.points[0][4])];
+        curve.extend(self.points.iter().map(|p| plot.to_screen(p[0], p[4])));
+        curve.push(plot.to_screen(hi, self.points[self.points.len() - 1][4]));
         painter.line(curve, Stroke::new(1.5, Color32::from_gray(220)));
         for (index, p) in self.points.iter().enumerate() {
-            let centre = to_screen(p[0], p[4]);
+            let centre = plot.to_screen(p[0], p[4]);
             painter.circle_filled(centre, 5.0, color(p[1], p[2], p[3]));
             let ring = if self.selected == Some(index) { Color32::YELLOW } else { Color32::WHITE };
             painter.circle_stroke(centre, 5.0, Stroke::new(1.5, ring));
         }
-        let nearest = |pointer: Pos2, points: &[[f64; 5]]| {
-            points
-                .iter()
-                .enumerate()
-                .map(|(i, p)| (i, to_screen(p[0], p[4]).distance(pointer)))
-                .filter(|&(_, d)| d <= PICK_RADIUS)
-                .min_by(|a, b| a.1.total_cmp(&b.1))
-                .map(|(i, _)| i)
-        };
         if let Some(pointer) = response.interact_pointer_pos() {
-            if response.drag_started() || response.clicked() {
-                self.dragged = nearest(pointer, &self.points);
+            if response.drag_started() {
+                // egui starts a drag once the pointer has moved some pixels (or further, between two slow frames):
+                // the point is the one under the press, not under the pointer now.
+                let press = ui.input(|i| i.pointer.press_origin());
+                self.dragged = plot.pick_for_drag(&self.points, press, pointer);
                 if self.dragged.is_some() {
                     self.selected = self.dragged;
                 }
             }
+            if response.clicked() {
+                if let Some(index) = plot.pick(&self.points, pointer) {
+                    self.selected = Some(index);
+                }
+            }
             if response.dragged() {
                 if let Some(index) = self.dragged {
-                    let (value, alpha) = from_screen(pointer);
+                    let (value, alpha) = plot.from_screen(pointer);
                     self.move_point(index, value, alpha);
                 }
             }
-            if response.double_clicked() && nearest(pointer, &self.points).is_none() {
-                let (value, alpha) = from_screen(pointer);
+            if response.double_clicked() && plot.pick(&self.points, pointer).is_none() {
+                let (value, alpha) = plot.from_screen(pointer);
                 self.add_point(value, alpha);
             }
             if response.secondary_clicked() {
-                if let Some(index) = nearest(pointer, &self.points) {
+                if let Some(index) = plot.pick(&self.points, pointer) {
                     self.delete_point(index);
                 }
             }
@@ -216,7 +219,62 @@ impl TransferFunctionEditor {
     }
 }
 
-fn draw_histogram(painter: &egui::Painter, rect: Rect, histogram: &SampledHistogram, lo: f64, span: f64) {
+/// Where values and opacities are in the plot: x the value over `lo..lo + span`, y the opacity on a square-root
+/// axis.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Plot {
+    /// The plotting area (points).
+    pub rect: Rect,
+    /// The value at the left edge.
+    pub lo: f64,
+    /// The values across the plot (positive).
+    pub span: f64,
+}
+
+impl Plot {
+    /// A plot of values `lo..=hi` (a span of 1 when they are equal) in `rect`.
+    pub fn new(rect: Rect, lo: f64, hi: f64) -> Plot {
+        Plot { rect, lo, span: if hi > lo { hi - lo } else { 1.0 } }
+    }
+
+    /// The point of `value` at opacity `alpha`.
+    pub fn to_screen(&self, value: f64, alpha: f64) -> Pos2 {
+        let rect = self.rect;
+        Pos2::new(
+            rect.left() + ((value - self.lo) / self.span) as f32 * rect.width(),
+            rect.bottom() - (alpha.max(0.0).sqrt() as f32) * rect.height(),
+        )
+    }
+
+    /// The value and opacity at point `p` (the opacity clamped to `[0, 1]`).
+    pub fn from_screen(&self, p: Pos2) -> (f64, f64) {
+        let rect = self.rect;
+        let value = self.lo + ((p.x - rect.left()) / rect.width()) as f64 * self.span;
+        let height = ((rect.bottom() - p.y) / rect.height()).clamp(0.0, 1.0) as f64;
+        (value, height * height)
+    }
+
+    /// The point a drag takes when it starts: the one under `press`, where the button went down (egui's
+    /// `press_origin`), not the one under the pointer now, which a drag recognised late has left behind; `pointer`
+    /// where no press is known.
+    pub fn pick_for_drag(&self, points: &[[f64; 5]], press: Option<Pos2>, pointer: Pos2) -> Option<usize> {
+        self.pick(points, press.unwrap_or(pointer))
+    }
+
+    /// The control point within [`PICK_RADIUS`] of `at` (the nearest), if any.
+    pub fn pick(&self, points: &[[f64; 5]], at: Pos2) -> Option<usize> {
+        points
+            .iter()
+            .enumerate()
+            .map(|(i, p)| (i, self.to_screen(p[0], p[4]).distance(at)))
+            .filter(|&(_, d)| d <= PICK_RADIUS)
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(i, _)| i)
+    }
+}
+
+fn draw_histogram(painter: &egui::Painter, plot: &Plot, histogram: &SampledHistogram) {
+    let (rect, lo, span) = (plot.rect, plot.lo, plot.span);
     let max = histogram.max_count();
     if max == 0 {
         return;
@@ -239,6 +297,23 @@ fn draw_histogram(painter: &egui::Painter, rect: Rect, histogram: &SampledHistog
             0.0,
             Color32::from_gray(70),
         );
+    }
+}
+
+/// Tick marks and labels in data units under the plot ([`value_axis::value_ticks`]).
+fn draw_value_axis(painter: &egui::Painter, plot: &Plot, text: Color32) {
+    let rect = plot.rect;
+    let font = egui::FontId::proportional(11.0);
+    let y = rect.bottom() + 6.0;
+    for tick in value_axis::value_ticks(plot.lo, plot.lo + plot.span, rect.width()) {
+        let x = rect.left() + tick.position * rect.width();
+        painter.line_segment([Pos2::new(x, y - 3.0), Pos2::new(x, y + 1.0)], Stroke::new(1.0, text));
+        let anchor = match (tick.is_end, tick.position < 0.5) {
+            (true, true) => Align2::LEFT_TOP,
+            (true, false) => Align2::RIGHT_TOP,
+            (false, _) => Align2::CENTER_TOP,
+        };
+        painter.text(Pos2::new(x, y + 1.0), anchor, tick.label, font.clone(), text);
     }
 }
 
@@ -289,6 +364,29 @@ mod tests {
         assert!(points[1][0] > points[0][0] && points[1][0] < 0.01);
         assert_eq!(points[1][4], 0.0);
         assert!(TransferFunction::new(points.to_vec(), None).is_ok(), "still strictly increasing");
+    }
+
+    #[test]
+    fn a_drag_takes_the_point_under_the_press_however_far_it_moved_first() {
+        let plot = Plot::new(Rect::from_min_size(Pos2::new(10.0, 20.0), Vec2::new(200.0, 100.0)), 0.0, 1.0);
+        let points = [[0.0, 0.0, 0.0, 0.0, 0.0], [0.5, 1.0, 1.0, 1.0, 0.25], [1.0, 1.0, 1.0, 1.0, 1.0]];
+        // Point 1 is at x = 10 + 0.5 × 200, y = 120 − √0.25 × 100.
+        let centre = plot.to_screen(0.5, 0.25);
+        assert_eq!(centre, Pos2::new(110.0, 70.0));
+        // Pressed 3 px off the point; the drag was recognised 30 px later.
+        let press = centre + Vec2::new(3.0, -2.0);
+        let pointer = press + Vec2::new(30.0, 12.0);
+        assert_eq!(plot.pick(&points, pointer), None, "nothing under the pointer now");
+        assert_eq!(plot.pick_for_drag(&points, Some(press), pointer), Some(1));
+        // No press known (a touch that began elsewhere): the pointer decides.
+        assert_eq!(plot.pick_for_drag(&points, None, centre), Some(1));
+        assert_eq!(plot.pick_for_drag(&points, Some(centre + Vec2::new(PICK_RADIUS + 1.0, 0.0)), centre), None);
+        // Of two points within reach, the nearer.
+        let close = [[0.5, 0.0, 0.0, 0.0, 0.25], [0.52, 0.0, 0.0, 0.0, 0.25]];
+        assert_eq!(plot.pick(&close, plot.to_screen(0.52, 0.25) + Vec2::new(-1.0, 0.0)), Some(1));
+        // And back: the press's value and opacity.
+        let (value, alpha) = plot.from_screen(centre);
+        assert!((value - 0.5).abs() < 1e-6 && (alpha - 0.25).abs() < 1e-6);
     }
 
     #[test]

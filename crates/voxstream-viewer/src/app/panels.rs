@@ -9,9 +9,60 @@ use voxstream_render::{IsoSurface, Shading};
 use super::{max_budget_mib, ViewerApp, ORBIT_DEGREES_PER_POINT};
 use crate::files::{camera_json, write_output};
 
+/// The keys that may close the window, and what else is open.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct DismissKeys {
+    /// `Esc` was pressed.
+    pub escape: bool,
+    /// `Ctrl+Q` (`Cmd+Q` on macOS) was pressed.
+    pub command_q: bool,
+    /// A text field has the keyboard.
+    pub typing: bool,
+    /// The help overlay is shown.
+    pub help_shown: bool,
+    /// A popup (the presets' list) is open.
+    pub popup_open: bool,
+}
+
+/// What `Esc` or `Ctrl+Q` does.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Dismiss {
+    Nothing,
+    HideHelp,
+    CloseWindow,
+}
+
+/// `Ctrl+Q` closes the window whatever has the keyboard. `Esc` closes what is open first (a text field's focus or a
+/// popup, which egui closes itself, or the help overlay), and the window when nothing is.
+pub(super) fn dismiss(keys: DismissKeys) -> Dismiss {
+    if keys.command_q {
+        Dismiss::CloseWindow
+    } else if !keys.escape || keys.typing || keys.popup_open {
+        Dismiss::Nothing
+    } else if keys.help_shown {
+        Dismiss::HideHelp
+    } else {
+        Dismiss::CloseWindow
+    }
+}
+
 impl ViewerApp {
     pub(super) fn keyboard(&mut self, ctx: &egui::Context) {
-        if ctx.egui_wants_keyboard_input() {
+        let typing = ctx.egui_wants_keyboard_input();
+        let (escape, command_q) =
+            ctx.input(|i| (i.key_pressed(Key::Escape), i.modifiers.command && i.key_pressed(Key::Q)));
+        let popup_open = egui::Popup::is_any_open(ctx);
+        let keys = DismissKeys { escape, command_q, typing, help_shown: self.show_help, popup_open };
+        match dismiss(keys) {
+            Dismiss::Nothing => {}
+            Dismiss::HideHelp => self.show_help = false,
+            // As the window's close button: `on_exit` writes `--stats`.
+            Dismiss::CloseWindow => {
+                ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+                return;
+            }
+        }
+        if typing {
             return;
         }
         let (dt, keys) = ctx.input(|i| {
@@ -287,6 +338,7 @@ impl ViewerApp {
                 "left drag: orbit · right/middle drag or shift+drag: pan · wheel: zoom\n\
                  W/S: fly forward/back · A/D: left/right · Q/E: down/up · arrows: orbit\n\
                  R or double-click: reset · M: mark missing data · L: colour by level · H/F1: this help\n\
+                 Esc: hide this help, then close · Ctrl+Q: close (--stats is written)\n\
                  renderer: {}",
                 self.config.renderer
             );
@@ -298,5 +350,23 @@ impl ViewerApp {
                 Color32::WHITE,
             );
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn escape_closes_the_window_once_nothing_else_is_open_and_ctrl_q_always() {
+        let escape = DismissKeys { escape: true, ..DismissKeys::default() };
+        assert_eq!(dismiss(escape), Dismiss::CloseWindow);
+        assert_eq!(dismiss(DismissKeys { help_shown: true, ..escape }), Dismiss::HideHelp);
+        assert_eq!(dismiss(DismissKeys { typing: true, ..escape }), Dismiss::Nothing, "Esc leaves the text field");
+        assert_eq!(dismiss(DismissKeys { popup_open: true, ..escape }), Dismiss::Nothing, "Esc closes the popup");
+        let quit = DismissKeys { command_q: true, typing: true, help_shown: true, popup_open: true, escape: false };
+        assert_eq!(dismiss(quit), Dismiss::CloseWindow);
+        assert_eq!(dismiss(DismissKeys::default()), Dismiss::Nothing);
+        assert_eq!(dismiss(DismissKeys { help_shown: true, ..DismissKeys::default() }), Dismiss::Nothing);
     }
 }
