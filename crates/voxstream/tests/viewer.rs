@@ -331,6 +331,12 @@ fn with_the_gpu_backend_the_viewer_shows_what_render_on_the_gpu_draws() {
     let stats = camera(&dir.join("stats.json"));
     let renderer = stats["renderer"].as_str().unwrap_or("");
     assert!(renderer.starts_with("gpu:"), "the frame log names the GPU renderer: {renderer}");
+    // A CPU emulation (lavapipe) is warned of, in the log as on stderr; a GPU is not.
+    let warning = stats["renderer_warning"].as_str();
+    assert_eq!(warning.is_some(), renderer.contains("(CPU emulation"), "{stats}");
+    if let Some(warning) = warning {
+        assert!(String::from_utf8_lossy(&out.stderr).contains(&format!("warning: {warning}")), "on stderr too");
+    }
     // `render` on either backend with the saved camera and transfer function.
     let render = |backend: &str, iso: bool, out: &str| {
         let what: &[&str] = if iso { &["--iso", "1500", "--iso-color", "0.9,0.8,0.7"] } else { &["--tf", "tf-b.json"] };
