@@ -318,9 +318,15 @@ fn with_the_gpu_backend_the_viewer_shows_what_render_on_the_gpu_draws() {
     let out = under_xvfb(
         &dir,
         &format!(
-            "XDG_RUNTIME_DIR=/tmp {viewer} view balls.zarr --width 160 --height 120 --budget-mb 64 --backend gpu \
+            "env -u XDG_RUNTIME_DIR {viewer} view balls.zarr --width 160 --height 120 --budget-mb 64 --backend gpu \
              --script session.txt --stats stats.json"
         ),
+    );
+    // No libwayland line about XDG_RUNTIME_DIR (Mesa's device-selection layer looked for a compositor).
+    assert!(
+        !String::from_utf8_lossy(&out.stderr).contains("XDG_RUNTIME_DIR"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
     );
     assert!(
         out.status.success(),
