@@ -21,6 +21,12 @@ pub trait FrameRenderer {
     /// The renderer and the device it runs on, in one line (for `--stats`).
     fn describe(&self) -> String;
 
+    /// A warning about the device the renderer runs on, in one line (front ends print it once and put it in
+    /// `--stats`): e.g. a GPU renderer on a CPU emulation of a GPU, slower than the CPU renderer. `None` by default.
+    fn device_warning(&self) -> Option<String> {
+        None
+    }
+
     /// Bytes of pool data copied to the renderer's own memory so far (0 for a renderer that reads the CPU pools in
     /// place).
     fn bytes_uploaded(&self) -> u64 {
@@ -47,6 +53,10 @@ impl FrameRenderer for Box<dyn FrameRenderer + Send + '_> {
 
     fn describe(&self) -> String {
         (**self).describe()
+    }
+
+    fn device_warning(&self) -> Option<String> {
+        (**self).device_warning()
     }
 
     fn bytes_uploaded(&self) -> u64 {

@@ -1,5 +1,7 @@
 //! The GPU device: a headless wgpu adapter (Vulkan), opened with the adapter's own limits so that pools as large as
-//! the budget and the adapter allow can be bound, and described for `--stats`.
+//! the budget and the adapter allow can be bound, and described for `--stats`. Where the only adapter is a CPU
+//! emulation (Mesa's lavapipe, "llvmpipe"), [`cpu_emulation_warning`] says so: it draws about 12× slower than the
+//! CPU renderer (measured on a 2-core machine), which is never what `--backend gpu` was asked for.
 
 use crate::error::GpuError;
 
@@ -66,8 +68,47 @@ impl GpuContext {
         format!("{} ({kind}, {:?}, {driver})", info.name, info.backend)
     }
 
+    /// A warning when the adapter is a CPU emulation of a GPU ([`cpu_emulation_warning`]).
+    pub fn cpu_emulation_warning(&self) -> Option<String> {
+        cpu_emulation_warning(self.info.device_type, &self.info.name)
+    }
+
     /// The largest buffer a shader can bind as storage, bytes.
     pub fn max_storage_bytes(&self) -> u64 {
         self.limits.max_storage_buffer_binding_size.min(self.limits.max_buffer_size)
+    }
+}
+
+/// One line for an adapter of `device_type` named `adapter` that is a CPU emulation of a GPU (wgpu's
+/// [`wgpu::DeviceType::Cpu`]: Mesa's lavapipe, SwiftShader, WARP), pointing to the CPU renderer; `None` for a GPU.
+pub fn cpu_emulation_warning(device_type: wgpu::DeviceType, adapter: &str) -> Option<String> {
+    (device_type == wgpu::DeviceType::Cpu).then(|| {
+        format!(
+            "the GPU adapter \"{adapter}\" is a CPU emulation of a GPU (no GPU driver was found), which draws about \
+             12x slower than the CPU renderer: use --backend cpu"
+        )
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_a_cpu_emulation_is_warned_of() {
+        let warning = cpu_emulation_warning(wgpu::DeviceType::Cpu, "llvmpipe (LLVM 15.0.6, 256 bits)").unwrap();
+        assert!(
+            warning.contains("\"llvmpipe (LLVM 15.0.6, 256 bits)\"") && warning.contains("CPU emulation"),
+            "{warning}"
+        );
+        assert!(warning.ends_with("use --backend cpu") && !warning.contains('\n'), "one line: {warning}");
+        for gpu in [
+            wgpu::DeviceType::DiscreteGpu,
+            wgpu::DeviceType::IntegratedGpu,
+            wgpu::DeviceType::VirtualGpu,
+            wgpu::DeviceType::Other,
+        ] {
+            assert_eq!(cpu_emulation_warning(gpu, "NVIDIA H100"), None, "{gpu:?}");
+        }
     }
 }

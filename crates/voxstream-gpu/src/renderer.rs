@@ -558,6 +558,10 @@ impl FrameRenderer for GpuRenderer {
         format!("gpu: {}, {}", self.adapter(), self.filtering.describe())
     }
 
+    fn device_warning(&self) -> Option<String> {
+        self.context.cpu_emulation_warning()
+    }
+
     fn bytes_uploaded(&self) -> u64 {
         self.total_upload.bytes()
     }

@@ -5,6 +5,7 @@
 //! frame, coarser data stands in and detail fades in (GigaVoxels [P09] §5's interactive frames, Thiele et al.'s
 //! blending). The parts:
 //!
+//! - [`close_on_signal`]: `SIGTERM`/`SIGINT` close the window as its close button does (`--stats` is written);
 //! - [`render_worker`]: the render thread that owns the session, so the window never blocks;
 //! - [`app`]: the window (image, controls, status line), reduced resolution while moving, full size at rest;
 //! - [`orbit`]: orbit, pan, zoom and fly, converted to and from the renderer's camera;
@@ -17,6 +18,7 @@
 //! GPU one with `--backend gpu`) draws the image off-screen and OpenGL only shows it.
 
 pub mod app;
+pub mod close_on_signal;
 pub mod error;
 pub mod files;
 pub mod histogram;
@@ -51,7 +53,8 @@ pub struct ViewerSummary {
     pub failed_bricks: usize,
 }
 
-/// Opens the viewer's window on `session` and returns when it is closed: `Err` when no window could be opened or a
+/// Opens the viewer's window on `session` and returns when it is closed (by its close button, `Esc`, `Ctrl+Q`, a
+/// script's `quit`, or `SIGTERM`/`SIGINT`: all of them write `--stats`): `Err` when no window could be opened or a
 /// script failed.
 pub fn run_viewer<P, R>(session: Session<P, R>, config: ViewerConfig) -> Result<ViewerSummary, ViewerError>
 where
@@ -75,18 +78,33 @@ where
     };
     let title = config.title.clone();
     let mut config = Some(config);
-    eframe::run_native(
+    // Held until the window has closed (from then on the signals terminate, as without it).
+    let close_on_signal = Arc::new(Mutex::new(None));
+    let app_close_on_signal = close_on_signal.clone();
+    let result = eframe::run_native(
         &title,
         options,
         Box::new(move |cc| {
             let context = cc.egui_ctx.clone();
             let config = config.take().ok_or("the viewer was started twice")?;
+            // SIGTERM and SIGINT close the window as its close button does: `on_exit` writes `--stats`.
+            let closing = cc.egui_ctx.clone();
+            let guard = close_on_signal::CloseOnSignal::install(move || {
+                closing.send_viewport_cmd(eframe::egui::ViewportCommand::Close);
+                closing.request_repaint();
+            });
+            match guard {
+                Ok(guard) => *app_close_on_signal.lock().unwrap_or_else(PoisonError::into_inner) = Some(guard),
+                Err(error) => eprintln!("warning: SIGTERM will end the viewer without writing --stats: {error}"),
+            }
             let worker =
                 render_worker::RenderWorker::start(session, config.refinement, move || context.request_repaint())?;
             Ok(Box::new(ViewerApp::new(worker, config, app_failure, app_failed_bricks)))
         }),
     )
-    .map_err(|e| ViewerError::Window(e.to_string()))?;
+    .map_err(|e| ViewerError::Window(e.to_string()));
+    drop(close_on_signal.lock().unwrap_or_else(PoisonError::into_inner).take());
+    result?;
     let failure = failure.lock().unwrap_or_else(PoisonError::into_inner).take();
     match failure {
         Some(message) => Err(ViewerError::Script(message)),

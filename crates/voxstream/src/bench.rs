@@ -65,6 +65,9 @@ pub struct SceneFigures {
     pub resident_bytes_peak: u64,
     /// The renderer and its device.
     pub backend: String,
+    /// What the renderer warned of its device (a GPU adapter that is a CPU emulation), if anything.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub backend_warning: Option<String>,
     /// Bytes of tiles and bricks uploaded to the renderer's memory (the GPU's; 0 on the CPU) by the cold converged
     /// frame.
     pub converged_bytes_uploaded: u64,
@@ -99,7 +102,11 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let mut figures = Vec::new();
     for name in &names {
         eprintln!("bench: {name} at {0}x{0} …", args.size);
-        figures.push(bench_source(name, args, &bounds)?);
+        let scene = bench_source(name, args, &bounds)?;
+        if let (None, Some(warning)) = (figures.first(), &scene.backend_warning) {
+            eprintln!("warning: {warning}");
+        }
+        figures.push(scene);
     }
     println!(
         "backend: {}\nthreads: {}, ray loop: {}, peak RSS: {:.0} MiB, trilinear bounds in ns per sample on one core \
@@ -264,6 +271,7 @@ fn bench_source(name: &str, args: &BenchArgs, bounds: &TrilinearBounds) -> Resul
     let warm_bytes_uploaded_per_frame =
         (session.renderer().bytes_uploaded() - converged_bytes_uploaded) as f64 / args.warm_frames.max(1) as f64;
     let backend = session.renderer().describe();
+    let backend_warning = session.renderer().device_warning();
     let warm_frame_ms = median(&mut warm_ms);
 
     // Interactive from cold: frames until complete.
@@ -307,6 +315,7 @@ fn bench_source(name: &str, args: &BenchArgs, bounds: &TrilinearBounds) -> Resul
         bricks_resident: session.residency().bricks,
         resident_bytes_peak: session.peak_resident_bytes(),
         backend,
+        backend_warning,
         converged_bytes_uploaded,
         warm_bytes_uploaded_per_frame,
         path_bytes_uploaded_per_frame,

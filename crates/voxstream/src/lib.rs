@@ -28,6 +28,8 @@ pub mod popping_run;
 pub mod render_command;
 pub mod render_progress;
 pub mod render_warnings;
+#[cfg(unix)]
+pub mod runtime_dir;
 pub mod stats;
 pub mod trilinear_bound;
 pub mod video_output;

@@ -23,6 +23,10 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
+    // Before any thread starts and before Vulkan is opened: no libwayland line about XDG_RUNTIME_DIR (see the
+    // module). Kept until the end of `main`, which removes the directory.
+    #[cfg(unix)]
+    let _runtime_dir = if opens_gpu(&cli) { voxstream::runtime_dir::prepare_for_vulkan() } else { None };
     let result = match cli.command {
         None => {
             let args = match Cli::try_parse_from(["voxstream", "render"]) {
@@ -59,6 +63,17 @@ fn main() -> ExitCode {
             eprintln!("error: {}", voxstream::error_message::user_message(&error));
             ExitCode::from(voxstream::exit_status::exit_code(&error))
         }
+    }
+}
+
+/// Whether the command opens a GPU (`--backend gpu`).
+fn opens_gpu(cli: &Cli) -> bool {
+    use voxstream::backend::Backend;
+    match &cli.command {
+        Some(Command::Render(args)) => args.look.backend == Backend::Gpu,
+        Some(Command::View(args)) => args.look.backend == Backend::Gpu,
+        Some(Command::Bench(args)) => args.backend == Backend::Gpu,
+        _ => false,
     }
 }
 

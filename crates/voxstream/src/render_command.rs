@@ -143,6 +143,7 @@ fn render_source(args: &RenderArgs, source: Source, budget: &MemoryBudget) -> Re
         budget_bytes,
         threads: rayon::current_num_threads(),
         backend: session.renderer().describe(),
+        backend_warning: session.renderer().device_warning(),
         ..RunStats::default()
     };
     stats.camera = cameras.first().copied();
@@ -150,6 +151,9 @@ fn render_source(args: &RenderArgs, source: Source, budget: &MemoryBudget) -> Re
     let sequence = args.path.is_some();
     let repeats = if sequence || args.mode == Mode::Converged { 1 } else { args.frames };
     let progress = RenderProgress::new(cameras.len() as u64 * u64::from(repeats), args.quiet);
+    if let Some(warning) = &stats.backend_warning {
+        progress.warn(warning);
+    }
     let mismatch = transfer_function_mismatch(transfer_function, source.typical_range, source.value_range);
     if let Some(warning) = mismatch.filter(|_| !drawing_surfaces || surfaces_in_volume) {
         progress.warn(&warning);

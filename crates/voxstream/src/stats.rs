@@ -46,6 +46,10 @@ pub struct RunStats {
     pub threads: usize,
     /// The renderer and its device (`--backend`): e.g. "gpu: llvmpipe (LLVM 15.0.6, 256 bits) (CPU emulation, …)".
     pub backend: String,
+    /// What the renderer warned of its device, if anything: a GPU adapter that is a CPU emulation (lavapipe), with
+    /// `--backend cpu` suggested.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub backend_warning: Option<String>,
     /// Bytes of tiles and bricks uploaded to the renderer's memory (the GPU's; 0 on the CPU).
     pub bytes_uploaded: u64,
     /// Bytes read from files while rendering (stores only: compressed shards and metadata).

@@ -58,6 +58,10 @@ pub fn run(args: &ViewArgs) -> Result<()> {
     }
     let session_options = view_flags::session_options(&args.look, args.budget_mb, args.requests_per_frame);
     let (session, plan) = voxstream_api::start_session(producer, &meta, &prepared, &session_options, &budget)?;
+    let renderer_warning = session.renderer().device_warning();
+    if let Some(warning) = &renderer_warning {
+        eprintln!("warning: {warning}");
+    }
     let config = ViewerConfig {
         title: format!("voxstream view {}", meta.name),
         camera: prepared.camera,
@@ -71,6 +75,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         stats_path: args.stats.clone(),
         refinement,
         renderer: session.renderer().describe(),
+        renderer_warning,
     };
     let summary = run_viewer(session, config).context("voxstream view");
     if let Some(warning) = meta.clipped_warning() {

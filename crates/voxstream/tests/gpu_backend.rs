@@ -297,6 +297,44 @@ fn the_command_line_names_the_adapter_or_says_why_there_is_none() {
 }
 
 #[test]
+fn the_gpu_backend_prints_no_wayland_line_and_says_when_the_adapter_is_a_cpu_emulation() {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("gpu-cli-environment");
+    let _ = std::fs::remove_dir_all(&dir);
+    let tmp = dir.join("tmp");
+    std::fs::create_dir_all(&tmp).expect("scratch folder");
+    let stats = dir.join("stats.json");
+    // No XDG_RUNTIME_DIR, as under cron, ssh without a login session, or a container: Mesa's device-selection layer
+    // made libwayland print "XDG_RUNTIME_DIR is invalid or not set in the environment" twice.
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_voxstream"))
+        .args(["render", "shell", "--backend", "gpu", "--width", "32", "--height", "32", "--quiet"])
+        .arg("--out")
+        .arg(dir.join("shell.png"))
+        .arg("--stats")
+        .arg(&stats)
+        .env_remove("XDG_RUNTIME_DIR")
+        .env("TMPDIR", &tmp)
+        .output()
+        .expect("run voxstream");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    assert!(!stderr.contains("XDG_RUNTIME_DIR"), "libwayland's line is gone: {stderr}");
+    assert_eq!(std::fs::read_dir(&tmp).expect("tmp").count(), 0, "the private runtime folder is removed at exit");
+    // A CPU emulation (lavapipe, "llvmpipe") is named once, with the CPU renderer suggested; a GPU is not.
+    let stats: serde_json::Value = serde_json::from_slice(&std::fs::read(&stats).expect("stats")).expect("json");
+    let backend = stats["backend"].as_str().expect("backend named");
+    let warnings: Vec<&str> = stderr.lines().filter(|l| l.contains("CPU emulation")).collect();
+    if backend.contains("(CPU emulation") {
+        assert_eq!(warnings.len(), 1, "{stderr}");
+        assert!(warnings[0].starts_with("warning: ") && warnings[0].ends_with("use --backend cpu"), "{stderr}");
+        assert_eq!(stats["backend_warning"].as_str(), warnings[0].strip_prefix("warning: "), "{stats}");
+    } else {
+        assert!(warnings.is_empty(), "{backend}: {stderr}");
+        assert!(stats.get("backend_warning").is_none(), "{stats}");
+    }
+    std::fs::remove_dir_all(&dir).expect("clean up");
+}
+
+#[test]
 fn the_deep_sponge_zoom_stays_exact() {
     // Features of 3^-20 of the scene (crates/voxstream/tests/sponge_silhouette.rs checks the CPU's image against the
     // analytic Menger set there): far below f32's 2^-24 in unit-cube coordinates. The shader's positions are

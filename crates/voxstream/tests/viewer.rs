@@ -1,7 +1,8 @@
 //! The viewer end to end, in a real X server (Xvfb) with Mesa's software OpenGL: a scripted session on a store
 //! rotates the view and edits the transfer function, and the saved camera and transfer function reproduce its
 //! images byte for byte with `voxstream render`; a real pointer drag (xdotool) turns the camera while the window
-//! keeps answering; errors are `render`'s, one line, before any window.
+//! keeps answering; Esc, Ctrl+Q and SIGTERM close it with `--stats` written; errors are `render`'s, one line, before
+//! any window.
 //!
 //! Needs `xvfb-run` and `xdotool` (Debian: `apt-get install xvfb xauth xdotool libgl1-mesa-dri`); `.ci/run` installs
 //! them.
@@ -317,9 +318,15 @@ fn with_the_gpu_backend_the_viewer_shows_what_render_on_the_gpu_draws() {
     let out = under_xvfb(
         &dir,
         &format!(
-            "XDG_RUNTIME_DIR=/tmp {viewer} view balls.zarr --width 160 --height 120 --budget-mb 64 --backend gpu \
+            "env -u XDG_RUNTIME_DIR {viewer} view balls.zarr --width 160 --height 120 --budget-mb 64 --backend gpu \
              --script session.txt --stats stats.json"
         ),
+    );
+    // No libwayland line about XDG_RUNTIME_DIR (Mesa's device-selection layer looked for a compositor).
+    assert!(
+        !String::from_utf8_lossy(&out.stderr).contains("XDG_RUNTIME_DIR"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
     );
     assert!(
         out.status.success(),
@@ -330,6 +337,12 @@ fn with_the_gpu_backend_the_viewer_shows_what_render_on_the_gpu_draws() {
     let stats = camera(&dir.join("stats.json"));
     let renderer = stats["renderer"].as_str().unwrap_or("");
     assert!(renderer.starts_with("gpu:"), "the frame log names the GPU renderer: {renderer}");
+    // A CPU emulation (lavapipe) is warned of, in the log as on stderr; a GPU is not.
+    let warning = stats["renderer_warning"].as_str();
+    assert_eq!(warning.is_some(), renderer.contains("(CPU emulation"), "{stats}");
+    if let Some(warning) = warning {
+        assert!(String::from_utf8_lossy(&out.stderr).contains(&format!("warning: {warning}")), "on stderr too");
+    }
     // `render` on either backend with the saved camera and transfer function.
     let render = |backend: &str, iso: bool, out: &str| {
         let what: &[&str] = if iso { &["--iso", "1500", "--iso-color", "0.9,0.8,0.7"] } else { &["--tf", "tf-b.json"] };
@@ -385,5 +398,45 @@ fn a_budget_set_from_the_window_holds_and_leaves_the_image_as_render_draws_it() 
     assert!(info.width > 160 + 200 && info.height > 120, "window {}x{}", info.width, info.height);
     let window = pixels(&dir.join("window.png"));
     assert!(window.iter().any(|&v| v > 200) && window.iter().any(|&v| v < 50), "the window capture is blank");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn esc_ctrl_q_and_sigterm_close_the_window_and_write_the_stats() {
+    require("xvfb-run");
+    require("xdotool");
+    let dir = scratch("close");
+    store(&dir);
+    // The script only waits for the first final image and says so; then the window stays open until closed.
+    std::fs::write(dir.join("session.txt"), "wait-final 600\nsave-camera ready.json\n").unwrap();
+    let viewer = env!("CARGO_BIN_EXE_voxstream");
+    for (name, close) in [
+        ("escape", "xdotool windowfocus --sync $window; xdotool key Escape"),
+        ("ctrl-q", "xdotool windowfocus --sync $window; xdotool key ctrl+q"),
+        ("sigterm", "kill -TERM $pid"),
+    ] {
+        let _ = std::fs::remove_file(dir.join("ready.json"));
+        let harness = format!(
+            r#"{viewer} view balls.zarr --width 160 --height 120 --budget-mb 64 --script session.txt --stats {name}.json & pid=$!
+for i in $(seq 600); do [ -f ready.json ] && break; sleep 0.1; done
+[ -f ready.json ] || {{ echo "the first image never became final"; kill -KILL $pid; exit 1; }}
+window=$(xdotool search --sync --name "voxstream view" | head -1)
+{close}
+for i in $(seq 300); do kill -0 $pid 2>/dev/null || break; sleep 0.1; done
+kill -0 $pid 2>/dev/null && {{ echo "the window is still open 30 s later"; kill -KILL $pid; exit 1; }}
+wait $pid"#
+        );
+        let out = under_xvfb(&dir, &harness);
+        assert!(
+            out.status.success(),
+            "{name}: {}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        // The frame log of a normal close: every frame up to the final one.
+        let stats = camera(&dir.join(format!("{name}.json")));
+        let frames = stats["frames"].as_array().map_or(0, Vec::len);
+        assert!(frames > 0 && stats["first_final_ms"].is_number(), "{name}: {stats}");
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }

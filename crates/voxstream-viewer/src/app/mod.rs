@@ -85,6 +85,9 @@ pub struct ViewerConfig {
     /// The renderer drawing the frames, in one line (`FrameRenderer::describe`): in the help overlay and the frame
     /// log.
     pub renderer: String,
+    /// What the renderer warned of its device (`FrameRenderer::device_warning`: a CPU emulation of a GPU): shown
+    /// in the window's messages and written to the frame log.
+    pub renderer_warning: Option<String>,
 }
 
 /// One frame as the window received it (`view --stats`).
@@ -162,6 +165,7 @@ impl ViewerApp {
             started: Instant::now(),
             window_shot: None,
         });
+        let messages = config.renderer_warning.iter().cloned().collect();
         ViewerApp {
             worker,
             orbit: OrbitCamera::from_camera(&config.camera),
@@ -180,7 +184,7 @@ impl ViewerApp {
             budget_field_mib: (config.pool_budget_bytes >> 20).max(1),
             focus: [0.5, 0.5],
             show_help: false,
-            messages: Vec::new(),
+            messages,
             frame_times: VecDeque::new(),
             script,
             script_failure,

@@ -194,6 +194,7 @@ impl ViewerApp {
             .collect();
         serde_json::json!({
             "renderer": self.config.renderer,
+            "renderer_warning": self.config.renderer_warning,
             "producer_failures": self.failed_bricks.load(Ordering::Relaxed),
             "status_line": self.status_text(),
             "render_size": full,
