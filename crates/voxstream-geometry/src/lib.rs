@@ -30,6 +30,7 @@ pub use particles::{ParticleSet, RawParticles};
 pub use triangle_mesh::{RawMesh, TriangleMesh};
 pub mod mesh_distance;
 pub mod mesh_producer;
+mod neighbour_spacing;
 pub mod particle_index;
 pub mod particle_producer;
 pub mod superbrick_particles;

@@ -33,9 +33,8 @@
 //!   includes 0 (empty space), to 0…1.
 
 use glam::DVec3;
-use std::num::NonZero;
 
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use crate::neighbour_spacing::DistinctPositions;
 use rayon::prelude::*;
 use voxstream_core::{quantize, NodeContent, NodeKey, ProduceError, Produced, Producer, TreeShape};
 
@@ -206,15 +205,15 @@ impl ParticleProducer {
 
         // Particles at one position with one kernel add up to one particle of their summed mass: the density is the
         // same, and a pile of copies (a file of one point repeated) no longer makes every gather and every density
-        // probe visit all of them (50,000 copies took a minute to open, a million hours). Not for an attribute,
-        // whose weights are per particle.
+        // probe visit all of them (50,000 copies took a minute to open, a million hours). With an attribute, the
+        // merged particle carries the values' mass-weighted mean: its `M/ρ·Ā` is the copies' `Σ mⱼ·Aⱼ/ρ`.
         // Particles closer than a 64th of the finest voxel (with kernels within 4.4%) merge the same way, at their
         // centre of mass: a cluster jittered far below the voxels (10⁶ points within 5·10⁻⁵ of one place, one 100
         // away) is a handful of particles, not a quadratic density probe (hours); the bricks, whose kernels are at
         // least two voxels wide, barely see the move.
         let merge_cell = shape.voxel_size(max_level) / MERGE_CELLS_PER_VOXEL;
-        let (unit, support, masses) =
-            if settings.attribute { (unit, support, masses) } else { merge_close(unit, support, masses, merge_cell) };
+        let values = settings.attribute.then(|| particles.values().0.to_vec());
+        let (unit, support, masses, values) = merge_close(unit, support, masses, values, merge_cell);
         let count = unit.len();
         // Particles by support class (powers of two from the smallest), each class on a grid of cells no smaller
         // than its own largest support, sorted by (class, cell).
@@ -247,8 +246,7 @@ impl ParticleProducer {
             false => *probed_densities.select_nth_unstable_by(middle, f64::total_cmp).1,
         };
         producer.scale = FieldScale::of_densities(max_density, typical_density, settings.attribute);
-        if settings.attribute {
-            let values = particles.values().0;
+        if let Some(values) = values {
             // Every particle's kernel is positive at its own centre, so ρⱼ > 0.
             producer.attribute_weights = Some(
                 order
@@ -347,10 +345,17 @@ pub const BUILD_BYTES_PER_PARTICLE: u64 = 128;
 pub const MERGE_CELLS_PER_VOXEL: f64 = 64.0;
 
 /// Particles in one cell of `cell` (unit units) whose supports lie within a sixteenth of an octave, merged into one
-/// of their summed mass at their centre of mass (rounded to single precision) with their mass-weighted mean support:
-/// exact copies of a point become one particle of the same density, and a cluster finer than the voxels a handful.
-/// Returned as given where nothing merges.
-fn merge_close(unit: Vec<DVec3>, support: Vec<f64>, masses: Vec<f32>, cell: f64) -> (Vec<DVec3>, Vec<f64>, Vec<f32>) {
+/// of their summed mass at their centre of mass (rounded to single precision) with their mass-weighted mean support
+/// and, where given, value: exact copies of a point become one particle of the same density (and interpolated
+/// attribute), and a cluster finer than the voxels a handful. Returned as given where nothing merges.
+#[allow(clippy::type_complexity)]
+fn merge_close(
+    unit: Vec<DVec3>,
+    support: Vec<f64>,
+    masses: Vec<f32>,
+    values: Option<Vec<f32>>,
+    cell: f64,
+) -> (Vec<DVec3>, Vec<f64>, Vec<f32>, Option<Vec<f32>>) {
     let key = |i: usize| {
         let c = unit[i].to_array().map(|v| (v / cell).floor() as i64);
         [c[0], c[1], c[2], (support[i].log2() * 16.0).floor() as i64]
@@ -358,10 +363,11 @@ fn merge_close(unit: Vec<DVec3>, support: Vec<f64>, masses: Vec<f32>, cell: f64)
     let mut order: Vec<u32> = (0..unit.len() as u32).collect();
     order.par_sort_unstable_by_key(|&i| key(i as usize));
     if order.windows(2).all(|w| key(w[0] as usize) != key(w[1] as usize)) {
-        return (unit, support, masses);
+        return (unit, support, masses, values);
     }
     let (mut merged_unit, mut merged_support, mut merged_masses) = (Vec::new(), Vec::new(), Vec::new());
-    let (mut mass, mut weight, mut position, mut reach) = (0.0f64, 0.0f64, DVec3::ZERO, 0.0f64);
+    let mut merged_values = values.as_ref().map(|_| Vec::new());
+    let (mut mass, mut weight, mut position, mut reach, mut value) = (0.0f64, 0.0f64, DVec3::ZERO, 0.0f64, 0.0f64);
     for (n, &i) in order.iter().enumerate() {
         let i = i as usize;
         // Massless particles weigh a little in the mean, so a cell of them still has a position.
@@ -370,14 +376,18 @@ fn merge_close(unit: Vec<DVec3>, support: Vec<f64>, masses: Vec<f32>, cell: f64)
         weight += w;
         position += unit[i] * w;
         reach += support[i] * w;
+        value += values.as_ref().map_or(0.0, |v| f64::from(v[i])) * w;
         if n + 1 == order.len() || key(order[n + 1] as usize) != key(i) {
             merged_unit.push((position / weight).as_vec3().as_dvec3());
             merged_support.push(f64::from((reach / weight) as f32));
             merged_masses.push(mass as f32);
-            (mass, weight, position, reach) = (0.0, 0.0, DVec3::ZERO, 0.0);
+            if let Some(merged) = &mut merged_values {
+                merged.push((value / weight) as f32);
+            }
+            (mass, weight, position, reach, value) = (0.0, 0.0, DVec3::ZERO, 0.0, 0.0);
         }
     }
-    (merged_unit, merged_support, merged_masses)
+    (merged_unit, merged_support, merged_masses, merged_values)
 }
 
 /// Neighbours the adaptive smoothing length reaches: `h = 2 · (distance to the 8th nearest other particle)`, about
@@ -391,60 +401,26 @@ fn adaptive_support(unit: &[DVec3]) -> Vec<f64> {
     if unit.len() < 2 {
         return vec![0.05; unit.len()];
     }
-    // The k-d tree is built over distinct positions, each with its multiplicity: a tree over many copies of one
-    // point cannot split them, and every query then scanned them all (50,000 identical points took a minute, a
-    // million hours).
-    let mut order: Vec<u32> = (0..unit.len() as u32).collect();
-    let bits = |i: u32| unit[i as usize].to_array().map(|c| (c + 0.0).to_bits());
-    order.par_sort_unstable_by_key(|&i| bits(i));
-    let mut distinct: Vec<[f64; 3]> = Vec::new();
-    let mut multiplicity: Vec<u32> = Vec::new();
-    let mut distinct_of = vec![0u32; unit.len()];
-    for (n, &i) in order.iter().enumerate() {
-        if n == 0 || bits(i) != bits(order[n - 1]) {
-            distinct.push(unit[i as usize].to_array());
-            multiplicity.push(0);
-        }
-        *multiplicity.last_mut().unwrap_or(&mut 0) += 1;
-        distinct_of[i as usize] = distinct.len() as u32 - 1;
-    }
+    // Over distinct positions, each with its multiplicity (see [`crate::neighbour_spacing`]).
+    let distinct = DistinctPositions::new(unit.len(), |i| unit[i].to_array(), |_| 1);
     // Held no longer than needed: this is the in-memory build's peak (see [`BUILD_BYTES_PER_PARTICLE`]).
-    drop(order);
-    let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&distinct);
-    // The k nearest points (the particle itself included) lie among the k nearest distinct positions.
-    let k = (SMOOTHING_NEIGHBOURS + 1).min(unit.len());
-    let wanted = NonZero::new(k.min(distinct.len())).unwrap_or(NonZero::<usize>::MIN);
-    let distinct_support: Vec<f64> = distinct
-        .par_iter()
-        .map(|p| {
-            let mut nearest = tree.nearest_n::<SquaredEuclidean>(p, wanted);
-            nearest.sort_by(|a, b| a.distance.total_cmp(&b.distance));
-            // The distance at which the points counted (with their multiplicities) reach k.
-            let mut counted = 0u64;
-            let mut farthest = 0.0f64;
-            for n in &nearest {
-                farthest = n.distance;
-                counted += u64::from(multiplicity[n.item as usize]);
-                if counted >= k as u64 {
-                    break;
-                }
-            }
-            (2.0 * farthest.sqrt()).clamp(1e-6, 0.1)
-        })
-        .collect();
-    drop(tree);
+    let queries: Vec<u32> = (0..distinct.positions.len() as u32).collect();
+    let distinct_support: Vec<f64> =
+        distinct.neighbour_reach(&queries).into_iter().map(|reach| reach.clamp(1e-6, 0.1)).collect();
+    drop(queries);
+    let DistinctPositions { positions, multiplicity, of: distinct_of } = distinct;
     // Isolated particles (outliers, a sparse halo) would get kernels spanning much of the volume: their density is
     // negligible, but every brick their kernel touches would have to be made. At most four times the median, the
     // particles' median taken over the distinct positions weighted by their multiplicities.
-    let mut by_support: Vec<u32> = (0..distinct.len() as u32).collect();
-    drop(distinct);
+    let mut by_support: Vec<u32> = (0..positions.len() as u32).collect();
+    drop(positions);
     by_support.par_sort_unstable_by(|&a, &b| distinct_support[a as usize].total_cmp(&distinct_support[b as usize]));
     let middle = (unit.len() / 2) as u64;
     let mut seen = 0u64;
     let median = by_support
         .iter()
         .find_map(|&d| {
-            seen += u64::from(multiplicity[d as usize]);
+            seen += multiplicity[d as usize];
             (seen > middle).then_some(distinct_support[d as usize])
         })
         .unwrap_or(0.1);
@@ -559,17 +535,24 @@ mod tests {
         let expected = copies as f64 * cubic_spline(0.0, h);
         let density = producer.density(at, 0.0);
         assert!((density - expected).abs() < 1e-5 * expected, "{density} vs {expected}");
-        // The attribute keeps every particle (its weights are per particle).
-        let lone = ParticleSet::new(RawParticles {
+        // With an attribute, copies merge too (they kept every particle before), carrying their values'
+        // mass-weighted mean: the interpolant at them, Σ mⱼ/ρ·Aⱼ·W(0) with ρ = Σ mⱼ·W(0), is that mean either way.
+        let copies = ParticleSet::new(RawParticles {
             positions: vec![[0.0, 0.0, 0.0]; 4],
             smoothing: vec![0.1; 4],
+            masses: vec![1.0, 1.0, 1.0, 3.0],
             values: vec![1.0, 2.0, 3.0, 4.0],
             value_name: "v".into(),
-            ..RawParticles::default()
         })
         .unwrap();
         let settings = ParticleTreeSettings { attribute: true, ..ParticleTreeSettings::default() };
-        assert_eq!(ParticleProducer::new(&lone, settings).unwrap().index.positions.len(), 4);
+        let producer = ParticleProducer::new(&copies, settings).unwrap();
+        assert_eq!(producer.index.positions.len(), 1);
+        let mean = (1.0 + 2.0 + 3.0 + 3.0 * 4.0) / 6.0;
+        let at = producer.fit().to_unit([0.0; 3]);
+        let field = producer.field(at, 0.0);
+        assert!((field - mean).abs() < 1e-5, "{field} vs {mean}");
+        assert!((producer.value_range()[1] - mean).abs() < 1e-5, "{:?}", producer.value_range());
     }
 
     #[test]

@@ -7,11 +7,11 @@ use std::os::unix::fs::FileExt;
 use std::sync::Mutex;
 
 use glam::DVec3;
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 use voxstream_core::TreeShape;
 
 use super::coarse::{aggregate_into, coarse_levels, Aggregates};
+use super::merge::{compact, merge_records, multiplicity, Merging, SpillMerger, BYTES_PER_MERGED_CELL, DENSE_SHARE};
 use super::spill::{encode, index_input, Record, MASS, RECORD_BYTES, WEIGHT};
 use super::{
     OutOfCoreSettings, ParticleChunks, SuperbrickCache, SuperbrickExtent, SuperbrickParticleProducer, AGGREGATE_SHARE,
@@ -19,6 +19,7 @@ use super::{
 };
 use crate::error::GeometryError;
 use crate::mesh_distance::UnitCubeFit;
+use crate::neighbour_spacing::DistinctPositions;
 use crate::particle_index::{class_of, oracle_cells, GridCounts, ParticleGrid, ParticleIndex, MAX_CLASSES};
 use crate::particle_producer::{
     FieldScale, MAX_SUPPORT_OVER_MEDIAN, MERGE_CELLS_PER_VOXEL, SMOOTHING_NEIGHBOURS, SMOOTHING_SCALE_RANGE,
@@ -45,11 +46,16 @@ impl LogHistogram {
     }
 
     fn add(&mut self, value: f64) {
+        self.add_n(value, 1);
+    }
+
+    /// Adds `value` `n` times.
+    fn add_n(&mut self, value: f64, n: u64) {
         if value > 0.0 {
             let bin = ((value.log2() - Self::LOWEST) * Self::PER_OCTAVE).floor().max(0.0) as usize;
             let last = self.bins.len() - 1;
-            self.bins[bin.min(last)] += 1;
-            self.count += 1;
+            self.bins[bin.min(last)] += n;
+            self.count += n;
         }
     }
 
@@ -139,9 +145,14 @@ impl SuperbrickParticleProducer {
         let per_axis = superbricks_per_axis(&survey, &settings, &fit, has_smoothing, budget_particles);
         let superbrick_level = per_axis.trailing_zeros();
         let binning = Binning { fit, per_axis };
-        let starts = count_per_superbrick(source, &binning, survey.count)?;
-        let spill = spill_records(source, &binning, &starts, columns, &settings, out_of_core)?;
-
+        // Particles closer than a 64th of the finest voxel merge, out of core as in memory (here the finest the
+        // settings allow: the smallest support is not known yet); the dense superbricks already while binned.
+        let merging =
+            Merging { cell: finest_voxel_bound(&settings) / MERGE_CELLS_PER_VOXEL, attribute: settings.attribute };
+        let counted = count_per_superbrick(source, &binning, survey.count)?;
+        let binned = Spilling { binning, columns, merging, budget_particles, memory_bytes: out_of_core.memory_bytes };
+        let (spill, starts) = binned.spill_records(source, &counted, &settings, out_of_core)?;
+        check_largest_superbrick(&starts, per_axis, budget_particles, out_of_core.memory_bytes)?;
         let mut producer = SuperbrickParticleProducer {
             shape: TreeShape::new(2, settings.brick_size, 0).map_err(|error| invalid(error.to_string()))?,
             fit,
@@ -157,6 +168,7 @@ impl SuperbrickParticleProducer {
             oracle: Vec::new(),
             max_support: 0.0,
             cache: Mutex::new(SuperbrickCache::default()),
+            largest_read: Default::default(),
             loaded_signal: std::sync::Condvar::new(),
             budget_particles,
             total_mass: survey.total_mass,
@@ -164,13 +176,11 @@ impl SuperbrickParticleProducer {
             scale: FieldScale::of_densities(1.0, 1.0, settings.attribute),
         };
         let spill_io = |error| GeometryError::Io { path: out_of_core.spill_directory.clone(), error };
-        if !has_smoothing {
-            producer.adaptive_smoothing(survey.count).map_err(spill_io)?;
-        }
-        // Out of core as in memory, particles closer than a 64th of the finest voxel merge (here the finest the
-        // settings allow: the smallest support is not known yet); not for an attribute, whose weights are per particle.
-        let merge_cell = (!settings.attribute).then(|| finest_voxel_bound(&settings) / MERGE_CELLS_PER_VOXEL);
-        let min_support = producer.sort_and_measure(merge_cell).map_err(spill_io)?;
+        let adaptive = match has_smoothing {
+            false => Some(producer.adaptive_smoothing(survey.count, &out_of_core.spill_directory).map_err(spill_io)?),
+            true => None,
+        };
+        let min_support = producer.sort_and_measure(merging, adaptive.as_ref()).map_err(spill_io)?;
         let max_level = max_level_for(&settings, resolution_for(&settings, min_support));
         producer.shape =
             TreeShape::new(2, settings.brick_size, max_level).map_err(|error| invalid(error.to_string()))?;
@@ -186,65 +196,78 @@ impl SuperbrickParticleProducer {
     }
 
     /// Smoothing lengths where the file has none: per superbrick, over it and its neighbours' nearby particles (the
-    /// module's step 3); sets the adaptive cap from their median.
-    fn adaptive_smoothing(&mut self, count: u64) -> std::io::Result<()> {
+    /// module's step 3), each record counted with the particles it stands for (merged while binned). Sets the
+    /// adaptive cap from their median, and returns the lengths in a file of their own (a record's offset in the spill
+    /// file, four bytes each): the neighbours' records must keep their counts until every superbrick is done.
+    fn adaptive_smoothing(&mut self, count: u64, directory: &std::path::Path) -> std::io::Result<std::fs::File> {
         let per_axis = self.per_axis;
         let mut histogram = LogHistogram::new();
         let reach = 0.25 / per_axis as f64;
         let cap = (0.5 / per_axis as f64).min(0.1);
+        let records = self.starts[self.starts.len() - 1];
+        let lengths = tempfile::tempfile_in(directory)?;
+        lengths.set_len(records * 4)?;
+        let mut bytes = Vec::new();
         for bin in 0..self.starts.len() - 1 {
-            let mut own = self.read(bin)?;
+            let own = self.read(bin)?;
             if own.is_empty() {
                 continue;
             }
             let neighbours = self.neighbourhood(bin, reach)?;
-            let points: Vec<[f64; 3]> =
-                own.iter().chain(&neighbours).map(|r| [f64::from(r[0]), f64::from(r[1]), f64::from(r[2])]).collect();
+            let around: Vec<&Record> = own.iter().chain(&neighbours).collect();
+            let particles: u64 = around.iter().map(|r| multiplicity(r)).sum();
             let h: Vec<f64> = if count < 2 {
-                vec![0.05f64.min(cap)]
-            } else if points.len() <= SMOOTHING_NEIGHBOURS.min(count as usize - 1) {
+                vec![0.05f64.min(cap); own.len()]
+            } else if particles <= SMOOTHING_NEIGHBOURS.min(count as usize - 1) as u64 {
                 // The 8th neighbour (or the set's farthest) lies beyond `reach`: its h is past the cap.
                 vec![cap; own.len()]
             } else {
-                let tree: ImmutableKdTree<f64, 3> = ImmutableKdTree::new_from_slice(&points);
-                let k = (SMOOTHING_NEIGHBOURS + 1).min(points.len());
-                let wanted = std::num::NonZero::new(k).unwrap_or(std::num::NonZero::<usize>::MIN);
-                points[..own.len()]
-                    .par_iter()
-                    .map(|p| {
-                        let nearest = tree.nearest_n::<SquaredEuclidean>(p, wanted);
-                        let farthest = nearest.iter().map(|n| n.distance).fold(0.0, f64::max);
-                        (2.0 * farthest.sqrt()).clamp(1e-6, cap)
+                let position = |i: usize| [0, 1, 2].map(|a| f64::from(around[i][a]));
+                let distinct = DistinctPositions::new(around.len(), position, |i| multiplicity(around[i]));
+                let mut queries = distinct.of[..own.len()].to_vec();
+                queries.sort_unstable();
+                queries.dedup();
+                let reach = distinct.neighbour_reach(&queries);
+                (0..own.len())
+                    .map(|i| {
+                        let q = queries.binary_search(&distinct.of[i]).unwrap_or(0);
+                        reach[q].clamp(1e-6, cap)
                     })
                     .collect()
             };
-            for (record, h) in own.iter_mut().zip(&h) {
-                record[3] = *h as f32;
-                histogram.add(f64::from(record[3]));
+            bytes.clear();
+            for (record, h) in own.iter().zip(&h) {
+                let h = *h as f32;
+                histogram.add_n(f64::from(h), multiplicity(record));
+                bytes.extend_from_slice(&h.to_le_bytes());
             }
-            self.write(self.starts[bin], &own)?;
+            lengths.write_all_at(&bytes, self.starts[bin] * 4)?;
         }
         let median = histogram.median().unwrap_or(cap);
         self.support_cap = (MAX_SUPPORT_OVER_MEDIAN * median) as f32;
-        Ok(())
+        Ok(lengths)
     }
 
-    /// The supports' range, now that every particle has one: each superbrick's extent, the largest support, and each
-    /// superbrick's run rewritten in the order its index sorts them, its particles within one cell of `merge_cell`
-    /// merged first (the runs compacted in place: a merged run ends no later than it did). Returns the smallest
-    /// support.
-    fn sort_and_measure(&mut self, merge_cell: Option<f64>) -> std::io::Result<f64> {
+    /// The supports' range, now that every particle has one (the `adaptive` smoothing lengths put in their records
+    /// first, capped): each superbrick's extent, the largest support, and each superbrick's run rewritten in the
+    /// order its index sorts them, its close particles merged first ([`merge_records`]; the runs compacted in place:
+    /// a merged run ends no later than it did). Returns the smallest support.
+    fn sort_and_measure(&mut self, merging: Merging, adaptive: Option<&std::fs::File>) -> std::io::Result<f64> {
         let bins = self.starts.len() - 1;
         let (mut min_support, mut max_support) = (f64::INFINITY, 0.0f64);
         let mut extents = Vec::with_capacity(bins);
         let mut compacted = vec![0u64; bins + 1];
         for bin in 0..bins {
             let mut extent = SuperbrickExtent { lower: DVec3::INFINITY, upper: DVec3::NEG_INFINITY, max_support: 0.0 };
-            let records = self.read(bin)?;
-            let records = match merge_cell {
-                Some(cell) => merge_records(records, cell),
-                None => records,
-            };
+            let mut records = self.read(bin)?;
+            if let Some(lengths) = adaptive {
+                let mut bytes = vec![0u8; records.len() * 4];
+                lengths.read_exact_at(&mut bytes, self.starts[bin] * 4)?;
+                for (record, h) in records.iter_mut().zip(bytes.chunks_exact(4)) {
+                    record[3] = f32::from_le_bytes([h[0], h[1], h[2], h[3]]).min(self.support_cap);
+                }
+            }
+            let records = merge_records(records, merging);
             compacted[bin + 1] = compacted[bin] + records.len() as u64;
             // Rewritten in the order its index sorts them (support class, cell), so that each later load of the
             // superbrick sorts sorted keys (a linear pass) instead of shuffled ones.
@@ -428,39 +451,6 @@ fn finest_voxel_bound(settings: &ParticleTreeSettings) -> f64 {
 /// The largest resolution [`resolution_for`] chooses by itself.
 const MAX_DEFAULT_RESOLUTION: u64 = 8192;
 
-/// A superbrick's records with those in one cell of `cell` whose supports lie within a sixteenth of an octave merged
-/// into one of their summed mass and weight, at their centre of mass with their mass-weighted mean support (as the
-/// in-memory producer merges them). Returned as given where nothing merges.
-fn merge_records(records: Vec<Record>, cell: f64) -> Vec<Record> {
-    let key = |r: &Record| {
-        let c = [0, 1, 2].map(|a| (f64::from(r[a]) / cell).floor() as i64);
-        [c[0], c[1], c[2], (f64::from(r[3]).log2() * 16.0).floor() as i64]
-    };
-    let mut order: Vec<u32> = (0..records.len() as u32).collect();
-    order.sort_unstable_by_key(|&i| key(&records[i as usize]));
-    if order.windows(2).all(|w| key(&records[w[0] as usize]) != key(&records[w[1] as usize])) {
-        return records;
-    }
-    let mut merged = Vec::new();
-    let (mut mass, mut weight, mut sum_w, mut position, mut reach) = (0.0f64, 0.0f64, 0.0f64, DVec3::ZERO, 0.0f64);
-    for (n, &i) in order.iter().enumerate() {
-        let r = &records[i as usize];
-        // Massless particles weigh a little in the mean, so a cell of them still has a position.
-        let w = f64::from(r[MASS]).max(1e-30);
-        mass += f64::from(r[MASS]);
-        weight += f64::from(r[WEIGHT]);
-        sum_w += w;
-        position += DVec3::new(f64::from(r[0]), f64::from(r[1]), f64::from(r[2])) * w;
-        reach += f64::from(r[3]) * w;
-        if n + 1 == order.len() || key(&records[order[n + 1] as usize]) != key(r) {
-            let p = (position / sum_w).as_vec3();
-            merged.push([p.x, p.y, p.z, (reach / sum_w) as f32, mass as f32, weight as f32]);
-            (mass, weight, sum_w, position, reach) = (0.0, 0.0, 0.0, DVec3::ZERO, 0.0);
-        }
-    }
-    merged
-}
-
 /// Pass 1: count, bounds, smoothing lengths, mass; every run validated.
 fn survey(source: &dyn ParticleChunks, columns: [bool; 3]) -> Result<Survey, GeometryError> {
     let [has_smoothing, has_masses, has_values] = columns;
@@ -553,62 +543,116 @@ fn count_per_superbrick(source: &dyn ParticleChunks, binning: &Binning, count: u
     if starts[bins] != count {
         return Err(invalid("the file changed while it was read".into()));
     }
-    let largest = starts.windows(2).map(|w| w[1] - w[0]).max().unwrap_or(0);
-    if largest > u64::from(u32::MAX) {
-        let per_axis = binning.per_axis;
-        return Err(invalid(format!(
-            "{largest} particles in one superbrick of {per_axis}³: at most 2³² are read (split the file's densest \
-             region, or give more --particle-memory)"
-        )));
-    }
     Ok(starts)
 }
 
-/// Pass 3: each particle, in unit-cube units, to its superbrick's run of a new spill file (an external counting
-/// sort).
-fn spill_records(
-    source: &dyn ParticleChunks,
-    binning: &Binning,
+/// Refuses a superbrick that, merged, still holds more particles than the memory budget (a region denser than the
+/// superbricks can split: they are at most [`MAX_SUPERBRICKS_PER_AXIS`] a side), or than one index holds (2³²),
+/// naming the `--particle-memory` that would hold it twice (it and its neighbours).
+fn check_largest_superbrick(
     starts: &[u64],
-    [has_smoothing, has_masses, _]: [bool; 3],
-    settings: &ParticleTreeSettings,
-    out_of_core: &OutOfCoreSettings,
-) -> Result<std::fs::File, GeometryError> {
-    let count = starts[starts.len() - 1];
-    let spill_io = |error| GeometryError::Io { path: out_of_core.spill_directory.clone(), error };
-    let spill = tempfile::tempfile_in(&out_of_core.spill_directory).map_err(spill_io)?;
-    spill.set_len(count * RECORD_BYTES as u64).map_err(spill_io)?;
-    let mut cursor = starts.to_vec();
-    let mut bytes = Vec::new();
-    source.for_each_chunk(&mut |_, run| {
-        let mut binned: Vec<(usize, Record)> = run
-            .positions
-            .iter()
-            .enumerate()
-            .map(|(i, p)| {
-                let unit = binning.unit_of(*p);
-                let h = if has_smoothing { to_support(run.smoothing[i], settings, &binning.fit) as f32 } else { 0.0 };
-                let m = if has_masses { run.masses[i] } else { 1.0 };
-                let w = if settings.attribute { run.values[i] } else { m };
-                (binning.superbrick_of(unit), [unit.x as f32, unit.y as f32, unit.z as f32, h, m, w])
-            })
-            .collect();
-        binned.sort_by_key(|&(bin, _)| bin);
-        for group in binned.chunk_by(|a, b| a.0 == b.0) {
-            let bin = group[0].0;
-            if cursor[bin] + group.len() as u64 > starts[bin + 1] {
-                return Err(invalid("the file changed while it was read".into()));
+    per_axis: u64,
+    budget_particles: u64,
+    memory_bytes: u64,
+) -> Result<(), GeometryError> {
+    let largest = starts.windows(2).map(|w| w[1] - w[0]).max().unwrap_or(0);
+    if largest > budget_particles || largest > u64::from(u32::MAX) {
+        let needed = (largest.saturating_mul(2 * BYTES_PER_LOADED_PARTICLE)).div_ceil(1 << 20);
+        return Err(invalid(format!(
+            "{largest} particles (after merging those closer than the finest voxels tell apart) lie in one \
+             superbrick, 1/{per_axis} of the set's width a side: more than {} MiB of --particle-memory holds \
+             ({budget_particles} at {BYTES_PER_LOADED_PARTICLE} bytes each); give --particle-memory {needed} or more{}",
+            memory_bytes >> 20,
+            if largest > u64::from(u32::MAX) {
+                " (at most 2³² particles are read from one superbrick: split the file's densest region)"
+            } else {
+                ""
             }
-            encode(group.iter().map(|(_, r)| r), &mut bytes);
-            spill.write_all_at(&bytes, cursor[bin] * RECORD_BYTES as u64).map_err(spill_io)?;
-            cursor[bin] += group.len() as u64;
-        }
-        Ok(())
-    })?;
-    if cursor.iter().zip(&starts[1..]).any(|(written, end)| written != end) {
-        return Err(invalid("the file changed while it was read".into()));
+        )));
     }
-    Ok(spill)
+    Ok(())
+}
+
+/// How pass 3 writes the spill file.
+struct Spilling {
+    binning: Binning,
+    columns: [bool; 3],
+    merging: Merging,
+    budget_particles: u64,
+    memory_bytes: u64,
+}
+
+impl Spilling {
+    /// Pass 3: each particle, in unit-cube units, to its superbrick's run of a new spill file (an external counting
+    /// sort), the dense superbricks' records merged on the way (see [`super::merge`]). Returns the file and its runs'
+    /// offsets (`S³ + 1`), compacted where merging left runs shorter than `counted`.
+    fn spill_records(
+        &self,
+        source: &dyn ParticleChunks,
+        counted: &[u64],
+        settings: &ParticleTreeSettings,
+        out_of_core: &OutOfCoreSettings,
+    ) -> Result<(std::fs::File, Vec<u64>), GeometryError> {
+        let Spilling { binning, columns: [has_smoothing, has_masses, _], .. } = *self;
+        let count = counted[counted.len() - 1];
+        let spill_io = |error| GeometryError::Io { path: out_of_core.spill_directory.clone(), error };
+        let spill = tempfile::tempfile_in(&out_of_core.spill_directory).map_err(spill_io)?;
+        spill.set_len(count * RECORD_BYTES as u64).map_err(spill_io)?;
+        let dense_from = self.budget_particles / DENSE_SHARE;
+        let dense = |bin: usize| counted[bin + 1] - counted[bin] > dense_from;
+        let mut merger =
+            SpillMerger::new(self.merging, (self.memory_bytes / AGGREGATE_SHARE / BYTES_PER_MERGED_CELL) as usize);
+        let mut cursor = counted[..counted.len() - 1].to_vec();
+        let mut seen = vec![0u64; cursor.len()];
+        let mut bytes = Vec::new();
+        source.for_each_chunk(&mut |_, run| {
+            let mut binned: Vec<(usize, Record)> = run
+                .positions
+                .iter()
+                .enumerate()
+                .map(|(i, p)| {
+                    let unit = binning.unit_of(*p);
+                    // Before the adaptive smoothing lengths, minus the particles a record stands for.
+                    let h = match has_smoothing {
+                        true => to_support(run.smoothing[i], settings, &binning.fit) as f32,
+                        false => -1.0,
+                    };
+                    let m = if has_masses { run.masses[i] } else { 1.0 };
+                    let w = if settings.attribute { run.values[i] } else { m };
+                    (binning.superbrick_of(unit), [unit.x as f32, unit.y as f32, unit.z as f32, h, m, w])
+                })
+                .collect();
+            binned.sort_by_key(|&(bin, _)| bin);
+            for group in binned.chunk_by(|a, b| a.0 == b.0) {
+                let bin = group[0].0;
+                seen[bin] += group.len() as u64;
+                if counted[bin] + seen[bin] > counted[bin + 1] {
+                    return Err(invalid("the file changed while it was read".into()));
+                }
+                if dense(bin) {
+                    for (_, record) in group {
+                        if merger.add(bin, record) {
+                            merger.flush(&spill, &mut cursor).map_err(spill_io)?;
+                        }
+                    }
+                    continue;
+                }
+                encode(group.iter().map(|(_, r)| r), &mut bytes);
+                spill.write_all_at(&bytes, cursor[bin] * RECORD_BYTES as u64).map_err(spill_io)?;
+                cursor[bin] += group.len() as u64;
+            }
+            Ok(())
+        })?;
+        merger.flush(&spill, &mut cursor).map_err(spill_io)?;
+        if seen.iter().zip(counted.windows(2)).any(|(seen, run)| *seen != run[1] - run[0]) {
+            return Err(invalid("the file changed while it was read".into()));
+        }
+        let starts = match cursor.iter().zip(&counted[1..]).all(|(written, end)| written == end) {
+            true => counted.to_vec(),
+            false => compact(&spill, counted, &cursor).map_err(spill_io)?,
+        };
+        Ok((spill, starts))
+    }
 }
 
 #[cfg(test)]
@@ -669,7 +713,12 @@ mod tests {
         let starts = count_per_superbrick(&source, &binning, 9).unwrap();
         let settings = ParticleTreeSettings::default();
         let out_of_core = OutOfCoreSettings { memory_bytes: MIN_MEMORY_BYTES, spill_directory: std::env::temp_dir() };
-        let spill = spill_records(&source, &binning, &starts, source.columns(), &settings, &out_of_core).unwrap();
+        let merging = Merging { cell: 1e-6, attribute: false };
+        let budget_particles = MIN_MEMORY_BYTES / BYTES_PER_LOADED_PARTICLE;
+        let spilling =
+            Spilling { binning, columns: source.columns(), merging, budget_particles, memory_bytes: MIN_MEMORY_BYTES };
+        let (spill, spilled) = spilling.spill_records(&source, &starts, &settings, &out_of_core).unwrap();
+        assert_eq!(spilled, starts, "nothing dense, nothing merged");
         assert_eq!(spill.metadata().unwrap().len(), 9 * RECORD_BYTES as u64);
         let mut last = vec![0u8; 2 * RECORD_BYTES];
         spill.read_exact_at(&mut last, 7 * RECORD_BYTES as u64).unwrap();

@@ -122,6 +122,7 @@ impl SuperbrickParticleProducer {
             superbricks_per_axis: self.per_axis,
             superbrick_level: self.superbrick_level,
             largest_superbrick: largest,
+            largest_read: self.largest_read.load(std::sync::atomic::Ordering::Relaxed),
             budget_particles: self.budget_particles,
             peak_cached_particles: cache.peak,
             loads: cache.loads,

@@ -23,6 +23,7 @@ impl SuperbrickParticleProducer {
     /// The particles of superbrick `bin` as the spill file holds them (the adaptive cap applied).
     pub(super) fn read(&self, bin: usize) -> std::io::Result<Vec<Record>> {
         let (from, to) = (self.starts[bin], self.starts[bin + 1]);
+        self.largest_read.fetch_max(to - from, std::sync::atomic::Ordering::Relaxed);
         let mut bytes = vec![0u8; ((to - from) as usize) * RECORD_BYTES];
         self.spill.read_exact_at(&mut bytes, from * RECORD_BYTES as u64)?;
         Ok(bytes

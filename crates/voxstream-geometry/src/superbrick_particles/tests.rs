@@ -273,3 +273,92 @@ fn a_cluster_finer_than_a_voxel_merges_out_of_core_too() {
     assert!(statistics.spill_bytes <= 9 * 24, "{statistics:?}");
     assert!((producer.total_mass() - 20_001.0).abs() < 1e-6);
 }
+
+/// Points jittered by `spread` (file units) about `centre`, and a generator's state.
+fn jittered(count: usize, centre: [f64; 3], spread: f64, seed: u64) -> Vec<[f64; 3]> {
+    let mut state = seed;
+    let mut next = move || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    (0..count).map(|_| centre.map(|c| c + next() * spread)).collect()
+}
+
+#[test]
+fn a_dense_cluster_merges_while_it_is_binned_within_the_budget() {
+    // Issue 41: binning loaded each superbrick whole before merging its close particles, so a region holding much of
+    // a file went past --particle-memory while binning (10⁷ clustered points: 877 MB at 64 MiB). Here 300,000
+    // points within 5·10⁻⁵ of one place (one superbrick) and one point far away, in 8 MiB (131,072 particles).
+    let mut positions = jittered(300_000, [0.0; 3], 5e-5, 3);
+    positions.push([100.0; 3]);
+    for attribute in [false, true] {
+        let values: Vec<f32> = (0..positions.len()).map(|i| (i % 5) as f32).collect();
+        let set = ParticleSet::new(RawParticles {
+            positions: positions.clone(),
+            values: if attribute { values } else { Vec::new() },
+            value_name: if attribute { "v".into() } else { String::new() },
+            ..RawParticles::default()
+        })
+        .unwrap();
+        let settings = ParticleTreeSettings { attribute, ..ParticleTreeSettings::default() };
+        let producer = SuperbrickParticleProducer::new(&set, settings, &out_of_core(MIN_MEMORY_BYTES)).unwrap();
+        let statistics = producer.statistics();
+        assert_eq!(statistics.particles, 300_001);
+        // Never more than a sliver of the budget read at once, and a handful of records kept (the attribute's
+        // merge too: it kept every particle before).
+        assert!(statistics.largest_read <= statistics.budget_particles / 8, "{attribute}: {statistics:?}");
+        assert!(statistics.spilled_particles <= 20, "{attribute}: {statistics:?}");
+        assert!((producer.total_mass() - 300_001.0).abs() < 1e-3 * 300_001.0, "{}", producer.total_mass());
+        // The range the in-memory producer finds (the attribute's: its values, 0 to 4 evenly, interpolate to about
+        // their mean at the cluster).
+        let memory = ParticleProducer::new(&set, settings).unwrap();
+        let ([a0, a1], [b0, b1]) = (memory.value_range(), producer.value_range());
+        assert!((a0 - b0).abs() <= 1e-3 * (a1 - a0) && (a1 / b1 - 1.0).abs() < 0.01, "{a0} {a1} / {b0} {b1}");
+        if attribute {
+            assert!((a1 - 2.0).abs() < 0.1, "{a1}");
+        }
+    }
+}
+
+#[test]
+fn copies_merged_while_binned_keep_the_in_memory_smoothing_and_density() {
+    // 100,000 copies of a point inside a cloud, no smoothing lengths: binned, the copies are one record standing
+    // for 100,000 particles, and the adaptive rule must count them (a k-d tree over the copies themselves took over
+    // five minutes for a million): with each record counted once, its kernel would reach its 8 cloud neighbours
+    // instead of the in-memory producer's 1e-6, and the density there would differ by orders of magnitude.
+    let mut positions = cloud(20_000, 23);
+    positions.extend(std::iter::repeat_n([10.5, 20.5, 30.5], 100_000));
+    let set = ParticleSet::new(RawParticles { positions, ..RawParticles::default() }).unwrap();
+    let settings = ParticleTreeSettings { resolution: Some(64), ..ParticleTreeSettings::default() };
+    let memory = ParticleProducer::new(&set, settings).unwrap();
+    let streamed = SuperbrickParticleProducer::new(&set, settings, &out_of_core(MIN_MEMORY_BYTES)).unwrap();
+    let statistics = streamed.statistics();
+    assert!(statistics.superbricks_per_axis >= 4, "{statistics:?}");
+    assert!(statistics.largest_read < 20_000, "the copies were read whole: {statistics:?}");
+    assert!((streamed.margin() / memory.margin() - 1.0).abs() < 0.02, "{} {}", streamed.margin(), memory.margin());
+    assert!((streamed.value_range()[1] / memory.value_range()[1] - 1.0).abs() < 0.02);
+    for level in statistics.superbrick_level..=memory.shape().max_level {
+        let (worst, compared) = largest_difference(&memory, &streamed, level, 1);
+        assert!(compared > 10, "level {level}: {compared}");
+        assert!(worst < 0.01, "level {level}: {worst}");
+    }
+}
+
+#[test]
+fn a_region_denser_than_the_budget_is_refused_naming_the_memory_it_needs() {
+    // 200,000 distinct points (far apart at the merging scale) within a thousandth of the set's width: one
+    // superbrick of them cannot be held in 8 MiB (131,072 particles) however it is binned.
+    let mut positions = jittered(200_000, [50.05, 50.05, 50.05], 0.1, 9);
+    positions.extend([[0.0; 3], [100.0; 3]]);
+    let set = ParticleSet::new(RawParticles { positions, ..RawParticles::default() }).unwrap();
+    let error = SuperbrickParticleProducer::new(&set, ParticleTreeSettings::default(), &out_of_core(MIN_MEMORY_BYTES))
+        .unwrap_err()
+        .to_string();
+    // (A few dozen of them fall in one merging cell.)
+    let held: u64 = error.split(' ').next().and_then(|n| n.parse().ok()).unwrap_or(0);
+    assert!(held > 199_000 && error.contains("particles (after merging") && error.contains("lie in one superbrick"));
+    // 200,000 at 64 bytes, twice: 24.4 MiB, rounded up.
+    assert!(error.contains("give --particle-memory 25 or more"), "{error}");
+    let enough = SuperbrickParticleProducer::new(&set, ParticleTreeSettings::default(), &out_of_core(25 << 20));
+    assert!(enough.is_ok(), "{:?}", enough.err());
+}
