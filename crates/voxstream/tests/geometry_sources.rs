@@ -674,3 +674,62 @@ fn a_particle_file_read_out_of_core_renders_as_in_memory() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Issue 41: out of core, a place holding much of a file was read whole while binning (10⁷ points in one place
+/// took 877 MB with `--particle-memory 64`). Such a place now merges while it is binned, and renders; a region whose
+/// *distinct* particles one superbrick cannot hold within the memory given is refused in one line naming the figure.
+#[test]
+fn a_region_denser_than_the_particle_memory_is_refused_in_one_line_and_a_cluster_renders() {
+    let dir = scratch("dense-region");
+    let write = |name: &str, points: &[[f32; 3]]| {
+        let mut bytes = format!(
+            "ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\nproperty float y\n\
+             property float z\nend_header\n",
+            points.len()
+        )
+        .into_bytes();
+        for p in points {
+            for v in p {
+                bytes.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        let path = dir.join(name);
+        std::fs::write(&path, bytes).unwrap();
+        path
+    };
+    let mut state = 41u64;
+    let mut next = move || {
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (state >> 40) as f32 / (1u64 << 24) as f32
+    };
+    // 200,000 distinct points within a thousandth of the set's width, and its two far corners.
+    let mut region: Vec<[f32; 3]> = (0..200_000).map(|_| [0.0; 3].map(|_: f32| 50.0 + 0.1 * next())).collect();
+    region.extend([[0.0; 3], [100.0; 3]]);
+    let region = write("region.ply", &region);
+    let out = dir.join("region.png");
+    assert_fails(
+        &["render", region.to_str().unwrap(), "--particle-memory", "8", "--out", out.to_str().unwrap()],
+        "give --particle-memory 25 or more",
+    );
+    assert!(!out.exists(), "nothing written");
+    // 500,000 points within 5·10⁻⁵ of one place and one far away: a handful of particles after binning.
+    let mut cluster: Vec<[f32; 3]> = (0..500_000).map(|_| [0.0; 3].map(|_: f32| 5e-5 * next())).collect();
+    cluster.push([100.0; 3]);
+    let cluster = write("cluster.ply", &cluster);
+    let out = dir.join("cluster.png");
+    let output = run(&[
+        "render",
+        cluster.to_str().unwrap(),
+        "--particle-memory",
+        "8",
+        "--width",
+        "32",
+        "--height",
+        "32",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(output.status.success(), "{}", stderr(&output));
+    assert!(stderr(&output).contains("500001 particles read out of core"), "{}", stderr(&output));
+    std::fs::remove_dir_all(&dir).ok();
+}
