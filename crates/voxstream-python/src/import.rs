@@ -13,6 +13,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use voxstream_api::import_input::{open_input, ImportInput, ImportSettings};
+use voxstream_api::remote_output::remote_output;
 use voxstream_store::{DType, ImportReport, StoreError, VolumeInfo, VolumeSource};
 
 use crate::errors::{progress_step, to_py_err};
@@ -54,7 +55,8 @@ impl VolumeSource for ArraySource {
 }
 
 /// Imports `source` (a file's path: any format `voxstream import` reads, meshes and particles included; or a 3-D
-/// numpy array indexed `[z, y, x]` of uint8, uint16, int16 or float32) into the store `out`; returns what was written.
+/// numpy array indexed `[z, y, x]` of uint8, uint16, int16 or float32) into the store `out` (a folder, or
+/// `s3://BUCKET/NAME.zarr`, `gs://…`, `az://…`: built in a temporary folder, then uploaded); returns what was written.
 #[pyfunction]
 #[pyo3(signature = (source, out, *, spacing=None, origin=None, brick_size=32, overwrite=false, nan_as=None,
     resolution=None, amplify=None, progress=None))]
@@ -85,6 +87,9 @@ pub fn import_volume<'py>(
         amplify,
         ..ImportSettings::default()
     };
+    // A remote `out` (s3://, gs://, az://) is checked before the source is read; the store is built in a temporary
+    // folder and uploaded.
+    let remote = py.detach(|| remote_output(&out, &settings)).map_err(to_py_err)?;
     let input = match array_source(source, spacing, origin)? {
         Some(array) => ImportInput::from_source(Box::new(array), Path::new("the array")),
         None => {
@@ -101,11 +106,15 @@ pub fn import_volume<'py>(
     let mut raised: Option<PyErr> = None;
     let mut last = 0;
     let report = py.detach(|| {
-        input.import(&out, &settings, &mut |done, total| {
+        let mut step = |done, total| {
             last = done;
             // Between slabs: Python's signal handlers (Ctrl-C) and the callback.
             progress_step(&progress, &mut raised, done, total)
-        })
+        };
+        match &remote {
+            None => input.import(&out, &settings, &mut step),
+            Some(remote) => remote.import(input, &settings, &mut step, &mut |_, _| {}).map(|(report, _)| report),
+        }
     });
     if let Some(error) = raised {
         return Err(error);

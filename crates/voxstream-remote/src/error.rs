@@ -22,6 +22,22 @@ pub enum RemoteError {
         /// Why.
         problem: String,
     },
+    /// A store cannot be written there.
+    #[error("{url}: {problem}")]
+    NotWritable {
+        /// The location, redacted.
+        url: String,
+        /// Why, and what to do instead.
+        problem: String,
+    },
+    /// Writing a store's objects failed.
+    #[error("{url}: {problem}")]
+    Upload {
+        /// The location (and object), redacted.
+        url: String,
+        /// What failed, and what was left.
+        problem: String,
+    },
     /// A profile file could not be read.
     #[error("{path}: {problem}")]
     Profile {

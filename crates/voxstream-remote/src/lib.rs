@@ -6,6 +6,7 @@
 //! - [`RemoteStore`]: zarrs's storage traits over `object_store`, one ranged request per brick, retried, checked for
 //!   length, bounded, with a deadline.
 //! - [`DiskCache`]: fetched bytes kept on disk within a limit, least recently used out first.
+//! - [`StoreUpload`]: a store built in a local folder, written to S3, GCS or Azure, its root metadata last.
 //!
 //! The store reader (`voxstream-store`) wraps a [`RemoteStore`] in the same checks as a local folder.
 
@@ -15,8 +16,10 @@ pub mod disk_cache;
 pub mod error;
 pub mod location;
 pub mod remote_store;
+pub mod upload;
 
 pub use disk_cache::DiskCache;
 pub use error::RemoteError;
 pub use location::{is_remote, redact, RemoteLocation, Service};
 pub use remote_store::{RemoteCounts, RemoteOptions, RemoteStore};
+pub use upload::{StoreUpload, UploadReport};

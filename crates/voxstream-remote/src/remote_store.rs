@@ -185,36 +185,7 @@ impl RemoteStore {
 
     /// The message for a client error, with the fix where one is likely.
     fn describe(&self, key: &str, error: &object_store::Error) -> StorageError {
-        let hint = match error {
-            object_store::Error::PermissionDenied { .. } | object_store::Error::Unauthenticated { .. } => {
-                match self.location.service {
-                    crate::Service::S3 => {
-                        "access denied: set AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY (or AWS_PROFILE), or check \
-                         the bucket's policy"
-                    }
-                    crate::Service::Http => {
-                        "access denied: put the user and password in the URL (https://USER:PASSWORD@host/…)"
-                    }
-                    _ => "access denied: set the service's credentials in the environment",
-                }
-            }
-            _ if transport_cause(error).is_some_and(|cause| cause.contains("certificate")) => {
-                "the server's TLS certificate is not trusted: if the server is yours, set SSL_CERT_FILE to the \
-                 certificate (PEM) of the authority that signed it"
-            }
-            _ => "",
-        };
-        // object_store's messages name the request's URL, which never holds credentials here (see `location`). A
-        // transport failure's own message ("error sending request") hides its cause: the innermost one is added.
-        let text = match transport_cause(error) {
-            Some(cause) => format!("{error}: {cause}"),
-            None => first_line(&error.to_string()),
-        };
-        if hint.is_empty() {
-            self.error(key, text)
-        } else {
-            self.error(key, format!("{hint} ({text})"))
-        }
+        self.error(key, explain(&self.location, error))
     }
 
     /// Fetches `range` of `key` (whole value when `None`), from the disk cache where it is, checked for length,
@@ -427,6 +398,42 @@ impl ReadableStorageTraits for RemoteStore {
 
 /// The first line of a client message, without the start of an HTML body after it: a server's error page (nginx's
 /// "400 The plain HTTP request was sent to HTTPS port") follows the status line in object_store's message.
+/// What a client error says, with the fix where one is likely (credentials for `location`'s service, a certificate
+/// authority), its transport cause named: never a credential (object_store's messages name request URLs, which hold
+/// none here; see [`crate::location`]).
+pub(crate) fn explain(location: &RemoteLocation, error: &object_store::Error) -> String {
+    let hint = match error {
+        object_store::Error::PermissionDenied { .. } | object_store::Error::Unauthenticated { .. } => {
+            match location.service {
+                crate::Service::S3 => {
+                    "access denied: set AWS_ACCESS_KEY_ID and AWS_SECRET_ACCESS_KEY (or AWS_PROFILE), or check \
+                     the bucket's policy"
+                }
+                crate::Service::Http => {
+                    "access denied: put the user and password in the URL (https://USER:PASSWORD@host/…)"
+                }
+                _ => "access denied: set the service's credentials in the environment",
+            }
+        }
+        _ if transport_cause(error).is_some_and(|cause| cause.contains("certificate")) => {
+            "the server's TLS certificate is not trusted: if the server is yours, set SSL_CERT_FILE to the \
+             certificate (PEM) of the authority that signed it"
+        }
+        _ => "",
+    };
+    // object_store's messages name the request's URL, which never holds credentials here (see `location`). A
+    // transport failure's own message ("error sending request") hides its cause: the innermost one is added.
+    let text = match transport_cause(error) {
+        Some(cause) => format!("{error}: {cause}"),
+        None => first_line(&error.to_string()),
+    };
+    if hint.is_empty() {
+        text
+    } else {
+        format!("{hint} ({text})")
+    }
+}
+
 fn first_line(text: &str) -> String {
     let line = text.lines().next().unwrap_or_default().trim_end();
     line.strip_suffix("<html>")

@@ -5,6 +5,7 @@ use std::ops::ControlFlow;
 use anyhow::{bail, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use voxstream_api::import_input::{open_input, ImportSettings, RawSettings};
+use voxstream_api::remote_output::remote_output;
 
 use crate::cli::{EndianArg, ImportArgs};
 
@@ -37,6 +38,8 @@ pub fn run(args: &ImportArgs) -> Result<()> {
         smoothing_scale: args.smoothing_scale,
         particle_memory: args.particle_memory,
     };
+    // A remote --out is checked (and its bucket asked) before the input is read.
+    let remote = remote_output(&args.out, &settings)?;
     let input = open_input(&args.input, &settings)?;
     if let Some(description) = input.description.as_ref().filter(|_| !args.quiet) {
         eprintln!("{description}");
@@ -49,29 +52,51 @@ pub fn run(args: &ImportArgs) -> Result<()> {
             .progress_chars("=> "),
     );
     bar.set_message(format!("importing {}", args.input.display()));
-    let report = input.import(&args.out, &settings, &mut |done, _total| {
+    let mut progress = |done, _total| {
         bar.set_position(done);
         ControlFlow::Continue(())
-    })?;
+    };
+    let (report, uploaded) = match &remote {
+        None => (input.import(&args.out, &settings, &mut progress)?, None),
+        Some(remote) => {
+            let upload_bar = bar.clone();
+            let mut started = false;
+            let (report, uploaded) = remote.import(input, &settings, &mut progress, &mut |done, total| {
+                if !started {
+                    started = true;
+                    upload_bar.reset();
+                    upload_bar.set_length(total);
+                    upload_bar.set_message(format!("uploading to {}", remote.shown()));
+                }
+                upload_bar.set_position(done);
+            })?;
+            (report, Some(uploaded))
+        }
+    };
     bar.finish_and_clear();
     // Said even with --quiet: the store holds other values than the file's type could suggest.
     if let Some(conversion) = &report.conversion {
         eprintln!("note: {conversion}");
     }
     if !args.quiet {
+        let out = match &remote {
+            Some(remote) => remote.shown().to_string(),
+            None => args.out.display().to_string(),
+        };
         eprintln!(
-            "imported {} ({}x{}x{} {}) into {}: {} levels, {} bricks written, {} empty, values {} to {}",
+            "imported {} ({}x{}x{} {}) into {}: {} levels, {} bricks written, {} empty, values {} to {}{}",
             args.input.display(),
             info.dims[0],
             info.dims[1],
             info.dims[2],
             info.dtype.name(),
-            args.out.display(),
+            out,
             report.levels,
             report.bricks_written.iter().sum::<u64>(),
             report.bricks_empty.iter().sum::<u64>(),
             report.value_range[0],
-            report.value_range[1]
+            report.value_range[1],
+            uploaded.map(|u| format!("; {} objects ({} bytes) uploaded", u.objects, u.bytes)).unwrap_or_default()
         );
     }
     Ok(())

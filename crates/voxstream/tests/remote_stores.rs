@@ -227,6 +227,69 @@ fn http_and_s3_give_the_local_image_byte_for_byte() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// Creates `bucket` on moto at `port` with boto3.
+fn create_bucket(port: u16, bucket: &str) {
+    let script = r#"
+import boto3, sys
+bucket, endpoint = sys.argv[1:3]
+boto3.client("s3", endpoint_url=endpoint, aws_access_key_id="test", aws_secret_access_key="test",
+             region_name="us-east-1").create_bucket(Bucket=bucket)
+"#;
+    let status =
+        Command::new(venv_python()).args(["-c", script, bucket, &format!("http://127.0.0.1:{port}")]).status().unwrap();
+    assert!(status.success(), "creating a bucket on moto failed");
+}
+
+/// Issue 43: `import --out s3://…` wrote a local folder named `s3:` and said it had imported into S3. The store is
+/// now built in a temporary folder and uploaded, its root `zarr.json` last; what S3 holds renders as the local
+/// import, byte for byte, and what cannot be written is refused in one line before the input is read.
+#[test]
+fn import_writes_a_store_to_s3_that_renders_as_the_local_folder() {
+    let dir = scratch("remote_stores", "import-s3");
+    import_ball(&dir, "ball.zarr");
+    let (local, out) = render(&dir, "ball.zarr", "local.png", &[], &[]);
+    assert!(out.status.success() && !local.is_empty(), "local render: {}", stderr(&out));
+    let s3 = moto();
+    create_bucket(s3.port, "scans");
+    let env = s3_env(s3.port);
+    let import = |out: &str, extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_voxstream"))
+            .args(["import", "ball.nrrd", "--out", out, "--brick-size", "16"])
+            .args(extra)
+            .envs(env.iter().map(|(k, v)| (*k, v.as_str())))
+            .current_dir(&dir)
+            .output()
+            .unwrap()
+    };
+    let output = import("s3://scans/imported/ball.zarr", &[]);
+    let text = stderr(&output);
+    assert!(output.status.success(), "import to S3: {text}");
+    assert!(text.contains("into s3://scans/imported/ball.zarr") && text.contains("objects ("), "{text}");
+    assert!(!text.contains("s3cretValue"), "a secret in the output: {text}");
+    assert!(!dir.join("s3:").exists(), "a local folder named s3: was written");
+    let env_refs: Vec<(&str, &str)> = env.iter().map(|(k, v)| (*k, v.as_str())).collect();
+    let (from_s3, out) = render(&dir, "s3://scans/imported/ball.zarr", "s3.png", &[], &env_refs);
+    assert!(out.status.success(), "S3 render: {}", stderr(&out));
+    assert!(from_s3 == local, "the store imported into S3 renders differently from the local import");
+    // What cannot be written: one line each, a non-zero exit, nothing written.
+    for (out, extra, needle) in [
+        ("s3://scans/imported/ball.zarr", &[][..], "a store is already there (zarr.json): give another --out"),
+        ("s3://scans/other.zarr", &["--overwrite"][..], "--overwrite does not apply to a remote store"),
+        ("s3://missing/ball.zarr", &[][..], "the bucket missing does not exist: create it first"),
+        ("s3://scans", &[][..], "name the store's folder in the bucket"),
+        ("http://127.0.0.1:9/ball.zarr", &[][..], "HTTP(S) stores are read-only"),
+    ] {
+        let output = import(out, extra);
+        let text = stderr(&output);
+        assert!(!output.status.success(), "{out} {extra:?}: {text}");
+        assert_eq!(text.lines().count(), 1, "{out} {extra:?}: one line expected: {text}");
+        assert!(text.starts_with("error: ") && text.contains(needle), "{out} {extra:?}: {text}");
+    }
+    let (_, out) = render(&dir, "s3://scans/other.zarr", "none.png", &[], &env_refs);
+    assert!(!out.status.success(), "a refused import wrote a store");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 #[test]
 fn https_certificates_are_verified_and_a_trusted_one_reads_the_local_image() {
     let dir = scratch("remote_stores", "https");
