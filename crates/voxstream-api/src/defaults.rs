@@ -100,6 +100,19 @@ pub fn default_store_transfer_function(range: [f64; 2]) -> Result<TransferFuncti
     )?)
 }
 
+/// The transfer function of an OME-Zarr channel's `omero` display settings: opacity and brightness ramping over its
+/// contrast `window` (napari's contrast limits) in its colour (white where it names none), as `default_store_…`'s
+/// ramp reaches 0.12 per sample spacing at its top.
+pub fn omero_transfer_function(window: [f64; 2], color: Option<[f32; 3]>) -> Result<TransferFunction> {
+    let [lo, hi] = window;
+    let [r, g, b] = color.unwrap_or([1.0; 3]).map(f64::from);
+    let mid = lo + 0.5 * (hi - lo);
+    Ok(TransferFunction::new(
+        vec![[lo, 0.0, 0.0, 0.0, 0.0], [mid, 0.6 * r, 0.6 * g, 0.6 * b, 0.04], [hi, r, g, b, 0.12]],
+        None,
+    )?)
+}
+
 /// A number as a user would type it: `1500`, `0.25`, but `1e30` rather than thirty-one digits.
 pub fn shown_number(value: f64) -> String {
     if value == 0.0 || (1e-4..1e15).contains(&value.abs()) || !value.is_finite() {

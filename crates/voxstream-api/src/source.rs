@@ -13,15 +13,16 @@ use voxstream_core::{Producer, VoxelFormat};
 use voxstream_engine::MemoryBudget;
 use voxstream_geometry::formats::is_geometry_file_name;
 use voxstream_render::{Camera, IsoSurface, Shading, TransferFunction, VolumePlacement};
+use voxstream_store::image_planes::PlaneChoice;
 use voxstream_store::remote::RemoteStore;
 use voxstream_store::remote_access::RemoteAccess;
 use voxstream_store::{InMemoryVolume, StoreProducer, StoreReader};
 
-use crate::defaults::{default_store_transfer_function, store_camera, store_placement};
+use crate::defaults::{default_store_transfer_function, omero_transfer_function, store_camera, store_placement};
 use crate::geometry_source::{self, GeometryOptions};
 use crate::scenes::builtin;
 use crate::source_path::{check_store_path, missing_geometry_file, warn_about_leftovers};
-use crate::store_open::{clipped_warning, open_store};
+use crate::store_open::{clipped_warning, open_store, planes_description};
 
 /// How the brick pool keeps a store's voxels (`voxstream_core::VoxelFormat`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -54,6 +55,8 @@ pub struct SourceOptions {
     pub smoothing_scale: Option<f64>,
     /// Read a binary PLY point file out of core with this many MiB for its particles (`--particle-memory`).
     pub particle_memory: Option<u64>,
+    /// The channel and time point of a 4-D/5-D OME-Zarr image (`--channel`, `--time`; the first when `None`).
+    pub planes: PlaneChoice,
     /// Timeouts, retries, concurrency and the on-disk cache of a remote store.
     pub remote: RemoteAccess,
     /// The image size the default camera frames the source for.
@@ -75,6 +78,7 @@ impl Default for SourceOptions {
             attribute: false,
             smoothing_scale: None,
             particle_memory: None,
+            planes: PlaneChoice::default(),
             remote: RemoteAccess::default(),
             width: 512,
             height: 512,
@@ -136,6 +140,12 @@ pub fn open(name: &str, options: &SourceOptions, budget: &MemoryBudget) -> Resul
     let path = Path::new(name);
     if options.value_range.is_some() && (builtin(name).is_some() || is_geometry_file_name(path)) {
         bail!("--value-range applies to stores (other tools' OME-Zarr images); {name} is not one");
+    }
+    if options.planes != PlaneChoice::default() && (builtin(name).is_some() || is_geometry_file_name(path)) {
+        bail!(
+            "--channel and --time apply to 4-D and 5-D OME-Zarr images (and --time to a fluid's time series, with \
+             --fluid); {name} is not one"
+        );
     }
     if let Some(scene) = builtin(name) {
         check_geometry_flags(options, scene.name)?;
@@ -200,9 +210,15 @@ pub fn open(name: &str, options: &SourceOptions, budget: &MemoryBudget) -> Resul
     check_store_path(path, "render")?;
     check_geometry_flags(options, &voxstream_store::remote::redact(name))?;
     let cache_bytes = budget.store_cache_bytes();
-    let reader = Arc::new(open_store(path, cache_bytes, options.value_range, &options.remote, options.quiet)?);
+    let reader =
+        Arc::new(open_store(path, cache_bytes, options.value_range, options.planes, &options.remote, options.quiet)?);
     warn_about_leftovers(path);
-    let transfer_function = default_store_transfer_function(reader.attributes().typical_range())?;
+    // An image's own display settings (OME-Zarr `omero`: the channel's contrast window and colour) where it has
+    // them, else a ramp over the bulk of the values.
+    let transfer_function = match reader.image_planes().omero.as_ref().and_then(|o| o.window.map(|w| (w, o.color))) {
+        Some((window, color)) => omero_transfer_function(window, color)?,
+        None => default_store_transfer_function(reader.attributes().typical_range())?,
+    };
     // (A GPU session keeps 16-bit bricks whatever the producer allows: `FrameRenderer::needs_sixteen_bit_bricks`.)
     let format = match options.brick_bits {
         BrickBits::Auto => None,
@@ -241,8 +257,8 @@ fn store_source(
         light: None,
         default_surfaces: Vec::new(),
         remote: reader.remote().cloned(),
+        description: planes_description(reader.image_planes()),
         store: Some(reader),
-        description: None,
     };
     Source { producer, meta }
 }

@@ -7,6 +7,7 @@ use std::path::Path;
 use anyhow::{bail, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use voxstream_store::foreign::ForeignOptions;
+use voxstream_store::image_planes::{ImagePlanes, LeadingKind, PlaneChoice};
 use voxstream_store::StoreReader;
 
 use voxstream_store::remote_access::RemoteAccess;
@@ -25,12 +26,14 @@ pub fn parse_value_range(text: &str) -> Result<[f64; 2], String> {
     }
 }
 
-/// Opens the store at `path` with a host cache of `cache_bytes`; `value_range` (`--value-range`) applies to foreign
-/// OME-Zarr images only (a voxstream store's range is exact). `quiet` hides the scan's progress bar.
+/// Opens the store at `path` with a host cache of `cache_bytes`; `value_range` (`--value-range`) and `planes`
+/// (`--channel`, `--time`) apply to foreign OME-Zarr images only (a voxstream store's range is exact, and it is
+/// 3-D). `quiet` hides the scan's progress bar.
 pub fn open_store(
     path: &Path,
     cache_bytes: u64,
     value_range: Option<[f64; 2]>,
+    planes: PlaneChoice,
     remote: &RemoteAccess,
     quiet: bool,
 ) -> Result<StoreReader> {
@@ -48,7 +51,8 @@ pub fn open_store(
         }
         bar.set_position(done);
     };
-    let options = ForeignOptions { value_range, progress: Some(&show), remote: Some(remote), ..Default::default() };
+    let options =
+        ForeignOptions { value_range, progress: Some(&show), remote: Some(remote), planes, ..Default::default() };
     let reader = StoreReader::open_with_options(path, cache_bytes, &options)?;
     bar.finish_and_clear();
     if value_range.is_some() && reader.is_native() {
@@ -58,6 +62,13 @@ pub fn open_store(
             reader.path().display(),
             reader.attributes().value_range[0],
             reader.attributes().value_range[1]
+        );
+    }
+    if planes != PlaneChoice::default() && reader.is_native() {
+        bail!(
+            "--channel and --time choose a volume of a 4-D or 5-D OME-Zarr image; {} is a voxstream store (one \
+             3-D volume)",
+            reader.path().display()
         );
     }
     if reader.value_range_level() > 0 {
@@ -71,6 +82,41 @@ pub fn open_store(
         );
     }
     Ok(reader)
+}
+
+/// What a 4-D or 5-D image shows of its channels and time points: `channel 1 of 3 ("GFP"), time point 0 of 2 (the
+/// others: --channel C, --time T)`; `None` for a 3-D image.
+pub fn planes_description(planes: &ImagePlanes) -> Option<String> {
+    let mut parts = Vec::new();
+    let mut flags = Vec::new();
+    // The channel first, then the time point, then any other axis.
+    let order = |kind: LeadingKind| {
+        [LeadingKind::Channel, LeadingKind::Time, LeadingKind::Other].iter().position(|k| *k == kind)
+    };
+    let mut axes: Vec<_> = planes.axes.iter().collect();
+    axes.sort_by_key(|a| order(a.kind));
+    for axis in axes {
+        let (noun, flag) = match axis.kind {
+            LeadingKind::Channel => ("channel", "--channel C"),
+            LeadingKind::Time => ("time point", "--time T"),
+            LeadingKind::Other if axis.extent > 1 => ("index", ""),
+            LeadingKind::Other => continue,
+        };
+        let label = match (&axis.kind, planes.omero.as_ref().and_then(|o| o.label.as_ref())) {
+            (LeadingKind::Channel, Some(label)) => format!(" (\"{label}\")"),
+            _ => String::new(),
+        };
+        let of_axis = if axis.kind == LeadingKind::Other { format!(" of axis {}", axis.name) } else { String::new() };
+        parts.push(format!("{noun} {}{of_axis} of {}{label}", axis.index, axis.extent));
+        if axis.extent > 1 && !flag.is_empty() {
+            flags.push(flag);
+        }
+    }
+    if parts.is_empty() {
+        return None;
+    }
+    let others = if flags.is_empty() { String::new() } else { format!(" (the others: {})", flags.join(", ")) };
+    Some(format!("{}{others}", parts.join(", ")))
 }
 
 /// The warning after a run when samples read lay outside the value range (they saturated), else `None`.

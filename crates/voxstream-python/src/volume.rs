@@ -59,10 +59,12 @@ struct Rendered {
 
 #[pymethods]
 impl PyVolume {
-    /// Opens `source`: a built-in scene, a mesh or particle file, or a store's folder or URL.
+    /// Opens `source`: a built-in scene, a mesh or particle file, or a store's folder or URL; `channel` and `time`
+    /// choose the volume of a 4-D or 5-D OME-Zarr image (the first of each by default; `info["leading_axes"]`).
     #[new]
     #[pyo3(signature = (source, *, width=512, height=512, budget_mb=256, value_range=None, in_memory=false,
-        cache_dir=None, cache_mb=None, request_timeout=None, retries=None, concurrent_requests=None))]
+        cache_dir=None, cache_mb=None, request_timeout=None, retries=None, concurrent_requests=None, channel=None,
+        time=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -77,6 +79,8 @@ impl PyVolume {
         request_timeout: Option<f64>,
         retries: Option<usize>,
         concurrent_requests: Option<usize>,
+        channel: Option<u64>,
+        time: Option<u64>,
     ) -> PyResult<Self> {
         let name = source.to_str().ok_or_else(|| PyValueError::new_err("the source's name is not valid UTF-8"))?;
         let mut remote = RemoteAccess { cache_dir, ..RemoteAccess::default() };
@@ -100,7 +104,9 @@ impl PyVolume {
             }
             remote.options.concurrency = concurrency;
         }
-        let options = SourceOptions { value_range, in_memory, remote, width, height, ..SourceOptions::default() };
+        let planes = voxstream_store::image_planes::PlaneChoice { channel, time };
+        let options =
+            SourceOptions { value_range, in_memory, remote, width, height, planes, ..SourceOptions::default() };
         let name = name.to_string();
         let volume = py.detach(|| Volume::open(&name, &options, budget_mb)).map_err(to_py_err)?;
         let meta = volume.meta().clone();
@@ -136,6 +142,22 @@ impl PyVolume {
                 info.set_item("remote", store.remote().is_some())?;
                 let percentiles: Vec<[f64; 2]> = attributes.value_percentiles.clone().unwrap_or_default();
                 info.set_item("percentiles", percentiles)?;
+                // A 4-D/5-D image's axes before z, y, x: (name, kind, extent, index read).
+                let axes: Vec<(String, &str, u64, u64)> = store
+                    .image_planes()
+                    .axes
+                    .iter()
+                    .map(|a| {
+                        use voxstream_store::image_planes::LeadingKind;
+                        let kind = match a.kind {
+                            LeadingKind::Time => "time",
+                            LeadingKind::Channel => "channel",
+                            LeadingKind::Other => "other",
+                        };
+                        (a.name.clone(), kind, a.extent, a.index)
+                    })
+                    .collect();
+                info.set_item("leading_axes", axes)?;
             }
             None if meta.description.is_some() => info.set_item("kind", "geometry")?,
             None => info.set_item("kind", "scene")?,

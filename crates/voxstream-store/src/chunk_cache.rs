@@ -87,14 +87,14 @@ impl ChunkCache {
         &self,
         level: usize,
         array: &Array<dyn ReadableStorageTraits>,
-        leading: usize,
+        leading: &crate::image_planes::LeadingIndex,
         shape: [u64; 3],
         dtype: DType,
         lower: [u64; 3],
         upper: [u64; 3],
     ) -> Result<Vec<f32>, ArrayError> {
         let Some(unit) = self.units.get(level).copied().flatten() else {
-            let mut ranges: Vec<std::ops::Range<u64>> = vec![0..1; leading];
+            let mut ranges = leading.ranges();
             ranges.extend([2, 1, 0].map(|a| lower[a]..upper[a]));
             return retrieve_f32(array, &ArraySubset::new_with_ranges(&ranges), dtype);
         };
@@ -109,7 +109,7 @@ impl ChunkCache {
                     let origin = [0, 1, 2].map(|a| index[a] * unit[a]);
                     let extent = [0, 1, 2].map(|a| (origin[a] + unit[a]).min(shape[a]) - origin[a]);
                     let samples = self.unit(level, index, || {
-                        let mut ranges: Vec<std::ops::Range<u64>> = vec![0..1; leading];
+                        let mut ranges = leading.ranges();
                         ranges.extend([2, 1, 0].map(|a| origin[a]..origin[a] + extent[a]));
                         retrieve_f32(array, &ArraySubset::new_with_ranges(&ranges), dtype)
                     })?;

@@ -1,7 +1,7 @@
 //! Reading OME-Zarr images that voxstream did not write: Zarr v3 (OME-Zarr 0.5, `attributes.ome.multiscales`) and
 //! Zarr v2 (OME-Zarr ≤ 0.4, `multiscales` in `.zattrs`).
 //!
-//! The last three axes are read as z, y, x (leading axes such as time or channel are read at index 0); `axes`
+//! The last three axes are read as z, y, x (of leading axes, time and channel, the index chosen: [`crate::image_planes`]); `axes`
 //! metadata saying otherwise, and `scale` or `translation` that are not one number per axis, are refused
 //! ([`crate::foreign_axes`]), as are arrays whose chunk files do not follow their declared key separator
 //! ([`crate::chunk_keys`]). Level 0 is the first dataset; spacing and origin come from its `scale` and `translation`. voxstream's own pyramid (each level
@@ -26,6 +26,7 @@ use zarrs::storage::ReadableStorageTraits;
 use crate::chunk_keys::{stored_chunks_in, ChunkSource};
 use crate::error::StoreError;
 use crate::foreign_axes::{check_axes, space_unit, transform_xyz};
+use crate::image_planes::{choose_planes, leading_index, omero_channel, ImagePlanes, LeadingKind, PlaneChoice};
 use crate::layout::PyramidLayout;
 use crate::level_source::LevelSource;
 use crate::metadata::StoreAttributes;
@@ -49,6 +50,8 @@ pub struct ForeignOptions<'a> {
     /// How a remote store (a URL) is read: timeouts, retries, the disk cache (defaults when `None`). Applies to
     /// voxstream's own stores too.
     pub remote: Option<&'a crate::remote_access::RemoteAccess>,
+    /// The channel and time point of a 4-D/5-D image (0 when `None`).
+    pub planes: PlaneChoice,
 }
 
 /// Default bound of the value-range scan at open: 2^28 samples (about a second of decoding here). A larger level 0
@@ -67,6 +70,10 @@ fn multiscales(attributes: &serde_json::Map<String, Value>) -> Option<&Value> {
 /// A level and its chunks as stored on disk (their indices), to be scanned for the value range.
 pub(crate) type StoredChunks = (usize, Vec<Vec<u64>>);
 
+/// What [`open_foreign`] finds: voxstream's attributes for the image, where each level's bricks come from, the level
+/// to scan for the value range (unless given), and the leading axes and `omero` metadata.
+pub(crate) type OpenedForeign = (StoreAttributes, Vec<LevelSource>, Option<StoredChunks>, ImagePlanes);
+
 /// Opens a foreign OME-Zarr image: voxstream's attributes for it, where each level's bricks come from, and, unless
 /// `options` gives the value range, the level to scan and its stored chunks (level 0's unless they hold more than
 /// the scan's bound of samples), whose range the attributes' `value_range` (then
@@ -77,8 +84,9 @@ pub(crate) fn open_foreign(
     attributes: &serde_json::Map<String, Value>,
     options: &ForeignOptions,
     chunk_source: &ChunkSource,
-) -> Result<(StoreAttributes, Vec<LevelSource>, Option<StoredChunks>), StoreError> {
+) -> Result<OpenedForeign, StoreError> {
     let bad = |m: String| StoreError::store(path, m);
+    let attributes_json = attributes;
     let ms = multiscales(attributes).ok_or_else(|| {
         bad("neither a voxstream store nor an OME-Zarr image (no 'voxstream' or 'multiscales' attributes)".into())
     })?;
@@ -141,6 +149,8 @@ pub(crate) fn open_foreign(
     };
     let dims = last3(first.shape());
     let dimensions = first.shape().len();
+    let planes = choose_planes(ms, first.shape(), options.planes).map_err(bad)?;
+    let leading = leading_index(&planes);
     let transform = |kind: &str| {
         transform_xyz(&datasets[0], kind, dimensions).map_err(|m| bad(format!("dataset '{}': {m}", arrays[0].0)))
     };
@@ -164,13 +174,20 @@ pub(crate) fn open_foreign(
             Some((i, (_, array))) => {
                 used[i] = true;
                 level_datasets.push(Some(i));
-                let leading = array.shape().len() - 3;
+                let extents = &array.shape()[..array.shape().len() - 3];
+                if extents.len() != leading.len() || extents.iter().zip(&leading.0).any(|(&n, &i)| i >= n) {
+                    return Err(bad(format!(
+                        "dataset '{}' has shape {:?}: its leading axes differ from level 0's",
+                        array.path(),
+                        array.shape()
+                    )));
+                }
                 levels.push(LevelSource::Array {
                     array: Array::open(readable.clone(), array.path().as_str())
                         .map_err(|e| e.to_string())
                         .and_then(|opened| crate::strict_codecs::with_strict_blosc(opened, readable.clone()))
                         .map_err(bad)?,
-                    leading,
+                    leading: leading.clone(),
                     shape: last3(array.shape()),
                 });
             }
@@ -227,7 +244,9 @@ pub(crate) fn open_foreign(
     };
     let attributes = StoreAttributes::new(&info, &layout, value_range, true);
     validate_attributes(path, &attributes)?;
-    Ok((attributes, levels, scan))
+    let channel = planes.iter().find(|a| a.kind == LeadingKind::Channel).map_or(0, |a| a.index);
+    let omero = omero_channel(attributes_json, channel);
+    Ok((attributes, levels, scan, ImagePlanes { axes: planes, omero }))
 }
 
 /// Most chunks of a grid taken as stored when a remote store cannot be listed (the level scanned holds at most

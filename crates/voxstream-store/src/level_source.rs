@@ -7,14 +7,15 @@
 use zarrs::array::{Array, ArraySubset};
 use zarrs::storage::ReadableStorageTraits;
 
+use crate::image_planes::LeadingIndex;
 use crate::volume::DType;
 
 /// Where the samples of one level come from.
 pub(crate) enum LevelSource {
-    /// An array of shape `[.., z, y, x]`; leading axes (time, channel) are read at index 0. Its last three
-    /// dimensions may differ from the level's by one sample (foreign pyramids that halve rounding down): missing
-    /// samples repeat the edge.
-    Array { array: Array<dyn ReadableStorageTraits>, leading: usize, shape: [u64; 3] },
+    /// An array of shape `[.., z, y, x]`; leading axes (time, channel) are read at `leading`'s indices
+    /// ([`crate::image_planes`]). Its last three dimensions may differ from the level's by one sample (foreign
+    /// pyramids that halve rounding down): missing samples repeat the edge.
+    Array { array: Array<dyn ReadableStorageTraits>, leading: LeadingIndex, shape: [u64; 3] },
     /// Averaged from the level below.
     Synthesized,
 }

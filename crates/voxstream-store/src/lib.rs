@@ -20,6 +20,7 @@ pub mod error;
 pub mod foreign;
 pub mod foreign_axes;
 pub mod formats;
+pub mod image_planes;
 pub mod import;
 pub mod layout;
 pub mod level_probe;

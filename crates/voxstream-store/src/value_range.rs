@@ -8,6 +8,7 @@
 use zarrs::array::{Array, ArrayError};
 use zarrs::storage::ReadableStorageTraits;
 
+use crate::image_planes::LeadingIndex;
 use crate::volume::DType;
 
 /// Reports `(chunks done, chunks in all)` while the range is computed.
@@ -34,19 +35,17 @@ fn fold_bytes(bytes: &[u8], dtype: DType, range: &mut [f64; 2]) {
     }
 }
 
-/// The stored chunks of `array` (indices as found on disk) that hold index 0 of the `leading` axes and lie within
-/// its chunk grid, each once.
-fn chunks_at_leading_zero<'c>(
+/// The stored chunks of `array` (indices as found on disk) that hold the chosen indices of the `leading` axes and lie
+/// within its chunk grid, each once.
+fn chunks_at_leading<'c>(
     array: &Array<dyn ReadableStorageTraits>,
-    leading: usize,
+    leading: &LeadingIndex,
     stored: &'c [Vec<u64>],
 ) -> Vec<&'c Vec<u64>> {
     let grid = array.chunk_grid_shape();
     let mut chunks: Vec<&Vec<u64>> = stored
         .iter()
-        .filter(|c| {
-            c.len() == grid.len() && c[..leading].iter().all(|&i| i == 0) && (0..grid.len()).all(|a| c[a] < grid[a])
-        })
+        .filter(|c| c.len() == grid.len() && leading.chunk_holds(array, c) && (0..grid.len()).all(|a| c[a] < grid[a]))
         .collect();
     chunks.sort();
     chunks.dedup();
@@ -57,13 +56,13 @@ fn chunks_at_leading_zero<'c>(
 /// chunk by chunk (so that a chunk cache holding a few chunks reads each once).
 pub(crate) fn bricks_over_stored_chunks(
     array: &Array<dyn ReadableStorageTraits>,
-    leading: usize,
+    leading: &LeadingIndex,
     stored: &[Vec<u64>],
     brick_size: u64,
 ) -> Result<Vec<[u64; 3]>, ArrayError> {
     let mut seen = std::collections::HashSet::new();
     let mut bricks = Vec::new();
-    for chunk in chunks_at_leading_zero(array, leading, stored) {
+    for chunk in chunks_at_leading(array, leading, stored) {
         let bounded = array.chunk_subset_bounded(chunk)?;
         let n = chunk.len();
         let (start, shape) = (bounded.start(), bounded.shape());
@@ -85,16 +84,16 @@ pub(crate) fn bricks_over_stored_chunks(
     Ok(bricks)
 }
 
-/// The fill value of `array` as a number of type `dtype`, when some chunk holding index 0 of the `leading` axes was
-/// never written (so the image holds it), else `None`.
+/// The fill value of `array` as a number of type `dtype`, when some chunk holding the chosen indices of the
+/// `leading` axes was never written (so the image holds it), else `None`.
 pub(crate) fn unwritten_fill_value(
     array: &Array<dyn ReadableStorageTraits>,
-    leading: usize,
+    leading: &LeadingIndex,
     dtype: DType,
     stored: &[Vec<u64>],
 ) -> Option<f64> {
-    let declared = array.chunk_grid_shape()[leading..].iter().fold(1u64, |n, &d| n.saturating_mul(d));
-    if chunks_at_leading_zero(array, leading, stored).len() as u64 >= declared {
+    let declared = array.chunk_grid_shape()[leading.len()..].iter().fold(1u64, |n, &d| n.saturating_mul(d));
+    if chunks_at_leading(array, leading, stored).len() as u64 >= declared {
         return None;
     }
     let mut range = [f64::INFINITY, f64::NEG_INFINITY];

@@ -11,6 +11,7 @@ use std::io::Write;
 
 use serde_json::{json, Value};
 use voxstream_store::foreign::ForeignOptions;
+use voxstream_store::image_planes::{LeadingKind, PlaneChoice};
 use voxstream_store::StoreReader;
 
 fn scratch(name: &str) -> PathBuf {
@@ -72,6 +73,14 @@ impl Default for Layout {
 
 /// Writes an OME-Zarr 0.4 image (Zarr v2) of `levels` at `store`; returns the bytes of its chunk files.
 fn write_v2(store: &Path, levels: &[Level], layout: &Layout) -> u64 {
+    write_v2_planes(store, &[levels], &[], layout, None)
+}
+
+/// Writes an OME-Zarr 0.4 image (Zarr v2) with leading axes of extents `leading` (chunks of one sample along them):
+/// `planes[p]` is the pyramid of the `p`-th combination of leading indices (the last leading axis fastest), and
+/// `omero` goes into the attributes where given; returns the bytes of its chunk files.
+fn write_v2_planes(store: &Path, planes: &[&[Level]], leading: &[u64], layout: &Layout, omero: Option<Value>) -> u64 {
+    let levels = planes[0];
     std::fs::create_dir_all(store).unwrap();
     std::fs::write(store.join(".zgroup"), r#"{"zarr_format": 2}"#).unwrap();
     let datasets: Vec<Value> = (0..levels.len())
@@ -91,44 +100,62 @@ fn write_v2(store: &Path, levels: &[Level], layout: &Layout) -> u64 {
     if let Some(axes) = &layout.axes {
         multiscale["axes"] = axes.clone();
     }
-    std::fs::write(store.join(".zattrs"), json!({"multiscales": [multiscale]}).to_string()).unwrap();
+    let mut zattrs = json!({"multiscales": [multiscale]});
+    if let Some(omero) = omero {
+        zattrs["omero"] = omero;
+    }
+    std::fs::write(store.join(".zattrs"), zattrs.to_string()).unwrap();
     let c = layout.chunk;
     let mut chunk_bytes = 0;
     for (i, level) in levels.iter().enumerate() {
         let dir = store.join(i.to_string());
         std::fs::create_dir_all(&dir).unwrap();
         let [nx, ny, nz] = level.dims;
+        let shape: Vec<u64> = leading.iter().copied().chain([nz, ny, nx]).collect();
+        let chunks: Vec<u64> = leading.iter().map(|_| 1).chain([c[2], c[1], c[0]]).collect();
         let zarray = json!({
-            "zarr_format": 2, "shape": [nz, ny, nx], "chunks": [c[2], c[1], c[0]], "dtype": "<u2",
+            "zarr_format": 2, "shape": shape, "chunks": chunks, "dtype": "<u2",
             "compressor": {"id": "gzip", "level": 1}, "fill_value": 0, "order": "C", "filters": null,
             "dimension_separator": layout.declared_separator
         });
         std::fs::write(dir.join(".zarray"), zarray.to_string()).unwrap();
-        for cz in 0..nz.div_ceil(c[2]) {
-            for cy in 0..ny.div_ceil(c[1]) {
-                for cx in 0..nx.div_ceil(c[0]) {
-                    let mut bytes = Vec::new();
-                    for z in cz * c[2]..(cz + 1) * c[2] {
-                        for y in cy * c[1]..(cy + 1) * c[1] {
-                            for x in cx * c[0]..(cx + 1) * c[0] {
-                                let v = if x < nx && y < ny && z < nz {
-                                    level.samples[((z * ny + y) * nx + x) as usize]
-                                } else {
-                                    0
-                                };
-                                bytes.extend_from_slice(&v.to_le_bytes());
+        for (p, plane) in planes.iter().enumerate() {
+            let level = &plane[i];
+            // The plane's leading indices as chunk-key components.
+            let mut prefix = String::new();
+            let mut rest = p as u64;
+            for (a, &extent) in leading.iter().enumerate().rev() {
+                let sep = layout.file_separator;
+                prefix = format!("{}{sep}{prefix}", rest % extent);
+                rest /= extent;
+                let _ = a;
+            }
+            for cz in 0..nz.div_ceil(c[2]) {
+                for cy in 0..ny.div_ceil(c[1]) {
+                    for cx in 0..nx.div_ceil(c[0]) {
+                        let mut bytes = Vec::new();
+                        for z in cz * c[2]..(cz + 1) * c[2] {
+                            for y in cy * c[1]..(cy + 1) * c[1] {
+                                for x in cx * c[0]..(cx + 1) * c[0] {
+                                    let v = if x < nx && y < ny && z < nz {
+                                        level.samples[((z * ny + y) * nx + x) as usize]
+                                    } else {
+                                        0
+                                    };
+                                    bytes.extend_from_slice(&v.to_le_bytes());
+                                }
                             }
                         }
+                        let sep = layout.file_separator;
+                        let key = format!("{prefix}{cz}{sep}{cy}{sep}{cx}");
+                        let path = dir.join(&key);
+                        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+                        let mut gzip = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+                        gzip.write_all(&bytes).unwrap();
+                        let bytes = gzip.finish().unwrap();
+                        chunk_bytes += bytes.len() as u64;
+                        std::fs::write(path, bytes).unwrap();
                     }
-                    let sep = layout.file_separator;
-                    let key = format!("{cz}{sep}{cy}{sep}{cx}");
-                    let path = dir.join(&key);
-                    std::fs::create_dir_all(path.parent().unwrap()).unwrap();
-                    let mut gzip = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
-                    gzip.write_all(&bytes).unwrap();
-                    let bytes = gzip.finish().unwrap();
-                    chunk_bytes += bytes.len() as u64;
-                    std::fs::write(path, bytes).unwrap();
                 }
             }
         }
@@ -332,4 +359,63 @@ fn a_dataset_path_leaving_the_store_is_refused() {
     std::fs::write(&attributes, text).unwrap();
     let message = open_error(&dir.join("inner/image.zarr"));
     assert!(message.contains("leaves the store"), "{message}");
+}
+
+/// Issue 42 item 5: a 5-D image's other channels and time points could not be reached, and channel 0 was read
+/// silently. `planes` chooses them (`--channel`, `--time`); the reader says which it reads, the value range is the
+/// chosen volume's, and the chosen channel's `omero` metadata is read.
+#[test]
+fn channels_and_time_points_of_a_five_dimensional_image_are_chosen() {
+    let dir = scratch("planes");
+    let store = dir.join("cells.ome.zarr");
+    // Two time points of three channels: the plane (t, c) holds 1000·t + 100·c + x at every sample.
+    let pyramids: Vec<Vec<Level>> = (0..6u16)
+        .map(|p| pyramid(Level::filled([40, 36, 32], move |x, _, _| 1000 * (p / 3) + 100 * (p % 3) + x as u16)))
+        .collect();
+    let planes: Vec<&[Level]> = pyramids.iter().map(|p| p.as_slice()).collect();
+    let layout = Layout {
+        axes: Some(json!([{"name": "t", "type": "time"}, {"name": "c", "type": "channel"}, "z", "y", "x"])),
+        scale: json!([1.0, 1.0, 0.5, 0.5, 0.5]),
+        chunk: [16; 3],
+        ..Layout::default()
+    };
+    let omero = json!({"channels": [
+        {"label": "DAPI", "color": "0000FF", "window": {"start": 0, "end": 50}},
+        {"label": "GFP", "color": "00FF00", "window": {"start": 1110, "end": 1130}},
+        {"label": "RFP", "color": "FF0000"}]});
+    write_v2_planes(&store, &planes, &[2, 3], &layout, Some(omero));
+    let open = |channel: Option<u64>, time: Option<u64>| {
+        let options = ForeignOptions { planes: PlaneChoice { channel, time }, ..Default::default() };
+        StoreReader::open_with_options(&store, 64 << 20, &options)
+    };
+    let reader = open(Some(1), Some(1)).unwrap();
+    assert_eq!(reader.read_region(0, [7, 3, 2], [1, 1, 1]).unwrap(), [1107.0]);
+    assert_eq!(reader.info().spacing, [0.5; 3]);
+    assert_eq!(reader.attributes().value_range, [1100.0, 1139.0], "the chosen plane's range");
+    let planes = reader.image_planes();
+    let (time, channel) = (planes.axis(LeadingKind::Time).unwrap(), planes.axis(LeadingKind::Channel).unwrap());
+    assert_eq!((time.extent, time.index, channel.extent, channel.index), (2, 1, 3, 1));
+    let omero = planes.omero.as_ref().unwrap();
+    assert_eq!(
+        (omero.label.as_deref(), omero.color, omero.window),
+        (Some("GFP"), Some([0.0, 1.0, 0.0]), Some([1110.0, 1130.0]))
+    );
+    // Coarser levels read the same plane.
+    let coarse = reader.read_region(1, [0, 0, 0], [1, 1, 1]).unwrap()[0];
+    assert!((1100.0..1102.0).contains(&coarse), "{coarse}");
+    // By default the first of each, said in `image_planes`.
+    let reader = open(None, None).unwrap();
+    assert_eq!(reader.read_region(0, [7, 3, 2], [1, 1, 1]).unwrap(), [7.0]);
+    assert_eq!(reader.image_planes().axis(LeadingKind::Channel).unwrap().index, 0);
+    // Beyond the image, or an axis it does not have: one line naming what there is.
+    let error = open(Some(3), None).err().unwrap().to_string();
+    assert!(error.contains("--channel 3: the image has 3 channels (0 to 2)"), "{error}");
+    let error = open(None, Some(2)).err().unwrap().to_string();
+    assert!(error.contains("--time 2: the image has 2 time points (0 to 1)"), "{error}");
+    let flat = dir.join("flat.ome.zarr");
+    write_v2(&flat, &pyramid(Level::filled([40, 36, 32], |x, _, _| x as u16)), &Layout::default());
+    let options = ForeignOptions { planes: PlaneChoice { channel: Some(1), time: None }, ..Default::default() };
+    let error = StoreReader::open_with_options(&flat, 64 << 20, &options).err().unwrap().to_string();
+    assert!(error.contains("--channel: the image has no channel axis (its axes: z, y, x)"), "{error}");
+    std::fs::remove_dir_all(&dir).ok();
 }

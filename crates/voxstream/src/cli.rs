@@ -139,6 +139,13 @@ pub struct SourceFlags {
     /// at open); samples beyond it are clipped, with a warning.
     #[arg(long, value_name = "LO,HI", value_parser = crate::store_open::parse_value_range, allow_hyphen_values = true)]
     pub value_range: Option<[f64; 2]>,
+    /// 4-D and 5-D OME-Zarr images: the channel to draw (0 by default; `info` lists them).
+    #[arg(long, value_name = "C")]
+    pub channel: Option<u64>,
+    /// The time point to draw (0 by default): of a 5-D (or 4-D) OME-Zarr image, or, with --fluid, the step of a time
+    /// series (0-based, in file-name order).
+    #[arg(long, value_name = "T")]
+    pub time: Option<u64>,
     /// Remote stores: the on-disk cache and the client's patience.
     #[command(flatten)]
     pub remote: RemoteArgs,
@@ -162,9 +169,6 @@ pub struct FluidFlags {
     /// and slower).
     #[arg(long, value_name = "EDGE", allow_negative_numbers = true)]
     pub fluid_cell: Option<f64>,
-    /// With --fluid and a time series: the time step to draw (0-based, in file-name order).
-    #[arg(long, value_name = "STEP")]
-    pub time: Option<usize>,
     /// With --fluid: screen-space smoothing of the surface: rof (total variation, Rudin–Osher–Fatemi, depth-
     /// adaptive), bilateral, or none (the spheres as they are).
     #[arg(long, value_enum, default_value_t = SmoothArg::Rof)]
@@ -188,7 +192,6 @@ impl Default for FluidFlags {
             fluid: false,
             particle_radius: None,
             fluid_cell: None,
-            time: None,
             smooth: SmoothArg::Rof,
             smooth_iterations: 75,
             smooth_strength: 4.0,
@@ -514,6 +517,12 @@ pub struct InfoArgs {
     /// Other tools' OME-Zarr images: normalise by this value range (as `render --value-range`).
     #[arg(long, value_name = "LO,HI", value_parser = crate::store_open::parse_value_range, allow_hyphen_values = true)]
     pub value_range: Option<[f64; 2]>,
+    /// 4-D and 5-D OME-Zarr images: the channel whose value range is shown (as `render --channel`).
+    #[arg(long, value_name = "C")]
+    pub channel: Option<u64>,
+    /// 4-D and 5-D OME-Zarr images: the time point whose value range is shown (as `render --time`).
+    #[arg(long, value_name = "T")]
+    pub time: Option<u64>,
     /// Remote stores: the on-disk cache and the client's patience.
     #[command(flatten)]
     pub remote: RemoteArgs,

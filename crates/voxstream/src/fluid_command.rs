@@ -77,7 +77,6 @@ pub fn check_no_fluid_flags(flags: &FluidFlags) -> Result<()> {
     let given = [
         (flags.particle_radius.is_some(), "--particle-radius"),
         (flags.fluid_cell.is_some(), "--fluid-cell"),
-        (flags.time.is_some(), "--time"),
         (flags.smooth != defaults.smooth, "--smooth"),
         (flags.smooth_iterations != defaults.smooth_iterations, "--smooth-iterations"),
         (flags.smooth_strength != defaults.smooth_strength, "--smooth-strength"),
@@ -107,7 +106,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let options = FluidOptions {
         radius: flags.particle_radius,
         cell: flags.fluid_cell,
-        time: flags.time,
+        time: args.input.time.map(|t| usize::try_from(t).unwrap_or(usize::MAX)),
         render,
         budget_mb: args.budget_mb,
         width: args.width,

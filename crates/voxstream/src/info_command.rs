@@ -2,11 +2,12 @@
 
 use anyhow::Result;
 use serde::Serialize;
+use voxstream_store::image_planes::{LeadingKind, PlaneChoice};
 use voxstream_store::StoreReader;
 
 use crate::cli::InfoArgs;
 use crate::source_path::{check_store_path, warn_about_leftovers};
-use crate::store_open::open_store;
+use crate::store_open::{open_store, planes_description};
 
 /// Bricks of one level: for native stores, what its per-brick min/max say of them; for foreign stores, the chunk
 /// files of the dataset behind it (counted on disk, never looped over as declared).
@@ -96,14 +97,39 @@ struct StoreInfo {
     #[serde(skip_serializing_if = "Option::is_none")]
     value_percentiles: Option<Vec<[f64; 2]>>,
     bytes_on_disk: u64,
+    /// A 4-D/5-D image's axes before z, y, x (time, channel), each with its extent and the index read.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    leading_axes: Vec<LeadingAxisInfo>,
+    /// The chosen channel's OME-Zarr `omero` display settings.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    omero: Option<OmeroInfo>,
     levels: Vec<LevelInfo>,
+}
+
+#[derive(Serialize)]
+struct LeadingAxisInfo {
+    name: String,
+    kind: &'static str,
+    extent: u64,
+    index: u64,
+}
+
+#[derive(Serialize)]
+struct OmeroInfo {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    label: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    color: Option<[f32; 3]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    window: Option<[f64; 2]>,
 }
 
 /// Runs `voxstream info`.
 pub fn run(args: &InfoArgs) -> Result<()> {
     check_store_path(&args.store, "info")?;
     let cache_bytes = voxstream_store::store_reader::DEFAULT_CACHE_BYTES;
-    let reader = open_store(&args.store, cache_bytes, args.value_range, &args.remote.access(), false)?;
+    let planes = PlaneChoice { channel: args.channel, time: args.time };
+    let reader = open_store(&args.store, cache_bytes, args.value_range, planes, &args.remote.access(), false)?;
     warn_about_leftovers(&args.store);
     let layout = reader.layout();
     let attributes = reader.attributes();
@@ -122,6 +148,26 @@ pub fn run(args: &InfoArgs) -> Result<()> {
         value_range: attributes.value_range,
         value_percentiles: attributes.value_percentiles.clone(),
         bytes_on_disk: reader.bytes_on_disk(),
+        leading_axes: reader
+            .image_planes()
+            .axes
+            .iter()
+            .map(|a| LeadingAxisInfo {
+                name: a.name.clone(),
+                kind: match a.kind {
+                    LeadingKind::Time => "time",
+                    LeadingKind::Channel => "channel",
+                    LeadingKind::Other => "other",
+                },
+                extent: a.extent,
+                index: a.index,
+            })
+            .collect(),
+        omero: reader.image_planes().omero.as_ref().map(|o| OmeroInfo {
+            label: o.label.clone(),
+            color: o.color,
+            window: o.window,
+        }),
         levels,
     };
     if args.json {
@@ -138,6 +184,27 @@ pub fn run(args: &InfoArgs) -> Result<()> {
     if let Some(percentiles) = &info.value_percentiles {
         let text: Vec<String> = percentiles.iter().map(|[p, v]| format!("{p}%: {v}")).collect();
         println!("percentiles  {}", text.join(", "));
+    }
+    if let Some(planes) = planes_description(reader.image_planes()) {
+        println!("showing      {planes}");
+    }
+    if let Some(omero) = &info.omero {
+        let mut parts = Vec::new();
+        if let Some(label) = &omero.label {
+            parts.push(format!("\"{label}\""));
+        }
+        if let Some([r, g, b]) = omero.color {
+            parts.push(format!(
+                "colour #{:02X}{:02X}{:02X}",
+                (r * 255.0).round() as u8,
+                (g * 255.0).round() as u8,
+                (b * 255.0).round() as u8
+            ));
+        }
+        if let Some([start, end]) = omero.window {
+            parts.push(format!("window {start} to {end} (the default transfer function's)"));
+        }
+        println!("omero        {}", parts.join(", "));
     }
     println!("brick        {}^3", info.brick_size);
     match reader.remote() {

@@ -92,6 +92,8 @@ fn unreachable_default() -> RenderArgs {
             in_memory: false,
             brick_bits: voxstream::cli::BrickBits::Auto,
             value_range: None,
+            channel: None,
+            time: None,
             fluid: Default::default(),
         },
         out: "frame.png".into(),

@@ -18,6 +18,7 @@ pub fn source_options(flags: &SourceFlags, width: u32, height: u32, quiet: bool)
         attribute: flags.attribute,
         smoothing_scale: flags.smoothing_scale,
         particle_memory: flags.particle_memory,
+        planes: voxstream_store::image_planes::PlaneChoice { channel: flags.channel, time: flags.time },
         remote: flags.remote.access(),
         width,
         height,

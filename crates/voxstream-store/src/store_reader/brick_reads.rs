@@ -162,7 +162,7 @@ impl StoreReader {
                 if (0..3).any(|a| read_upper[a] <= lower[a]) {
                     // The foreign level is one sample short here: repeat its last samples.
                     let inner = [0, 1, 2].map(|a| lower[a].min(shape[a] - 1));
-                    let got = self.read_array(level, array, *leading, inner, [0, 1, 2].map(|a| inner[a] + 1))?;
+                    let got = self.read_array(level, array, leading, inner, [0, 1, 2].map(|a| inner[a] + 1))?;
                     vec![got[0]; ((upper[0] - lower[0]) * (upper[1] - lower[1]) * (upper[2] - lower[2])) as usize]
                 } else {
                     let got = if self.chunk_cache.caches(level) {
@@ -174,10 +174,10 @@ impl StoreReader {
                         };
                         let dtype = self.info.dtype;
                         self.chunk_cache
-                            .read(level, array, *leading, *shape, dtype, lower, read_upper)
+                            .read(level, array, leading, *shape, dtype, lower, read_upper)
                             .map_err(corrupt)?
                     } else {
-                        self.read_array(level, array, *leading, lower, read_upper)?
+                        self.read_array(level, array, leading, lower, read_upper)?
                     };
                     self.check_brick(level, ijk, array, &got)?;
                     self.count_clipped(&got);
@@ -247,11 +247,11 @@ impl StoreReader {
         &self,
         level: usize,
         array: &Array<dyn ReadableStorageTraits>,
-        leading: usize,
+        leading: &crate::image_planes::LeadingIndex,
         lower: [u64; 3],
         upper: [u64; 3],
     ) -> Result<Vec<f32>, StoreError> {
-        let mut ranges: Vec<std::ops::Range<u64>> = vec![0..1; leading];
+        let mut ranges = leading.ranges();
         ranges.extend([lower[2]..upper[2], lower[1]..upper[1], lower[0]..upper[0]]);
         let subset = ArraySubset::new_with_ranges(&ranges);
         let corrupt = |e: zarrs::array::ArrayError| {

@@ -75,6 +75,8 @@ pub struct StoreReader {
     reading: crate::single_flight::SingleFlight<(usize, [u64; 3])>,
     /// Background fetching for frames that must not wait (see [`StoreReader::set_nonblocking`]).
     background: Background,
+    /// A foreign 4-D/5-D image's leading axes, the indices read, and the channel's `omero` metadata.
+    planes: crate::image_planes::ImagePlanes,
 }
 
 impl StoreReader {
@@ -112,6 +114,7 @@ impl StoreReader {
             remote: None,
             reading: crate::single_flight::SingleFlight::new(),
             background: Background::default(),
+            planes: Default::default(),
         })
     }
 
@@ -150,6 +153,12 @@ impl StoreReader {
     /// Whether the store was written by voxstream (it has per-brick ranges and exact pyramid levels).
     pub fn is_native(&self) -> bool {
         self.minmax.is_some()
+    }
+
+    /// A foreign 4-D or 5-D image's axes before z, y, x (time, channel) with the index read along each, and the
+    /// chosen channel's `omero` display metadata; empty for 3-D images and voxstream's stores.
+    pub fn image_planes(&self) -> &crate::image_planes::ImagePlanes {
+        &self.planes
     }
 
     /// Where the samples of `level` come from (`None` past the coarsest level).

@@ -193,9 +193,10 @@ impl StoreReader {
                     Some(remote) => ChunkSource::Remote(remote),
                     None => ChunkSource::Folder(path),
                 };
-                let (attributes, levels, scan) =
+                let (attributes, levels, scan, planes) =
                     crate::foreign::open_foreign(path, encoded, group.attributes(), foreign, &chunk_source)?;
                 let mut reader = StoreReader::assemble(path, attributes, levels, None, cache_bytes - cache_bytes / 4)?;
+                reader.planes = planes;
                 reader.metrics = Some(metrics);
                 reader.remote = remote;
                 if let Some((level, stored)) = scan {
@@ -235,7 +236,7 @@ impl StoreReader {
             check_chunk_sizes(path, &level.to_string(), &metadata_json(&array))?;
             check_level_dtype(path, &level.to_string(), &array, info.dtype)?;
             let ranges = read_minmax(path, &store, &layout, level, attributes.value_range == [0.0, 0.0])?;
-            Ok((LevelSource::Array { array, leading: 0, shape: [x, y, z] }, ranges))
+            Ok((LevelSource::Array { array, leading: Default::default(), shape: [x, y, z] }, ranges))
         };
         // A remote store's levels are opened at once (each a few round trips); a folder's in turn. Either way the
         // first level that fails, in level order, is the one reported.

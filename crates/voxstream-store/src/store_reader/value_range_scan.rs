@@ -24,7 +24,6 @@ impl StoreReader {
         };
         self.value_range_level = level;
         let failed = |e: zarrs::array::ArrayError| StoreError::store(&self.path, format!("level {level}: {e}"));
-        let leading = *leading;
         let bricks = bricks_over_stored_chunks(array, leading, stored, self.layout.brick_size).map_err(failed)?;
         let mut range = EMPTY_RANGE;
         if let Some(fill) = unwritten_fill_value(array, leading, self.info.dtype, stored) {
