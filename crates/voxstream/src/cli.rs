@@ -386,6 +386,14 @@ pub struct RenderArgs {
     /// No progress bar, no list of files written and no summary line (warnings and errors are still printed).
     #[arg(long)]
     pub quiet: bool,
+    /// Draw the transfer function's colour bar at the right edge: its colours from its first to its last point
+    /// (labelled, data units) and its opacity as a white curve.
+    #[arg(long, alias = "colour-bar")]
+    pub color_bar: bool,
+    /// Draw a scale bar at the bottom left: a round length in the data's units (a store's OME-Zarr unit), as long as
+    /// it appears at the camera's target.
+    #[arg(long)]
+    pub scale_bar: bool,
     /// How it is drawn.
     #[command(flatten)]
     pub look: LookFlags,

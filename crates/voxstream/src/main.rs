@@ -109,6 +109,8 @@ fn unreachable_default() -> RenderArgs {
         popping: false,
         stats: None,
         quiet: false,
+        color_bar: false,
+        scale_bar: false,
         look: LookFlags {
             camera: None,
             eye: None,

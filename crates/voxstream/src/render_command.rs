@@ -3,6 +3,7 @@
 use std::io::Write;
 
 use anyhow::{bail, Context, Result};
+use voxstream_api::annotations::{annotate, AnnotationContext, Annotations};
 use voxstream_api::{PreparedView, SessionOptions, Source, SourceMeta, SourceOptions, ViewOptions};
 use voxstream_engine::{MemoryBudget, Mode, MAX_BUDGET_MB};
 
@@ -126,6 +127,11 @@ fn render_source(args: &RenderArgs, source: Source, budget: &MemoryBudget) -> Re
     let (view, drawing_surfaces) = (*view, *drawing_surfaces);
     let surfaces_in_volume = prepared.settings.surfaces_in_volume;
     let cameras = path_cameras(args.path.as_deref(), &view)?;
+    let annotations = Annotations { color_bar: args.color_bar, scale_bar: args.scale_bar };
+    if args.color_bar && drawing_surfaces && !surfaces_in_volume {
+        bail!("--color-bar shows the transfer function, and only isosurfaces are drawn: add --tf to draw the volume too, or drop --color-bar");
+    }
+    let unit = source.store.as_ref().and_then(|store| store.info().unit.map(|u| u.name()));
     // Before the work: a folder, a disk or a missing folder as an output is refused now, not after the render.
     if args.video.is_none() {
         check_output(&if args.path.is_some() { numbered_path(&args.out, 0) } else { args.out.clone() }, "--out")?;
@@ -199,16 +205,20 @@ fn render_source(args: &RenderArgs, source: Source, budget: &MemoryBudget) -> Re
             // A single camera stops early once a frame is final (nothing missing, nothing blending): later frames
             // would be identical.
             if repeat + 1 == repeats || (!sequence && result.is_final()) {
+                // The annotations go on a copy: the checks below see the image as rendered.
+                let context = AnnotationContext { transfer_function, camera, world_per_unit: 1.0, unit };
+                let annotated = annotations.any().then(|| annotate(&result.image, annotations, &context));
+                let image = annotated.as_ref().unwrap_or(&result.image);
                 let out = match (&mut video, sequence) {
                     (Some(video), _) => {
-                        video.push(&result.image)?;
+                        video.push(image)?;
                         args.video.clone().expect("a video path")
                     }
                     (None, true) => numbered_path(&args.out, index),
                     (None, false) => args.out.clone(),
                 };
                 if video.is_none() {
-                    write_png(&result.image, &out)?;
+                    write_png(image, &out)?;
                 }
                 let volume = !drawing_surfaces || surfaces_in_volume;
                 if let Some(warning) = empty_image(&result.image, drawing_surfaces, volume) {

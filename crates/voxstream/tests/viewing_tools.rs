@@ -175,3 +175,43 @@ fn a_full_orbit_becomes_a_movie_of_its_frames() {
     run_fails(&["render", "hypertexture", "--video", "a.avi", "--path", "orbit:4"], &dir, ".mp4");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Issue 42 item 9: a colour bar and a scale bar, off by default, drawn over the image where asked and nowhere
+/// else: the picture itself is the same, pixel for pixel, outside their corners.
+#[test]
+fn colour_and_scale_bars_are_drawn_in_their_corners_only() {
+    let dir = scratch("viewing_tools", "annotations");
+    import_ball(&dir, "ball.zarr");
+    let size = ["--width", "200", "--height", "160"];
+    run_ok(&[&["render", "ball.zarr", "--out", "plain.png"][..], &size].concat(), &dir);
+    run_ok(&[&["render", "ball.zarr", "--out", "bars.png", "--color-bar", "--scale-bar"][..], &size].concat(), &dir);
+    let (w, h, plain) = read_png(&dir.join("plain.png"));
+    let (_, _, bars) = read_png(&dir.join("bars.png"));
+    let (w, h) = (w as usize, h as usize);
+    let mut changed_bar = 0;
+    let mut changed_scale = 0;
+    for y in 0..h {
+        for x in 0..w {
+            let i = (y * w + x) * 3;
+            if plain[i..i + 3] == bars[i..i + 3] {
+                continue;
+            }
+            // The colour bar and its labels: the right part, the middle three fifths; the scale bar: bottom left.
+            if x >= w / 2 && y >= h / 5 - 2 && y <= h - h / 5 + 2 {
+                changed_bar += 1;
+            } else if x < w / 2 && y >= h - 30 {
+                changed_scale += 1;
+            } else {
+                panic!("pixel ({x}, {y}) changed outside the bars' corners");
+            }
+        }
+    }
+    assert!(changed_bar > 500 && changed_scale > 100, "{changed_bar} {changed_scale}");
+    // A colour bar of nothing: isosurfaces alone have no transfer function to show.
+    run_fails(
+        &["render", "ball.zarr", "--iso", "1500", "--color-bar", "--out", "iso.png"],
+        &dir,
+        "--color-bar shows the transfer function, and only isosurfaces are drawn",
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
