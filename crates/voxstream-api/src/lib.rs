@@ -29,6 +29,7 @@ pub mod remote_output;
 pub mod render_budget;
 pub mod scenes;
 pub mod session;
+pub mod slices;
 pub mod source;
 pub mod source_path;
 pub mod store_open;

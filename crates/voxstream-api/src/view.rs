@@ -120,6 +120,8 @@ pub struct ViewOptions {
     pub projection: Projection,
     /// Half-spaces of the world that are kept (`--clip-plane`).
     pub clip_planes: Vec<ClipPlane>,
+    /// A store's plane of samples, drawn alone and face-on (`--slice z=K`; see [`crate::slices`]).
+    pub slice: Option<crate::slices::Slice>,
 }
 
 impl Default for ViewOptions {
@@ -142,6 +144,7 @@ impl Default for ViewOptions {
             region: None,
             projection: Projection::Composite,
             clip_planes: Vec::new(),
+            slice: None,
         }
     }
 }
@@ -240,6 +243,15 @@ fn step_choice(view: &ViewOptions, drawing_surfaces: bool) -> Result<Option<f64>
 
 /// Applies `view` to `source`'s defaults.
 pub fn prepare_view(view: &ViewOptions, source: &SourceMeta) -> Result<PreparedView> {
+    // A slice is a view of its own: its slab's clipping planes, the mean projection, the camera along its axis.
+    let sliced;
+    let view = match view.slice {
+        Some(slice) => {
+            sliced = crate::slices::slice_view(view, slice, source)?;
+            &sliced
+        }
+        None => view,
+    };
     if view.width == 0 || view.height == 0 {
         bail!("image size must be positive, got {}x{}", view.width, view.height);
     }

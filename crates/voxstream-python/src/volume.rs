@@ -235,7 +235,7 @@ impl PyVolume {
         tf_points=None, tf_file=None, iso=Vec::new(), iso_colors=Vec::new(), iso_opacities=Vec::new(),
         shadows=false, light=None, background=[0.0; 3], step=0.5, lod_bias=0.0, shading=None, blending=true,
         preintegrate=false, adaptive_step=None, faithful=false, float32=false, region=None, projection="composite",
-        clip_planes=Vec::new(), view=None, azimuth=None, elevation=None, zoom=None))]
+        clip_planes=Vec::new(), view=None, azimuth=None, elevation=None, zoom=None, slice=None))]
     #[allow(clippy::too_many_arguments)]
     fn render<'py>(
         &self,
@@ -269,7 +269,9 @@ impl PyVolume {
         azimuth: Option<f64>,
         elevation: Option<f64>,
         zoom: Option<f64>,
+        slice: Option<&str>,
     ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyDict>)> {
+        let slice = slice.map(voxstream_api::slices::parse_slice).transpose().map_err(PyValueError::new_err)?;
         let mode = match mode {
             "converged" => Mode::Converged,
             "interactive" => Mode::Interactive,
@@ -334,6 +336,7 @@ impl PyVolume {
             region,
             projection,
             clip_planes,
+            slice,
         };
         let session = SessionOptions { budget_mb, backend, blending, ..SessionOptions::default() };
         let rendered = self.render_on_thread(py, view, session, mode, float32)?;

@@ -260,6 +260,10 @@ pub struct LookFlags {
     /// gives the dimensions, upper bounds excluded); the rest stays transparent.
     #[arg(long, value_name = "X0,Y0,Z0,X1,Y1,Z1", value_parser = parse_crop)]
     pub crop: Option<[[u64; 3]; 2]>,
+    /// Stores: draw one plane of level-0 samples alone, face-on: x=K, y=K, z=K (or sagittal=K, coronal=K, axial=K),
+    /// as the mean through the one-sample slab around it, in the transfer function's colours. CPU backend.
+    #[arg(long, value_name = "AXIS=INDEX", value_parser = voxstream_api::slices::parse_slice)]
+    pub slice: Option<voxstream_api::slices::Slice>,
     /// Transfer function JSON: {"points": [[value, r, g, b, alpha], ...], "unit_distance": u}, or a ParaView
     /// colour-map preset (RGBPoints, optional Points), rescaled onto the data's value range.
     #[arg(long)]

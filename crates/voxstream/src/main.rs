@@ -123,6 +123,7 @@ fn unreachable_default() -> RenderArgs {
             zoom: None,
             projection: voxstream::cli::ProjectionArg::Composite,
             clip_plane: Vec::new(),
+            slice: None,
             crop: None,
             tf: None,
             iso: Vec::new(),

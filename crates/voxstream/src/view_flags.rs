@@ -67,6 +67,7 @@ pub fn view_options(look: &LookFlags, width: u32, height: u32) -> ViewOptions {
         region: look.crop,
         projection: look.projection.projection(),
         clip_planes: look.clip_plane.clone(),
+        slice: look.slice,
     }
 }
 

@@ -215,3 +215,59 @@ fn colour_and_scale_bars_are_drawn_in_their_corners_only() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Issue 42 item 8: orthogonal slices. The ball's cross-section at z = k is the ellipse
+/// ((x − 24)/18)² + ((y − 20)/16)² < 1 − ((k − 18)/14)²: seen face-on, its area shrinks by that factor from the
+/// centre plane (k = 18) to k = 28 (0.49) — times the perspective's magnification of the nearer plane, the square of
+/// the ratio of the eye's distances to the two planes — and the slice shows nothing of the planes around it.
+#[test]
+fn a_slice_draws_the_plane_of_samples_it_names() {
+    let dir = scratch("viewing_tools", "slices");
+    import_ball(&dir, "ball.zarr");
+    // Every value fully opaque, brightness proportional to the value: the lit pixels are the cross-section.
+    std::fs::write(dir.join("grey.json"), r#"{"points": [[0, 0, 0, 0, 1], [3050, 1, 1, 1, 1]]}"#).unwrap();
+    let lit = |name: &str, slice: &str| {
+        let (out, stats) = (format!("{name}.png"), format!("{name}.json"));
+        run_ok(
+            &[
+                "render",
+                "ball.zarr",
+                "--slice",
+                slice,
+                "--tf",
+                "grey.json",
+                "--width",
+                "240",
+                "--height",
+                "240",
+                "--out",
+                &out,
+                "--stats",
+                &stats,
+            ],
+            &dir,
+        );
+        // The camera looks down z from above: the eye's height over the plane.
+        let (eye, _, _) = stats_camera(&dir.join(&stats));
+        let (_, _, pixels) = read_png(&dir.join(&out));
+        (pixels.chunks_exact(3).filter(|p| p[0] > 2).count() as f64, eye.z)
+    };
+    let ((centre, eye_z), (off, _)) = (lit("centre", "z=18"), lit("off", "axial=28"));
+    let ratio = off / centre;
+    let magnification = ((eye_z - 18.0) / (eye_z - 28.0)).powi(2);
+    let expected = (1.0 - (10.0f64 / 14.0).powi(2)) * magnification;
+    assert!(centre > 5000.0, "the centre plane's disk: {centre} pixels");
+    assert!((ratio - expected).abs() < 0.05, "area ratio {ratio}, the ellipses' {expected}");
+    // Beyond the ball (its last plane with samples inside is z = 31): nothing lit.
+    assert_eq!(lit("outside", "z=33").0, 0.0);
+    // Planes that do not exist, and what a slice cannot be drawn with: one line each.
+    run_fails(&["render", "ball.zarr", "--slice", "z=36", "--out", "x.png"], &dir, "has 36 samples along z (0 to 35)");
+    run_fails(
+        &["render", "ball.zarr", "--slice", "z=3", "--iso", "1500", "--out", "x.png"],
+        &dir,
+        "drop --iso or --slice",
+    );
+    run_fails(&["render", "sponge", "--slice", "z=3", "--out", "x.png"], &dir, "--slice applies to stores");
+    run_fails(&["render", "ball.zarr", "--slice", "w=3", "--out", "x.png"], &dir, "not an axis");
+    std::fs::remove_dir_all(&dir).ok();
+}

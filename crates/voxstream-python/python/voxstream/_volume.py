@@ -84,7 +84,7 @@ class Volume:
                preintegrate: bool = False, adaptive_step: Optional[float] = None,
                faithful: bool = False, region=None, projection: str = "composite", clip_planes=(),
                view: Optional[str] = None, azimuth: Optional[float] = None, elevation: Optional[float] = None,
-               zoom: Optional[float] = None) -> np.ndarray:
+               zoom: Optional[float] = None, slice: Optional[str] = None) -> np.ndarray:
         """Renders the volume; returns an (height, width, 4) array, RGBA: ``uint8`` (the CLI's PNG, plus alpha) or
         ``float32`` (linear, unclamped). The array's memory is Rust's buffer, handed over without a copy.
 
@@ -108,7 +108,9 @@ class Volume:
         - ``view``: ``"+x"``, ``"-x"``, ``"+y"``, ``"-y"``, ``"+z"``, ``"-z"`` or ``"iso"``, framing the volume
           looking along that axis in place of ``camera`` (``--view``); ``azimuth``, ``elevation`` (degrees) and
           ``zoom`` (a factor) turn and move the camera around its target (``--azimuth``, ``--elevation``,
-          ``--zoom``).
+          ``--zoom``);
+        - ``slice``: ``"z=100"`` (``x``, ``y``, ``z``, or ``sagittal``, ``coronal``, ``axial``), one plane of the
+          store's level-0 samples alone and face-on (``--slice``; CPU backend).
 
         The GIL is released while rendering; Ctrl-C raises ``KeyboardInterrupt`` at once. Statistics of the frame
         are in ``last_stats``. A converged render whose bricks could not all be read raises ``RuntimeError``."""
@@ -132,7 +134,8 @@ class Volume:
             projection=str(projection),
             clip_planes=[(tuple(float(v) for v in p), tuple(float(v) for v in n)) for p, n in clip_planes],
             view=view, azimuth=None if azimuth is None else float(azimuth),
-            elevation=None if elevation is None else float(elevation), zoom=None if zoom is None else float(zoom))
+            elevation=None if elevation is None else float(elevation), zoom=None if zoom is None else float(zoom),
+            slice=None if slice is None else str(slice))
         self.last_stats = dict(stats)
         return pixels
 
