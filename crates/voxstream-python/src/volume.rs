@@ -235,7 +235,8 @@ impl PyVolume {
         tf_points=None, tf_file=None, iso=Vec::new(), iso_colors=Vec::new(), iso_opacities=Vec::new(),
         shadows=false, light=None, background=[0.0; 3], step=0.5, lod_bias=0.0, shading=None, blending=true,
         preintegrate=false, adaptive_step=None, faithful=false, float32=false, region=None, projection="composite",
-        clip_planes=Vec::new(), view=None, azimuth=None, elevation=None, zoom=None, slice=None))]
+        clip_planes=Vec::new(), view=None, azimuth=None, elevation=None, zoom=None, slice=None, color_bar=false,
+        scale_bar=false))]
     #[allow(clippy::too_many_arguments)]
     fn render<'py>(
         &self,
@@ -270,7 +271,10 @@ impl PyVolume {
         elevation: Option<f64>,
         zoom: Option<f64>,
         slice: Option<&str>,
+        color_bar: bool,
+        scale_bar: bool,
     ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyDict>)> {
+        let annotations = voxstream_api::annotations::Annotations { color_bar, scale_bar };
         let slice = slice.map(voxstream_api::slices::parse_slice).transpose().map_err(PyValueError::new_err)?;
         let mode = match mode {
             "converged" => Mode::Converged,
@@ -339,7 +343,7 @@ impl PyVolume {
             slice,
         };
         let session = SessionOptions { budget_mb, backend, blending, ..SessionOptions::default() };
-        let rendered = self.render_on_thread(py, view, session, mode, float32)?;
+        let rendered = self.render_on_thread(py, view, session, mode, float32, annotations)?;
         if !rendered.failures.is_empty() && mode == Mode::Converged {
             return Err(incomplete(rendered.failures.len(), &rendered.failures[0]));
         }
@@ -370,6 +374,7 @@ impl PyVolume {
         session: SessionOptions,
         mode: Mode,
         float32: bool,
+        annotations: voxstream_api::annotations::Annotations,
     ) -> PyResult<Rendered> {
         let volume = self.volume.clone();
         let cancel = Arc::new(AtomicBool::new(false));
@@ -389,44 +394,67 @@ impl PyVolume {
                     }
                 };
                 let started = std::time::Instant::now();
-                let result = volume.render(&view, &session, mode, &mut observe).map(|(frame, _)| {
-                    let rendered_at = std::time::Instant::now();
-                    let remote = volume.meta().remote.as_ref().map(|remote| remote.counts());
-                    let mut stats = vec![
-                        ("passes", f64::from(frame.passes)),
-                        ("elapsed_ms", frame.elapsed_ms),
-                        ("render_ms", frame.render_ms),
-                        ("rays", frame.rays as f64),
-                        ("samples", frame.samples as f64),
-                        ("requests", frame.requests as f64),
-                        ("bricks_produced", frame.bricks_produced as f64),
-                        ("pending", frame.pending as f64),
-                    ];
-                    if let Some(counts) = remote {
-                        stats.push(("remote_requests", counts.requests as f64));
-                        stats.push(("remote_bytes", counts.bytes as f64));
-                    }
-                    let renderer = volume.session().map(|s| s.renderer().describe()).unwrap_or_default();
-                    let image = frame.image;
-                    let (width, height) = (image.width, image.height);
-                    let rgba8 = (!float32).then(|| image.to_rgba8());
-                    let rgba32 = float32.then(|| image.pixels.into_flattened());
-                    // Where the time outside the engine's frame went: preparing the view and session, converting.
-                    let total_ms = started.elapsed().as_secs_f64() * 1000.0;
-                    stats.push(("convert_ms", rendered_at.elapsed().as_secs_f64() * 1000.0));
-                    stats.push(("call_ms", total_ms));
-                    Rendered {
-                        width,
-                        height,
-                        rgba8,
-                        rgba32,
-                        stats,
-                        converged: frame.pending == 0 && !frame.interrupted,
-                        interrupted: frame.interrupted,
-                        failures: frame.failures.iter().map(ToString::to_string).collect(),
-                        renderer,
-                    }
-                });
+                let result = volume
+                    .render(&view, &session, mode, &mut observe)
+                    .and_then(|(frame, prepared)| {
+                        if annotations.color_bar && prepared.drawing_surfaces && !prepared.settings.surfaces_in_volume {
+                            anyhow::bail!(
+                            "color_bar shows the transfer function, and only isosurfaces are drawn: give tf= to draw \
+                             the volume too, or drop color_bar"
+                        );
+                        }
+                        Ok((frame, prepared))
+                    })
+                    .map(|(frame, prepared)| {
+                        let rendered_at = std::time::Instant::now();
+                        let remote = volume.meta().remote.as_ref().map(|remote| remote.counts());
+                        let mut stats = vec![
+                            ("passes", f64::from(frame.passes)),
+                            ("elapsed_ms", frame.elapsed_ms),
+                            ("render_ms", frame.render_ms),
+                            ("rays", frame.rays as f64),
+                            ("samples", frame.samples as f64),
+                            ("requests", frame.requests as f64),
+                            ("bricks_produced", frame.bricks_produced as f64),
+                            ("pending", frame.pending as f64),
+                        ];
+                        if let Some(counts) = remote {
+                            stats.push(("remote_requests", counts.requests as f64));
+                            stats.push(("remote_bytes", counts.bytes as f64));
+                        }
+                        let renderer = volume.session().map(|s| s.renderer().describe()).unwrap_or_default();
+                        let image = match annotations.any() {
+                            true => {
+                                let unit = volume.meta().store.as_ref().and_then(|s| s.info().unit.map(|u| u.name()));
+                                let context = voxstream_api::annotations::AnnotationContext {
+                                    transfer_function: &prepared.transfer_function,
+                                    camera: &prepared.camera,
+                                    world_per_unit: 1.0,
+                                    unit,
+                                };
+                                voxstream_api::annotations::annotate(&frame.image, annotations, &context)
+                            }
+                            false => frame.image,
+                        };
+                        let (width, height) = (image.width, image.height);
+                        let rgba8 = (!float32).then(|| image.to_rgba8());
+                        let rgba32 = float32.then(|| image.pixels.into_flattened());
+                        // Where the time outside the engine's frame went: preparing the view and session, converting.
+                        let total_ms = started.elapsed().as_secs_f64() * 1000.0;
+                        stats.push(("convert_ms", rendered_at.elapsed().as_secs_f64() * 1000.0));
+                        stats.push(("call_ms", total_ms));
+                        Rendered {
+                            width,
+                            height,
+                            rgba8,
+                            rgba32,
+                            stats,
+                            converged: frame.pending == 0 && !frame.interrupted,
+                            interrupted: frame.interrupted,
+                            failures: frame.failures.iter().map(ToString::to_string).collect(),
+                            renderer,
+                        }
+                    });
                 let _ = sender.send(result);
             })
             .map_err(|e| PyRuntimeError::new_err(format!("cannot start a render thread: {e}")))?;
