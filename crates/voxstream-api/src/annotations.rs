@@ -2,7 +2,8 @@
 //! **colour bar** of the transfer function (its colours from its first to its last point, the opacity as a white
 //! curve beside them, the two ends labelled in data units) and a **scale bar** (a round length in the data's units
 //! as it appears at the camera's target: for a perspective camera, nearer parts look larger and farther ones
-//! smaller). Off by default; `render --color-bar --scale-bar` (the viewer and Python do not draw them yet).
+//! smaller). Off by default; `render --color-bar --scale-bar`, Python `render(color_bar=True, scale_bar=True)` (the
+//! viewer does not draw them yet).
 //!
 //! Labels use the public-domain 8×8 bitmap font of `font8x8` (scaled ×2 from 512 pixels up), drawn white with a
 //! black outline so they read over any background. The annotations are drawn onto a copy: the image the renderer
