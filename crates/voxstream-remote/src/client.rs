@@ -30,6 +30,17 @@ fn env(name: &str) -> Option<String> {
     std::env::var(name).ok().filter(|v| !v.is_empty())
 }
 
+/// The runtime a client's requests run on: two worker threads named `name` (the requests wait on the network, not
+/// on the CPU).
+pub(crate) fn client_runtime(location: &RemoteLocation, name: &str) -> Result<tokio::runtime::Runtime, RemoteError> {
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .thread_name(name)
+        .enable_all()
+        .build()
+        .map_err(|e| RemoteError::Client { url: location.shown().into(), problem: e.to_string() })
+}
+
 /// The client for `location`.
 pub(crate) fn build_client(
     location: &RemoteLocation,

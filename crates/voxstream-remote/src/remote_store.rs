@@ -29,7 +29,7 @@ use object_store::{GetOptions, GetRange, ObjectStore, ObjectStoreExt};
 use zarrs_storage::byte_range::{ByteRange, ByteRangeIterator};
 use zarrs_storage::{MaybeBytesIterator, ReadableStorageTraits, StorageError, StoreKey};
 
-use crate::client::build_client;
+use crate::client::{build_client, client_runtime};
 use crate::disk_cache::DiskCache;
 use crate::error::RemoteError;
 use crate::location::RemoteLocation;
@@ -140,12 +140,7 @@ impl RemoteStore {
         cache: Option<DiskCache>,
     ) -> Result<RemoteStore, RemoteError> {
         let store = build_client(&location, &options)?;
-        let runtime = tokio::runtime::Builder::new_multi_thread()
-            .worker_threads(2)
-            .thread_name("voxstream-remote")
-            .enable_all()
-            .build()
-            .map_err(|e| RemoteError::Client { url: location.shown().into(), problem: e.to_string() })?;
+        let runtime = client_runtime(&location, "voxstream-remote")?;
         Ok(RemoteStore { store, location, options, runtime, stats: RemoteStats::default(), cache })
     }
 

@@ -22,7 +22,7 @@ use futures::{StreamExt, TryStreamExt};
 use object_store::path::Path as ObjectPath;
 use object_store::{ObjectStore, ObjectStoreExt, PutPayload, WriteMultipart};
 
-use crate::client::build_client;
+use crate::client::{build_client, client_runtime};
 use crate::error::RemoteError;
 use crate::location::{RemoteLocation, Service};
 use crate::remote_store::{explain, RemoteOptions};
@@ -73,12 +73,7 @@ impl StoreUpload {
             });
         }
         let store = build_client(&location, options)?;
-        let runtime = tokio::runtime::Builder::new_multi_thread()
-            .worker_threads(2)
-            .thread_name("voxstream-upload")
-            .enable_all()
-            .build()
-            .map_err(|e| RemoteError::Client { url: location.shown().into(), problem: e.to_string() })?;
+        let runtime = client_runtime(&location, "voxstream-upload")?;
         Ok(StoreUpload { store, location, runtime })
     }
 
