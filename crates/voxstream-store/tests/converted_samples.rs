@@ -89,18 +89,7 @@ fn attributes(store: &Path) -> serde_json::Value {
 }
 
 fn npy(descr: &str, data: &[u8]) -> Vec<u8> {
-    let dict =
-        format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': ({}, {}, {}), }}", DIMS[2], DIMS[1], DIMS[0]);
-    let mut header = dict.into_bytes();
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(b' ');
-    }
-    header.push(b'\n');
-    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
-    bytes.extend((header.len() as u16).to_le_bytes());
-    bytes.extend(header);
-    bytes.extend(data);
-    bytes
+    voxstream_store::formats::npy::npy_bytes(descr, [DIMS[2], DIMS[1], DIMS[0]], data)
 }
 
 #[test]

@@ -247,17 +247,11 @@ fn inr_plain_and_gzip() {
 #[test]
 fn npy_and_raw() {
     let dir = scratch("npy");
-    let dict =
-        format!("{{'descr': '<i2', 'fortran_order': False, 'shape': ({}, {}, {}), }}", DIMS[2], DIMS[1], DIMS[0]);
-    let mut header = dict.into_bytes();
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(b' ');
-    }
-    header.push(b'\n');
-    let mut npy = b"\x93NUMPY\x01\x00".to_vec();
-    npy.extend((header.len() as u16).to_le_bytes());
-    npy.extend(header);
-    npy.extend(encode(DType::I16, Endian::Little));
+    let npy = voxstream_store::formats::npy::npy_bytes(
+        "<i2",
+        [DIMS[2], DIMS[1], DIMS[0]],
+        &encode(DType::I16, Endian::Little),
+    );
     std::fs::write(dir.join("a.npy"), npy).unwrap();
     check_import(&dir.join("a.npy"), None, DType::I16, [1.0; 3], [0.0; 3]);
 
@@ -586,17 +580,11 @@ fn nifti_scaling_is_applied_as_float() {
 fn npz_stored_and_deflated() {
     use std::io::Write;
     let dir = scratch("npz");
-    let dict =
-        format!("{{'descr': '<u2', 'fortran_order': False, 'shape': ({}, {}, {}), }}", DIMS[2], DIMS[1], DIMS[0]);
-    let mut header = dict.into_bytes();
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(b' ');
-    }
-    header.push(b'\n');
-    let mut npy = b"\x93NUMPY\x01\x00".to_vec();
-    npy.extend((header.len() as u16).to_le_bytes());
-    npy.extend(header);
-    npy.extend(encode(DType::U16, Endian::Little));
+    let npy = voxstream_store::formats::npy::npy_bytes(
+        "<u2",
+        [DIMS[2], DIMS[1], DIMS[0]],
+        &encode(DType::U16, Endian::Little),
+    );
     for (name, method) in
         [("stored.npz", zip::CompressionMethod::Stored), ("deflated.npz", zip::CompressionMethod::Deflated)]
     {

@@ -309,15 +309,7 @@ fn mistakes_in_flags_and_files_are_named_in_the_user_s_terms() {
     assert!(path_file.exists());
     // A NumPy file of shape (48, 56, 64), C order: x = 64 varies fastest.
     let raw = std::fs::read(dir.join("ball.raw")).unwrap();
-    let mut header = "{'descr': '<u2', 'fortran_order': False, 'shape': (48, 56, 64), }".to_string();
-    while !(10 + header.len() + 1).is_multiple_of(64) {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut npy = b"\x93NUMPY\x01\x00".to_vec();
-    npy.extend((header.len() as u16).to_le_bytes());
-    npy.extend(header.as_bytes());
-    npy.extend(&raw);
+    let npy = voxstream_store::formats::npy::npy_bytes("<u2", [48, 56, 64], &raw);
     std::fs::write(dir.join("numpy.npy"), npy).unwrap();
     for (args, expected) in cases {
         let output = voxstream(&args, &dir);

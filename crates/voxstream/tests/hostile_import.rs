@@ -111,20 +111,7 @@ fn nifti(dims: [i16; 3], code: i16, bitpix: i16, slope: f32, data: &[u8]) -> Vec
 }
 
 fn npy(descr: &str, shape: [u64; 3], data: &[u8]) -> Vec<u8> {
-    let dict = format!(
-        "{{'descr': '{descr}', 'fortran_order': False, 'shape': ({}, {}, {}), }}",
-        shape[0], shape[1], shape[2]
-    );
-    let mut header = dict.into_bytes();
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(b' ');
-    }
-    header.push(b'\n');
-    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
-    bytes.extend((header.len() as u16).to_le_bytes());
-    bytes.extend(header);
-    bytes.extend(data);
-    bytes
+    voxstream_store::formats::npy::npy_bytes(descr, shape, data)
 }
 
 fn npz(npy: &[u8], method: zip::CompressionMethod) -> Vec<u8> {

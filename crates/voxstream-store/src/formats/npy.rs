@@ -12,6 +12,24 @@ use super::sample_type::SampleType;
 use crate::error::StoreError;
 use crate::volume::VolumeInfo;
 
+/// A `.npy` file (format 1.0) of a C-order array of shape `(Z, Y, X)` = `shape_zyx` and type `descr` (`'<u2'`,
+/// `'|i1'`, …) holding `data`, the bytes in that type and order: what `numpy.save` writes. For tests and tools that
+/// hand voxstream NumPy files (the import reads them back with [`open`]).
+pub fn npy_bytes(descr: &str, shape_zyx: [u64; 3], data: &[u8]) -> Vec<u8> {
+    let [z, y, x] = shape_zyx;
+    let mut header = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': ({z}, {y}, {x}), }}").into_bytes();
+    // The magic (6), version (2), header length (2), header and its newline fill a multiple of 64 bytes.
+    while !(10 + header.len() + 1).is_multiple_of(64) {
+        header.push(b' ');
+    }
+    header.push(b'\n');
+    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+    bytes.extend((header.len() as u16).to_le_bytes());
+    bytes.extend(header);
+    bytes.extend(data);
+    bytes
+}
+
 /// Opens a `.npy` array.
 pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
     let mut file = std::fs::File::open(path).map_err(|e| StoreError::io(path, e))?;
