@@ -113,14 +113,7 @@ pub fn omero_transfer_function(window: [f64; 2], color: Option<[f32; 3]>) -> Res
     )?)
 }
 
-/// A number as a user would type it: `1500`, `0.25`, but `1e30` rather than thirty-one digits.
-pub fn shown_number(value: f64) -> String {
-    if value == 0.0 || (1e-4..1e15).contains(&value.abs()) || !value.is_finite() {
-        format!("{value}")
-    } else {
-        format!("{value:e}")
-    }
-}
+pub use voxstream_render::annotations::shown_number;
 
 /// The volume's place in the world is the source's (a store's spacing and origin, a mesh's bounds), not the flags':
 /// a bad one is blamed on the source.

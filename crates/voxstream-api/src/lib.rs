@@ -13,7 +13,7 @@
 //! Messages name the CLI's flags (`--iso`, `--budget-mb`): they are the one-line errors every front end shows.
 //! Errors are `anyhow` chains whose root causes stay typed (`std::io::Error`, `voxstream_store::StoreError`, …).
 
-pub mod annotations;
+pub use voxstream_render::annotations;
 pub mod backend;
 pub mod camera_path;
 pub mod camera_presets;

@@ -28,6 +28,7 @@
 //! ```
 
 pub mod adaptive_step;
+pub mod annotations;
 pub mod block_visibility;
 pub mod camera;
 pub mod cell_intersection;

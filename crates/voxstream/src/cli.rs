@@ -264,6 +264,14 @@ pub struct LookFlags {
     /// as the mean through the one-sample slab around it, in the transfer function's colours. CPU backend.
     #[arg(long, value_name = "AXIS=INDEX", value_parser = voxstream_api::slices::parse_slice)]
     pub slice: Option<voxstream_api::slices::Slice>,
+    /// Draw the transfer function's colour bar at the right edge: its colours from its first to its last point
+    /// (labelled, data units) and its opacity as a white curve.
+    #[arg(long, alias = "colour-bar")]
+    pub color_bar: bool,
+    /// Draw a scale bar at the bottom left: a round length in the data's units (a store's OME-Zarr unit), as long as
+    /// it appears at the camera's target.
+    #[arg(long)]
+    pub scale_bar: bool,
     /// Transfer function JSON: {"points": [[value, r, g, b, alpha], ...], "unit_distance": u}, or a ParaView
     /// colour-map preset (RGBPoints, optional Points), rescaled onto the data's value range.
     #[arg(long)]
@@ -390,14 +398,6 @@ pub struct RenderArgs {
     /// No progress bar, no list of files written and no summary line (warnings and errors are still printed).
     #[arg(long)]
     pub quiet: bool,
-    /// Draw the transfer function's colour bar at the right edge: its colours from its first to its last point
-    /// (labelled, data units) and its opacity as a white curve.
-    #[arg(long, alias = "colour-bar")]
-    pub color_bar: bool,
-    /// Draw a scale bar at the bottom left: a round length in the data's units (a store's OME-Zarr unit), as long as
-    /// it appears at the camera's target.
-    #[arg(long)]
-    pub scale_bar: bool,
     /// How it is drawn.
     #[command(flatten)]
     pub look: LookFlags,

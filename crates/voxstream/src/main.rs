@@ -109,8 +109,6 @@ fn unreachable_default() -> RenderArgs {
         popping: false,
         stats: None,
         quiet: false,
-        color_bar: false,
-        scale_bar: false,
         look: LookFlags {
             camera: None,
             eye: None,
@@ -124,6 +122,8 @@ fn unreachable_default() -> RenderArgs {
             projection: voxstream::cli::ProjectionArg::Composite,
             clip_plane: Vec::new(),
             slice: None,
+            color_bar: false,
+            scale_bar: false,
             crop: None,
             tf: None,
             iso: Vec::new(),

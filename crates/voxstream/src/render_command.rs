@@ -127,8 +127,8 @@ fn render_source(args: &RenderArgs, source: Source, budget: &MemoryBudget) -> Re
     let (view, drawing_surfaces) = (*view, *drawing_surfaces);
     let surfaces_in_volume = prepared.settings.surfaces_in_volume;
     let cameras = path_cameras(args.path.as_deref(), &view)?;
-    let annotations = Annotations { color_bar: args.color_bar, scale_bar: args.scale_bar };
-    if args.color_bar && drawing_surfaces && !surfaces_in_volume {
+    let annotations = Annotations { color_bar: args.look.color_bar, scale_bar: args.look.scale_bar };
+    if args.look.color_bar && drawing_surfaces && !surfaces_in_volume {
         bail!("--color-bar shows the transfer function, and only isosurfaces are drawn: add --tf to draw the volume too, or drop --color-bar");
     }
     let unit = source.store.as_ref().and_then(|store| store.info().unit.map(|u| u.name()));

@@ -76,6 +76,11 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         refinement,
         renderer: session.renderer().describe(),
         renderer_warning,
+        annotations: voxstream_api::annotations::Annotations {
+            color_bar: args.look.color_bar,
+            scale_bar: args.look.scale_bar,
+        },
+        unit: meta.store.as_ref().and_then(|s| s.info().unit.map(|u| u.name().to_string())),
     };
     let summary = run_viewer(session, config).context("voxstream view");
     if let Some(warning) = meta.clipped_warning() {

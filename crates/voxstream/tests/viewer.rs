@@ -440,3 +440,32 @@ wait $pid"#
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Issue 42 item 9 in the viewer: `view --color-bar --scale-bar` draws over its frames the bars `render` draws, and a
+/// script's screenshot (the image as shown) is `render`'s image with the same camera, transfer function and flags.
+#[test]
+fn the_viewer_draws_the_bars_render_draws() {
+    require("xvfb-run");
+    let dir = scratch("bars");
+    store(&dir);
+    std::fs::write(
+        dir.join("bars.txt"),
+        "wait-final 600\nscreenshot a.png\nsave-camera a.json\nsave-tf tf.json\nquit\n",
+    )
+    .unwrap();
+    let viewer = env!("CARGO_BIN_EXE_voxstream");
+    let out = under_xvfb(
+        &dir,
+        &format!(
+            "{viewer} view balls.zarr --width 160 --height 120 --budget-mb 64 --color-bar --scale-bar --script bars.txt"
+        ),
+    );
+    assert!(out.status.success(), "viewer: {}", String::from_utf8_lossy(&out.stderr));
+    let shown = pixels(&dir.join("a.png"));
+    let rendered =
+        render_balls(&dir, &["--camera", "a.json", "--tf", "tf.json", "--color-bar", "--scale-bar"], "render-bars.png");
+    assert_eq!(shown, rendered, "the viewer's bars and render's differ");
+    let plain = render_balls(&dir, &["--camera", "a.json", "--tf", "tf.json"], "render-plain.png");
+    assert!(mean_difference(&plain, &shown) > 0.5, "no bars were drawn");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -14,6 +14,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use eframe::egui::{self, Color32, ColorImage, TextureHandle, TextureOptions};
+use voxstream_render::annotations::{annotate_rgb8, AnnotationContext, Annotations};
 use voxstream_render::{Camera, RenderSettings, TransferFunction};
 
 use crate::files::write_output;
@@ -88,6 +89,11 @@ pub struct ViewerConfig {
     /// What the renderer warned of its device (`FrameRenderer::device_warning`: a CPU emulation of a GPU): shown
     /// in the window's messages and written to the frame log.
     pub renderer_warning: Option<String>,
+    /// The colour bar and scale bar drawn over the frames at start (`view --color-bar --scale-bar`; the window's
+    /// toggles change them).
+    pub annotations: Annotations,
+    /// The data's length unit (OME-Zarr name) for the scale bar, where known.
+    pub unit: Option<String>,
 }
 
 /// One frame as the window received it (`view --stats`).
@@ -122,6 +128,8 @@ pub struct ViewerApp {
     shown: Option<ShownFrame>,
     texture: Option<TextureHandle>,
     overlay_missing: bool,
+    /// The colour bar and scale bar drawn over the frame shown.
+    annotations: Annotations,
     /// The pools' budget the renderer is asked for, bytes (`--budget-mb`'s share at start).
     pool_budget_bytes: u64,
     /// The budget field, MiB (applied by its button).
@@ -180,6 +188,7 @@ impl ViewerApp {
             shown: None,
             texture: None,
             overlay_missing: false,
+            annotations: config.annotations,
             pool_budget_bytes: config.pool_budget_bytes,
             budget_field_mib: (config.pool_budget_bytes >> 20).max(1),
             focus: [0.5, 0.5],
@@ -324,6 +333,22 @@ impl ViewerApp {
         }
     }
 
+    /// `rgb` (the frame's pixels) with the colour bar and scale bar drawn over it where they are on: with the
+    /// transfer function the window shows and the frame's own camera, as `render --color-bar --scale-bar` draws them.
+    pub(super) fn annotated(&self, frame: &ShownFrame, rgb: Vec<u8>) -> Vec<u8> {
+        if !self.annotations.any() {
+            return rgb;
+        }
+        let tf = self.editor.transfer_function();
+        let context = AnnotationContext {
+            transfer_function: &tf,
+            camera: &frame.camera,
+            world_per_unit: 1.0,
+            unit: self.config.unit.as_deref(),
+        };
+        annotate_rgb8(&rgb, frame.size[0], frame.size[1], self.annotations, &context)
+    }
+
     fn upload(&mut self, ctx: &egui::Context, frame: &ShownFrame) {
         let mut rgb = frame.rgb.clone();
         if self.overlay_missing {
@@ -335,6 +360,7 @@ impl ViewerApp {
                 }
             }
         }
+        let rgb = self.annotated(frame, rgb);
         let image = ColorImage::from_rgb([frame.size[0] as usize, frame.size[1] as usize], &rgb);
         match &mut self.texture {
             Some(texture) => texture.set(image, TextureOptions::LINEAR),
@@ -364,7 +390,7 @@ impl eframe::App for ViewerApp {
 
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
         let ctx = ui.ctx().clone();
-        let overlay_before = self.overlay_missing;
+        let overlay_before = (self.overlay_missing, self.annotations);
         self.receive(&ctx);
         self.keyboard(&ctx);
         egui::Panel::bottom("status").show(ui, |ui| self.status_line(ui));
@@ -383,7 +409,7 @@ impl eframe::App for ViewerApp {
         });
         egui::CentralPanel::default().show(ui, |ui| self.image(ui));
         self.run_script(&ctx);
-        if self.overlay_missing != overlay_before {
+        if (self.overlay_missing, self.annotations) != overlay_before {
             // The image shown now, with or without the marks (frames may have stopped coming).
             if let Some(shown) = self.shown.take() {
                 self.upload(&ctx, &shown);

@@ -146,6 +146,8 @@ impl ViewerApp {
         ui.add(egui::Slider::new(&mut self.settings.step_factor, 0.25..=2.0).text("step (voxels)"));
         self.isosurface_controls(ui);
         ui.checkbox(&mut self.overlay_missing, "mark pixels still missing data (M)");
+        ui.checkbox(&mut self.annotations.color_bar, "colour bar of the transfer function");
+        ui.checkbox(&mut self.annotations.scale_bar, "scale bar");
         ui.checkbox(&mut self.settings.colour_by_level, "colour by the level used (L)");
         if self.settings.colour_by_level {
             ui.horizontal_wrapped(|ui| {

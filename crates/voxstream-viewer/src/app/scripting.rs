@@ -28,7 +28,7 @@ impl ViewerApp {
 
     pub(super) fn screenshot(&self, path: &std::path::Path) -> Result<(), String> {
         let shown = self.shown.as_ref().ok_or("no image yet")?;
-        save_png(path, shown.size, &shown.rgb)
+        save_png(path, shown.size, &self.annotated(shown, shown.rgb.clone()))
     }
 
     /// Ends the scripted session with `message`: shown, left for `run_viewer` to return, and the window closed.

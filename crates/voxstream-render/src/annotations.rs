@@ -2,8 +2,8 @@
 //! **colour bar** of the transfer function (its colours from its first to its last point, the opacity as a white
 //! curve beside them, the two ends labelled in data units) and a **scale bar** (a round length in the data's units
 //! as it appears at the camera's target: for a perspective camera, nearer parts look larger and farther ones
-//! smaller). Off by default; `render --color-bar --scale-bar`, Python `render(color_bar=True, scale_bar=True)` (the
-//! viewer does not draw them yet).
+//! smaller). Off by default; `render --color-bar --scale-bar`, `view` (the same flags, and the window's toggles),
+//! Python `render(color_bar=True, scale_bar=True)`.
 //!
 //! Labels use the public-domain 8×8 bitmap font of `font8x8` (scaled ×2 from 512 pixels up), drawn white with a
 //! black outline so they read over any background. The annotations are drawn onto a copy: the image the renderer
@@ -11,9 +11,17 @@
 
 use font8x8::{UnicodeFonts, BASIC_FONTS, LATIN_FONTS};
 use glam::DVec3;
-use voxstream_render::{Camera, Image, TransferFunction};
 
-use crate::defaults::shown_number;
+use crate::{Camera, Image, TransferFunction};
+
+/// A number as a user would type it: `1500`, `0.25`, but `1e30` rather than thirty-one digits.
+pub fn shown_number(value: f64) -> String {
+    if value == 0.0 || (1e-4..1e15).contains(&value.abs()) || !value.is_finite() {
+        format!("{value}")
+    } else {
+        format!("{value:e}")
+    }
+}
 
 /// Which annotations to draw.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -55,6 +63,14 @@ pub fn annotate(image: &Image, what: Annotations, context: &AnnotationContext) -
         draw_scale_bar(&mut out, context, scale);
     }
     out
+}
+
+/// [`annotate`] over 8-bit RGB pixels (`width × height`, top row first), as a window shows them.
+pub fn annotate_rgb8(rgb: &[u8], width: u32, height: u32, what: Annotations, context: &AnnotationContext) -> Vec<u8> {
+    let pixels =
+        rgb.chunks_exact(3).map(|p| [0, 1, 2].map(|c| f32::from(p[c]) / 255.0)).map(|[r, g, b]| [r, g, b, 1.0]);
+    let image = Image { width, height, pixels: pixels.collect() };
+    annotate(&image, what, context).to_rgb8()
 }
 
 /// A short unit label: `mm` for `millimeter`, `µm` for `micrometer`; other names as they are; `units` when unknown.

@@ -1,0 +1,60 @@
+#!/usr/bin/env bash
+# voxstream against tensorstore over the same emulated link (issue 43; not part of CI): STORE served by nginx
+# (byte ranges), scripts/fault_proxy.py adding RTT ms before every answer. voxstream renders the URL converged at
+# 512² (wall clock, opening and rendering included); tensorstore (pip, into target/peers/ts-venv) then reads exactly
+# the bricks that render fetched (bench/peers/tensorstore_fetch.py), without and with a cache pool. Prints one line
+# per RTT: voxstream's seconds and requests, tensorstore's seconds and requests (as nginx logged them).
+# Usage: bench/peers/tensorstore.sh STORE [RTT_MS ...]   (default RTTs: 0 50 150)
+set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")/../.."
+store=$(realpath "$1"); shift
+rtts=("$@"); [ ${#rtts[@]} -gt 0 ] || rtts=(0 50 150)
+bin=${VOXSTREAM_BIN:-$(pwd)/target/release/voxstream}
+[ -x "$bin" ] || cargo build --release --quiet
+venv=target/peers/ts-venv
+if [ ! -x "$venv/bin/python" ]; then
+    python3 -m venv "$venv"
+    "$venv/bin/pip" install --quiet --disable-pip-version-check tensorstore==0.1.86 numpy==2.4.6
+fi
+work=$(mktemp -d /tmp/voxstream-ts-bench.XXXXXX)
+pids=()
+cleanup() { for pid in "${pids[@]}"; do kill "$pid" 2>/dev/null || true; done; rm -rf "$work"; }
+trap cleanup EXIT
+free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'; }
+wait_port() { for _ in $(seq 300); do (echo >/dev/tcp/127.0.0.1/"$1") 2>/dev/null && return 0; sleep 0.1; done; return 1; }
+port=$(free_port)
+mkdir -p "$work/nginx"
+cat > "$work/nginx/nginx.conf" <<CONF
+daemon off; master_process off; pid $work/nginx/nginx.pid; error_log $work/nginx/error.log;
+events { worker_connections 1024; }
+http { log_format ranges '\$request "\$http_range" \$status \$body_bytes_sent'; access_log $work/nginx/access.log ranges;
+  client_body_temp_path $work/nginx/b; proxy_temp_path $work/nginx/p; fastcgi_temp_path $work/nginx/f;
+  uwsgi_temp_path $work/nginx/u; scgi_temp_path $work/nginx/s;
+  server { listen 127.0.0.1:$port; root $(dirname "$store"); location / { } } }
+CONF
+/usr/sbin/nginx -p "$work/nginx" -c "$work/nginx/nginx.conf" -e "$work/nginx/error.log" & pids+=($!)
+wait_port "$port"
+name=$(basename "$store")
+printf '%6s %14s %10s %16s %10s %18s %10s %7s\n' "RTT ms" "voxstream s" requests "tensorstore s" requests "ts + cache s" requests chunks
+for rtt in "${rtts[@]}"; do
+    pport=$(free_port)
+    python3 scripts/fault_proxy.py --listen "$pport" --upstream "127.0.0.1:$port" --latency-ms "$rtt" >/dev/null 2>&1 & pids+=($!)
+    wait_port "$pport"
+    url="http://127.0.0.1:$pport/$name"
+    : > "$work/nginx/access.log"
+    start=$(date +%s.%N)
+    "$bin" render "$url" --out "$work/remote.png" --quiet --width 512 --height 512
+    end=$(date +%s.%N); vs=$(echo "$end - $start" | bc)
+    cp "$work/nginx/access.log" "$work/voxstream.log"
+    vs_requests=$(wc -l < "$work/voxstream.log")
+    : > "$work/nginx/access.log"
+    plain=$("$venv/bin/python" bench/peers/tensorstore_fetch.py "$store" "$url" "$work/voxstream.log")
+    plain_requests=$(wc -l < "$work/nginx/access.log")
+    : > "$work/nginx/access.log"
+    cached=$("$venv/bin/python" bench/peers/tensorstore_fetch.py "$store" "$url" "$work/voxstream.log" --cache-mb 256)
+    cached_requests=$(wc -l < "$work/nginx/access.log")
+    read -r chunks ts_plain < <(python3 -c 'import json,sys; r=json.loads(sys.argv[1]); print(r["chunks"], r["seconds"])' "$plain")
+    ts_cached=$(python3 -c 'import json,sys; print(json.loads(sys.argv[1])["seconds"])' "$cached")
+    printf '%6s %14.2f %10s %16s %10s %18s %10s %7s\n' "$rtt" "$vs" "$vs_requests" "$ts_plain" "$plain_requests" "$ts_cached" "$cached_requests" "$chunks"
+    kill "${pids[-1]}" 2>/dev/null || true
+done
