@@ -23,6 +23,7 @@ use voxstream_geometry::{
 use voxstream_render::{Camera, IsoSurface, TransferFunction, VolumePlacement, FRAME_BYTES_PER_PIXEL};
 
 use crate::defaults::frame_box;
+use crate::loading_spinner::LoadingSpinner;
 
 /// The flags that shape a geometry file's tree (from `render` or `import`).
 #[derive(Clone, Copy, Debug)]
@@ -43,6 +44,8 @@ pub struct GeometryOptions {
     pub width: u32,
     /// Image height.
     pub height: u32,
+    /// No spinner while a large file is read and indexed.
+    pub quiet: bool,
 }
 
 /// A producer over a mesh or particles (a closed set, dispatched through an enum).
@@ -145,13 +148,21 @@ pub fn open(path: &Path, args: &GeometryOptions) -> Result<GeometrySource> {
         }
     }
     if let Some(memory) = out_of_core_memory(path, args)? {
+        let _spinner = LoadingSpinner::start(path, "binning into superbricks (three passes over)", args.quiet);
         return open_streamed(path, args, memory, started);
     }
     // A point file's header says how many particles it holds: refuse before reading a file whose index cannot fit.
     if let Some(count) = declared_points(path) {
         check_particle_budget(path, count, "declares", args)?;
     }
+    let spinner = LoadingSpinner::start(path, "reading", args.quiet);
     let raw = read_geometry(path)?;
+    spinner.stage(match &raw {
+        RawGeometry::Mesh(mesh) => {
+            format!("building the distance index of {shown}'s {} triangles", mesh.triangles.len())
+        }
+        RawGeometry::Particles(particles) => format!("indexing {shown}'s {} particles", particles.positions.len()),
+    });
     match raw {
         RawGeometry::Mesh(raw) => {
             if args.attribute {

@@ -115,6 +115,7 @@ pub fn open_input(input: &Path, settings: &ImportSettings) -> Result<ImportInput
             budget_mb: None,
             width: 512,
             height: 512,
+            quiet: false,
         };
         let geometry = geometry_source::open(input, &options)?;
         let source = BakedGeometry::new(geometry.producer, geometry.value_range, geometry.bounds)?;

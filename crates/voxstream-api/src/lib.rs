@@ -24,6 +24,7 @@ pub mod fluid;
 pub mod geometry_import;
 pub mod geometry_source;
 pub mod import_input;
+pub mod loading_spinner;
 pub mod near_names;
 pub mod remote_output;
 pub mod render_budget;

@@ -180,6 +180,7 @@ pub fn open(name: &str, options: &SourceOptions, budget: &MemoryBudget) -> Resul
             budget_mb: Some(budget.budget_mb()),
             width: options.width,
             height: options.height,
+            quiet: options.quiet,
         };
         let geometry = geometry_source::open(path, &geometry_options)?;
         let producer = Box::new(geometry.producer);
