@@ -14,6 +14,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use voxstream_api::import_input::{open_input, ImportInput, ImportSettings};
 use voxstream_api::remote_output::remote_output;
+use voxstream_store::formats::sample_type::{SampleConversion, SampleType};
 use voxstream_store::{DType, ImportReport, StoreError, VolumeInfo, VolumeSource};
 
 use crate::errors::{progress_step, to_py_err};
@@ -32,11 +33,18 @@ struct ArraySource {
     samples: Samples,
     /// The next z slice to hand out.
     next_slice: usize,
+    /// For int8, int32, uint32 and float64 arrays: what converting them to the store's type did (as `voxstream
+    /// import` of a `.npy` of them says).
+    conversion: Option<SampleConversion>,
 }
 
 impl VolumeSource for ArraySource {
     fn info(&self) -> &VolumeInfo {
         &self.info
+    }
+
+    fn conversion(&self) -> Option<SampleConversion> {
+        self.conversion
     }
 
     fn read_slices(&mut self, count: usize, out: &mut Vec<f32>) -> Result<(), StoreError> {
@@ -148,14 +156,17 @@ pub fn report_dict<'py>(
     result.set_item("bricks_written", report.bricks_written.iter().sum::<u64>())?;
     result.set_item("bricks_empty", report.bricks_empty.iter().sum::<u64>())?;
     result.set_item("value_range", report.value_range)?;
+    if let Some(conversion) = &report.conversion {
+        result.set_item("conversion", conversion.to_string())?;
+    }
     Ok(result)
 }
 
 /// The error for an array of a sample type no store holds (`name` as numpy spells it).
-pub fn unsupported_dtype(name: &str) -> PyErr {
+fn unsupported_dtype(name: &str) -> PyErr {
     PyValueError::new_err(format!(
-        "arrays of {name} cannot be imported: convert to uint8, uint16, int16 or float32 (e.g. \
-         array.astype(numpy.float32))"
+        "arrays of {name} cannot be imported: give uint8, uint16, int16 or float32 (stored as they are), or int8, \
+         int32, uint32 or float64 (converted) (e.g. array.astype(numpy.float32))"
     ))
 }
 
@@ -183,6 +194,25 @@ fn array_source(
         // `iter` walks the logical order ([z, y, x], x fastest) whatever the strides.
         Some(view.iter().copied().collect())
     }
+    // int8, int32, uint32 and float64 are converted as the `.npy` importer converts them (int8 to int16, exactly;
+    // the others to float32, the rounding counted and said), a finite float64 beyond float32's range refused.
+    let mut conversion = None;
+    let mut converted = |ty: SampleType, values: &mut dyn Iterator<Item = f64>| -> PyResult<Vec<f32>> {
+        let mut tally = SampleConversion::new(ty);
+        let mut out = Vec::new();
+        for (i, value) in values.enumerate() {
+            let stored = value as f32;
+            if value.is_finite() && !stored.is_finite() {
+                return Err(PyValueError::new_err(format!(
+                    "sample {i} of the float64 array is {value}, beyond float32's range: scale the array first"
+                )));
+            }
+            tally.count(value, stored);
+            out.push(stored);
+        }
+        conversion = Some(tally);
+        Ok(out)
+    };
     let (dtype, samples) = if let Some(v) = samples::<u8>(source) {
         (DType::U8, Samples::U8(v))
     } else if let Some(v) = samples::<u16>(source) {
@@ -191,6 +221,15 @@ fn array_source(
         (DType::I16, Samples::I16(v))
     } else if let Some(v) = samples::<f32>(source) {
         (DType::F32, Samples::F32(v))
+    } else if let Some(v) = samples::<i8>(source) {
+        conversion = Some(SampleConversion { samples: v.len() as u64, ..SampleConversion::new(SampleType::I8) });
+        (DType::I16, Samples::I16(v.into_iter().map(i16::from).collect()))
+    } else if let Some(v) = samples::<i32>(source) {
+        (DType::F32, Samples::F32(converted(SampleType::I32, &mut v.into_iter().map(f64::from))?))
+    } else if let Some(v) = samples::<u32>(source) {
+        (DType::F32, Samples::F32(converted(SampleType::U32, &mut v.into_iter().map(f64::from))?))
+    } else if let Some(v) = samples::<f64>(source) {
+        (DType::F32, Samples::F32(converted(SampleType::F64, &mut v.into_iter())?))
     } else {
         return Err(unsupported_dtype(&source.getattr("dtype")?.str()?.to_string()));
     };
@@ -201,5 +240,5 @@ fn array_source(
         origin: origin.unwrap_or([0.0; 3]),
         unit: None,
     };
-    Ok(Some(ArraySource { info, samples, next_slice: 0 }))
+    Ok(Some(ArraySource { info, samples, next_slice: 0, conversion }))
 }

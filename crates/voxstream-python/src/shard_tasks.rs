@@ -13,7 +13,7 @@ use voxstream_store::value_histogram::HistogramParts;
 use voxstream_store::{DType, ImportOptions, VolumeInfo};
 
 use crate::errors::to_py_err;
-use crate::import::{report_dict, unsupported_dtype};
+use crate::import::report_dict;
 
 /// A distributed import in progress: the store's import lock and `STORE.partial`. `finish` puts the store in
 /// place; `abort` (or the object's end) removes the partial store and leaves an existing one as it was.
@@ -172,7 +172,12 @@ fn sample_type(name: &str) -> PyResult<DType> {
         "float32" => Some(DType::F32),
         other => DType::from_name(other),
     };
-    dtype.ok_or_else(|| unsupported_dtype(name))
+    dtype.ok_or_else(|| {
+        PyValueError::new_err(format!(
+            "a distributed import of {name} is not possible: its shards hold uint8, uint16, int16 or float32 (convert \
+             the array first, e.g. array.astype(numpy.float32))"
+        ))
+    })
 }
 
 fn summary_to_py<'py>(py: Python<'py>, summary: &ShardSummary) -> PyResult<Bound<'py, PyDict>> {

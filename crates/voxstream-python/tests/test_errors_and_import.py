@@ -97,7 +97,10 @@ def test_a_mesh_file_is_baked_into_a_store_as_the_cli_does(cli, tmp_path):
 
 def test_arrays_of_other_types_and_shapes_are_refused_with_the_fix(tmp_path):
     with pytest.raises(ValueError, match="astype"):
-        vs.import_volume(np.zeros((4, 4, 4), dtype=np.float64), tmp_path / "x.zarr")
+        vs.import_volume(np.zeros((4, 4, 4), dtype=np.int64), tmp_path / "x.zarr")
+    with pytest.raises(ValueError, match="beyond float32's range"):
+        vs.import_volume(np.full((4, 4, 4), 1e300), tmp_path / "y.zarr")
+    assert not (tmp_path / "y.zarr").exists()
     with pytest.raises(ValueError, match="3-D array"):
         vs.import_volume(np.zeros((4, 4), dtype=np.uint8), tmp_path / "x.zarr")
 
@@ -110,3 +113,24 @@ def test_a_strided_array_imports_in_its_logical_order(tmp_path):
     a = vs.open(tmp_path / "c.zarr", size=(64, 64)).render()
     b = vs.open(tmp_path / "s.zarr", size=(64, 64)).render()
     assert np.array_equal(a, b)
+
+
+def test_int8_int32_uint32_and_float64_arrays_are_converted_and_said(tmp_path):
+    """As `voxstream import` converts such .npy files (issue 42 item 6): int8 to int16 exactly, the others to float32,
+    the rounding counted; the store holds what the float32 (or int16) array would."""
+    base = ball(24)
+    cases = [
+        (base.astype(np.int8) - 60, "i16", "every int8 value is an int16: exact"),
+        (base.astype(np.int32) * 1000, "f32", "exact"),
+        (base.astype(np.uint32) + (1 << 25) + 1, "f32", "rounded to the nearest float32"),
+        (base.astype(np.float64) / 3.0, "f32", "rounded to float32's 24-bit precision"),
+    ]
+    for i, (array, stored, note) in enumerate(cases):
+        report = vs.import_volume(array, tmp_path / f"c{i}.zarr")
+        assert report["dtype"] == stored and note in report["conversion"], report
+        expected = array.astype(np.int16 if stored == "i16" else np.float32)
+        vs.import_volume(expected, tmp_path / f"e{i}.zarr")
+        a = vs.open(tmp_path / f"c{i}.zarr", size=(48, 48)).render()
+        b = vs.open(tmp_path / f"e{i}.zarr", size=(48, 48)).render()
+        assert np.array_equal(a, b), (i, array.dtype)
+    assert "conversion" not in vs.import_volume(base, tmp_path / "plain.zarr")

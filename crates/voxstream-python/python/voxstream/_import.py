@@ -17,7 +17,8 @@ def import_volume(source, out, *, spacing: Optional[Sequence[float]] = None,
     """Writes ``source`` as a voxstream store at ``out``: a file's path (any format ``voxstream import`` reads:
     NumPy, NIfTI, NRRD, MetaImage, VTK, TIFF stacks, …; meshes and particle files are baked into a grid of
     ``resolution`` voxels per axis, meshes with noise of ``amplify``) or a 3-D numpy array indexed ``[z, y, x]`` of
-    uint8, uint16, int16 or float32. ``progress(done, total)`` is called with input bytes read (tqdm-friendly:
+    uint8, uint16, int16 or float32 (stored as they are), or int8, int32, uint32 or float64 (converted as ``voxstream
+    import`` converts them; the report's ``conversion`` says what it did). ``progress(done, total)`` is called with input bytes read (tqdm-friendly:
     ``lambda done, total: bar.update(done - bar.n)``). An existing store is replaced only with ``overwrite=True``,
     and only once the new one is complete; Ctrl-C or an exception raised by ``progress`` stops the import and
     removes what was written. Returns dims, dtype, levels, bricks written and empty, and the value range.
