@@ -61,8 +61,9 @@ pub trait Producer: Send + Sync {
         None
     }
 
-    /// A hint that these nodes will probably be requested soon (requests deferred past this frame's bound): a
-    /// producer that reads from slow storage may start fetching them in the background. It must not change what
+    /// A hint that these nodes will probably be requested soon (requests deferred past this frame's bound, or, in
+    /// converged passes, the level below what the rays still lack: [`crate::ServeOptions::prefetch_new_children`]):
+    /// a producer that reads from slow storage may start fetching them in the background. It must not change what
     /// `produce` returns. The default does nothing.
     fn prefetch(&self, keys: &[NodeKey]) {
         let _ = keys;

@@ -4,6 +4,7 @@
 //! node at once.
 
 use crate::error::ProduceError;
+use crate::feedback::{Request, RequestKind};
 use crate::key::NodeKey;
 use crate::node::{NodeData, NodeId, TileId};
 use crate::producer::Producer;
@@ -13,7 +14,7 @@ use super::space_order::in_space_order;
 use super::tree_updates::Eviction;
 #[cfg(doc)]
 use super::ServeOptions;
-use super::{CacheManager, ServeReport};
+use super::{CacheManager, ServeReport, PREFETCH_LIMIT};
 
 impl<P: Producer> CacheManager<P> {
     /// Produces the still-missing children of `new_tiles` (each with its parent's key) into free brick slots, in
@@ -83,6 +84,67 @@ impl<P: Producer> CacheManager<P> {
                 } else if is_brick {
                     report.bricks_prefetched += 1;
                 }
+            }
+        }
+    }
+}
+
+impl<P: Producer> CacheManager<P> {
+    /// Converged passes: hints the producer ([`Producer::prefetch`]) at the level the rays of `asked` will want in
+    /// the next pass, so that its data is on its way while this pass's result is drawn instead of being fetched only
+    /// once the rays ask (one wait on slow storage per tree level otherwise). A ray that asked with a deficit of
+    /// 2 or more still lacks a level below what was served: the children of a brick it asked to be produced, the
+    /// grandchildren under a subdivision it asked for (under each child brick of the new tile). Only what the
+    /// oracle does not know to be constant, and what has no tile yet, is hinted; at most [`PREFETCH_LIMIT`] nodes,
+    /// in `asked`'s order (the queue's: largest deficit first). Hints change nothing resident or produced.
+    pub(super) fn hint_next_level(&self, asked: &[(Request, NodeKey)], report: &mut ServeReport) {
+        let per_tile = self.shape.nodes_per_tile();
+        let mut hints: Vec<NodeKey> = Vec::new();
+        for &(request, key) in asked {
+            if hints.len() >= PREFETCH_LIMIT {
+                break;
+            }
+            if request.deficit < 2
+                || !self.node_pool.is_in_use(request.node.tile(per_tile))
+                || self.node_pool.key(request.node) != key
+            {
+                continue;
+            }
+            match request.kind {
+                RequestKind::Produce => self.unknown_children(request.node, key, &mut hints),
+                RequestKind::Subdivide => {
+                    if let Some(tile) = self.node_pool.node(request.node).child_tile() {
+                        for child in 0..per_tile {
+                            let child_key = key.child(child, self.shape.n);
+                            self.unknown_children(NodeId::new(tile, child, per_tile), child_key, &mut hints);
+                        }
+                    }
+                }
+            }
+        }
+        hints.truncate(PREFETCH_LIMIT);
+        if !hints.is_empty() {
+            report.next_level_hints += hints.len();
+            self.producer.prefetch(&hints);
+        }
+    }
+
+    /// Appends the children of `node` (holding `key`) that a later subdivision would create and produce: none unless
+    /// it holds a non-terminal brick and has no child tile; those the oracle does not know to be constant and that
+    /// have not failed.
+    fn unknown_children(&self, node: NodeId, key: NodeKey, hints: &mut Vec<NodeKey>) {
+        let record = self.node_pool.node(node);
+        if record.brick().is_none()
+            || record.is_terminal()
+            || record.child_tile().is_some()
+            || key.level >= self.shape.max_level
+        {
+            return;
+        }
+        for child in 0..self.shape.nodes_per_tile() {
+            let child_key = key.child(child, self.shape.n);
+            if !self.failed.contains(&child_key) && self.producer.oracle(child_key).is_none() {
+                hints.push(child_key);
             }
         }
     }
@@ -170,5 +232,84 @@ mod tests {
             }
         }
         assert!(was_full, "the pool of {capacity} bricks never filled up");
+    }
+
+    /// [`Ramp`], remembering what it is told to prefetch.
+    #[derive(Default)]
+    struct Hinted(std::sync::Mutex<Vec<NodeKey>>);
+    impl Producer for Hinted {
+        fn shape(&self) -> crate::key::TreeShape {
+            Ramp.shape()
+        }
+        fn oracle(&self, key: NodeKey) -> Option<f32> {
+            Ramp.oracle(key)
+        }
+        fn produce(&self, key: NodeKey, voxels: &mut [u16]) -> Result<crate::producer::Produced, ProduceError> {
+            Ramp.produce(key, voxels)
+        }
+        fn prefetch(&self, keys: &[NodeKey]) {
+            self.0.lock().unwrap().extend_from_slice(keys);
+        }
+    }
+
+    /// Serves one request of `deficit` and returns what the producer was told to prefetch, sorted.
+    fn hints_after(
+        cache: &mut CacheManager<Hinted>,
+        node: NodeId,
+        kind: RequestKind,
+        deficit: u8,
+        prefetch_new_children: bool,
+    ) -> (ServeReport, Vec<NodeKey>) {
+        cache.producer().0.lock().unwrap().clear();
+        cache.begin_frame();
+        cache.feedback().push_requests(&[Request { node, kind, deficit }]);
+        let report = cache.end_frame(crate::ServeOptions { limit: None, prefetch_new_children, wait_for_data: true });
+        assert_eq!(cache.check_invariants(), Ok(()));
+        let mut hints = cache.producer().0.lock().unwrap().clone();
+        hints.sort_by_key(|key| (key.level, key.ijk[2], key.ijk[1], key.ijk[0]));
+        (report, hints)
+    }
+
+    #[test]
+    fn rays_short_of_two_levels_get_the_level_below_what_was_served_hinted() {
+        let unknown_children = |key: NodeKey| -> Vec<NodeKey> {
+            let mut children: Vec<NodeKey> =
+                (0..8).map(|c| key.child(c, 2)).filter(|k| Ramp.oracle(*k).is_none()).collect();
+            children.sort_by_key(|key| (key.level, key.ijk[2], key.ijk[1], key.ijk[0]));
+            children
+        };
+        let root = NodeKey { level: 0, ijk: [0; 3] };
+        // Producing the root for a ray that wants level 1 or finer: its seven non-constant children are hinted
+        // (a deficit of 2 for a missing node means the ray wants one level below it).
+        let mut cache = CacheManager::new(Hinted::default(), 16 << 20).unwrap();
+        let (report, hints) = hints_after(&mut cache, NodeId::ROOT, RequestKind::Produce, 2, true);
+        assert_eq!(hints, unknown_children(root));
+        assert_eq!(report.next_level_hints, 7);
+        assert!(cache.node_pool().node(NodeId::ROOT).child_tile().is_none(), "a hint creates nothing");
+
+        // A subdivision asked with a deficit of 1 is complete once its children are produced: no hints.
+        let (report, hints) = hints_after(&mut cache, NodeId::ROOT, RequestKind::Subdivide, 1, true);
+        assert_eq!((report.bricks_prefetched, report.next_level_hints, hints.len()), (7, 0, 0));
+
+        // With a deficit of 2, the children of each new child brick are hinted (7 bricks, 7 unknown each), and
+        // only in converged passes (`prefetch_new_children`).
+        for converged in [false, true] {
+            let mut cache = CacheManager::new(Hinted::default(), 16 << 20).unwrap();
+            hints_after(&mut cache, NodeId::ROOT, RequestKind::Produce, 1, converged);
+            let (report, hints) = hints_after(&mut cache, NodeId::ROOT, RequestKind::Subdivide, 2, converged);
+            if !converged {
+                assert_eq!((report.next_level_hints, hints.len()), (0, 0));
+                continue;
+            }
+            let mut expected: Vec<NodeKey> = (0..8)
+                .map(|c| root.child(c, 2))
+                .filter(|k| Ramp.oracle(*k).is_none())
+                .flat_map(unknown_children)
+                .collect();
+            expected.sort_by_key(|key| (key.level, key.ijk[2], key.ijk[1], key.ijk[0]));
+            assert_eq!(hints.len(), 49);
+            assert_eq!(hints, expected);
+            assert_eq!(report.next_level_hints, 49);
+        }
     }
 }

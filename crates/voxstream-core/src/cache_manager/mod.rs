@@ -32,6 +32,9 @@
 //!   occluded; none for the shell scene, 2.6× the bricks for the sponge's 27-child tiles) for fewer passes;
 //!   converged frames turn it on, interactive frames keep their bounded work.
 //!   A child whose production fails is left missing, to be requested, and its failure reported, if a ray needs it.
+//!   Where a ray is short of two or more levels, the level below what was served (children of a produced brick,
+//!   grandchildren under a new tile) is handed to [`Producer::prefetch`] as well: a remote store fetches it while
+//!   the next pass is drawn, instead of each pass waiting a round trip for the level its rays just found they need.
 //! - **Brick analysis.** A produced terminal brick whose voxels are all equal becomes a constant node (no brick
 //!   slot). Non-terminal bricks stay bricks: only the producer knows whether finer levels are constant too.
 //!
@@ -265,6 +268,13 @@ impl<P: Producer> CacheManager<P> {
         if take < work.len() && limit != Some(0) {
             self.prefetch_deferred(&work[take..]);
         }
+        // Rays still short of two or more levels: the level below what this frame serves is hinted to the producer
+        // once it is served (converged passes, see `hint_next_level`).
+        let short: Vec<(Request, NodeKey)> = if options.prefetch_new_children {
+            work[..take].iter().filter(|(request, _)| request.deficit >= 2).copied().collect()
+        } else {
+            Vec::new()
+        };
         // What this frame leaves unserved: past the bound, or deferred for want of room.
         let mut unserved: Vec<(Request, NodeKey)> = Vec::new();
         let mut new_tiles: Vec<(TileId, NodeKey)> = Vec::new();
@@ -279,6 +289,7 @@ impl<P: Producer> CacheManager<P> {
         }
         if options.prefetch_new_children {
             self.prefetch_children(&new_tiles, &mut report);
+            self.hint_next_level(&short, &mut report);
         }
         if let Some(blending) = &mut self.blending {
             // The regions the rays want finer than resident: a missing node at its level, a childless one a level

@@ -9,7 +9,9 @@ use crate::producer::Producer;
 pub struct ServeOptions {
     /// Most requests served (all if `None`); the rest wait for a later frame.
     pub limit: Option<usize>,
-    /// Also produce the children of each new tile into free brick slots, never evicting (see the module docs).
+    /// Also produce the children of each new tile into free brick slots, never evicting (see the module docs), and
+    /// hint the producer at the level below what was served where rays are still short of two or more levels
+    /// ([`Producer::prefetch`]), so that slow storage fetches it while the next pass is drawn: converged passes.
     pub prefetch_new_children: bool,
     /// Produce nodes whose data is still on its way ([`Producer::ready`] says no), waiting for it: converged frames
     /// do; interactive frames leave them to a later frame, so that a frame never waits on slow storage.

@@ -31,6 +31,9 @@ pub struct ServeReport {
     /// Children of new tiles left missing by [`ServeOptions::prefetch_new_children`] (no free slot, or their
     /// production failed).
     pub children_left_missing: usize,
+    /// Nodes the producer was told the next pass will probably want ([`ServeOptions::prefetch_new_children`]: the
+    /// level below what was served, for rays still short of two or more levels; see [`Producer::prefetch`]).
+    pub next_level_hints: usize,
     /// Nodes that turned out constant (oracle or brick analysis).
     pub constant_nodes: usize,
     /// Tiles created.
