@@ -165,6 +165,12 @@ fn index_cache() -> std::sync::Mutex<lru::LruCache<(String, u64), Option<zarrs::
 }
 
 impl CheckedStore {
+    /// Reads the shard index of `key` (its last `length` bytes) into the cache of indexes, as the first brick read
+    /// of the shard would (see `store_reader::shard_indexes`).
+    pub(crate) fn shard_index(&self, key: &StoreKey, length: u64) -> Result<(), StorageError> {
+        self.suffix(key, length).map(|_| ())
+    }
+
     /// The shard index `key`'s last `length` bytes, read once and then kept.
     fn suffix(&self, key: &StoreKey, length: u64) -> Result<MaybeBytesIterator<'_>, StorageError> {
         let cache_key = (key.as_str().to_string(), length);

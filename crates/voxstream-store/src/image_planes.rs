@@ -23,6 +23,17 @@ pub enum LeadingKind {
     Other,
 }
 
+impl LeadingKind {
+    /// The kind's name in `info`'s text and JSON and the Python package's `info()`: `time`, `channel` or `other`.
+    pub fn name(self) -> &'static str {
+        match self {
+            LeadingKind::Time => "time",
+            LeadingKind::Channel => "channel",
+            LeadingKind::Other => "other",
+        }
+    }
+}
+
 /// One axis before z, y, x: what it is, its name, how many samples it has and which one is read.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct LeadingAxis {

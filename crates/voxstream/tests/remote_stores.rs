@@ -227,6 +227,47 @@ fn http_and_s3_give_the_local_image_byte_for_byte() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// Every shard file under `level_dir` (`…/c/z/y/x`), as its path below `store` with `/` separators.
+fn shard_files(store: &Path, level_dir: &Path, out: &mut Vec<String>) {
+    for entry in std::fs::read_dir(level_dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.is_dir() {
+            shard_files(store, &path, out);
+        } else if path.strip_prefix(store).unwrap().components().nth(1).is_some_and(|c| c.as_os_str() == "c") {
+            out.push(path.strip_prefix(store).unwrap().to_string_lossy().replace('\\', "/"));
+        }
+    }
+}
+
+#[test]
+fn opening_a_remote_store_fetches_its_shard_indexes_with_the_level_probes() {
+    // Opening reads every shard index the coarse levels have (at most 256), while the levels are probed, so that a
+    // render waits one round trip per brick of those levels, not two: `info` opens the store and reads nothing else.
+    let dir = scratch("remote_stores", "indexes");
+    import_ball(&dir, "www/ball.zarr");
+    let store = dir.join("www/ball.zarr");
+    let mut shards = Vec::new();
+    for level in ["0", "1", "2"] {
+        shard_files(&store, &store.join(level), &mut shards);
+    }
+    shards.sort();
+    assert!(shards.len() >= 3, "the ball's store has shards at each of its levels: {shards:?}");
+    let server = nginx(&dir, &dir.join("www"));
+    let out = voxstream(&["info", &format!("http://127.0.0.1:{}/ball.zarr", server.port)], &dir);
+    assert!(out.status.success(), "info over HTTP: {}", stderr(&out));
+    let log = std::fs::read_to_string(dir.join("nginx/access.log")).unwrap();
+    // Suffix reads (`bytes=-N`) are shard indexes; each is asked for once.
+    let mut indexes: Vec<String> = log
+        .lines()
+        .filter(|l| l.contains("\"bytes=-"))
+        .filter_map(|l| l.split_whitespace().nth(1))
+        .map(|path| path.trim_start_matches("/ball.zarr/").to_string())
+        .collect();
+    indexes.sort();
+    assert_eq!(indexes, shards, "shard indexes fetched at open, against the shards stored:\n{log}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// Creates `bucket` on moto at `port` with boto3.
 fn create_bucket(port: u16, bucket: &str) {
     let script = r#"

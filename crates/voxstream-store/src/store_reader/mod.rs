@@ -15,11 +15,13 @@
 //! - `opening`: opening a local or remote store and validating its metadata and per-brick min/max once.
 //! - `brick_reads`: regions assembled from bricks, each read once through the brick cache and checked.
 //! - `background`: fetching ahead (prefetch, and the non-blocking frames of a remote session).
+//! - `shard_indexes`: a remote store's coarse shard indexes, fetched at open.
 //! - `value_range_scan`: a foreign store's value range, scanned at open, and the samples it clips.
 
 mod background;
 mod brick_reads;
 mod opening;
+mod shard_indexes;
 mod value_range_scan;
 
 use std::num::NonZeroUsize;

@@ -51,6 +51,7 @@ fn read_minmax(
     layout: &PyramidLayout,
     level: usize,
     volume_is_zero: bool,
+    remote: bool,
 ) -> Result<Vec<[f32; 2]>, StoreError> {
     let name = format!("{MINMAX_GROUP}/{level}");
     let bad = |problem: String| StoreError::store(path, format!("min/max of level {level} ({name}): {problem}"));
@@ -64,16 +65,38 @@ fn read_minmax(
     }
     let expected_bytes = bx * by * bz * 8;
     let key = ranges.chunk_key(&[0, 0, 0, 0]);
-    let stored_bytes = store.size_key(&key).map_err(|e| bad(e.to_string()))?;
-    match stored_bytes {
+    let check_size = |stored_bytes: Result<Option<u64>, zarrs::storage::StorageError>| match stored_bytes
+        .map_err(|e| bad(e.to_string()))?
+    {
         Some(bytes) if bytes != expected_bytes => {
-            return Err(bad(format!("{key} holds {bytes} bytes, expected {expected_bytes} (truncated or corrupt)")));
+            Err(bad(format!("{key} holds {bytes} bytes, expected {expected_bytes} (truncated or corrupt)")))
         }
-        Some(_) => {}
-        None if volume_is_zero => {}
-        None => return Err(bad(format!("{key} is missing; import the volume again"))),
-    }
-    let flat: Vec<f32> = ranges.retrieve_array_subset(&ranges.subset_all()).map_err(|e| bad(e.to_string()))?;
+        Some(_) => Ok(()),
+        None if volume_is_zero => Ok(()),
+        None => Err(bad(format!("{key} is missing; import the volume again"))),
+    };
+    let retrieve = || -> Result<Vec<f32>, StoreError> {
+        ranges.retrieve_array_subset(&ranges.subset_all()).map_err(|e| bad(e.to_string()))
+    };
+    let flat: Vec<f32> = if remote {
+        // Over a network the size and the bytes are asked for at once (one round trip, not two): the read is held
+        // to the remote store's cap on whole values and decodes into the array's shape (checked above), and the
+        // size is checked before anything read is used.
+        let (size, flat) = std::thread::scope(|scope| {
+            let size = scope.spawn(|| store.size_key(&key));
+            let flat = retrieve();
+            (
+                size.join()
+                    .unwrap_or_else(|_| Err(zarrs::storage::StorageError::Other("size request panicked".into()))),
+                flat,
+            )
+        });
+        check_size(size)?;
+        flat?
+    } else {
+        check_size(store.size_key(&key))?;
+        retrieve()?
+    };
     let entries: Vec<[f32; 2]> = flat.chunks_exact(2).map(|c| [c[0], c[1]]).collect();
     if let Some(index) = entries.iter().position(|[min, max]| !(min.is_finite() && max.is_finite() && min <= max)) {
         return Err(bad(format!("entry {index} is {:?}, expected finite min ≤ max", entries[index])));
@@ -218,12 +241,10 @@ impl StoreReader {
         let bricks_store = Arc::new(
             checked(zstd_encoded_bound(brick_bytes, BRICK_CHECKSUM_BYTES))?.with_range_cache(range_cache_bytes),
         );
-        let metrics = Arc::new(PerformanceMetricsStorageAdapter::new(bricks_store));
-        let open_level = |level: usize| -> Result<(LevelSource, Vec<[f32; 2]>), StoreError> {
+        let metrics = Arc::new(PerformanceMetricsStorageAdapter::new(bricks_store.clone()));
+        let volume_is_zero = attributes.value_range == [0.0, 0.0];
+        let open_array = |level: usize| -> Result<Array<dyn ReadableStorageTraits>, StoreError> {
             let readable: Arc<dyn ReadableStorageTraits> = metrics.clone();
-            for node in [level.to_string(), MINMAX_GROUP.to_string(), format!("{MINMAX_GROUP}/{level}")] {
-                check_metadata(&node)?;
-            }
             let array = Array::open(readable, &format!("/{level}"))
                 .map_err(|e| StoreError::store(path, format!("level {level}: {e}")))?;
             let [x, y, z] = layout.level_dims[level];
@@ -235,7 +256,29 @@ impl StoreReader {
             }
             check_chunk_sizes(path, &level.to_string(), &metadata_json(&array))?;
             check_level_dtype(path, &level.to_string(), &array, info.dtype)?;
-            let ranges = read_minmax(path, &store, &layout, level, attributes.value_range == [0.0, 0.0])?;
+            Ok(array)
+        };
+        let open_level = |level: usize| -> Result<(LevelSource, Vec<[f32; 2]>), StoreError> {
+            for node in [level.to_string(), MINMAX_GROUP.to_string(), format!("{MINMAX_GROUP}/{level}")] {
+                check_metadata(&node)?;
+            }
+            let minmax = || read_minmax(path, &store, &layout, level, volume_is_zero, remote.is_some());
+            // Over a network the level's array and its min/max are read at once (their round trips overlap); the
+            // level's error, if both fail, is the one reported.
+            let (array, ranges) = if remote.is_some() {
+                let (array, ranges) = std::thread::scope(|scope| {
+                    let ranges = scope.spawn(minmax);
+                    let array = open_array(level);
+                    let ranges = ranges
+                        .join()
+                        .unwrap_or_else(|_| Err(StoreError::store(path, "reading a level's min/max panicked")));
+                    (array, ranges)
+                });
+                (array?, ranges?)
+            } else {
+                (open_array(level)?, minmax()?)
+            };
+            let [x, y, z] = layout.level_dims[level];
             Ok((LevelSource::Array { array, leading: Default::default(), shape: [x, y, z] }, ranges))
         };
         // A remote store's levels are opened at once (each a few round trips); a folder's in turn. Either way the
@@ -277,7 +320,17 @@ impl StoreReader {
             StoreReader::assemble(path, attributes, levels, Some(minmax), cache_bytes - range_cache_bytes)?;
         reader.metrics = Some(metrics);
         reader.remote = remote;
-        reader.probe_levels()?;
+        if reader.remote.is_some() {
+            // The coarse levels' shard indexes are fetched while the levels are probed (see `shard_indexes`).
+            let indexes = reader.shard_indexes_to_fetch();
+            let reader = &reader;
+            std::thread::scope(|scope| {
+                scope.spawn(|| StoreReader::fetch_shard_indexes(&bricks_store, &indexes));
+                reader.probe_levels()
+            })?;
+        } else {
+            reader.probe_levels()?;
+        }
         Ok(reader)
     }
 }

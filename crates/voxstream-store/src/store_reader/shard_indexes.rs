@@ -1,0 +1,140 @@
+//! Shard indexes fetched when a remote store opens (issue 43): a brick of a shard is two round trips, its index
+//! (a suffix of the shard) and then its bytes, unless the index is already known. The coarse levels' indexes are
+//! few and nearly always all needed (every view starts at the root and refines), so they are fetched at once while
+//! the levels are probed, and each later brick of those levels costs one round trip. Only shards holding a brick
+//! with data (per the store's min/max) are asked for, coarsest level first, at most [`OPEN_INDEXES`] in all; the
+//! finest levels of a large store are left to be fetched as the rays reach them.
+//!
+//! The index is read through [`CheckedStore`]'s suffix cache with the length zarrs's sharding codec asks for
+//! (16 bytes per brick, and 4 for the `crc32c` index codec voxstream writes), so that the first brick read of a
+//! shard finds it there. A store whose index is encoded otherwise is left alone: nothing is fetched ahead.
+
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use zarrs::storage::StoreKey;
+
+use crate::checked_store::CheckedStore;
+use crate::level_source::LevelSource;
+
+use super::StoreReader;
+
+/// Most shard indexes fetched at open: with 64 bricks per shard, 256 indexes are 263 KB and cover 16,384 bricks.
+pub(super) const OPEN_INDEXES: usize = 256;
+
+/// Threads fetching indexes at open (each waits on one request at a time).
+const FETCH_THREADS: usize = 32;
+
+impl StoreReader {
+    /// The shards whose indexes [`StoreReader::fetch_shard_indexes`] reads, with the suffix length of their index:
+    /// the shards that hold a brick with data, coarsest level first, at most [`OPEN_INDEXES`]; none for a foreign
+    /// store or a level whose shard index is not `bytes` + `crc32c` at the end of the shard.
+    pub(super) fn shard_indexes_to_fetch(&self) -> Vec<(StoreKey, u64)> {
+        let mut wanted = Vec::new();
+        for level in (0..self.layout.levels()).rev() {
+            let Some(LevelSource::Array { array, .. }) = self.levels.get(level) else { continue };
+            let metadata = serde_json::to_value(array.metadata()).unwrap_or_default();
+            let Some((shard_bricks, index_bytes)) = shard_geometry(&metadata, self.layout.brick_size) else {
+                continue;
+            };
+            let bricks = self.layout.bricks(level);
+            let mut shards = std::collections::BTreeSet::new();
+            for z in 0..bricks[2] {
+                for y in 0..bricks[1] {
+                    for x in 0..bricks[0] {
+                        let has_data = self.brick_range(level, [x, y, z]).is_some_and(|range| range != [0.0, 0.0]);
+                        if has_data {
+                            // Shard indices in the array's axis order (z, y, x).
+                            shards.insert([z / shard_bricks[0], y / shard_bricks[1], x / shard_bricks[2]]);
+                        }
+                    }
+                }
+            }
+            if wanted.len() + shards.len() > OPEN_INDEXES {
+                break;
+            }
+            wanted.extend(shards.into_iter().map(|shard| (array.chunk_key(&shard), index_bytes)));
+        }
+        wanted
+    }
+
+    /// Reads the indexes `wanted` into `store`'s suffix cache, [`FETCH_THREADS`] at a time. A failure is left alone:
+    /// the brick read that needs the index fetches it again and reports what persists.
+    pub(super) fn fetch_shard_indexes(store: &CheckedStore, wanted: &[(StoreKey, u64)]) {
+        let next = AtomicUsize::new(0);
+        std::thread::scope(|scope| {
+            for _ in 0..FETCH_THREADS.min(wanted.len()) {
+                scope.spawn(|| {
+                    while let Some((key, length)) = wanted.get(next.fetch_add(1, Ordering::Relaxed)) {
+                        let _ = store.shard_index(key, *length);
+                    }
+                });
+            }
+        });
+    }
+}
+
+/// Bricks per shard along (z, y, x) and the encoded length of a shard's index, from a level's `zarr.json`; `None`
+/// unless its one codec is `sharding_indexed` with the index at the end, encoded as `bytes` with an optional
+/// `crc32c`, and its inner chunks are bricks.
+fn shard_geometry(metadata: &serde_json::Value, brick_size: u64) -> Option<([u64; 3], u64)> {
+    let codecs = metadata.get("codecs")?.as_array()?;
+    let [sharding] = &codecs[..] else { return None };
+    if sharding.get("name")?.as_str()? != "sharding_indexed" {
+        return None;
+    }
+    let configuration = sharding.get("configuration")?;
+    if configuration.get("index_location").and_then(|l| l.as_str()).unwrap_or("end") != "end" {
+        return None;
+    }
+    let inner: Vec<u64> = configuration.get("chunk_shape")?.as_array()?.iter().filter_map(|v| v.as_u64()).collect();
+    let outer: Vec<u64> = metadata
+        .get("chunk_grid")?
+        .get("configuration")?
+        .get("chunk_shape")?
+        .as_array()?
+        .iter()
+        .filter_map(|v| v.as_u64())
+        .collect();
+    if inner != [brick_size; 3] || outer.len() != 3 || outer.iter().any(|&edge| edge == 0 || edge % brick_size != 0) {
+        return None;
+    }
+    let mut checksum = 0;
+    for codec in configuration.get("index_codecs")?.as_array()? {
+        match codec.get("name")?.as_str()? {
+            "bytes" => {}
+            "crc32c" if checksum == 0 => checksum = 4,
+            _ => return None,
+        }
+    }
+    let shard_bricks = [0, 1, 2].map(|a| outer[a] / brick_size);
+    let count = shard_bricks.iter().try_fold(1u64, |n, &b| n.checked_mul(b))?;
+    Some((shard_bricks, count.checked_mul(16)?.checked_add(checksum)?))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn level_metadata(index_codecs: &str, index_location: &str) -> serde_json::Value {
+        serde_json::from_str(&format!(
+            r#"{{"chunk_grid": {{"name": "regular", "configuration": {{"chunk_shape": [32, 256, 256]}}}},
+                "codecs": [{{"name": "sharding_indexed", "configuration": {{"chunk_shape": [32, 32, 32],
+                  "codecs": [{{"name": "bytes"}}], "index_codecs": {index_codecs},
+                  "index_location": "{index_location}"}}}}]}}"#
+        ))
+        .unwrap()
+    }
+
+    #[test]
+    fn the_index_length_is_sixteen_bytes_a_brick_and_the_checksum() {
+        let with_crc = level_metadata(r#"[{"name": "bytes"}, {"name": "crc32c"}]"#, "end");
+        assert_eq!(shard_geometry(&with_crc, 32), Some(([1, 8, 8], 64 * 16 + 4)));
+        let bare = level_metadata(r#"[{"name": "bytes"}]"#, "end");
+        assert_eq!(shard_geometry(&bare, 32), Some(([1, 8, 8], 64 * 16)));
+        // Anything else is left alone: the index at the start, another index codec, inner chunks not bricks.
+        assert_eq!(shard_geometry(&level_metadata(r#"[{"name": "bytes"}]"#, "start"), 32), None);
+        assert_eq!(shard_geometry(&level_metadata(r#"[{"name": "bytes"}, {"name": "zstd"}]"#, "end"), 32), None);
+        assert_eq!(shard_geometry(&with_crc, 16), None);
+        assert_eq!(shard_geometry(&serde_json::json!({"codecs": [{"name": "zstd"}]}), 32), None);
+    }
+}
