@@ -6,7 +6,8 @@
 #     wall clock, opening included;
 #   - requests and bytes fetched (`--stats`'s remote) against the store's bytes on disk, and how many (chunk, range)
 #     pairs were fetched more than once.
-# Usage: bench/remote.sh STORE [RTT_MS ...] [-- RENDER_FLAGS...]   (default RTTs: 0 50 150)
+# Usage: bench/remote.sh STORE [RTT_MS ...] [-- RENDER_FLAGS...]   (default RTTs: 0 50 150; VOXSTREAM_BIN names
+# another build than target/release/voxstream)
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 store=$(realpath "$1"); shift
@@ -15,27 +16,14 @@ while [ $# -gt 0 ] && [ "$1" != "--" ]; do rtts+=("$1"); shift; done
 [ $# -gt 0 ] && shift
 flags=("$@")
 [ ${#rtts[@]} -gt 0 ] || rtts=(0 50 150)
-bin=$(pwd)/target/release/voxstream
+bin=${VOXSTREAM_BIN:-$(pwd)/target/release/voxstream}
 [ -x "$bin" ] || cargo build --release --quiet
 work=$(mktemp -d /tmp/voxstream-remote-bench.XXXXXX)
 pids=()
 cleanup() { for pid in "${pids[@]}"; do kill "$pid" 2>/dev/null || true; done; rm -rf "$work"; }
 trap cleanup EXIT
-free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'; }
-wait_port() { for _ in $(seq 300); do (echo >/dev/tcp/127.0.0.1/"$1") 2>/dev/null && return 0; sleep 0.1; done; return 1; }
-
-port=$(free_port)
-mkdir -p "$work/nginx"
-cat > "$work/nginx/nginx.conf" <<EOF
-daemon off; master_process off; pid $work/nginx/nginx.pid; error_log $work/nginx/error.log;
-events { worker_connections 1024; }
-http { log_format ranges '\$request "\$http_range" \$status \$body_bytes_sent'; access_log $work/nginx/access.log ranges;
-  client_body_temp_path $work/nginx/b; proxy_temp_path $work/nginx/p; fastcgi_temp_path $work/nginx/f;
-  uwsgi_temp_path $work/nginx/u; scgi_temp_path $work/nginx/s;
-  server { listen 127.0.0.1:$port; root $(dirname "$store"); location / { } } }
-EOF
-/usr/sbin/nginx -p "$work/nginx" -c "$work/nginx/nginx.conf" -e "$work/nginx/error.log" & pids+=($!)
-wait_port "$port"
+source bench/lib/http_store.sh
+serve_folder "$(dirname "$store")"
 name=$(basename "$store")
 disk=$(du -sb "$store" | cut -f1)
 "$bin" render "$store" --out "$work/local.png" --quiet "${flags[@]}"
@@ -43,10 +31,8 @@ start=$(date +%s.%N); "$bin" render "$store" --out "$work/local.png" --quiet "${
 printf 'store %s: %s bytes on disk; local converged render %.2f s\n' "$name" "$disk" "$(echo "$end - $start" | bc)"
 printf '%8s %12s %12s %9s %12s %10s %s\n' "RTT ms" "first img s" "complete s" requests "bytes" "repeated" "image"
 for rtt in "${rtts[@]}"; do
-    pport=$(free_port)
-    python3 scripts/fault_proxy.py --listen "$pport" --upstream "127.0.0.1:$port" --latency-ms "$rtt" >/dev/null 2>&1 & pids+=($!)
-    wait_port "$pport"
-    url="http://127.0.0.1:$pport/$name"
+    start_proxy "$rtt"
+    url="http://127.0.0.1:$proxy_port/$name"
     start=$(date +%s.%N)
     "$bin" render "$url" --out "$work/first.png" --quiet --mode interactive --frames 2 "${flags[@]}"
     end=$(date +%s.%N); first=$(echo "$end - $start" | bc)

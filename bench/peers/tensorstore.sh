@@ -20,27 +20,13 @@ work=$(mktemp -d /tmp/voxstream-ts-bench.XXXXXX)
 pids=()
 cleanup() { for pid in "${pids[@]}"; do kill "$pid" 2>/dev/null || true; done; rm -rf "$work"; }
 trap cleanup EXIT
-free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'; }
-wait_port() { for _ in $(seq 300); do (echo >/dev/tcp/127.0.0.1/"$1") 2>/dev/null && return 0; sleep 0.1; done; return 1; }
-port=$(free_port)
-mkdir -p "$work/nginx"
-cat > "$work/nginx/nginx.conf" <<CONF
-daemon off; master_process off; pid $work/nginx/nginx.pid; error_log $work/nginx/error.log;
-events { worker_connections 1024; }
-http { log_format ranges '\$request "\$http_range" \$status \$body_bytes_sent'; access_log $work/nginx/access.log ranges;
-  client_body_temp_path $work/nginx/b; proxy_temp_path $work/nginx/p; fastcgi_temp_path $work/nginx/f;
-  uwsgi_temp_path $work/nginx/u; scgi_temp_path $work/nginx/s;
-  server { listen 127.0.0.1:$port; root $(dirname "$store"); location / { } } }
-CONF
-/usr/sbin/nginx -p "$work/nginx" -c "$work/nginx/nginx.conf" -e "$work/nginx/error.log" & pids+=($!)
-wait_port "$port"
+source bench/lib/http_store.sh
+serve_folder "$(dirname "$store")"
 name=$(basename "$store")
 printf '%6s %14s %10s %16s %10s %18s %10s %7s\n' "RTT ms" "voxstream s" requests "tensorstore s" requests "ts + cache s" requests chunks
 for rtt in "${rtts[@]}"; do
-    pport=$(free_port)
-    python3 scripts/fault_proxy.py --listen "$pport" --upstream "127.0.0.1:$port" --latency-ms "$rtt" >/dev/null 2>&1 & pids+=($!)
-    wait_port "$pport"
-    url="http://127.0.0.1:$pport/$name"
+    start_proxy "$rtt"
+    url="http://127.0.0.1:$proxy_port/$name"
     : > "$work/nginx/access.log"
     start=$(date +%s.%N)
     "$bin" render "$url" --out "$work/remote.png" --quiet --width 512 --height 512

@@ -147,15 +147,7 @@ impl PyVolume {
                     .image_planes()
                     .axes
                     .iter()
-                    .map(|a| {
-                        use voxstream_store::image_planes::LeadingKind;
-                        let kind = match a.kind {
-                            LeadingKind::Time => "time",
-                            LeadingKind::Channel => "channel",
-                            LeadingKind::Other => "other",
-                        };
-                        (a.name.clone(), kind, a.extent, a.index)
-                    })
+                    .map(|a| (a.name.clone(), a.kind.name(), a.extent, a.index))
                     .collect();
                 info.set_item("leading_axes", axes)?;
             }

@@ -2,7 +2,7 @@
 
 use anyhow::Result;
 use serde::Serialize;
-use voxstream_store::image_planes::{LeadingKind, PlaneChoice};
+use voxstream_store::image_planes::PlaneChoice;
 use voxstream_store::StoreReader;
 
 use crate::cli::InfoArgs;
@@ -152,16 +152,7 @@ pub fn run(args: &InfoArgs) -> Result<()> {
             .image_planes()
             .axes
             .iter()
-            .map(|a| LeadingAxisInfo {
-                name: a.name.clone(),
-                kind: match a.kind {
-                    LeadingKind::Time => "time",
-                    LeadingKind::Channel => "channel",
-                    LeadingKind::Other => "other",
-                },
-                extent: a.extent,
-                index: a.index,
-            })
+            .map(|a| LeadingAxisInfo { name: a.name.clone(), kind: a.kind.name(), extent: a.extent, index: a.index })
             .collect(),
         omero: reader.image_planes().omero.as_ref().map(|o| OmeroInfo {
             label: o.label.clone(),
