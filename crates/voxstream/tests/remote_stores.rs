@@ -452,10 +452,17 @@ fn interactive_frames_never_wait_on_the_network() {
     let dir = scratch("remote_stores", "nonblocking");
     import_ball(&dir, "www/ball.zarr");
     let server = nginx(&dir, &dir.join("www"));
-    // Metadata and per-brick ranges are answered, and the 6 requests of the bricks read when the store is opened
-    // (one brick per level, an index and a brick each: the open checks that every level decodes); no brick after.
+    // Metadata and per-brick ranges are answered, and the requests of the open: every shard's index (fetched
+    // with the level probes) and one brick per level (the open checks that every level decodes); no brick after.
+    let store = dir.join("www/ball.zarr");
+    let mut shards = Vec::new();
+    for level in ["0", "1", "2"] {
+        shard_files(&store, &store.join(level), &mut shards);
+    }
+    let open_requests = (shards.len() + 3).to_string();
     let log = dir.join("proxy.log");
-    let stalled = proxy(server.port, &["--stall-match", r"^/[^/]+/[0-9]+/c/", "--stall-match-after", "6"], &log);
+    let stalled =
+        proxy(server.port, &["--stall-match", r"^/[^/]+/[0-9]+/c/", "--stall-match-after", &open_requests], &log);
     let url = format!("http://127.0.0.1:{}/ball.zarr", stalled.port);
     // A frame that waited for a brick would wait the request timeout, 100 s, at least.
     let mut child = Command::new(env!("CARGO_BIN_EXE_voxstream"))
