@@ -93,6 +93,15 @@ def test_non_finite_samples_are_replaced_or_refused_leaving_the_store_in_place(c
         vs.import_volume(array.astype(np.float64), tmp_path / "c", brick_size=8)
 
 
+def test_an_object_store_url_is_refused_for_a_distributed_import(tmp_path, monkeypatch):
+    # Workers write shard files into the store's folder: "s3://…" would be a local folder named "s3:".
+    monkeypatch.chdir(tmp_path)
+    array = da.from_array(volume(dtype=np.uint8), chunks=(16, 70, 83))
+    with pytest.raises(ValueError, match="folder every worker sees"):
+        vs.import_volume(array, "s3://scans/volume.zarr", brick_size=8)
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_camera_path_rendered_on_two_workers_gives_one_process_frames_in_order_and_a_video(client, tmp_path):
     store = tmp_path / "store"
     vs.import_volume(volume(dtype=np.uint8), store, brick_size=8)

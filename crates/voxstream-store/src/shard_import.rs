@@ -371,6 +371,21 @@ impl ShardImport {
     /// Takes the import lock of `out` and creates `STORE.partial` with every level's metadata, checking `options`
     /// as `import_volume` does (an existing store needs `overwrite`).
     pub fn begin(info: VolumeInfo, out: &Path, options: &ImportOptions) -> Result<ShardImport, StoreError> {
+        // Tasks write shard files into `out` from every worker: a URL would become a local folder named `s3:` (a
+        // store the caller believes is in the bucket), so it is refused before anything is written.
+        let text = out.to_string_lossy();
+        match voxstream_remote::RemoteLocation::parse(&text) {
+            Ok(None) => {}
+            Ok(Some(location)) => {
+                return Err(StoreError::store(
+                    location.shown(),
+                    "a distributed import writes into a folder every worker sees, not into an object store: import \
+                     into a shared folder and copy it to the bucket (its root zarr.json last), or import an array \
+                     that fits in memory with import_volume(numpy_array, URL)",
+                ))
+            }
+            Err(e) => return Err(StoreError::store(voxstream_remote::redact(&text), e.to_string())),
+        }
         let lock = ImportLock::acquire(out)?;
         let (_, partial, layout) = match prepare_partial(out, &info, options) {
             Ok(prepared) => prepared,

@@ -258,3 +258,28 @@ fn forged_specs_pieces_and_summaries_are_refused_with_a_reason() {
     assert!(!partial_path(&out).exists());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn an_object_store_url_is_refused_before_anything_is_written() {
+    // The tasks write files into `out`: a URL would be a local folder named `s3:`, believed to be in the bucket.
+    let dims = [8, 8, 8];
+    for url in ["s3://scans/volume.zarr", "gs://scans/volume.zarr", "https://example.org/volume.zarr"] {
+        let error = ShardImport::begin(info(dims, DType::U8), Path::new(url), &ImportOptions::default())
+            .err()
+            .unwrap_or_else(|| panic!("{url}: a distributed import into a URL began"));
+        let message = error.to_string();
+        assert!(message.contains("folder every worker sees") && message.contains(url), "{message}");
+    }
+    for folder in ["s3:", "gs:", "https:"] {
+        assert!(!Path::new(folder).exists(), "a local folder {folder} was written");
+    }
+    // Credentials in a URL are not repeated.
+    let error = ShardImport::begin(
+        info(dims, DType::U8),
+        Path::new("https://user:hunter2@h/v.zarr"),
+        &ImportOptions::default(),
+    )
+    .err()
+    .expect("a URL with credentials began");
+    assert!(!error.to_string().contains("hunter2"), "{error}");
+}
