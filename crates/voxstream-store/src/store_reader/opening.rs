@@ -235,9 +235,11 @@ impl StoreReader {
         let (info, layout) = validate_attributes(path, &attributes)?;
         // A brick read from a shard is at most one zstd frame of brick_size³ samples and its CRC32C.
         let brick_bytes = layout.brick_size.pow(3) * info.dtype.size() as u64;
-        // A remote store keeps a quarter of the host cache for bricks as fetched (compressed: many more fit), so
-        // that a border brick the decoded cache let go is not fetched again.
-        let range_cache_bytes = if remote.is_some() { cache_bytes / 4 } else { 0 };
+        // A remote store keeps half of the host cache for bricks as fetched (compressed: several times more fit), so
+        // that a border brick the decoded cache let go is not fetched again. A quarter was too little on the 2048³
+        // store at `--budget-mb 512`: 3,460 ranges fetched twice, 10,700 requests and 92 MB for a view that needs
+        // 4,513 and 41 MB (BENCHMARKS.md, "Against tensorstore").
+        let range_cache_bytes = if remote.is_some() { cache_bytes / 2 } else { 0 };
         let bricks_store = Arc::new(
             checked(zstd_encoded_bound(brick_bytes, BRICK_CHECKSUM_BYTES))?.with_range_cache(range_cache_bytes),
         );
