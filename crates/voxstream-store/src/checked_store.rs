@@ -54,6 +54,9 @@ pub struct CheckedStore {
     ranges: Option<std::sync::Mutex<RangeCache>>,
     /// The most bytes one explicit range may ask for; `u64::MAX` when unbounded (the file's size still bounds it).
     max_range_bytes: u64,
+    /// Whole values read ahead ([`CheckedStore::read_ahead`]) by key, `None` where the value is missing: the next
+    /// whole read of the key takes its entry, and a size request is answered from it.
+    ahead: std::sync::Mutex<std::collections::HashMap<String, Option<zarrs::storage::Bytes>>>,
 }
 
 impl CheckedStore {
@@ -66,6 +69,7 @@ impl CheckedStore {
             reading: Default::default(),
             ranges: None,
             max_range_bytes,
+            ahead: Default::default(),
         })
     }
 
@@ -77,6 +81,7 @@ impl CheckedStore {
             reading: Default::default(),
             ranges: None,
             max_range_bytes,
+            ahead: Default::default(),
         }
     }
 
@@ -165,6 +170,26 @@ fn index_cache() -> std::sync::Mutex<lru::LruCache<(String, u64), Option<zarrs::
 }
 
 impl CheckedStore {
+    /// Reads the whole value of `key` now, with the same checks as any read, and keeps it for the next whole read of
+    /// `key` (and its size for a size request): a caller that knows a value's key before the metadata that will ask
+    /// for it (a remote store's min/max chunk) fetches both at once. An entry no read takes is dropped with
+    /// [`CheckedStore::forget_ahead`].
+    pub(crate) fn read_ahead(&self, key: &StoreKey) -> Result<(), StorageError> {
+        let value = match self.read_checked(key, vec![ByteRange::FromStart(0, None)])? {
+            None => None,
+            Some(mut parts) => {
+                Some(parts.next().unwrap_or_else(|| Err(StorageError::Other(format!("{key}: no bytes"))))?)
+            }
+        };
+        self.ahead.lock().unwrap_or_else(|p| p.into_inner()).insert(key.as_str().to_string(), value);
+        Ok(())
+    }
+
+    /// Drops what [`CheckedStore::read_ahead`] kept for `key`, if no read took it.
+    pub(crate) fn forget_ahead(&self, key: &StoreKey) {
+        self.ahead.lock().unwrap_or_else(|p| p.into_inner()).remove(key.as_str());
+    }
+
     /// Reads the shard index of `key` (its last `length` bytes) into the cache of indexes, as the first brick read
     /// of the shard would (see `store_reader::shard_indexes`).
     pub(crate) fn shard_index(&self, key: &StoreKey, length: u64) -> Result<(), StorageError> {
@@ -219,6 +244,11 @@ impl ReadableStorageTraits for CheckedStore {
         byte_ranges: ByteRangeIterator<'a>,
     ) -> Result<MaybeBytesIterator<'a>, StorageError> {
         let ranges: Vec<ByteRange> = byte_ranges.collect();
+        if let [ByteRange::FromStart(0, None)] = ranges[..] {
+            if let Some(value) = self.ahead.lock().unwrap_or_else(|p| p.into_inner()).remove(key.as_str()) {
+                return Ok(value.map(|bytes| Box::new(std::iter::once(Ok(bytes))) as _));
+            }
+        }
         if let [ByteRange::Suffix(length)] = ranges[..] {
             return self.suffix(key, length);
         }
@@ -238,6 +268,9 @@ impl ReadableStorageTraits for CheckedStore {
     }
 
     fn size_key(&self, key: &StoreKey) -> Result<Option<u64>, StorageError> {
+        if let Some(value) = self.ahead.lock().unwrap_or_else(|p| p.into_inner()).get(key.as_str()) {
+            return Ok(value.as_ref().map(|bytes| bytes.len() as u64));
+        }
         match &self.inner {
             Inner::Folder(folder) => self.regular_file_size(folder, key),
             Inner::Remote(remote) => remote.size_key(key),
@@ -317,6 +350,28 @@ mod tests {
                 let _ = std::fs::remove_dir_all(&self.0);
             }
         }
+    }
+
+    #[test]
+    fn a_value_read_ahead_answers_the_next_whole_read_and_its_size_once() {
+        let (dir, store) = store_with("ahead", &[7u8; 100]);
+        let key = StoreKey::new("shard").unwrap();
+        store.read_ahead(&key).unwrap();
+        // The file changes after the read ahead: the size and the next whole read are what was read ahead.
+        std::fs::write(dir.path().join("shard"), [9u8; 40]).unwrap();
+        assert_eq!(store.size_key(&key).unwrap(), Some(100));
+        assert_eq!(store.get(&key).unwrap().unwrap().as_ref(), &[7u8; 100][..]);
+        // Taken once: the next read is the file's.
+        assert_eq!(store.size_key(&key).unwrap(), Some(40));
+        assert_eq!(store.get(&key).unwrap().unwrap().as_ref(), &[9u8; 40][..]);
+        // A missing value is read ahead as missing; what no read took is forgotten.
+        let missing = StoreKey::new("nothere").unwrap();
+        store.read_ahead(&missing).unwrap();
+        assert_eq!(store.size_key(&missing).unwrap(), None);
+        store.read_ahead(&key).unwrap();
+        store.forget_ahead(&key);
+        std::fs::write(dir.path().join("shard"), [3u8; 10]).unwrap();
+        assert_eq!(store.get(&key).unwrap().unwrap().as_ref(), &[3u8; 10][..]);
     }
 
     #[test]

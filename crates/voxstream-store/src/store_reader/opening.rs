@@ -7,7 +7,7 @@ use std::sync::Arc;
 use zarrs::array::Array;
 use zarrs::group::Group;
 use zarrs::storage::storage_adapter::performance_metrics::PerformanceMetricsStorageAdapter;
-use zarrs::storage::ReadableStorageTraits;
+use zarrs::storage::{ReadableStorageTraits, StoreKey};
 
 use voxstream_remote::{DiskCache, RemoteLocation, RemoteStore};
 
@@ -42,7 +42,9 @@ fn metadata_json(array: &Array<dyn ReadableStorageTraits>) -> serde_json::Value 
 }
 
 /// Reads and checks the per-brick `[min, max]` of `level`: the array must be there, its one chunk file must hold
-/// exactly `8 ·` bricks bytes (checked before reading, so a forged brick count allocates nothing), and every entry
+/// exactly `8 ·` bricks bytes (checked before reading, so a forged brick count allocates nothing; over a network the
+/// bytes are fetched with the metadata, held to the remote store's cap on whole values, and checked the same way
+/// before they are decoded), and every entry
 /// must be finite with `min ≤ max`. The chunk may be absent only when the whole volume is 0 (the Zarr fill value):
 /// otherwise a missing file would read as empty space.
 fn read_minmax(
@@ -55,7 +57,35 @@ fn read_minmax(
 ) -> Result<Vec<[f32; 2]>, StoreError> {
     let name = format!("{MINMAX_GROUP}/{level}");
     let bad = |problem: String| StoreError::store(path, format!("min/max of level {level} ({name}): {problem}"));
-    let ranges = Array::open(store.clone(), &format!("/{name}")).map_err(|e| bad(e.to_string()))?;
+    // Over a network the one chunk (where voxstream writes it) is fetched while the array's metadata is, one round
+    // trip instead of three (metadata, size, bytes); its size and bytes are then checked as if read after it.
+    let guessed = if remote { StoreKey::new(format!("{name}/c/0/0/0/0")).ok() } else { None };
+    let ranges = std::thread::scope(|scope| {
+        if let Some(key) = &guessed {
+            scope.spawn(move || {
+                // A failure is left to the reads below, which fetch again and report it.
+                let _ = store.read_ahead(key);
+            });
+        }
+        Array::open(store.clone(), &format!("/{name}"))
+    });
+    let result = check_minmax(ranges.map_err(|e| bad(e.to_string())), store, layout, level, volume_is_zero, &bad);
+    if let Some(key) = &guessed {
+        store.forget_ahead(key);
+    }
+    result
+}
+
+/// The checks of [`read_minmax`] once its array is open.
+fn check_minmax(
+    ranges: Result<Array<CheckedStore>, StoreError>,
+    store: &Arc<CheckedStore>,
+    layout: &PyramidLayout,
+    level: usize,
+    volume_is_zero: bool,
+    bad: &dyn Fn(String) -> StoreError,
+) -> Result<Vec<[f32; 2]>, StoreError> {
+    let ranges = ranges?;
     let [bx, by, bz] = layout.bricks(level);
     if ranges.shape() != [bz, by, bx, 2] {
         return Err(bad(format!("shape {:?}, expected {:?}", ranges.shape(), [bz, by, bx, 2])));
@@ -78,25 +108,8 @@ fn read_minmax(
     let retrieve = || -> Result<Vec<f32>, StoreError> {
         ranges.retrieve_array_subset(&ranges.subset_all()).map_err(|e| bad(e.to_string()))
     };
-    let flat: Vec<f32> = if remote {
-        // Over a network the size and the bytes are asked for at once (one round trip, not two): the read is held
-        // to the remote store's cap on whole values and decodes into the array's shape (checked above), and the
-        // size is checked before anything read is used.
-        let (size, flat) = std::thread::scope(|scope| {
-            let size = scope.spawn(|| store.size_key(&key));
-            let flat = retrieve();
-            (
-                size.join()
-                    .unwrap_or_else(|_| Err(zarrs::storage::StorageError::Other("size request panicked".into()))),
-                flat,
-            )
-        });
-        check_size(size)?;
-        flat?
-    } else {
-        check_size(store.size_key(&key))?;
-        retrieve()?
-    };
+    check_size(store.size_key(&key))?;
+    let flat = retrieve()?;
     let entries: Vec<[f32; 2]> = flat.chunks_exact(2).map(|c| [c[0], c[1]]).collect();
     if let Some(index) = entries.iter().position(|[min, max]| !(min.is_finite() && max.is_finite() && min <= max)) {
         return Err(bad(format!("entry {index} is {:?}, expected finite min ≤ max", entries[index])));
