@@ -186,6 +186,11 @@ impl RemoteStore {
     /// Fetches `range` of `key` (whole value when `None`), from the disk cache where it is, checked for length,
     /// retried on short bodies and transport errors.
     async fn fetch(&self, key: &str, range: Option<GetRange>) -> Result<Fetched, StorageError> {
+        self.fetch_capped(key, range, u64::MAX).await
+    }
+
+    /// [`RemoteStore::fetch`] with a whole value held to at most `limit` bytes (and the store's own cap).
+    async fn fetch_capped(&self, key: &str, range: Option<GetRange>, limit: u64) -> Result<Fetched, StorageError> {
         let cache_key = self.cache.as_ref().map(|_| format!("{}/{key}#{range:?}", self.location.shown()));
         if let (Some(cache), Some(cache_key)) = (&self.cache, &cache_key) {
             if let Some(bytes) = cache.get(cache_key) {
@@ -195,6 +200,7 @@ impl RemoteStore {
         }
         let path = self.object_path(key);
         let cap = if is_metadata_key(key) { self.options.max_metadata_bytes } else { self.options.max_value_bytes };
+        let cap = cap.min(limit);
         let expected = match &range {
             Some(GetRange::Bounded(r)) => Some(r.end - r.start),
             Some(GetRange::Suffix(n)) => Some(*n),
@@ -299,6 +305,16 @@ impl RemoteStore {
                 Err(_) => Err(self.error(key, format!("no answer within {} s", deadline.as_secs()))),
             }
         })
+    }
+
+    /// The whole value of `key` (`None` if it is not there), refused as an error past `limit` bytes (before its body
+    /// is read where the server says its size): a read ahead of metadata that will say how long the value must be.
+    pub fn get_capped(&self, key: &StoreKey, limit: u64) -> Result<Option<Bytes>, StorageError> {
+        let name = key.as_str();
+        match self.block_on(name, self.fetch_capped(name, None, limit))? {
+            Fetched::Bytes(bytes) => Ok(Some(bytes)),
+            Fetched::Missing => Ok(None),
+        }
     }
 
     /// The keys below `folder` (relative to it, `/`-separated), or `None` where the service cannot list (HTTP) or

@@ -172,15 +172,26 @@ fn index_cache() -> std::sync::Mutex<lru::LruCache<(String, u64), Option<zarrs::
 impl CheckedStore {
     /// Reads the whole value of `key` now, with the same checks as any read, and keeps it for the next whole read of
     /// `key` (and its size for a size request): a caller that knows a value's key before the metadata that will ask
-    /// for it (a remote store's min/max chunk) fetches both at once. An entry no read takes is dropped with
+    /// for it (a remote store's min/max chunk) fetches both at once. A value longer than `max_bytes` is an error and
+    /// nothing is kept (the reads after fetch and check it as usual). An entry no read takes is dropped with
     /// [`CheckedStore::forget_ahead`].
-    pub(crate) fn read_ahead(&self, key: &StoreKey) -> Result<(), StorageError> {
-        let value = match self.read_checked(key, vec![ByteRange::FromStart(0, None)])? {
-            None => None,
-            Some(mut parts) => {
-                Some(parts.next().unwrap_or_else(|| Err(StorageError::Other(format!("{key}: no bytes"))))?)
-            }
+    pub(crate) fn read_ahead(&self, key: &StoreKey, max_bytes: u64) -> Result<(), StorageError> {
+        let value = match &self.inner {
+            // Held to `max_bytes` while it is fetched: a forged value past it costs no download.
+            Inner::Remote(remote) => remote.get_capped(key, max_bytes)?,
+            Inner::Folder(_) => match self.read_checked(key, vec![ByteRange::FromStart(0, None)])? {
+                None => None,
+                Some(mut parts) => {
+                    Some(parts.next().unwrap_or_else(|| Err(StorageError::Other(format!("{key}: no bytes"))))?)
+                }
+            },
         };
+        if let Some(bytes) = value.as_ref().filter(|bytes| bytes.len() as u64 > max_bytes) {
+            return Err(StorageError::Other(format!(
+                "{key}: {} bytes, more than the {max_bytes} expected",
+                bytes.len()
+            )));
+        }
         self.ahead.lock().unwrap_or_else(|p| p.into_inner()).insert(key.as_str().to_string(), value);
         Ok(())
     }
@@ -356,7 +367,7 @@ mod tests {
     fn a_value_read_ahead_answers_the_next_whole_read_and_its_size_once() {
         let (dir, store) = store_with("ahead", &[7u8; 100]);
         let key = StoreKey::new("shard").unwrap();
-        store.read_ahead(&key).unwrap();
+        store.read_ahead(&key, 100).unwrap();
         // The file changes after the read ahead: the size and the next whole read are what was read ahead.
         std::fs::write(dir.path().join("shard"), [9u8; 40]).unwrap();
         assert_eq!(store.size_key(&key).unwrap(), Some(100));
@@ -366,10 +377,14 @@ mod tests {
         assert_eq!(store.get(&key).unwrap().unwrap().as_ref(), &[9u8; 40][..]);
         // A missing value is read ahead as missing; what no read took is forgotten.
         let missing = StoreKey::new("nothere").unwrap();
-        store.read_ahead(&missing).unwrap();
+        store.read_ahead(&missing, 100).unwrap();
         assert_eq!(store.size_key(&missing).unwrap(), None);
-        store.read_ahead(&key).unwrap();
+        store.read_ahead(&key, 100).unwrap();
         store.forget_ahead(&key);
+        // Longer than the caller expects: an error, nothing kept.
+        std::fs::write(dir.path().join("shard"), [5u8; 12]).unwrap();
+        assert!(store.read_ahead(&key, 11).is_err());
+        assert_eq!(store.size_key(&key).unwrap(), Some(12), "the size comes from the file");
         std::fs::write(dir.path().join("shard"), [3u8; 10]).unwrap();
         assert_eq!(store.get(&key).unwrap().unwrap().as_ref(), &[3u8; 10][..]);
     }

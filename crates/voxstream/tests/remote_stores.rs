@@ -268,6 +268,28 @@ fn opening_a_remote_store_fetches_its_shard_indexes_with_the_level_probes() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+#[test]
+fn a_remote_min_max_chunk_of_the_wrong_length_is_refused_in_one_line() {
+    // The open reads each level's min/max chunk ahead of its metadata, held to the length the bricks need: a longer
+    // (forged) or shorter (truncated) chunk is refused as in a local folder, naming the file and both lengths.
+    let dir = scratch("remote_stores", "minmax");
+    import_ball(&dir, "www/ball.zarr");
+    let chunk = dir.join("www/ball.zarr/voxstream_minmax/0/c/0/0/0/0");
+    let stored = std::fs::read(&chunk).unwrap();
+    let server = nginx(&dir, &dir.join("www"));
+    let url = format!("http://127.0.0.1:{}/ball.zarr", server.port);
+    for bytes in [[stored.as_slice(), &[0u8; 4096]].concat(), stored[..stored.len() - 8].to_vec()] {
+        std::fs::write(&chunk, &bytes).unwrap();
+        let out = voxstream(&["info", &url], &dir);
+        let message = stderr(&out);
+        assert!(!out.status.success(), "a min/max chunk of {} bytes was taken: {message}", bytes.len());
+        assert_eq!(message.trim().lines().count(), 1, "{message}");
+        let lengths = format!("holds {} bytes, expected {}", bytes.len(), stored.len());
+        assert!(message.contains(&lengths) && message.contains("voxstream_minmax/0"), "{message}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// Creates `bucket` on moto at `port` with boto3.
 fn create_bucket(port: u16, bucket: &str) {
     let script = r#"

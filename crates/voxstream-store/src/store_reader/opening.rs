@@ -60,11 +60,14 @@ fn read_minmax(
     // Over a network the one chunk (where voxstream writes it) is fetched while the array's metadata is, one round
     // trip instead of three (metadata, size, bytes); its size and bytes are then checked as if read after it.
     let guessed = if remote { StoreKey::new(format!("{name}/c/0/0/0/0")).ok() } else { None };
+    let [bx, by, bz] = layout.bricks(level);
+    let expected_bytes = bx * by * bz * 8;
     let ranges = std::thread::scope(|scope| {
         if let Some(key) = &guessed {
             scope.spawn(move || {
-                // A failure is left to the reads below, which fetch again and report it.
-                let _ = store.read_ahead(key);
+                // A failure (a value longer than the levels' bricks need, too) is left to the reads below, which
+                // fetch and check again and report it.
+                let _ = store.read_ahead(key, expected_bytes);
             });
         }
         Array::open(store.clone(), &format!("/{name}"))
