@@ -104,10 +104,7 @@ impl<P: Producer> CacheManager<P> {
             if hints.len() >= PREFETCH_LIMIT {
                 break;
             }
-            if request.deficit < 2
-                || !self.node_pool.is_in_use(request.node.tile(per_tile))
-                || self.node_pool.key(request.node) != key
-            {
+            if request.deficit < 2 || !self.node_holds(request.node, key) {
                 continue;
             }
             match request.kind {

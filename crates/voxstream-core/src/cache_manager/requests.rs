@@ -4,7 +4,7 @@
 
 use crate::feedback::{Request, RequestKind};
 use crate::key::NodeKey;
-use crate::node::NodeData;
+use crate::node::{NodeData, NodeId};
 use crate::producer::Producer;
 use crate::request_queue::RequestQueue;
 
@@ -35,9 +35,7 @@ impl<P: Producer> CacheManager<P> {
     /// Whether `request` (for the node of `key`) still needs work: its node still holds `key` (no tile recycling
     /// reused it), and it is missing and not known to fail, or childless and subdividable.
     pub(super) fn still_wanted(&self, request: Request, key: NodeKey) -> bool {
-        if !self.node_pool.is_in_use(request.node.tile(self.shape.nodes_per_tile()))
-            || self.node_pool.key(request.node) != key
-        {
+        if !self.node_holds(request.node, key) {
             return false;
         }
         let node = self.node_pool.node(request.node);
@@ -50,6 +48,11 @@ impl<P: Producer> CacheManager<P> {
                     && key.level < self.shape.max_level
             }
         }
+    }
+
+    /// Whether `node`'s tile is in use and the node still holds `key` (no tile recycling reused it).
+    pub(super) fn node_holds(&self, node: NodeId, key: NodeKey) -> bool {
+        self.node_pool.is_in_use(node.tile(self.shape.nodes_per_tile())) && self.node_pool.key(node) == key
     }
 
     /// Lets the producer fetch the bricks of the `deferred` requests (the first [`PREFETCH_LIMIT`] to produce) in the

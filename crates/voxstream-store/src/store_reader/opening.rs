@@ -72,7 +72,9 @@ fn read_minmax(
         }
         Array::open(store.clone(), &format!("/{name}"))
     });
-    let result = check_minmax(ranges.map_err(|e| bad(e.to_string())), store, layout, level, volume_is_zero, &bad);
+    let result = ranges
+        .map_err(|e| bad(e.to_string()))
+        .and_then(|ranges| check_minmax(&ranges, store, [bx, by, bz], volume_is_zero, &bad));
     if let Some(key) = &guessed {
         store.forget_ahead(key);
     }
@@ -81,15 +83,12 @@ fn read_minmax(
 
 /// The checks of [`read_minmax`] once its array is open.
 fn check_minmax(
-    ranges: Result<Array<CheckedStore>, StoreError>,
+    ranges: &Array<CheckedStore>,
     store: &Arc<CheckedStore>,
-    layout: &PyramidLayout,
-    level: usize,
+    [bx, by, bz]: [u64; 3],
     volume_is_zero: bool,
     bad: &dyn Fn(String) -> StoreError,
 ) -> Result<Vec<[f32; 2]>, StoreError> {
-    let ranges = ranges?;
-    let [bx, by, bz] = layout.bricks(level);
     if ranges.shape() != [bz, by, bx, 2] {
         return Err(bad(format!("shape {:?}, expected {:?}", ranges.shape(), [bz, by, bx, 2])));
     }
@@ -98,21 +97,15 @@ fn check_minmax(
     }
     let expected_bytes = bx * by * bz * 8;
     let key = ranges.chunk_key(&[0, 0, 0, 0]);
-    let check_size = |stored_bytes: Result<Option<u64>, zarrs::storage::StorageError>| match stored_bytes
-        .map_err(|e| bad(e.to_string()))?
-    {
+    match store.size_key(&key).map_err(|e| bad(e.to_string()))? {
         Some(bytes) if bytes != expected_bytes => {
-            Err(bad(format!("{key} holds {bytes} bytes, expected {expected_bytes} (truncated or corrupt)")))
+            return Err(bad(format!("{key} holds {bytes} bytes, expected {expected_bytes} (truncated or corrupt)")));
         }
-        Some(_) => Ok(()),
-        None if volume_is_zero => Ok(()),
-        None => Err(bad(format!("{key} is missing; import the volume again"))),
-    };
-    let retrieve = || -> Result<Vec<f32>, StoreError> {
-        ranges.retrieve_array_subset(&ranges.subset_all()).map_err(|e| bad(e.to_string()))
-    };
-    check_size(store.size_key(&key))?;
-    let flat = retrieve()?;
+        Some(_) => {}
+        None if volume_is_zero => {}
+        None => return Err(bad(format!("{key} is missing; import the volume again"))),
+    }
+    let flat: Vec<f32> = ranges.retrieve_array_subset(&ranges.subset_all()).map_err(|e| bad(e.to_string()))?;
     let entries: Vec<[f32; 2]> = flat.chunks_exact(2).map(|c| [c[0], c[1]]).collect();
     if let Some(index) = entries.iter().position(|[min, max]| !(min.is_finite() && max.is_finite() && min <= max)) {
         return Err(bad(format!("entry {index} is {:?}, expected finite min ≤ max", entries[index])));

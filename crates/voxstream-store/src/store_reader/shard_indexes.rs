@@ -41,8 +41,7 @@ impl StoreReader {
             for z in 0..bricks[2] {
                 for y in 0..bricks[1] {
                     for x in 0..bricks[0] {
-                        let has_data = self.brick_range(level, [x, y, z]).is_some_and(|range| range != [0.0, 0.0]);
-                        if has_data {
+                        if !self.holds_only_zero(level, [x, y, z]) {
                             // Shard indices in the array's axis order (z, y, x).
                             shards.insert([z / shard_bricks[0], y / shard_bricks[1], x / shard_bricks[2]]);
                         }
