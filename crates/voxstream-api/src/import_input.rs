@@ -13,7 +13,9 @@ use std::path::{Path, PathBuf};
 use anyhow::{anyhow, bail, Context, Result};
 use voxstream_store::formats::sample_type::DTYPE_NAMES;
 use voxstream_store::formats::{open_volume, Endian, RawLayout, SampleConversion, SampleType, WithGeometry};
-use voxstream_store::{import_volume, ImportOptions, ImportReport, SpaceUnit, StoreError, VolumeInfo, VolumeSource};
+use voxstream_store::{
+    import_volume, BrickCodec, ImportOptions, ImportReport, SpaceUnit, StoreError, VolumeInfo, VolumeSource,
+};
 
 use crate::geometry_import::{BakedGeometry, DEFAULT_BAKE_RESOLUTION};
 use crate::geometry_source::{self, GeometryOptions};
@@ -58,6 +60,8 @@ pub struct ImportSettings {
     pub smoothing_scale: Option<f64>,
     /// Particles: read out of core with this many MiB (`--particle-memory`).
     pub particle_memory: Option<u64>,
+    /// How bricks are compressed (`--codec`, `--max-error`).
+    pub codec: BrickCodec,
 }
 
 impl Default for ImportSettings {
@@ -74,6 +78,7 @@ impl Default for ImportSettings {
             amplify: None,
             smoothing_scale: None,
             particle_memory: None,
+            codec: BrickCodec::Zstd,
         }
     }
 }
@@ -184,6 +189,7 @@ impl ImportInput {
             brick_size: settings.brick_size,
             overwrite: settings.overwrite,
             nan_as: settings.nan_as,
+            codec: settings.codec,
             ..ImportOptions::default()
         };
         let total = self.info.byte_len();

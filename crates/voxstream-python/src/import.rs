@@ -15,7 +15,7 @@ use pyo3::types::PyDict;
 use voxstream_api::import_input::{open_input, ImportInput, ImportSettings};
 use voxstream_api::remote_output::remote_output;
 use voxstream_store::formats::sample_type::{SampleConversion, SampleType};
-use voxstream_store::{DType, ImportReport, StoreError, VolumeInfo, VolumeSource};
+use voxstream_store::{BrickCodec, DType, ImportReport, StoreError, VolumeInfo, VolumeSource};
 
 use crate::errors::{progress_step, to_py_err};
 
@@ -67,7 +67,7 @@ impl VolumeSource for ArraySource {
 /// `s3://BUCKET/NAME.zarr`, `gs://…`, `az://…`: built in a temporary folder, then uploaded); returns what was written.
 #[pyfunction]
 #[pyo3(signature = (source, out, *, spacing=None, origin=None, brick_size=32, overwrite=false, nan_as=None,
-    resolution=None, amplify=None, progress=None))]
+    resolution=None, amplify=None, progress=None, codec="zstd", max_error=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn import_volume<'py>(
     py: Python<'py>,
@@ -81,7 +81,10 @@ pub fn import_volume<'py>(
     resolution: Option<u64>,
     amplify: Option<f64>,
     progress: Option<Py<PyAny>>,
+    codec: &str,
+    max_error: Option<f64>,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let codec = BrickCodec::from_choice(codec, max_error).map_err(PyValueError::new_err)?;
     if let Some(s) = spacing.filter(|s| s.iter().any(|v| !(v.is_finite() && *v > 0.0))) {
         return Err(PyValueError::new_err(format!("spacing must be positive, got {s:?}")));
     }
@@ -93,6 +96,7 @@ pub fn import_volume<'py>(
         overwrite,
         resolution,
         amplify,
+        codec,
         ..ImportSettings::default()
     };
     // A remote `out` (s3://, gs://, az://) is checked before the source is read; the store is built in a temporary

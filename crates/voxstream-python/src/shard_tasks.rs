@@ -10,7 +10,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use voxstream_store::shard_import::{self, ShardInput, ShardSpec, ShardSummary};
 use voxstream_store::value_histogram::HistogramParts;
-use voxstream_store::{DType, ImportOptions, VolumeInfo};
+use voxstream_store::{BrickCodec, DType, ImportOptions, VolumeInfo};
 
 use crate::errors::to_py_err;
 use crate::import::report_dict;
@@ -32,7 +32,8 @@ impl ShardImport {
 impl ShardImport {
     /// Begins an import of a volume of `dims` (x, y, z) samples of `dtype` into `out`.
     #[new]
-    #[pyo3(signature = (out, dims, dtype, *, spacing=None, origin=None, brick_size=32, overwrite=false, nan_as=None))]
+    #[pyo3(signature = (out, dims, dtype, *, spacing=None, origin=None, brick_size=32, overwrite=false, nan_as=None,
+        codec="zstd", max_error=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -44,8 +45,11 @@ impl ShardImport {
         brick_size: u64,
         overwrite: bool,
         nan_as: Option<f32>,
+        codec: &str,
+        max_error: Option<f64>,
     ) -> PyResult<ShardImport> {
         let dtype = sample_type(dtype)?;
+        let codec = BrickCodec::from_choice(codec, max_error).map_err(PyValueError::new_err)?;
         if let Some(s) = spacing.filter(|s| s.iter().any(|v| !(v.is_finite() && *v > 0.0))) {
             return Err(PyValueError::new_err(format!("spacing must be positive, got {s:?}")));
         }
@@ -59,7 +63,7 @@ impl ShardImport {
             origin: origin.unwrap_or([0.0; 3]),
             unit: None,
         };
-        let options = ImportOptions { brick_size, overwrite, nan_as, ..ImportOptions::default() };
+        let options = ImportOptions { brick_size, overwrite, nan_as, codec, ..ImportOptions::default() };
         let import =
             py.detach(|| shard_import::ShardImport::begin(info, &out, &options)).map_err(|e| to_py_err(e.into()))?;
         Ok(ShardImport { import: Some(import) })

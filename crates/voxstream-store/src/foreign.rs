@@ -127,16 +127,7 @@ pub(crate) fn open_foreign(
     }
     let (_, first) = &arrays[0];
     let data_type = first.data_type().clone();
-    let dtype = [
-        (zarrs::array::data_type::uint8(), DType::U8),
-        (zarrs::array::data_type::uint16(), DType::U16),
-        (zarrs::array::data_type::int16(), DType::I16),
-        (zarrs::array::data_type::float32(), DType::F32),
-    ]
-    .into_iter()
-    .find(|(t, _)| *t == data_type)
-    .map(|(_, d)| d)
-    .ok_or_else(|| StoreError::Unsupported {
+    let dtype = DType::from_zarr_data_type(&data_type).ok_or_else(|| StoreError::Unsupported {
         path: path.into(),
         message: "sample type (uint8, uint16, int16, float32 only)".into(),
     })?;

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use rayon::prelude::*;
-use zarrs::array::{Array, ArrayBuilder, DataType};
+use zarrs::array::{Array, ArrayBuilder};
 use zarrs::filesystem::FilesystemStore;
 use zarrs::group::GroupBuilder;
 
@@ -25,6 +25,7 @@ use crate::non_finite;
 use crate::store_lock::ImportLock;
 use crate::value_histogram::ValueHistogram;
 use crate::volume::{DType, VolumeSource};
+use crate::wavelet_codec::WaveletCodec;
 
 /// Choices of an import.
 #[derive(Clone, Debug, PartialEq)]
@@ -42,6 +43,62 @@ pub struct ImportOptions {
     /// Follow each brick's zstd frame with the Zarr v3 `crc32c` codec (verified on read); `false` writes the codec
     /// chain of stores made before checksums, which readers still accept.
     pub brick_checksums: bool,
+    /// How bricks are compressed.
+    pub codec: BrickCodec,
+}
+
+/// How an import compresses its bricks.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(tag = "name", rename_all = "lowercase")]
+pub enum BrickCodec {
+    /// zstd (lossless): the store opens in every Zarr v3 reader.
+    #[default]
+    Zstd,
+    /// The wavelet codec ([`crate::wavelet_codec`]): lossless when `max_error` is 0, otherwise every sample within
+    /// `max_error` of its value; a Zarr v3 extension codec only voxstream reads.
+    Wavelet {
+        /// The guaranteed per-sample bound, in the data's units (0: lossless).
+        max_error: f64,
+    },
+}
+
+impl BrickCodec {
+    /// The codec a front end's choice names: `zstd` or `wavelet`, and a max error (wavelet only; absent or 0 is
+    /// lossless). The error is one line naming the problem.
+    pub fn from_choice(name: &str, max_error: Option<f64>) -> Result<BrickCodec, String> {
+        match (name, max_error) {
+            ("zstd", None) => Ok(BrickCodec::Zstd),
+            ("zstd", Some(_)) => Err("a max error applies to the wavelet codec; zstd is lossless".into()),
+            ("wavelet", e) => {
+                let max_error = e.unwrap_or(0.0);
+                if !(max_error.is_finite() && max_error >= 0.0) {
+                    return Err(format!("the max error must be a finite number ≥ 0 (0 is lossless), got {max_error}"));
+                }
+                Ok(BrickCodec::Wavelet { max_error })
+            }
+            (other, _) => Err(format!("unknown brick codec '{other}': zstd or wavelet")),
+        }
+    }
+
+    /// The largest difference between a stored and a decoded sample (0 for lossless codecs).
+    pub fn max_error(self) -> f64 {
+        match self {
+            BrickCodec::Zstd => 0.0,
+            BrickCodec::Wavelet { max_error } => max_error,
+        }
+    }
+
+    /// Widens a brick's `[min, max]` by the codec's bound, so that empty-space skipping never culls a brick whose
+    /// decoded samples reach a value (an all-zero brick, `[0, 0]`, is not stored and decodes exactly).
+    pub(crate) fn widen(self, range: [f32; 2]) -> [f32; 2] {
+        let e = self.max_error() as f32;
+        if e == 0.0 || range == [0.0, 0.0] || range[0] > range[1] {
+            return range;
+        }
+        // Rounded outwards: f32's spacing at the range's ends must not undo the widening.
+        let (lo, hi) = (range[0] - e, range[1] + e);
+        [lo - lo.abs() * f32::EPSILON, hi + hi.abs() * f32::EPSILON]
+    }
 }
 
 impl Default for ImportOptions {
@@ -53,6 +110,7 @@ impl Default for ImportOptions {
             overwrite: false,
             nan_as: None,
             brick_checksums: true,
+            codec: BrickCodec::Zstd,
         }
     }
 }
@@ -108,7 +166,7 @@ fn import_into_partial(
     for level in 0..layout.levels() {
         // The metadata is in place (prepare_partial wrote it).
         let array = build_level_array(&store, &layout, level, info.dtype, options).map_err(|e| zarr(&e))?;
-        levels.push(LevelWriter::new(array, &layout, level, info.dtype));
+        levels.push(LevelWriter::new(array, &layout, level, info.dtype, options.codec));
     }
 
     let brick = options.brick_size as usize;
@@ -147,7 +205,8 @@ fn import_into_partial(
         empty: levels.iter().map(|l| l.empty).collect(),
     };
     drop(levels);
-    let report = finish_store(&store, &partial, out, &info, &layout, minmax, value_range, &histogram, counts)?;
+    let report =
+        finish_store(&store, &partial, out, &info, &layout, minmax, value_range, &histogram, counts, options.codec)?;
     Ok(ImportReport { conversion: source.conversion(), ..report })
 }
 
@@ -212,6 +271,7 @@ pub(crate) fn finish_store(
     mut value_range: [f64; 2],
     histogram: &ValueHistogram,
     counts: BrickCounts,
+    codec: BrickCodec,
 ) -> Result<ImportReport, StoreError> {
     let zarr = |e: &dyn std::fmt::Display| StoreError::store(partial, e.to_string());
     if !value_range[0].is_finite() {
@@ -242,6 +302,7 @@ pub(crate) fn finish_store(
     let name = out.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let mut attributes = StoreAttributes::new(info, layout, value_range, true);
     attributes.value_percentiles = Some(histogram.stored_percentiles());
+    attributes.brick_codec = Some(codec).filter(|c| *c != BrickCodec::Zstd);
     let mut group = GroupBuilder::new().build(store.clone(), "/").map_err(|e| zarr(&e))?;
     group.attributes_mut().insert("ome".into(), ome_multiscales(&name, info, layout));
     group.attributes_mut().insert("voxstream".into(), serde_json::to_value(&attributes).map_err(|e| zarr(&e))?);
@@ -341,15 +402,6 @@ pub fn partial_path(out: &Path) -> PathBuf {
     out.with_file_name(name)
 }
 
-fn data_type(dtype: DType) -> DataType {
-    match dtype {
-        DType::U8 => zarrs::array::data_type::uint8(),
-        DType::U16 => zarrs::array::data_type::uint16(),
-        DType::I16 => zarrs::array::data_type::int16(),
-        DType::F32 => zarrs::array::data_type::float32(),
-    }
-}
-
 pub(crate) fn build_level_array<S: ?Sized>(
     store: &Arc<S>,
     layout: &PyramidLayout,
@@ -365,9 +417,14 @@ pub(crate) fn build_level_array<S: ?Sized>(
     let b = layout.brick_size;
     let shard = vec![b, b * options.shard_bricks, b * options.shard_bricks];
     let edge = std::num::NonZeroU64::new(b).ok_or("brick size must be positive")?;
-    let mut sharding = ShardingCodecBuilder::new(vec![edge; 3], &data_type(dtype));
-    let mut brick_codecs: Vec<Arc<dyn zarrs::array::codec::api::BytesToBytesCodecTraits>> =
-        vec![Arc::new(ZstdCodec::new(options.zstd_level, false))];
+    let mut sharding = ShardingCodecBuilder::new(vec![edge; 3], &dtype.zarr_data_type());
+    let mut brick_codecs: Vec<Arc<dyn zarrs::array::codec::api::BytesToBytesCodecTraits>> = Vec::new();
+    match options.codec {
+        BrickCodec::Zstd => brick_codecs.push(Arc::new(ZstdCodec::new(options.zstd_level, false))),
+        BrickCodec::Wavelet { max_error } => {
+            sharding.array_to_bytes_codec(Arc::new(WaveletCodec::new(max_error)?));
+        }
+    }
     if options.brick_checksums {
         brick_codecs.push(Arc::new(zarrs::array::codec::Crc32cCodec::new()));
     }
@@ -381,7 +438,7 @@ pub(crate) fn build_level_array<S: ?Sized>(
     // Bricks in C order within a shard (zarrs' default is the order their parallel encoders finish in): the same
     // input gives the same bytes, run after run and task by task (`crate::shard_import`).
     let ordered = ShardingCodecOptions::default().with_subchunk_write_order(SubchunkWriteOrder::C);
-    let array = ArrayBuilder::new(vec![z, y, x], shard, data_type(dtype), fill)
+    let array = ArrayBuilder::new(vec![z, y, x], shard, dtype.zarr_data_type(), fill)
         .array_to_bytes_codec(Arc::new(sharding.build().with_options(ordered)))
         .dimension_names(["z", "y", "x"].into())
         .build(store.clone(), &format!("/{level}"))?;
@@ -391,6 +448,8 @@ pub(crate) fn build_level_array<S: ?Sized>(
 /// One level being written: a slab of up to one brick of z planes.
 struct LevelWriter {
     array: Array<FilesystemStore>,
+    /// The bricks' codec (its bound widens their min/max).
+    codec: BrickCodec,
     dims: [u64; 3],
     bricks: [u64; 3],
     brick: u64,
@@ -407,11 +466,18 @@ struct LevelWriter {
 }
 
 impl LevelWriter {
-    fn new(array: Array<FilesystemStore>, layout: &PyramidLayout, level: usize, dtype: DType) -> LevelWriter {
+    fn new(
+        array: Array<FilesystemStore>,
+        layout: &PyramidLayout,
+        level: usize,
+        dtype: DType,
+        codec: BrickCodec,
+    ) -> LevelWriter {
         let bricks = layout.bricks(level);
         let buffer = if level == 0 { Samples::new(dtype) } else { Samples::new(DType::F32) };
         LevelWriter {
             array,
+            codec,
             dims: layout.level_dims[level],
             bricks,
             brick: layout.brick_size,
@@ -439,6 +505,7 @@ impl LevelWriter {
         let dtype = self.dtype;
         let array = &self.array;
         let row = self.row;
+        let codec = self.codec;
         // Encode and write the shards of this row in parallel.
         let results: Vec<Result<Vec<(u64, [f32; 2], bool)>, String>> = shards
             .par_iter()
@@ -460,7 +527,7 @@ impl LevelWriter {
                 let valid = [shard_x.min(nx - sx * shard_x), shard_y.min(ny - sy * shard_y), planes as u64];
                 for ([bx, by], range) in shard_brick_ranges(&elements, [shard_x, shard_y], valid, b) {
                     let (gbx, gby) = (sx * shard_x / b + bx, sy * shard_y / b + by);
-                    brick_ranges.push((gby * (nx.div_ceil(b)) + gbx, range, range == [0.0, 0.0]));
+                    brick_ranges.push((gby * (nx.div_ceil(b)) + gbx, codec.widen(range), range == [0.0, 0.0]));
                 }
                 store_shard(array, &[row, sy, sx], &elements, dtype).map_err(|e| e.to_string())?;
                 Ok(brick_ranges)

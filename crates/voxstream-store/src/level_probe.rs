@@ -30,16 +30,6 @@ use crate::volume::DType;
 /// metadata breaks every brick, while damage to one shard (reported when rendering) breaks only some.
 pub const PROBES_PER_LEVEL: usize = 3;
 
-/// The zarrs data type of samples of `dtype`.
-fn zarr_data_type(dtype: DType) -> zarrs::array::DataType {
-    match dtype {
-        DType::U8 => zarrs::array::data_type::uint8(),
-        DType::U16 => zarrs::array::data_type::uint16(),
-        DType::I16 => zarrs::array::data_type::int16(),
-        DType::F32 => zarrs::array::data_type::float32(),
-    }
-}
-
 /// Refuses a level array (`name`, its path in the store) whose data type is not the store's `dtype`.
 pub(crate) fn check_level_dtype(
     path: &Path,
@@ -47,7 +37,7 @@ pub(crate) fn check_level_dtype(
     array: &Array<dyn ReadableStorageTraits>,
     dtype: DType,
 ) -> Result<(), StoreError> {
-    if *array.data_type() != zarr_data_type(dtype) {
+    if *array.data_type() != dtype.zarr_data_type() {
         return Err(StoreError::store(
             path,
             format!(

@@ -42,10 +42,11 @@ pub mod synthesis_limit;
 pub mod value_histogram;
 pub mod value_range;
 pub mod volume;
+pub mod wavelet_codec;
 pub mod world_extent;
 
 pub use error::StoreError;
-pub use import::{import_volume, ImportOptions, ImportReport};
+pub use import::{import_volume, BrickCodec, ImportOptions, ImportReport};
 pub use layout::PyramidLayout;
 pub use space_unit::SpaceUnit;
 pub use store_producer::{BrickSource, InMemoryVolume, StoreProducer};

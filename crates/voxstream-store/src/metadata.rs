@@ -43,6 +43,10 @@ pub struct StoreAttributes {
     /// foreign OME-Zarr images.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub value_percentiles: Option<Vec<[f64; 2]>>,
+    /// How the bricks are compressed, when not zstd (`{"name": "wavelet", "max_error": E}`): absent for zstd, the
+    /// codec every Zarr reader opens. Bricks' min/max (`minmax/`) include the codec's bound.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub brick_codec: Option<crate::import::BrickCodec>,
 }
 
 impl StoreAttributes {
@@ -60,6 +64,7 @@ impl StoreAttributes {
             value_range,
             complete,
             value_percentiles: None,
+            brick_codec: None,
         }
     }
 

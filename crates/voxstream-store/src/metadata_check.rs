@@ -87,6 +87,12 @@ pub fn validate_attributes(
             ),
         );
     }
+    if let Some(codec) = attributes.brick_codec {
+        let e = codec.max_error();
+        if !(e.is_finite() && e >= 0.0) {
+            return bad("brick_codec", format!("max_error {e} must be a finite number ≥ 0"));
+        }
+    }
     let [lo, hi] = attributes.value_range;
     let [type_lo, type_hi] = dtype_range(dtype);
     if !(lo.is_finite() && hi.is_finite()) {
@@ -180,6 +186,7 @@ mod tests {
             value_range: [0.0, 4000.0],
             complete: true,
             value_percentiles: Some(vec![[0.5, 10.0], [99.5, 3900.0]]),
+            brick_codec: None,
         }
     }
 

@@ -28,7 +28,7 @@ use zarrs::storage::ReadableStorageTraits;
 
 use crate::error::StoreError;
 use crate::import::{build_level_array, downsample, finish_store, partial_path, prepare_partial};
-use crate::import::{shard_brick_ranges, store_shard};
+use crate::import::{shard_brick_ranges, store_shard, BrickCodec};
 use crate::import::{BrickCounts, Samples};
 use crate::import::{ImportOptions, ImportReport};
 use crate::layout::PyramidLayout;
@@ -55,6 +55,9 @@ pub struct ShardSpec {
     pub zstd_level: i32,
     /// Each brick followed by its CRC32C.
     pub brick_checksums: bool,
+    /// How bricks are compressed (absent in specs from before the wavelet codec: zstd).
+    #[serde(default)]
+    pub codec: BrickCodec,
 }
 
 /// A shard's samples: level 0's from the source (x fastest, the shard's region only), or a coarser level's as the
@@ -245,7 +248,7 @@ impl ShardSpec {
             .into_iter()
             .map(|([bx, by], range)| {
                 let [gx, gy, gz] = [origin[0] / b + bx, origin[1] / b + by, origin[2] / b];
-                ((gz * bricks_per_axis[1] + gy) * bricks_per_axis[0] + gx, range)
+                ((gz * bricks_per_axis[1] + gy) * bricks_per_axis[0] + gx, self.codec.widen(range))
             })
             .unzip();
         // Encoded in memory with the codecs the import built (not read back from its metadata: the same codecs
@@ -257,6 +260,7 @@ impl ShardSpec {
             nan_as: self.nan_as,
             brick_checksums: self.brick_checksums,
             overwrite: false,
+            codec: self.codec,
         };
         let zarr = |e: &dyn std::fmt::Display| StoreError::store(&self.partial, e.to_string());
         let memory = Arc::new(MemoryStore::new());
@@ -403,6 +407,7 @@ impl ShardImport {
             nan_as: options.nan_as,
             zstd_level: options.zstd_level,
             brick_checksums: options.brick_checksums,
+            codec: options.codec,
         };
         Ok(ShardImport { spec, layout, info, out: out.to_path_buf(), _lock: lock, finished: false })
     }
@@ -484,7 +489,18 @@ impl ShardImport {
             FilesystemStore::new(&self.spec.partial)
                 .map_err(|e| StoreError::store(&self.spec.partial, e.to_string()))?,
         );
-        finish_store(&store, &self.spec.partial, &self.out, &self.info, layout, minmax, value_range, &histogram, counts)
+        finish_store(
+            &store,
+            &self.spec.partial,
+            &self.out,
+            &self.info,
+            layout,
+            minmax,
+            value_range,
+            &histogram,
+            counts,
+            self.spec.codec,
+        )
     }
 }
 

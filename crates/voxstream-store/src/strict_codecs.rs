@@ -21,6 +21,8 @@
 //! re-creates such an array from its metadata converted to v3 (zarrs's own conversion), whose codecs come from the
 //! registry.
 //!
+//! [`register`] also installs voxstream's own `voxstream.wavelet` ([`crate::wavelet_codec`]).
+//!
 //! [`register`] installs the codecs into zarrs's runtime registry, which takes precedence over zarrs's built-in
 //! codecs of the same names, for Zarr v3 and v2 alike; encoding is zarrs's own, unchanged.
 
@@ -228,6 +230,7 @@ pub fn register() {
         register_codec_v2(CodecRuntimePluginV2::new(Crc32cCodec::matches_name_v2, |metadata| {
             strict(Decoding::Whole, <Crc32cCodec as CodecTraitsV2>::create(metadata))
         }));
+        crate::wavelet_codec::register();
     });
 }
 

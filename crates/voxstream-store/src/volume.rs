@@ -48,6 +48,21 @@ impl DType {
             _ => None,
         }
     }
+
+    /// The Zarr data type of these samples.
+    pub fn zarr_data_type(self) -> zarrs::array::DataType {
+        match self {
+            DType::U8 => zarrs::array::data_type::uint8(),
+            DType::U16 => zarrs::array::data_type::uint16(),
+            DType::I16 => zarrs::array::data_type::int16(),
+            DType::F32 => zarrs::array::data_type::float32(),
+        }
+    }
+
+    /// The sample type of a Zarr data type, where it is one of these four.
+    pub fn from_zarr_data_type(data_type: &zarrs::array::DataType) -> Option<DType> {
+        [DType::U8, DType::U16, DType::I16, DType::F32].into_iter().find(|d| d.zarr_data_type() == *data_type)
+    }
 }
 
 /// Geometry and type of a volume.

@@ -513,9 +513,26 @@ pub struct ImportArgs {
     /// Store NaN, +inf and -inf samples as this finite value (without it they are refused, naming the first one).
     #[arg(long, value_name = "VALUE", allow_negative_numbers = true)]
     pub nan_as: Option<f32>,
+    /// How bricks are compressed: zstd (lossless; every Zarr v3 reader opens the store) or wavelet (Reichl's brick
+    /// codec, a Zarr extension only voxstream reads: lossless, or lossy with --max-error).
+    #[arg(long, value_enum, default_value_t = CodecArg::Zstd)]
+    pub codec: CodecArg,
+    /// With --codec wavelet: every stored sample within this absolute error of its value, in the data's units
+    /// (integer samples: its whole part); 0, the default, is lossless.
+    #[arg(long, value_name = "E", allow_negative_numbers = true)]
+    pub max_error: Option<f64>,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+}
+
+/// `import --codec`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CodecArg {
+    /// zstd, lossless.
+    Zstd,
+    /// The wavelet brick codec.
+    Wavelet,
 }
 
 /// `voxstream info`.

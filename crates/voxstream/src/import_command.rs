@@ -7,7 +7,18 @@ use indicatif::{ProgressBar, ProgressStyle};
 use voxstream_api::import_input::{open_input, ImportSettings, RawSettings};
 use voxstream_api::remote_output::remote_output;
 
-use crate::cli::{EndianArg, ImportArgs};
+use voxstream_store::BrickCodec;
+
+use crate::cli::{CodecArg, EndianArg, ImportArgs};
+
+/// The codec `--codec` and `--max-error` ask for.
+fn brick_codec(args: &ImportArgs) -> Result<BrickCodec> {
+    let name = match args.codec {
+        CodecArg::Zstd => "zstd",
+        CodecArg::Wavelet => "wavelet",
+    };
+    BrickCodec::from_choice(name, args.max_error).map_err(|e| anyhow::anyhow!("--codec {name} --max-error: {e}"))
+}
 
 /// Runs `voxstream import`.
 pub fn run(args: &ImportArgs) -> Result<()> {
@@ -37,6 +48,7 @@ pub fn run(args: &ImportArgs) -> Result<()> {
         amplify: args.amplify,
         smoothing_scale: args.smoothing_scale,
         particle_memory: args.particle_memory,
+        codec: brick_codec(args)?,
     };
     // A remote --out is checked (and its bucket asked) before the input is read.
     let remote = remote_output(&args.out, &settings)?;
@@ -83,8 +95,15 @@ pub fn run(args: &ImportArgs) -> Result<()> {
             Some(remote) => remote.shown().to_string(),
             None => args.out.display().to_string(),
         };
+        let codec = match settings.codec {
+            BrickCodec::Zstd => String::new(),
+            BrickCodec::Wavelet { max_error } if max_error > 0.0 => {
+                format!("; bricks wavelet-coded, every sample within {max_error} of its value")
+            }
+            BrickCodec::Wavelet { .. } => "; bricks wavelet-coded, lossless".into(),
+        };
         eprintln!(
-            "imported {} ({}x{}x{} {}) into {}: {} levels, {} bricks written, {} empty, values {} to {}{}",
+            "imported {} ({}x{}x{} {}) into {}: {} levels, {} bricks written, {} empty, values {} to {}{codec}{}",
             args.input.display(),
             info.dims[0],
             info.dims[1],

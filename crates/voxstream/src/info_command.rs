@@ -3,7 +3,7 @@
 use anyhow::Result;
 use serde::Serialize;
 use voxstream_store::image_planes::PlaneChoice;
-use voxstream_store::StoreReader;
+use voxstream_store::{BrickCodec, StoreReader};
 
 use crate::cli::InfoArgs;
 use crate::source_path::{check_store_path, warn_about_leftovers};
@@ -92,6 +92,9 @@ struct StoreInfo {
     #[serde(skip_serializing_if = "Option::is_none")]
     unit: Option<String>,
     brick_size: u64,
+    /// The bricks' codec when not zstd (`{"name": "wavelet", "max_error": E}`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    brick_codec: Option<BrickCodec>,
     value_range: [f64; 2],
     /// `[percent, value]` pairs; absent for stores that do not keep them.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -145,6 +148,7 @@ pub fn run(args: &InfoArgs) -> Result<()> {
         origin: attributes.origin,
         unit: reader.info().unit.map(|u| u.name().to_string()),
         brick_size: attributes.brick_size,
+        brick_codec: attributes.brick_codec,
         value_range: attributes.value_range,
         value_percentiles: attributes.value_percentiles.clone(),
         bytes_on_disk: reader.bytes_on_disk(),
@@ -197,7 +201,14 @@ pub fn run(args: &InfoArgs) -> Result<()> {
         }
         println!("omero        {}", parts.join(", "));
     }
-    println!("brick        {}^3", info.brick_size);
+    let codec = match info.brick_codec {
+        None | Some(BrickCodec::Zstd) => String::new(),
+        Some(BrickCodec::Wavelet { max_error }) if max_error > 0.0 => {
+            format!(", wavelet-coded: every sample within {max_error} of the imported value")
+        }
+        Some(BrickCodec::Wavelet { .. }) => ", wavelet-coded, lossless".into(),
+    };
+    println!("brick        {}^3{codec}", info.brick_size);
     match reader.remote() {
         Some(remote) => {
             let counts = remote.counts();

@@ -182,3 +182,69 @@ fn store_renders_are_deterministic_with_background_prefetch() {
     }
     assert!(images.windows(2).all(|w| w[0] == w[1]), "store renders differ between runs");
 }
+
+/// PSNR of `b` against `a` (8-bit samples).
+fn psnr(a: &[u8], b: &[u8]) -> f64 {
+    let mse = a.iter().zip(b).map(|(x, y)| (*x as f64 - *y as f64).powi(2)).sum::<f64>() / a.len() as f64;
+    10.0 * (255.0f64.powi(2) / mse.max(1e-12)).log10()
+}
+
+#[test]
+fn wavelet_coded_stores_import_say_so_and_render_like_zstd_stores() {
+    let dir = scratch("wavelet");
+    write_ball(&dir.join("ball.nrrd"));
+    let stores = [
+        ("zstd.zarr", vec!["--codec", "zstd"]),
+        ("exact.zarr", vec!["--codec", "wavelet"]),
+        ("lossy.zarr", vec!["--codec", "wavelet", "--max-error", "20"]),
+    ];
+    for (store, flags) in &stores {
+        let mut args = vec!["import", "ball.nrrd", "--out", store, "--brick-size", "16"];
+        args.extend(flags);
+        let output = voxstream(&args, &dir);
+        assert!(output.status.success(), "{store}: {}", stderr(&output));
+        if *store == "lossy.zarr" {
+            assert!(stderr(&output).contains("every sample within 20 of its value"), "{}", stderr(&output));
+        }
+        let output = voxstream(&["info", store, "--json"], &dir);
+        assert!(output.status.success(), "{}", stderr(&output));
+        let info: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+        let expected = match *store {
+            "zstd.zarr" => serde_json::Value::Null,
+            "exact.zarr" => serde_json::json!({"name": "wavelet", "max_error": 0.0}),
+            _ => serde_json::json!({"name": "wavelet", "max_error": 20.0}),
+        };
+        assert_eq!(info["brick_codec"], expected, "{store}");
+        let png = store.replace(".zarr", ".png");
+        let output = voxstream(&["render", store, "--width", "96", "--height", "96", "--out", &png], &dir);
+        assert!(output.status.success(), "{store}: {}", stderr(&output));
+        assert!(!stderr(&output).contains("warning"), "{store}: {}", stderr(&output));
+    }
+    let level0 = |store: &str| {
+        let mut files = walk(&dir.join(store).join("0"));
+        files.retain(|f| f.file_name().is_some_and(|n| n != "zarr.json"));
+        files.iter().map(|f| std::fs::metadata(f).unwrap().len()).sum::<u64>()
+    };
+    let (zstd, exact, lossy) = (level0("zstd.zarr"), level0("exact.zarr"), level0("lossy.zarr"));
+    assert!(exact < zstd && lossy < exact, "level 0 bytes: zstd {zstd}, wavelet {exact}, ±20 {lossy}");
+    let (_, _, want) = common::read_png(&dir.join("zstd.png"));
+    let (_, _, same) = common::read_png(&dir.join("exact.png"));
+    assert!(want == same, "a lossless wavelet store renders the zstd store's image");
+    let (_, _, near) = common::read_png(&dir.join("lossy.png"));
+    let db = psnr(&want, &near);
+    assert!(db > 40.0 && db.is_finite(), "±20 in 0..4100 renders at {db:.1} dB against the exact store");
+
+    for (flags, expected) in [
+        (vec!["--max-error", "3"], "applies to the wavelet codec; zstd is lossless"),
+        (vec!["--codec", "wavelet", "--max-error", "-1"], "finite number ≥ 0"),
+    ] {
+        let mut args = vec!["import", "ball.nrrd", "--out", "bad.zarr"];
+        args.extend(&flags);
+        let output = voxstream(&args, &dir);
+        let text = stderr(&output);
+        assert!(!output.status.success() && !text.contains("panicked"), "{flags:?}: {text}");
+        assert!(text.contains(expected) && text.lines().count() == 1, "{flags:?}: {text}");
+        assert!(!dir.join("bad.zarr").exists());
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -107,7 +107,7 @@ _TASK_BYTES = 64 << 20
 
 
 def import_dask(array, out, *, spacing=None, origin=None, brick_size: int = 32, overwrite: bool = False,
-                nan_as: Optional[float] = None,
+                nan_as: Optional[float] = None, codec: str = "zstd", max_error: Optional[float] = None,
                 progress: Optional[Callable[[int, int], Any]] = None) -> Dict[str, Any]:
     """Imports a 3-D dask array indexed ``[z, y, x]`` into the store ``out`` on the active Dask cluster (see the
     module's documentation); ``progress(done, total)`` counts finished tasks (each a band of whole shards)."""
@@ -123,7 +123,8 @@ def import_dask(array, out, *, spacing=None, origin=None, brick_size: int = 32, 
     job = _native.ShardImport(
         os.fspath(out), (x, y, z), dtype, spacing=None if spacing is None else tuple(float(v) for v in spacing),
         origin=None if origin is None else tuple(float(v) for v in origin), brick_size=int(brick_size),
-        overwrite=bool(overwrite), nan_as=nan_as)
+        overwrite=bool(overwrite), nan_as=nan_as, codec=str(codec),
+        max_error=None if max_error is None else float(max_error))
     try:
         spec = job.spec()
         task = delayed(_write_band, nout=2, pure=True)

@@ -13,7 +13,8 @@ def import_volume(source, out, *, spacing: Optional[Sequence[float]] = None,
                   origin: Optional[Sequence[float]] = None, brick_size: int = 32, overwrite: bool = False,
                   nan_as: Optional[float] = None, resolution: Optional[int] = None,
                   amplify: Optional[float] = None,
-                  progress: Optional[Callable[[int, int], Any]] = None) -> Dict[str, Any]:
+                  progress: Optional[Callable[[int, int], Any]] = None, codec: str = "zstd",
+                  max_error: Optional[float] = None) -> Dict[str, Any]:
     """Writes ``source`` as a voxstream store at ``out``: a file's path (any format ``voxstream import`` reads:
     NumPy, NIfTI, NRRD, MetaImage, VTK, TIFF stacks, …; meshes and particle files are baked into a grid of
     ``resolution`` voxels per axis, meshes with noise of ``amplify``) or a 3-D numpy array indexed ``[z, y, x]`` of
@@ -23,6 +24,10 @@ def import_volume(source, out, *, spacing: Optional[Sequence[float]] = None,
     and only once the new one is complete; Ctrl-C or an exception raised by ``progress`` stops the import and
     removes what was written. Returns dims, dtype, levels, bricks written and empty, and the value range.
 
+    ``codec="wavelet"`` compresses bricks with voxstream's wavelet codec (a Zarr extension only voxstream reads):
+    lossless, or with ``max_error=E`` every stored sample within E of its value; ``"zstd"`` (the default) writes a
+    store every Zarr v3 reader opens.
+
     A dask array is imported on the active Dask cluster (``distributed.Client``; without one, Dask's local
     scheduler), one task per shard, into the same store byte for byte; ``out`` must then be on a filesystem every
     worker sees, and ``progress(done, total)`` counts finished shards."""
@@ -30,7 +35,7 @@ def import_volume(source, out, *, spacing: Optional[Sequence[float]] = None,
         if resolution is not None or amplify is not None:
             raise ValueError("resolution and amplify apply to meshes and particle files, not to arrays")
         return import_dask(source, out, spacing=spacing, origin=origin, brick_size=brick_size, overwrite=overwrite,
-                           nan_as=nan_as, progress=progress)
+                           nan_as=nan_as, codec=codec, max_error=max_error, progress=progress)
     if not isinstance(source, (str, os.PathLike)) and not hasattr(source, "__array_interface__"):
         raise ValueError("source must be a file's path or a 3-D numpy or dask array")
     if isinstance(source, (str, os.PathLike)):
@@ -38,4 +43,5 @@ def import_volume(source, out, *, spacing: Optional[Sequence[float]] = None,
     return dict(_native.import_volume(
         source, os.fspath(out), spacing=None if spacing is None else tuple(float(v) for v in spacing),
         origin=None if origin is None else tuple(float(v) for v in origin), brick_size=int(brick_size),
-        overwrite=bool(overwrite), nan_as=nan_as, resolution=resolution, amplify=amplify, progress=progress))
+        overwrite=bool(overwrite), nan_as=nan_as, resolution=resolution, amplify=amplify, progress=progress,
+        codec=str(codec), max_error=None if max_error is None else float(max_error)))

@@ -159,8 +159,12 @@ fn shard_tasks_in_any_order_write_the_single_process_store_byte_for_byte() {
     let dir = scratch("identical");
     // Odd dims everywhere; 4-sample bricks and 2×2 bricks a shard: 5 levels, several shards on each.
     let dims = [37, 45, 29];
-    let options = ImportOptions { brick_size: 4, shard_bricks: 2, ..ImportOptions::default() };
-    for dtype in [DType::U8, DType::U16, DType::I16, DType::F32] {
+    let codecs = [BrickCodec::Zstd, BrickCodec::Wavelet { max_error: 0.0 }, BrickCodec::Wavelet { max_error: 2.5 }];
+    for (dtype, codec) in
+        [DType::U8, DType::U16, DType::I16, DType::F32].into_iter().flat_map(|dtype| codecs.map(|codec| (dtype, codec)))
+    {
+        let options = ImportOptions { brick_size: 4, shard_bricks: 2, codec, ..ImportOptions::default() };
+        let dtype_name = format!("{dtype:?} {codec:?}");
         let values = volume(dims, dtype);
         let info = info(dims, dtype);
         // The same store name in two folders: the name is written into the OME metadata.
@@ -173,12 +177,12 @@ fn shard_tasks_in_any_order_write_the_single_process_store_byte_for_byte() {
         assert!(expected.levels >= 4, "{expected:?}");
         assert!(expected.bricks_empty[0] > 0 && expected.bricks_written[0] > 0, "{expected:?}");
         let got = import_by_shards(&values, &info, &b, &options, false).unwrap();
-        assert_eq!(got, expected, "{dtype:?}");
+        assert_eq!(got, expected, "{dtype_name}");
         let backwards = import_by_shards(&values, &info, &c, &options, true).unwrap();
-        assert_eq!(backwards, expected, "{dtype:?}");
+        assert_eq!(backwards, expected, "{dtype_name}");
         assert!(files(&a).len() > 20, "{} files", files(&a).len());
-        same_files(&a, &b, &format!("{dtype:?}"));
-        same_files(&a, &c, &format!("{dtype:?}, tasks backwards"));
+        same_files(&a, &b, &dtype_name);
+        same_files(&a, &c, &format!("{dtype_name}, tasks backwards"));
         for folder in [&a, &b, &c] {
             std::fs::remove_dir_all(folder).unwrap();
         }

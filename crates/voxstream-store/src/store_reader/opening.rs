@@ -317,7 +317,16 @@ impl StoreReader {
         // The coarsest level's one brick covers every sample: its range is the volume's.
         let root = minmax.last().and_then(|m| m.first()).copied().unwrap_or([0.0, 0.0]);
         let [lo, hi] = attributes.value_range;
-        if root != [lo as f32, hi as f32] {
+        let exact = [lo as f32, hi as f32];
+        // A lossy codec's bricks carry ranges widened by its bound: the root holds the value range, within it.
+        let agrees = match attributes.brick_codec.filter(|c| c.max_error() > 0.0) {
+            None => root == exact,
+            Some(codec) => {
+                let outer = codec.widen(exact);
+                (outer[0]..=exact[0]).contains(&root[0]) && (exact[1]..=outer[1]).contains(&root[1])
+            }
+        };
+        if !agrees {
             return Err(StoreError::metadata(
                 path,
                 "value_range",
