@@ -88,16 +88,9 @@ impl BrickCodec {
         }
     }
 
-    /// Widens a brick's `[min, max]` by the codec's bound, so that empty-space skipping never culls a brick whose
-    /// decoded samples reach a value (an all-zero brick, `[0, 0]`, is not stored and decodes exactly).
-    pub(crate) fn widen(self, range: [f32; 2]) -> [f32; 2] {
-        let e = self.max_error() as f32;
-        if e == 0.0 || range == [0.0, 0.0] || range[0] > range[1] {
-            return range;
-        }
-        // Rounded outwards: f32's spacing at the range's ends must not undo the widening.
-        let (lo, hi) = (range[0] - e, range[1] + e);
-        [lo - lo.abs() * f32::EPSILON, hi + hi.abs() * f32::EPSILON]
+    /// Whether decoded samples may differ from the samples written.
+    pub fn is_lossy(self) -> bool {
+        self.max_error() > 0.0
     }
 }
 
@@ -448,7 +441,7 @@ pub(crate) fn build_level_array<S: ?Sized>(
 /// One level being written: a slab of up to one brick of z planes.
 struct LevelWriter {
     array: Array<FilesystemStore>,
-    /// The bricks' codec (its bound widens their min/max).
+    /// The bricks' codec (a lossy one's ranges are read back from the bricks as written).
     codec: BrickCodec,
     dims: [u64; 3],
     bricks: [u64; 3],
@@ -525,11 +518,14 @@ impl LevelWriter {
                     }
                 }
                 let valid = [shard_x.min(nx - sx * shard_x), shard_y.min(ny - sy * shard_y), planes as u64];
-                for ([bx, by], range) in shard_brick_ranges(&elements, [shard_x, shard_y], valid, b) {
-                    let (gbx, gby) = (sx * shard_x / b + bx, sy * shard_y / b + by);
-                    brick_ranges.push((gby * (nx.div_ceil(b)) + gbx, codec.widen(range), range == [0.0, 0.0]));
-                }
                 store_shard(array, &[row, sy, sx], &elements, dtype).map_err(|e| e.to_string())?;
+                let ranges =
+                    stored_brick_ranges(array, &[row, sy, sx], &elements, [shard_x, shard_y], valid, b, dtype, codec)
+                        .map_err(|e| e.to_string())?;
+                for ([bx, by], range) in ranges {
+                    let (gbx, gby) = (sx * shard_x / b + bx, sy * shard_y / b + by);
+                    brick_ranges.push((gby * (nx.div_ceil(b)) + gbx, range, range == [0.0, 0.0]));
+                }
                 Ok(brick_ranges)
             })
             .collect();
@@ -581,6 +577,34 @@ pub(crate) fn shard_brick_ranges(
         }
     }
     ranges
+}
+
+/// Each brick's `[min, max]` as the shard just written at `indices` holds it (ranges of the samples that lie in the
+/// volume, as [`shard_brick_ranges`]; `[0, 0]` for a brick that reads as zeros, as empty ones do). For a lossless codec
+/// that is `elements`' own ranges; a lossy codec's bricks are read back and their decoded samples' ranges taken, so
+/// that each range is exactly what a reader decodes (tight for empty-space skipping, and never culling a brick whose
+/// decoded samples reach a value).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn stored_brick_ranges<S: ?Sized + zarrs::storage::ReadableStorageTraits + 'static>(
+    array: &Array<S>,
+    indices: &[u64],
+    elements: &[f32],
+    edge: [u64; 2],
+    valid: [u64; 3],
+    b: u64,
+    dtype: DType,
+    codec: BrickCodec,
+) -> Result<Vec<([u64; 2], [f32; 2])>, Box<dyn std::error::Error>> {
+    if !codec.is_lossy() {
+        return Ok(shard_brick_ranges(elements, edge, valid, b));
+    }
+    let decoded: Vec<f32> = match dtype {
+        DType::U8 => array.retrieve_chunk::<Vec<u8>>(indices)?.into_iter().map(f32::from).collect(),
+        DType::U16 => array.retrieve_chunk::<Vec<u16>>(indices)?.into_iter().map(f32::from).collect(),
+        DType::I16 => array.retrieve_chunk::<Vec<i16>>(indices)?.into_iter().map(f32::from).collect(),
+        DType::F32 => array.retrieve_chunk::<Vec<f32>>(indices)?,
+    };
+    Ok(shard_brick_ranges(&decoded, edge, valid, b))
 }
 
 pub(crate) fn store_shard<S: ?Sized + zarrs::storage::ReadableWritableStorageTraits + 'static>(

@@ -44,7 +44,7 @@ pub struct StoreAttributes {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub value_percentiles: Option<Vec<[f64; 2]>>,
     /// How the bricks are compressed, when not zstd (`{"name": "wavelet", "max_error": E}`): absent for zstd, the
-    /// codec every Zarr reader opens. Bricks' min/max (`minmax/`) include the codec's bound.
+    /// codec every Zarr reader opens. A lossy codec's per-brick min/max (`minmax/`) are its decoded samples'.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub brick_codec: Option<crate::import::BrickCodec>,
 }

@@ -28,7 +28,7 @@ use zarrs::storage::ReadableStorageTraits;
 
 use crate::error::StoreError;
 use crate::import::{build_level_array, downsample, finish_store, partial_path, prepare_partial};
-use crate::import::{shard_brick_ranges, store_shard, BrickCodec};
+use crate::import::{store_shard, stored_brick_ranges, BrickCodec};
 use crate::import::{BrickCounts, Samples};
 use crate::import::{ImportOptions, ImportReport};
 use crate::layout::PyramidLayout;
@@ -244,13 +244,6 @@ impl ShardSpec {
         }
         let b = self.brick_size;
         let bricks_per_axis = layout.bricks(level);
-        let (bricks, ranges) = shard_brick_ranges(&elements, [edge[0], edge[1]], extent, b)
-            .into_iter()
-            .map(|([bx, by], range)| {
-                let [gx, gy, gz] = [origin[0] / b + bx, origin[1] / b + by, origin[2] / b];
-                ((gz * bricks_per_axis[1] + gy) * bricks_per_axis[0] + gx, self.codec.widen(range))
-            })
-            .unzip();
         // Encoded in memory with the codecs the import built (not read back from its metadata: the same codecs
         // with the same options), then written into the level's folder by `write_shard_file`.
         let options = ImportOptions {
@@ -267,6 +260,15 @@ impl ShardSpec {
         let array = build_level_array(&memory, &layout, level, dtype, &options).map_err(|e| zarr(&e))?;
         let indices = [shard[2], shard[1], shard[0]];
         store_shard(&array, &indices, &elements, dtype).map_err(|e| zarr(&e))?;
+        let stored = stored_brick_ranges(&array, &indices, &elements, [edge[0], edge[1]], extent, b, dtype, self.codec)
+            .map_err(|e| zarr(&e))?;
+        let (bricks, ranges) = stored
+            .into_iter()
+            .map(|([bx, by], range)| {
+                let [gx, gy, gz] = [origin[0] / b + bx, origin[1] / b + by, origin[2] / b];
+                ((gz * bricks_per_axis[1] + gy) * bricks_per_axis[0] + gx, range)
+            })
+            .unzip();
         let key = array.chunk_key(&indices);
         // A shard of zeros only is not stored (as zarrs does not store it in a single-process import).
         if let Some(bytes) = memory.get(&key).map_err(|e| zarr(&e))? {

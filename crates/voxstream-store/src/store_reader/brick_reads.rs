@@ -234,16 +234,7 @@ impl StoreReader {
                 Err(e) => return Err(failure(e.to_string())),
             }
         }
-        let holds = lo >= min && hi <= max;
-        let agrees = match self.attributes.brick_codec.filter(|c| c.max_error() > 0.0) {
-            // Level 0's range is its samples' own; coarser ranges also hold the samples below them.
-            None => holds && (level > 0 || [lo, hi] == [min, max]),
-            // A lossy codec's ranges are its input's widened by the bound; its samples are within it of the input.
-            Some(codec) => {
-                let outer = codec.widen(codec.widen([lo, hi]));
-                holds && (level > 0 || (min >= outer[0] && max <= outer[1]))
-            }
-        };
+        let agrees = if level == 0 { lo == min && hi == max } else { lo >= min && hi <= max };
         if !agrees {
             return Err(failure(format!(
                 "reads as values {lo} to {hi}, but its min/max says {min} to {max}: the shard is corrupt"

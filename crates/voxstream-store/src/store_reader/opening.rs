@@ -318,12 +318,13 @@ impl StoreReader {
         let root = minmax.last().and_then(|m| m.first()).copied().unwrap_or([0.0, 0.0]);
         let [lo, hi] = attributes.value_range;
         let exact = [lo as f32, hi as f32];
-        // A lossy codec's bricks carry ranges widened by its bound: the root holds the value range, within it.
-        let agrees = match attributes.brick_codec.filter(|c| c.max_error() > 0.0) {
+        // A lossy codec's bricks decode within its bound of the values imported: so do their ranges.
+        let agrees = match attributes.brick_codec.filter(|c| c.is_lossy()) {
             None => root == exact,
             Some(codec) => {
-                let outer = codec.widen(exact);
-                (outer[0]..=exact[0]).contains(&root[0]) && (exact[1]..=outer[1]).contains(&root[1])
+                let e = codec.max_error() as f32;
+                let slack = e + (lo.abs().max(hi.abs()) as f32 + e) * 4.0 * f32::EPSILON;
+                (root[0] - exact[0]).abs() <= slack && (root[1] - exact[1]).abs() <= slack && root[0] <= root[1]
             }
         };
         if !agrees {
