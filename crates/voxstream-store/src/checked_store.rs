@@ -48,9 +48,9 @@ pub struct CheckedStore {
     indexes: std::sync::Mutex<lru::LruCache<(String, u64), Option<zarrs::storage::Bytes>>>,
     /// Shard indexes being read now (one read per index however many threads want it).
     reading: crate::single_flight::SingleFlight<(String, u64)>,
-    /// Remote stores: bricks as fetched (compressed), by key, offset and length, within a byte bound
-    /// ([`CheckedStore::with_range_cache`]), so that a brick the decoded-brick cache let go is decoded again from
-    /// memory instead of fetched again.
+    /// Bricks as stored (compressed), by key, offset and length, within a byte bound
+    /// ([`CheckedStore::with_range_cache`]): the host cache of compressed bricks (Reichl's, seed 004 ch. 4–5), so
+    /// that a brick the decoded-brick cache let go is decoded again from memory instead of read again.
     ranges: Option<std::sync::Mutex<RangeCache>>,
     /// The most bytes one explicit range may ask for; `u64::MAX` when unbounded (the file's size still bounds it).
     max_range_bytes: u64,
@@ -85,13 +85,30 @@ impl CheckedStore {
         }
     }
 
-    /// The same store keeping up to `bytes` of fetched brick ranges (remote stores only; a folder's reads are cheap).
+    /// The same store keeping up to `bytes` of brick ranges as read (compressed); 0 keeps none.
     pub fn with_range_cache(mut self, bytes: u64) -> CheckedStore {
-        if matches!(self.inner, Inner::Remote(_)) && bytes > 0 {
-            self.ranges =
-                Some(std::sync::Mutex::new(RangeCache { lru: lru::LruCache::unbounded(), held: 0, capacity: bytes }));
+        if bytes > 0 {
+            self.ranges = Some(std::sync::Mutex::new(RangeCache {
+                lru: lru::LruCache::unbounded(),
+                held: 0,
+                capacity: bytes,
+                hits: 0,
+                hit_bytes: 0,
+            }));
         }
         self
+    }
+
+    /// What the cache of compressed brick ranges holds and has served; `None` without one.
+    pub fn compressed_cache(&self) -> Option<CompressedCacheStats> {
+        let cache = self.ranges.as_ref()?.lock().unwrap_or_else(|p| p.into_inner());
+        Some(CompressedCacheStats {
+            capacity_bytes: cache.capacity,
+            held_bytes: cache.held,
+            bricks_held: cache.lru.len() as u64,
+            hits: cache.hits,
+            hit_bytes: cache.hit_bytes,
+        })
     }
 
     /// The size of `key`'s file, `None` when it does not exist; an error when it is not a regular file.
@@ -138,12 +155,30 @@ impl CheckedStore {
     }
 }
 
-/// Fetched brick ranges, least recently used first out within `capacity` bytes.
+/// Brick ranges as read, least recently used first out within `capacity` bytes.
 #[derive(Debug)]
 struct RangeCache {
     lru: lru::LruCache<(String, u64, u64), zarrs::storage::Bytes>,
     held: u64,
     capacity: u64,
+    /// Reads answered from the cache, and their bytes.
+    hits: u64,
+    hit_bytes: u64,
+}
+
+/// The compressed-brick cache's state ([`CheckedStore::compressed_cache`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct CompressedCacheStats {
+    /// Its budget.
+    pub capacity_bytes: u64,
+    /// Bytes of bricks it holds now.
+    pub held_bytes: u64,
+    /// Bricks it holds now.
+    pub bricks_held: u64,
+    /// Brick reads it answered (not read from the files or the network again).
+    pub hits: u64,
+    /// Bytes of those reads.
+    pub hit_bytes: u64,
 }
 
 impl RangeCache {
@@ -265,7 +300,16 @@ impl ReadableStorageTraits for CheckedStore {
         }
         if let (Some(cache), [ByteRange::FromStart(offset, Some(length))]) = (&self.ranges, &ranges[..]) {
             let id = (key.as_str().to_string(), *offset, *length);
-            if let Some(bytes) = cache.lock().unwrap_or_else(|p| p.into_inner()).lru.get(&id).cloned() {
+            let hit = {
+                let mut cache = cache.lock().unwrap_or_else(|p| p.into_inner());
+                let hit = cache.lru.get(&id).cloned();
+                if let Some(bytes) = &hit {
+                    cache.hits += 1;
+                    cache.hit_bytes += bytes.len() as u64;
+                }
+                hit
+            };
+            if let Some(bytes) = hit {
                 return Ok(Some(Box::new(std::iter::once(Ok(bytes)))));
             }
             let Some(parts) = self.read_checked(key, ranges)? else { return Ok(None) };

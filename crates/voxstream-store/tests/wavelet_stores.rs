@@ -1,6 +1,7 @@
-//! Stores whose bricks are wavelet-coded (issue 47, items 3 and 4): read back through the same reader as zstd stores,
-//! exactly when lossless, within the bound at every level when lossy, with per-brick min/max that still hold every
-//! decoded sample (so empty-space skipping never culls a brick whose decoded values reach a transfer function).
+//! Compressed bricks (issue 47, items 2–4). Stores whose bricks are wavelet-coded read back through the same reader as
+//! zstd stores, exactly when lossless, within the bound at every level when lossy, with per-brick min/max that hold
+//! every decoded sample (so empty-space skipping never culls a brick whose decoded values reach a transfer
+//! function); and the host cache of bricks as stored answers a brick the decoded cache let go.
 
 use std::path::{Path, PathBuf};
 
@@ -64,12 +65,16 @@ fn volume(dtype: DType) -> Vec<f32> {
 }
 
 fn import(dir: &Path, name: &str, dtype: DType, codec: BrickCodec) -> StoreReader {
+    import_only(dir, name, dtype, codec);
+    StoreReader::open(&dir.join(name)).unwrap()
+}
+
+fn import_only(dir: &Path, name: &str, dtype: DType, codec: BrickCodec) {
     let info = VolumeInfo { dims: DIMS, dtype, spacing: [1.0; 3], origin: [0.0; 3], unit: None };
     let mut source = InMemory { info, values: volume(dtype), next: 0 };
     let out = dir.join(name);
     let options = ImportOptions { brick_size: 16, shard_bricks: 2, codec, ..ImportOptions::default() };
     import_volume(&mut source, &out, &options, &mut |_, _| {}).unwrap();
-    StoreReader::open(&out).unwrap()
 }
 
 /// Every level whole, as the reader assembles it.
@@ -169,6 +174,34 @@ fn lossy_wavelet_stores_hold_their_bound_and_their_brick_ranges_hold_the_decoded
         let (a, b) =
             (stored_bytes(&dir.join(format!("{dtype:?}-zstd"))), stored_bytes(&dir.join(format!("{dtype:?}-lossy"))));
         assert!(b < a, "{dtype:?}: lossy {b} bytes against zstd {a}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn bricks_the_decoded_cache_let_go_are_decoded_again_from_the_compressed_cache() {
+    let dir = scratch("host-caches");
+    for codec in [BrickCodec::Zstd, BrickCodec::Wavelet { max_error: 0.0 }] {
+        let name = format!("{codec:?}");
+        import_only(&dir, &name, DType::U16, codec);
+        // 16³ bricks of f32 are 16 KiB decoded: a 1 MiB host cache holds 32 of level 0's 60 decoded, and keeps
+        // 512 KiB of bricks as stored (about 5 KiB each, noisy u16), which holds them all.
+        let reader = StoreReader::open_with_cache(&dir.join(&name), 1 << 20).unwrap();
+        let caches = reader.host_caches();
+        assert_eq!(caches.decoded_bytes, 32 * 16 * 16 * 16 * 4, "{name}");
+        let compressed = caches.compressed.expect("a native store has a compressed-brick cache");
+        assert_eq!(compressed.capacity_bytes, 512 << 10, "{name}");
+        let dims = reader.layout().level_dims[0];
+        let first = reader.read_region(0, [0; 3], dims).unwrap();
+        let after_first = reader.host_caches().compressed.unwrap();
+        let second = reader.read_region(0, [0; 3], dims).unwrap();
+        let after_second = reader.host_caches().compressed.unwrap();
+        assert!(first == second, "{name}: the same samples from either cache");
+        let stored = after_first.bricks_held;
+        assert!(stored > 40, "{name}: {after_first:?}");
+        assert!(after_first.held_bytes <= after_first.capacity_bytes, "{name}: {after_first:?}");
+        // The second pass found as stored every brick the decoded cache had let go (it holds the last 32 at most).
+        assert!(after_second.hits - after_first.hits >= stored - 32, "{name}: {after_first:?} then {after_second:?}");
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }

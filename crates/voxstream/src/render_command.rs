@@ -261,6 +261,7 @@ fn render_source(args: &RenderArgs, source: Source, budget: &MemoryBudget) -> Re
         }
     }
     stats.remote = source.remote.as_ref().map(|remote| RemoteStats::from(remote.counts()));
+    stats.host_caches = source.store.as_ref().map(|store| store.host_caches());
     if !stats.converged && args.mode == Mode::Converged {
         progress.warn(&format!(
             "the last frame did not converge: the budget of {} MiB cannot hold what the view needs; coarser data \

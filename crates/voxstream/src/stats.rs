@@ -54,6 +54,10 @@ pub struct RunStats {
     pub bytes_uploaded: u64,
     /// Bytes read from files while rendering (stores only: compressed shards and metadata).
     pub file_bytes_read: Option<u64>,
+    /// Stores: the host caches' budgets (decoded bricks, and bricks as stored: compressed), and what the compressed
+    /// one held at the end and served (reads not made again).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub host_caches: Option<voxstream_store::store_reader::HostCaches>,
     /// A remote store's requests, bytes, retries and failures since it was opened (absent for local sources).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub remote: Option<RemoteStats>,

@@ -81,6 +81,9 @@ pub fn run(args: &ViewArgs) -> Result<()> {
             scale_bar: args.look.scale_bar,
         },
         unit: meta.store.as_ref().and_then(|s| s.info().unit.map(|u| u.name().to_string())),
+        host_caches: meta.store.clone().map(|store| -> Box<dyn Fn() -> String + Send> {
+            Box::new(move || host_caches_status(&store.host_caches()))
+        }),
     };
     let summary = run_viewer(session, config).context("voxstream view");
     if let Some(warning) = meta.clipped_warning() {
@@ -133,4 +136,20 @@ fn presets(range: [f64; 2]) -> Vec<(String, TransferFunction)> {
     .into_iter()
     .filter_map(|(name, tf)| tf.map(|tf| (name.to_string(), tf)))
     .collect()
+}
+
+/// The status line's words for a store's host caches: the decoded-brick cache's budget, and the compressed one's
+/// use of its budget and the reads it saved.
+fn host_caches_status(caches: &voxstream_store::store_reader::HostCaches) -> String {
+    let mib = |b: u64| b as f64 / (1 << 20) as f64;
+    match caches.compressed {
+        Some(c) => format!(
+            "host cache {:.0} MiB decoded + {:.1} of {:.0} MiB compressed ({} reads saved)",
+            mib(caches.decoded_bytes),
+            mib(c.held_bytes),
+            mib(c.capacity_bytes),
+            c.hits
+        ),
+        None => format!("host cache {:.0} MiB decoded", mib(caches.decoded_bytes)),
+    }
 }

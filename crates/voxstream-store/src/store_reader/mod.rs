@@ -47,6 +47,15 @@ use background::Background;
 /// Default size of the host-side brick cache.
 pub const DEFAULT_CACHE_BYTES: u64 = 64 << 20;
 
+/// The host-side caches of a store ([`StoreReader::host_caches`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct HostCaches {
+    /// The decoded-brick cache's budget.
+    pub decoded_bytes: u64,
+    /// The compressed-brick cache, where there is one.
+    pub compressed: Option<crate::checked_store::CompressedCacheStats>,
+}
+
 /// An open store.
 pub struct StoreReader {
     path: PathBuf,
@@ -62,6 +71,10 @@ pub struct StoreReader {
     chunk_cache: ChunkCache,
     /// Counts the bytes the level arrays read from the storage.
     metrics: Option<Arc<PerformanceMetricsStorageAdapter<CheckedStore>>>,
+    /// The storage a native store's bricks are read through (it holds the compressed-brick cache).
+    bricks_store: Option<Arc<CheckedStore>>,
+    /// Bytes the decoded-brick cache may hold.
+    decoded_cache_bytes: u64,
     /// Samples read from a foreign store that lay outside its value range (they saturate).
     clipped: std::sync::atomic::AtomicU64,
     /// The level scanned for a foreign store's value range (see [`StoreReader::value_range_level`]).
@@ -109,6 +122,8 @@ impl StoreReader {
             brick_cache,
             chunk_cache,
             metrics: None,
+            bricks_store: None,
+            decoded_cache_bytes: capacity.get() as u64 * brick_bytes,
             clipped: std::sync::atomic::AtomicU64::new(0),
             value_range_level: 0,
             prefetching: std::sync::atomic::AtomicBool::new(false),
@@ -172,6 +187,15 @@ impl StoreReader {
     /// samples may be fractions even for an integer sample type.
     pub fn has_synthesized_levels(&self) -> bool {
         self.levels.iter().any(|level| matches!(level, LevelSource::Synthesized))
+    }
+
+    /// The host caches: decoded bricks (f32) and bricks as stored (compressed), their budgets and what the
+    /// compressed one holds and served. Foreign stores have no compressed-brick cache.
+    pub fn host_caches(&self) -> HostCaches {
+        HostCaches {
+            decoded_bytes: self.decoded_cache_bytes,
+            compressed: self.bricks_store.as_ref().and_then(|s| s.compressed_cache()),
+        }
     }
 
     /// Bytes the level arrays have read from the storage since the store was opened (chunk and shard bytes, as

@@ -242,15 +242,24 @@ impl StoreReader {
             return Err(StoreError::store(path, "incomplete store: its import was interrupted; run the import again"));
         }
         let (info, layout) = validate_attributes(path, &attributes)?;
-        // A brick read from a shard is at most one zstd frame of brick_size³ samples and its CRC32C.
+        // A brick read from a shard is at most one zstd frame of brick_size³ samples and its CRC32C; a wavelet brick
+        // at most that frame (of its byte-shuffled samples, its fallback) after its header.
         let brick_bytes = layout.brick_size.pow(3) * info.dtype.size() as u64;
-        // A remote store keeps half of the host cache for bricks as fetched (compressed: several times more fit), so
-        // that a border brick the decoded cache let go is not fetched again. A quarter was too little on the 2048³
-        // store at `--budget-mb 512`: 3,460 ranges fetched twice, 10,700 requests and 92 MB for a view that needs
-        // 4,513 and 41 MB (BENCHMARKS.md, "Against tensorstore").
-        let range_cache_bytes = if remote.is_some() { cache_bytes / 2 } else { 0 };
+        let header_bytes = match attributes.brick_codec {
+            Some(crate::import::BrickCodec::Wavelet { .. }) => {
+                voxstream_wavelet::header_len(voxstream_wavelet::DType::F32)
+            }
+            _ => 0,
+        } as u64;
+        // Half of the host cache keeps bricks as stored (compressed: several to tens of times more of the volume fit
+        // than decoded, as f32), so that a brick the decoded cache let go is decoded again from memory, not read or
+        // fetched again (Reichl's compressed host cache). A quarter was too little for a remote store: on the 2048³
+        // store at `--budget-mb 512`, 3,460 ranges were fetched twice, 10,700 requests and 92 MB for a view that
+        // needs 4,513 and 41 MB (BENCHMARKS.md, "Against tensorstore").
+        let range_cache_bytes = cache_bytes / 2;
         let bricks_store = Arc::new(
-            checked(zstd_encoded_bound(brick_bytes, BRICK_CHECKSUM_BYTES))?.with_range_cache(range_cache_bytes),
+            checked(zstd_encoded_bound(brick_bytes, BRICK_CHECKSUM_BYTES + header_bytes))?
+                .with_range_cache(range_cache_bytes),
         );
         let metrics = Arc::new(PerformanceMetricsStorageAdapter::new(bricks_store.clone()));
         let volume_is_zero = attributes.value_range == [0.0, 0.0];
@@ -341,6 +350,7 @@ impl StoreReader {
             StoreReader::assemble(path, attributes, levels, Some(minmax), cache_bytes - range_cache_bytes)?;
         reader.metrics = Some(metrics);
         reader.remote = remote;
+        reader.bricks_store = Some(bricks_store.clone());
         if reader.remote.is_some() {
             // The coarse levels' shard indexes are fetched while the levels are probed (see `shard_indexes`).
             let indexes = reader.shard_indexes_to_fetch();

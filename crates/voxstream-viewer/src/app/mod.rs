@@ -94,6 +94,9 @@ pub struct ViewerConfig {
     pub annotations: Annotations,
     /// The data's length unit (OME-Zarr name) for the scale bar, where known.
     pub unit: Option<String>,
+    /// The source's host caches in a few words, for the status line (stores: the decoded and the compressed brick
+    /// caches' budgets and use); asked once a frame.
+    pub host_caches: Option<Box<dyn Fn() -> String + Send>>,
 }
 
 /// One frame as the window received it (`view --stats`).

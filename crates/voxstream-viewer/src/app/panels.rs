@@ -261,6 +261,9 @@ impl ViewerApp {
             let [resident, budget] = shown.resident_bytes;
             let mib = |b: u64| b as f64 / (1 << 20) as f64;
             parts.push(format!("resident {:.1} of {:.0} MiB", mib(resident), mib(budget)));
+            if let Some(host_caches) = &self.config.host_caches {
+                parts.push(host_caches());
+            }
             parts.push(format!("{} requests pending", shown.pending));
             let state = if shown.size[0] < self.settings.width {
                 format!("moving: {}×{}", shown.size[0], shown.size[1])
