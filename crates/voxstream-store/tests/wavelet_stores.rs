@@ -184,13 +184,14 @@ fn bricks_the_decoded_cache_let_go_are_decoded_again_from_the_compressed_cache()
     for codec in [BrickCodec::Zstd, BrickCodec::Wavelet { max_error: 0.0 }] {
         let name = format!("{codec:?}");
         import_only(&dir, &name, DType::U16, codec);
-        // 16³ bricks of f32 are 16 KiB decoded: a 1 MiB host cache holds 32 of level 0's 60 decoded, and keeps
-        // 512 KiB of bricks as stored (about 5 KiB each, noisy u16), which holds them all.
-        let reader = StoreReader::open_with_cache(&dir.join(&name), 1 << 20).unwrap();
+        // 16³ bricks of u16 are 8 KiB decoded (kept in the store's type): an 800 KiB host cache holds 50 of level
+        // 0's 60 decoded, and keeps 400 KiB of bricks as stored (about 5.7 KiB each, noisy u16), which holds them
+        // all.
+        let reader = StoreReader::open_with_cache(&dir.join(&name), 800 << 10).unwrap();
         let caches = reader.host_caches();
-        assert_eq!(caches.decoded_bytes, 32 * 16 * 16 * 16 * 4, "{name}");
+        assert_eq!(caches.decoded_bytes, 50 * 16 * 16 * 16 * 2, "{name}");
         let compressed = caches.compressed.expect("a native store has a compressed-brick cache");
-        assert_eq!(compressed.capacity_bytes, 512 << 10, "{name}");
+        assert_eq!(compressed.capacity_bytes, 400 << 10, "{name}");
         let dims = reader.layout().level_dims[0];
         let first = reader.read_region(0, [0; 3], dims).unwrap();
         let after_first = reader.host_caches().compressed.unwrap();
@@ -200,8 +201,9 @@ fn bricks_the_decoded_cache_let_go_are_decoded_again_from_the_compressed_cache()
         let stored = after_first.bricks_held;
         assert!(stored > 40, "{name}: {after_first:?}");
         assert!(after_first.held_bytes <= after_first.capacity_bytes, "{name}: {after_first:?}");
-        // The second pass found as stored every brick the decoded cache had let go (it holds the last 32 at most).
-        assert!(after_second.hits - after_first.hits >= stored - 32, "{name}: {after_first:?} then {after_second:?}");
+        // The second pass finds as stored the bricks the decoded cache let go: in scan order, LRU keeps none of the
+        // ones it wants first, so most of them.
+        assert!(after_second.hits - after_first.hits >= stored / 2, "{name}: {after_first:?} then {after_second:?}");
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -10,6 +10,7 @@ use zarrs::storage::ReadableStorageTraits;
 use crate::error::StoreError;
 use crate::level_source::{retrieve_f32, LevelSource};
 
+use super::decoded_brick::DecodedBrick;
 use super::StoreReader;
 
 /// Extends `data` (dims `have`, x fastest) to dims `want` by repeating its last samples.
@@ -77,7 +78,7 @@ impl StoreReader {
         }
         // A remote store's bricks (a node's and its neighbours', for the border) are fetched at once, each a round
         // trip; a local folder's one after another.
-        let bricks: Vec<Arc<Vec<f32>>> = if self.remote.is_some() && ijks.len() > 1 {
+        let bricks: Vec<Arc<DecodedBrick>> = if self.remote.is_some() && ijks.len() > 1 {
             use rayon::prelude::*;
             ijks.par_iter().map(|&ijk| self.brick(level, ijk)).collect::<Result<_, _>>()?
         } else {
@@ -97,7 +98,7 @@ impl StoreReader {
                                 + (from[0] - origin[0])) as usize;
                             let dst =
                                 (((z - lower[2]) * size[1] + (y - lower[1])) * size[0] + (from[0] - lower[0])) as usize;
-                            out[dst..dst + run].copy_from_slice(&brick[src..src + run]);
+                            brick.copy_to_f32(src, &mut out[dst..dst + run]);
                         }
                     }
                 }
@@ -117,7 +118,7 @@ impl StoreReader {
     /// The samples of brick `ijk` of `level` (clipped to the level), x fastest, from the cache or the disk. A read
     /// from the store that succeeds takes the brick out of the failed background fetches (see
     /// `Background::failed`); a cache hit touches nothing but the cache.
-    pub(super) fn brick(&self, level: usize, ijk: [u64; 3]) -> Result<Arc<Vec<f32>>, StoreError> {
+    pub(super) fn brick(&self, level: usize, ijk: [u64; 3]) -> Result<Arc<DecodedBrick>, StoreError> {
         let key = (level, ijk);
         if let Some(brick) = self.brick_cache.lock().unwrap_or_else(|p| p.into_inner()).get(&key) {
             return Ok(brick.clone());
@@ -136,7 +137,7 @@ impl StoreReader {
     }
 
     /// Reads brick `ijk` of `level` from the store into the brick cache.
-    pub(super) fn read_brick(&self, level: usize, ijk: [u64; 3]) -> Result<Arc<Vec<f32>>, StoreError> {
+    pub(super) fn read_brick(&self, level: usize, ijk: [u64; 3]) -> Result<Arc<DecodedBrick>, StoreError> {
         let key = (level, ijk);
         // A brick whose min/max is [0, 0] holds only the fill value: nothing to read (its shard may not exist).
         if let Some(minmax) = &self.minmax {
@@ -147,7 +148,7 @@ impl StoreReader {
                 let dims = self.layout.level_dims[level];
                 let size = self.layout.brick_size;
                 let extent: u64 = (0..3).map(|a| (ijk[a] * size + size).min(dims[a]) - ijk[a] * size).product();
-                let brick = Arc::new(vec![0.0; extent as usize]);
+                let brick = Arc::new(DecodedBrick::new(vec![0.0; extent as usize], self.info.dtype));
                 self.brick_cache.lock().unwrap_or_else(|p| p.into_inner()).put(key, brick.clone());
                 return Ok(brick);
             }
@@ -193,7 +194,7 @@ impl StoreReader {
                 average_2x(&fine, size)
             }
         };
-        let brick = Arc::new(samples);
+        let brick = Arc::new(DecodedBrick::new(samples, self.info.dtype));
         self.brick_cache.lock().unwrap_or_else(|p| p.into_inner()).put(key, brick.clone());
         Ok(brick)
     }

@@ -20,6 +20,7 @@
 
 mod background;
 mod brick_reads;
+mod decoded_brick;
 mod opening;
 mod shard_indexes;
 mod value_range_scan;
@@ -43,6 +44,7 @@ use crate::metadata_check::validate_attributes;
 use crate::volume::VolumeInfo;
 
 use background::Background;
+use decoded_brick::DecodedBrick;
 
 /// Default size of the host-side brick cache.
 pub const DEFAULT_CACHE_BYTES: u64 = 64 << 20;
@@ -66,7 +68,7 @@ pub struct StoreReader {
     /// level) the 2×2×2 average of the level below.
     levels: Vec<LevelSource>,
     /// Decoded bricks (inner chunks) by level and brick index, least recently used first out.
-    brick_cache: Mutex<LruCache<(usize, [u64; 3]), Arc<Vec<f32>>>>,
+    brick_cache: Mutex<LruCache<(usize, [u64; 3]), Arc<DecodedBrick>>>,
     /// Decoded chunks of foreign arrays whose chunks do not tile the bricks (a share of the host cache).
     chunk_cache: ChunkCache,
     /// Counts the bytes the level arrays read from the storage.
@@ -109,8 +111,11 @@ impl StoreReader {
         let brick_cache_bytes = if chunk_cache.is_used() { cache_bytes - cache_bytes / 2 } else { cache_bytes };
         let chunk_cache =
             if chunk_cache.is_used() { chunk_cache } else { ChunkCache::new(&[], attributes.brick_size, 0) };
-        // The cache holds at most `brick_cache_bytes` of decoded bricks (each at most brick_size³ f32), at least one.
-        let brick_bytes = attributes.brick_size.pow(3) * 4;
+        // The cache holds at most `brick_cache_bytes` of decoded bricks, at least one: each at most brick_size³
+        // samples in the store's type (`DecodedBrick`), or f32 where a level is averaged from the level below.
+        let kept_sample_bytes =
+            if levels.iter().any(|l| matches!(l, LevelSource::Synthesized)) { 4 } else { info.dtype.size() as u64 };
+        let brick_bytes = attributes.brick_size.pow(3) * kept_sample_bytes;
         let capacity = NonZeroUsize::new((brick_cache_bytes / brick_bytes) as usize).unwrap_or(NonZeroUsize::MIN);
         let brick_cache = Mutex::new(LruCache::new(capacity));
         Ok(StoreReader {

@@ -34,7 +34,7 @@ impl StoreReader {
             // A brick that cannot be read is left out here: reading it fails again when it is wanted, and is
             // reported then (its ancestor stands in), as for any unreadable brick.
             if let Ok(samples) = self.brick(level, ijk) {
-                fold_samples(&samples, &mut range);
+                fold_samples(&samples.to_f32(), &mut range);
             }
             progress(done as u64 + 1, total);
         }
