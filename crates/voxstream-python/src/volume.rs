@@ -140,6 +140,14 @@ impl PyVolume {
                 info.set_item("brick_size", store.layout().brick_size)?;
                 info.set_item("native", store.is_native())?;
                 info.set_item("remote", store.remote().is_some())?;
+                // How the bricks are compressed: "zstd" or "wavelet", and the wavelet codec's guaranteed bound.
+                let codec = attributes.brick_codec.unwrap_or_default();
+                let codec_name = match codec {
+                    voxstream_store::BrickCodec::Zstd => "zstd",
+                    voxstream_store::BrickCodec::Wavelet { .. } => "wavelet",
+                };
+                info.set_item("codec", codec_name)?;
+                info.set_item("max_error", codec.max_error())?;
                 let percentiles: Vec<[f64; 2]> = attributes.value_percentiles.clone().unwrap_or_default();
                 info.set_item("percentiles", percentiles)?;
                 // A 4-D/5-D image's axes before z, y, x: (name, kind, extent, index read).

@@ -134,3 +134,22 @@ def test_int8_int32_uint32_and_float64_arrays_are_converted_and_said(tmp_path):
         b = vs.open(tmp_path / f"e{i}.zarr", size=(48, 48)).render()
         assert np.array_equal(a, b), (i, array.dtype)
     assert "conversion" not in vs.import_volume(base, tmp_path / "plain.zarr")
+
+
+def test_the_wavelet_codec_stores_within_its_bound_and_says_so(tmp_path):
+    """`codec="wavelet"` as `voxstream import --codec wavelet` (issue 47): lossless renders as the zstd store does,
+    a bound is kept and shown in `info`, and a bad choice is a ValueError naming it."""
+    data = ball(40)
+    vs.import_volume(data, tmp_path / "z.zarr")
+    vs.import_volume(data, tmp_path / "w.zarr", codec="wavelet")
+    vs.import_volume(data, tmp_path / "l.zarr", codec="wavelet", max_error=3)
+    zstd, exact, lossy = (vs.open(tmp_path / n, size=(48, 48)) for n in ("z.zarr", "w.zarr", "l.zarr"))
+    assert (zstd.info["codec"], zstd.info["max_error"]) == ("zstd", 0.0)
+    assert (exact.info["codec"], exact.info["max_error"]) == ("wavelet", 0.0)
+    assert (lossy.info["codec"], lossy.info["max_error"]) == ("wavelet", 3.0)
+    assert np.array_equal(zstd.render(), exact.render())
+    with pytest.raises(ValueError, match="unknown brick codec 'jpeg'"):
+        vs.import_volume(data, tmp_path / "x.zarr", codec="jpeg")
+    with pytest.raises(ValueError, match="zstd is lossless"):
+        vs.import_volume(data, tmp_path / "x.zarr", max_error=1.0)
+    assert not (tmp_path / "x.zarr").exists()

@@ -127,3 +127,33 @@ pub trait VolumeSource: Send {
         None
     }
 }
+
+/// A volume whose samples are already in memory (f32, x fastest), handed out slice by slice: for callers whose
+/// volume is an array, and for tests.
+pub struct SamplesInMemory {
+    info: VolumeInfo,
+    values: Vec<f32>,
+    next: usize,
+}
+
+impl SamplesInMemory {
+    /// `values` holds `info.dims` samples, x fastest; `None` when the count differs.
+    pub fn new(info: VolumeInfo, values: Vec<f32>) -> Option<SamplesInMemory> {
+        let count = info.dims.iter().try_fold(1u64, |n, &d| n.checked_mul(d))?;
+        (count == values.len() as u64).then_some(SamplesInMemory { info, values, next: 0 })
+    }
+}
+
+impl VolumeSource for SamplesInMemory {
+    fn info(&self) -> &VolumeInfo {
+        &self.info
+    }
+
+    fn read_slices(&mut self, count: usize, out: &mut Vec<f32>) -> Result<(), StoreError> {
+        let slice = (self.info.dims[0] * self.info.dims[1]) as usize;
+        let end = (self.next + count).min(self.info.dims[2] as usize);
+        out.extend_from_slice(&self.values[self.next * slice..end * slice]);
+        self.next = end;
+        Ok(())
+    }
+}

@@ -5,29 +5,8 @@
 
 use std::path::{Path, PathBuf};
 
-use voxstream_store::{
-    import_volume, BrickCodec, DType, ImportOptions, StoreError, StoreReader, VolumeInfo, VolumeSource,
-};
-
-/// Samples held in memory, handed out slice by slice.
-struct InMemory {
-    info: VolumeInfo,
-    values: Vec<f32>,
-    next: usize,
-}
-
-impl VolumeSource for InMemory {
-    fn info(&self) -> &VolumeInfo {
-        &self.info
-    }
-
-    fn read_slices(&mut self, count: usize, out: &mut Vec<f32>) -> Result<(), StoreError> {
-        let slice = (self.info.dims[0] * self.info.dims[1]) as usize;
-        out.extend_from_slice(&self.values[self.next * slice..(self.next + count) * slice]);
-        self.next += count;
-        Ok(())
-    }
-}
+use voxstream_store::volume::SamplesInMemory;
+use voxstream_store::{import_volume, BrickCodec, DType, ImportOptions, StoreReader, VolumeInfo};
 
 const DIMS: [u64; 3] = [70, 61, 45];
 
@@ -71,7 +50,7 @@ fn import(dir: &Path, name: &str, dtype: DType, codec: BrickCodec) -> StoreReade
 
 fn import_only(dir: &Path, name: &str, dtype: DType, codec: BrickCodec) {
     let info = VolumeInfo { dims: DIMS, dtype, spacing: [1.0; 3], origin: [0.0; 3], unit: None };
-    let mut source = InMemory { info, values: volume(dtype), next: 0 };
+    let mut source = SamplesInMemory::new(info, volume(dtype)).unwrap();
     let out = dir.join(name);
     let options = ImportOptions { brick_size: 16, shard_bricks: 2, codec, ..ImportOptions::default() };
     import_volume(&mut source, &out, &options, &mut |_, _| {}).unwrap();

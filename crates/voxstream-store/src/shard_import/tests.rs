@@ -6,27 +6,7 @@ use std::path::{Path, PathBuf};
 
 use super::*;
 use crate::import::import_volume;
-use crate::volume::VolumeSource;
-
-/// Samples held in memory, handed out slice by slice.
-struct Samples3 {
-    info: VolumeInfo,
-    values: Vec<f32>,
-    next: usize,
-}
-
-impl VolumeSource for Samples3 {
-    fn info(&self) -> &VolumeInfo {
-        &self.info
-    }
-
-    fn read_slices(&mut self, count: usize, out: &mut Vec<f32>) -> Result<(), StoreError> {
-        let slice = (self.info.dims[0] * self.info.dims[1]) as usize;
-        out.extend_from_slice(&self.values[self.next * slice..(self.next + count) * slice]);
-        self.next += count;
-        Ok(())
-    }
-}
+use crate::volume::SamplesInMemory;
 
 fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("voxstream-shard-import-{}-{name}", std::process::id()));
@@ -150,7 +130,7 @@ fn same_files(a: &Path, b: &Path, what: &str) {
 }
 
 fn single(values: &[f32], info: &VolumeInfo, out: &Path, options: &ImportOptions) -> ImportReport {
-    let mut source = Samples3 { info: info.clone(), values: values.to_vec(), next: 0 };
+    let mut source = SamplesInMemory::new(info.clone(), values.to_vec()).unwrap();
     import_volume(&mut source, out, options, &mut |_, _| {}).unwrap()
 }
 
