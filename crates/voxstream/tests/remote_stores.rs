@@ -227,6 +227,43 @@ fn http_and_s3_give_the_local_image_byte_for_byte() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+#[test]
+fn a_wavelet_coded_store_over_http_renders_the_local_image_byte_for_byte() {
+    // Issue 47: the compressed bytes travel as they are stored, decoded by the same codec as from a folder.
+    let dir = scratch("remote_stores", "wavelet");
+    import_ball(&dir, "ball.zarr");
+    let out = voxstream(
+        &[
+            "import",
+            "ball.nrrd",
+            "--out",
+            "www/lossy.zarr",
+            "--brick-size",
+            "16",
+            "--codec",
+            "wavelet",
+            "--max-error",
+            "5",
+        ],
+        &dir,
+    );
+    assert!(out.status.success(), "import: {}", stderr(&out));
+    let (local, out) = render(&dir, "www/lossy.zarr", "local.png", &[], &[]);
+    assert!(out.status.success() && !local.is_empty(), "local render: {}", stderr(&out));
+    let server = nginx(&dir, &dir.join("www"));
+    let url = format!("http://127.0.0.1:{}/lossy.zarr", server.port);
+    let (http, out) = render(&dir, &url, "http.png", &["--stats", "http.json"], &[]);
+    assert!(out.status.success(), "HTTP render: {}", stderr(&out));
+    assert!(http == local, "the wavelet store's image over HTTP differs from the local folder's");
+    let stats: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("http.json")).unwrap()).unwrap();
+    assert!(stats["remote"]["failures"] == 0, "{}", stats["remote"]);
+    let info = Command::new(env!("CARGO_BIN_EXE_voxstream")).args(["info", &url, "--json"]).output().unwrap();
+    assert!(info.status.success(), "info over HTTP: {}", stderr(&info));
+    let info: serde_json::Value = serde_json::from_slice(&info.stdout).unwrap();
+    assert_eq!(info["brick_codec"], serde_json::json!({"name": "wavelet", "max_error": 5.0}));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// Every shard file under `level_dir` (`…/c/z/y/x`), as its path below `store` with `/` separators.
 fn shard_files(store: &Path, level_dir: &Path, out: &mut Vec<String>) {
     for entry in std::fs::read_dir(level_dir).unwrap() {
