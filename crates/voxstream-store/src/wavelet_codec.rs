@@ -113,7 +113,12 @@ fn flip_sign(v: u16) -> u16 {
     v ^ 0x8000
 }
 
-fn encode_brick(bytes: &[u8], dims: [usize; 3], dtype: DType, options: &voxstream_wavelet::Options) -> Vec<u8> {
+fn encode_brick(
+    bytes: &[u8],
+    dims: [usize; 3],
+    dtype: DType,
+    options: &voxstream_wavelet::Options,
+) -> Result<Vec<u8>, CodecError> {
     let encoded = SCRATCH.with(|codec| {
         let mut codec = codec.borrow_mut();
         match dtype {
@@ -134,8 +139,9 @@ fn encode_brick(bytes: &[u8], dims: [usize; 3], dtype: DType, options: &voxstrea
             }
         }
     });
-    // The dims and length were checked by the caller and the bound by `WaveletCodec::new`: nothing is left to fail.
-    encoded.expect("a checked brick encodes")
+    // The dims and length were checked by the caller and the bound by `WaveletCodec::new`: an error here is a bug,
+    // reported as the codec's rather than a panic.
+    encoded.map_err(|e| CodecError::Other(format!("{NAME}: {e}")))
 }
 
 fn decode_brick(encoded: &[u8], dims: [usize; 3], dtype: DType) -> Result<Vec<u8>, CodecError> {
@@ -241,7 +247,7 @@ impl ArrayToBytesCodecTraits for WaveletCodec {
         if bytes.len() != expected {
             return Err(CodecError::Other(format!("{NAME}: {} bytes for a brick of {expected}", bytes.len())));
         }
-        Ok(Cow::Owned(encode_brick(&bytes, dims, dtype, &self.options())))
+        Ok(Cow::Owned(encode_brick(&bytes, dims, dtype, &self.options())?))
     }
 
     fn decode<'a>(
