@@ -18,10 +18,18 @@ pub struct RemoteAccess {
     pub cache_dir: Option<PathBuf>,
     /// The most bytes the cache folder holds.
     pub cache_limit_bytes: u64,
+    /// Any native store, local or remote: the bytes of bricks kept in memory as stored (compressed), besides the
+    /// host cache (`--compressed-cache-mb`); `None` gives that cache half of the host cache instead.
+    pub compressed_cache_bytes: Option<u64>,
 }
 
 impl Default for RemoteAccess {
     fn default() -> Self {
-        RemoteAccess { options: RemoteOptions::default(), cache_dir: None, cache_limit_bytes: DEFAULT_DISK_CACHE_BYTES }
+        RemoteAccess {
+            options: RemoteOptions::default(),
+            cache_dir: None,
+            cache_limit_bytes: DEFAULT_DISK_CACHE_BYTES,
+            compressed_cache_bytes: None,
+        }
     }
 }

@@ -751,12 +751,24 @@ pub struct RemoteArgs {
     /// Remote stores: requests kept in flight at once (bricks fetched in parallel).
     #[arg(long, value_name = "N", default_value_t = 128, value_parser = clap::value_parser!(u64).range(1..=256))]
     pub concurrent_requests: u64,
+    /// Any voxstream store, local or remote: keep up to MIB of bricks in memory as stored (compressed), besides
+    /// --budget-mb, so that bricks read once are not read again; without it, half of the store's share of
+    /// --budget-mb does this.
+    #[arg(long, value_name = "MIB", value_parser = clap::value_parser!(u64).range(1..=1 << 20))]
+    pub compressed_cache_mb: Option<u64>,
 }
 
 impl Default for RemoteArgs {
     /// The flags' defaults.
     fn default() -> Self {
-        RemoteArgs { cache_dir: None, cache_mb: 4096, request_timeout: 30, retries: 5, concurrent_requests: 128 }
+        RemoteArgs {
+            cache_dir: None,
+            cache_mb: 4096,
+            request_timeout: 30,
+            retries: 5,
+            concurrent_requests: 128,
+            compressed_cache_mb: None,
+        }
     }
 }
 
@@ -769,6 +781,7 @@ impl RemoteArgs {
         access.options.concurrency = self.concurrent_requests as usize;
         access.cache_dir = self.cache_dir.clone();
         access.cache_limit_bytes = self.cache_mb.saturating_mul(1 << 20);
+        access.compressed_cache_bytes = self.compressed_cache_mb.map(|mb| mb << 20);
         access
     }
 }

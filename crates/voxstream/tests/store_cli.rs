@@ -248,3 +248,31 @@ fn wavelet_coded_stores_import_say_so_and_render_like_zstd_stores() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn the_compressed_cache_takes_half_the_host_cache_or_a_budget_of_its_own() {
+    let dir = scratch("host-caches");
+    write_ball(&dir.join("ball.nrrd"));
+    let output = voxstream(&["import", "ball.nrrd", "--out", "ball.zarr", "--brick-size", "16"], &dir);
+    assert!(output.status.success(), "{}", stderr(&output));
+    let caches = |flags: &[&str], name: &str| {
+        let mut args = vec!["render", "ball.zarr", "--width", "64", "--height", "64", "--out", "c.png"];
+        args.extend(["--budget-mb", "64", "--stats", name]);
+        args.extend(flags);
+        let output = voxstream(&args, &dir);
+        assert!(output.status.success(), "{flags:?}: {}", stderr(&output));
+        let stats: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join(name)).unwrap()).unwrap();
+        let host = &stats["host_caches"];
+        let compressed = &host["compressed"];
+        assert!(compressed["held_bytes"].as_u64().unwrap() > 0, "{host}");
+        assert!(compressed["held_bytes"].as_u64() <= compressed["capacity_bytes"].as_u64(), "{host}");
+        (host["decoded_bytes"].as_u64().unwrap(), compressed["capacity_bytes"].as_u64().unwrap())
+    };
+    let (decoded, compressed) = caches(&[], "half.json");
+    // Half of the store's share each (the decoded half rounded down to whole 16³ u16 bricks of 8 KiB).
+    assert!(compressed > 1 << 20 && decoded <= compressed && compressed - decoded < 8192, "{decoded} {compressed}");
+    let (own_decoded, own_compressed) = caches(&["--compressed-cache-mb", "3"], "own.json");
+    assert_eq!(own_compressed, 3 << 20);
+    assert!(own_decoded >= 2 * decoded, "the whole share decoded: {own_decoded} against {decoded}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -256,7 +256,12 @@ impl StoreReader {
         // fetched again (Reichl's compressed host cache). A quarter was too little for a remote store: on the 2048³
         // store at `--budget-mb 512`, 3,460 ranges were fetched twice, 10,700 requests and 92 MB for a view that
         // needs 4,513 and 41 MB (BENCHMARKS.md, "Against tensorstore").
-        let range_cache_bytes = cache_bytes / 2;
+        // `--compressed-cache-mb` gives it a budget of its own, besides the host cache (then all decoded).
+        let (range_cache_bytes, decoded_cache_bytes) =
+            match foreign.remote.and_then(|access| access.compressed_cache_bytes) {
+                Some(bytes) => (bytes, cache_bytes),
+                None => (cache_bytes / 2, cache_bytes - cache_bytes / 2),
+            };
         let bricks_store = Arc::new(
             checked(zstd_encoded_bound(brick_bytes, BRICK_CHECKSUM_BYTES + header_bytes))?
                 .with_range_cache(range_cache_bytes),
@@ -346,8 +351,7 @@ impl StoreReader {
                 ),
             ));
         }
-        let mut reader =
-            StoreReader::assemble(path, attributes, levels, Some(minmax), cache_bytes - range_cache_bytes)?;
+        let mut reader = StoreReader::assemble(path, attributes, levels, Some(minmax), decoded_cache_bytes)?;
         reader.metrics = Some(metrics);
         reader.remote = remote;
         reader.bricks_store = Some(bricks_store.clone());
