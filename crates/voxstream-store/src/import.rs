@@ -550,15 +550,13 @@ impl LevelWriter {
     }
 }
 
+/// Each brick of a shard (x, y within it) with its `[min, max]`.
+pub(crate) type BrickRanges = Vec<([u64; 2], [f32; 2])>;
+
 /// Min and max of the samples of each brick of one shard that lie in the volume: `elements` is the whole shard (x
 /// fastest, `edge` samples along x and y), `valid` its samples inside the volume along x, y, z. Bricks (x, y within
 /// the shard, y outer) with no valid sample are left out.
-pub(crate) fn shard_brick_ranges(
-    elements: &[f32],
-    edge: [u64; 2],
-    valid: [u64; 3],
-    b: u64,
-) -> Vec<([u64; 2], [f32; 2])> {
+pub(crate) fn shard_brick_ranges(elements: &[f32], edge: [u64; 2], valid: [u64; 3], b: u64) -> BrickRanges {
     let [vx, vy, vz] = valid;
     let mut ranges = Vec::new();
     for by in 0..vy.div_ceil(b) {
@@ -594,7 +592,7 @@ pub(crate) fn stored_brick_ranges<S: ?Sized + zarrs::storage::ReadableStorageTra
     b: u64,
     dtype: DType,
     codec: BrickCodec,
-) -> Result<Vec<([u64; 2], [f32; 2])>, Box<dyn std::error::Error>> {
+) -> Result<BrickRanges, Box<dyn std::error::Error>> {
     if !codec.is_lossy() {
         return Ok(shard_brick_ranges(elements, edge, valid, b));
     }
