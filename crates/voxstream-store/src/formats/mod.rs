@@ -11,10 +11,13 @@
 //! | TIFF stack | `.tif`, `.tiff`, or a folder of them | as the tiff crate decodes |
 //! | OpenVDB | `.vdb` (first float grid: fog volume or level set) | via Debian's python3-openvdb |
 //! | VTK XML ImageData | `.vti` | inline binary/ascii, appended raw/base64, zlib |
+//! | DICOM | a folder of a series, `.dcm` (or any file with DICOM's `DICM` mark) | uncompressed, deflate, RLE, JPEG (baseline, extended, lossless), JPEG 2000 |
 //!
 //! Samples are stored as u8, u16, i16 or f32; raw, NRRD, NIfTI, MetaImage, INR and NumPy files of int8, int32,
 //! uint32 or float64 are converted on the way ([`sample_type`]).
 
+pub mod dicom;
+pub mod dicom_header;
 pub mod header_text;
 pub mod inr;
 pub mod metaimage;
@@ -48,6 +51,9 @@ pub fn open_volume(path: &Path, raw: Option<&RawLayout>) -> Result<Box<dyn Volum
     if let Some(layout) = raw {
         return Ok(Box::new(raw::open(path, layout)?));
     }
+    if path.is_dir() && !tiff_stack::folder_has_slices(path) || dicom::has_dicom_extension(path) {
+        return Ok(Box::new(dicom::DicomSeries::open(path)?));
+    }
     if path.is_dir() || name.ends_with(".tif") || name.ends_with(".tiff") {
         return Ok(Box::new(tiff_stack::TiffStack::open(path)?));
     }
@@ -62,10 +68,11 @@ pub fn open_volume(path: &Path, raw: Option<&RawLayout>) -> Result<Box<dyn Volum
         _ if name.ends_with(".npz") => npy::open_npz(path),
         _ if name.ends_with(".vti") => vti::open(path),
         _ if name.ends_with(".vdb") => vdb::open(path),
+        _ if dicom_header::has_dicom_magic(path) => return Ok(Box::new(dicom::DicomSeries::open(path)?)),
         _ => Err(StoreError::Unsupported {
             path: path.into(),
-            message: "unknown format: expected .nrrd, .nhdr, .nii, .nii.gz, .mha, .mhd, .inr, .inr.gz, .npy, .npz, .vti or .vdb, \
-                      .tif/.tiff (or a folder of slices), or a raw file with --dims and --dtype"
+            message: "unknown format: expected .nrrd, .nhdr, .nii, .nii.gz, .mha, .mhd, .inr, .inr.gz, .npy, .npz, .vti, .vdb or .dcm, \
+                      .tif/.tiff (or a folder of slices), a folder of a DICOM series, or a raw file with --dims and --dtype"
                 .into(),
         }),
     }?;

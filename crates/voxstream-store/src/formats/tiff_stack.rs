@@ -72,6 +72,15 @@ fn page_format(path: &Path, decoder: &mut Decoder<BufReader<File>>) -> Result<(u
     Ok((width, height, dtype_of(path, color, format == 3, format == 2)?))
 }
 
+fn is_tiff(path: &Path) -> bool {
+    path.extension().is_some_and(|e| e.eq_ignore_ascii_case("tif") || e.eq_ignore_ascii_case("tiff"))
+}
+
+/// `true` when `folder` holds `.tif`/`.tiff` files (a folder without them may be a DICOM series).
+pub fn folder_has_slices(folder: &Path) -> bool {
+    std::fs::read_dir(folder).is_ok_and(|entries| entries.flatten().any(|e| is_tiff(&e.path())))
+}
+
 impl TiffStack {
     /// A multi-page file, or a folder of `.tif`/`.tiff` slices.
     pub fn open(path: &Path) -> Result<TiffStack, StoreError> {
@@ -80,9 +89,7 @@ impl TiffStack {
                 .map_err(|e| StoreError::io(path, e))?
                 .flatten()
                 .map(|e| e.path())
-                .filter(|p| {
-                    p.extension().is_some_and(|e| e.eq_ignore_ascii_case("tif") || e.eq_ignore_ascii_case("tiff"))
-                })
+                .filter(|p| is_tiff(p))
                 .collect();
             files.sort();
             if files.is_empty() {
