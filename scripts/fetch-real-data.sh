@@ -11,6 +11,9 @@
 #   adenylate kinase     PyPI mdanalysistests==2.11.0 (sdist)  GRO, 47,681 atoms; HIV protease 1hvr PDB, 1,890 atoms
 #   SPH dam break        PyPI pysph==1.0b2 (run here: PySPH's dam_break_3d, 0.3 s, dx 0.04), 9,360 fluid particles
 #                        as a VTK unstructured grid written by PySPH's dump_vtk; needs a C compiler and python3-dev
+#   DICOM                PyPI pydicom==3.0.1         pydicom's test files: a 5-slice CT series, a series missing slices, a
+#                        study folder of 7 MR series (one a 3-orientation localizer), one MR slice in five transfer
+#                        syntaxes, an RT dose grid of 15 frames, and two files voxstream refuses (12-bit JPEG, JPEG-LS)
 #   bunny level set/fog  Debian libcgal-demo's bunny00.off mesh -> Debian libopenvdb-tools' vdb_tool (mesh2ls d=128,
 #                        ls2fog): OpenVDB files; needs the Debian packages libopenvdb-tools python3-openvdb python3-numpy
 #
@@ -74,7 +77,7 @@ run \`sudo apt-get update\` and run this script again"
 if [ ! -x "$venv/bin/python" ]; then
     python3 -m venv "$venv" || fail "cannot create the virtual environment $venv (above: python's reason)"
 fi
-python_packages=(numpy==2.1.3 nibabel==5.3.2 zarr==3.0.8 "moto[server]==5.2.6" boto3==1.44.18)
+python_packages=(numpy==2.1.3 nibabel==5.3.2 zarr==3.0.8 "moto[server]==5.2.6" boto3==1.44.18 pydicom==3.0.1)
 "$venv/bin/python" -m pip install --quiet --disable-pip-version-check "${python_packages[@]}" \
     || fail "cannot install ${python_packages[*]} into $venv from PyPI (above: pip's reason)"
 
@@ -116,6 +119,25 @@ if [ ! -f "$out/frog_tissues.vti" ]; then
     unzip -q -j -o "$work/pyvista-0.49.1-py3-none-any.whl" pyvista/examples/frog_tissues.vti -d "$out"
 fi
 check "$out/frog_tissues.vti" 844e3e324548fcebab4e14fa30be1400d34fafa7a0a14030b643b38db89da66c
+
+if [ ! -d "$out/dicom" ]; then
+    pip_download pydicom==3.0.1
+    check "$work/pydicom-3.0.1-py3-none-any.whl" db32f78b2641bd7972096b8289111ddab01fb221610de8d7afa835eb938adb41
+    files=pydicom/data/test_files
+    unzip -q -o "$work/pydicom-3.0.1-py3-none-any.whl" "$files/dicomdirtests/*" "$files/CT_small.dcm" \
+        "$files/MR_small*.dcm" "$files/rtdose.dcm" "$files/JPEG-lossy.dcm" -d "$work/pydicom"
+    mkdir -p "$work/dicom"
+    mv "$work/pydicom/$files/dicomdirtests/98892001/CT5N" "$work/pydicom/$files/dicomdirtests/77654033/CT2" "$work/dicom/"
+    mv "$work/pydicom/$files/dicomdirtests/98892003" "$work/dicom/mr_study"
+    for name in CT_small MR_small MR_small_RLE MR_small_bigendian MR_small_implicit MR_small_jp2klossless \
+        MR_small_jpeg_ls_lossless rtdose JPEG-lossy; do
+        mv "$work/pydicom/$files/$name.dcm" "$work/dicom/"
+    done
+    mv "$work/dicom" "$out/dicom"
+fi
+# The folder's files, by name and content, in one checksum.
+(cd "$out/dicom" && find . -type f | LC_ALL=C sort | xargs sha256sum) > "$work/dicom.sha256"
+check "$work/dicom.sha256" 3ad13f8781eda1b3d92eea8c04ef34ffd3e22afe6f1bb14ac416f25229743e27
 
 # Direct downloads from a registry's file server (for archives pip and apt do not fetch), pinned by sha256.
 url_download() { # url destination

@@ -1,4 +1,4 @@
-"""Decodes the real volumes with tools independent of voxstream (nibabel, numpy) into reference arrays.
+"""Decodes the real volumes with tools independent of voxstream (nibabel, numpy, pydicom) into reference arrays.
 
 For each volume NAME it writes NAME.reference.npy (C order, shape (z, y, x): x fastest, as voxstream stores) and
 NAME.reference.json (dims x,y,z, dtype, spacing, origin).
@@ -13,6 +13,7 @@ from pathlib import Path
 
 import nibabel
 import numpy as np
+import pydicom
 
 
 def save(out: Path, name: str, array_zyx: np.ndarray, spacing, origin):
@@ -71,6 +72,43 @@ def main(out: Path):
 
     den = (out / "brainsmall.den").read_bytes()
     save(out, "brainsmall", np.frombuffer(den[62:], dtype="u1").reshape(84, 128, 128), [1, 1, 1], [0, 0, 0])
+
+    dicom_references(out)
+
+
+def dicom_volume(files):
+    """A DICOM series as pydicom decodes it: slices sorted along the normal, the modality's values (rescaled) as
+    float32, spacing (columns, rows, between slices), the first slice's position. A multi-frame RT dose grid's frames
+    lie at GridFrameOffsetVector along the normal, its values scaled by DoseGridScaling."""
+    datasets = [pydicom.dcmread(f) for f in files]
+    slices = []
+    for ds in datasets:
+        row, column = np.array(ds.ImageOrientationPatient[:3], float), np.array(ds.ImageOrientationPatient[3:], float)
+        normal = np.cross(row, column)
+        position = np.array(ds.ImagePositionPatient, float)
+        pixels = ds.pixel_array.astype(np.float64)
+        if "GridFrameOffsetVector" in ds:
+            scale = float(ds.DoseGridScaling)
+            for offset, frame in zip(ds.GridFrameOffsetVector, pixels):
+                slices.append((position + float(offset) * normal, frame * scale))
+        else:
+            slope, intercept = float(ds.get("RescaleSlope", 1)), float(ds.get("RescaleIntercept", 0))
+            slices.append((position, pixels * slope + intercept))
+    slices.sort(key=lambda s: float(np.dot(s[0], normal)))
+    depths = [float(np.dot(p, normal)) for p, _ in slices]
+    dz = (depths[-1] - depths[0]) / (len(depths) - 1) if len(depths) > 1 else float(
+        datasets[0].get("SpacingBetweenSlices", datasets[0].get("SliceThickness", 1)))
+    spacing = [float(datasets[0].PixelSpacing[1]), float(datasets[0].PixelSpacing[0]), dz]
+    array = np.stack([values for _, values in slices]).astype(np.float32)
+    return array, spacing, list(map(float, slices[0][0]))
+
+
+def dicom_references(out: Path):
+    dicom = out / "dicom"
+    for name, files in [("dicom_ct5n", sorted((dicom / "CT5N").iterdir())), ("dicom_ct_small", [dicom / "CT_small.dcm"]),
+                        ("dicom_mr_small", [dicom / "MR_small.dcm"]), ("dicom_rtdose", [dicom / "rtdose.dcm"])]:
+        array, spacing, origin = dicom_volume(files)
+        save(out, name, array, spacing, origin)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,62 @@
+"""Writes a NIfTI volume as a CT series the way scanners and PACS exports do, with pydicom (independent of voxstream):
+one file per axial slice, under names in no order the slices have, split over two subfolders, 12 bits stored in 16
+with Rescale Intercept -1024 (stored = value + 1024), every tenth slice RLE-compressed. The test that imports it
+(crates/voxstream/tests/dicom_import.rs) compares the store with the NIfTI's own import.
+
+    python scripts/nifti_to_dicom.py IN.nii.gz OUT_FOLDER
+"""
+import random
+import sys
+from pathlib import Path
+
+import nibabel
+import numpy as np
+import pydicom
+from pydicom.dataset import Dataset, FileMetaDataset
+from pydicom.uid import CTImageStorage, ExplicitVRLittleEndian, RLELossless, generate_uid
+
+
+def main(nifti: Path, out: Path):
+    image = nibabel.load(nifti)
+    data = np.asarray(image.dataobj)  # (x, y, z), stored values
+    if data.min() < -1024 or data.max() > 4095 - 1024:
+        sys.exit(f"{nifti}: values {data.min()}..{data.max()} do not fit 12 bits with intercept -1024")
+    header = image.header
+    dx, dy, dz = (float(v) for v in header.get_zooms()[:3])
+    origin = [float(header["qoffset_x"]), float(header["qoffset_y"]), float(header["qoffset_z"])]
+    series, study = generate_uid(), generate_uid()
+    rng = random.Random(7)
+    names = [f"{rng.getrandbits(40):010x}" for _ in range(data.shape[2])]
+    for k, name in enumerate(names):
+        meta = FileMetaDataset()
+        meta.MediaStorageSOPClassUID = CTImageStorage
+        meta.MediaStorageSOPInstanceUID = generate_uid()
+        meta.TransferSyntaxUID = ExplicitVRLittleEndian
+        ds = Dataset()
+        ds.file_meta = meta
+        ds.SOPClassUID = CTImageStorage
+        ds.SOPInstanceUID = meta.MediaStorageSOPInstanceUID
+        ds.StudyInstanceUID, ds.SeriesInstanceUID = study, series
+        ds.Modality = "CT"
+        ds.SeriesDescription = "MNI152 as CT"
+        ds.InstanceNumber = rng.randrange(1, 10_000)
+        ds.ImagePositionPatient = [origin[0], origin[1], origin[2] + k * dz]
+        ds.ImageOrientationPatient = [1, 0, 0, 0, 1, 0]
+        ds.PixelSpacing = [dy, dx]
+        ds.SliceThickness = dz
+        ds.Rows, ds.Columns = data.shape[1], data.shape[0]
+        ds.SamplesPerPixel = 1
+        ds.PhotometricInterpretation = "MONOCHROME2"
+        ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = 16, 12, 11, 0
+        ds.RescaleIntercept, ds.RescaleSlope = -1024, 1
+        pixels = (data[:, :, k].T.astype(np.int32) + 1024).astype(np.uint16)
+        ds.PixelData = pixels.tobytes()
+        if k % 10 == 3:
+            ds.compress(RLELossless, pixels)
+        folder = out / ("a" if k % 2 else "b")
+        folder.mkdir(parents=True, exist_ok=True)
+        ds.save_as(folder / name, enforce_file_format=True)
+
+
+if __name__ == "__main__":
+    main(Path(sys.argv[1]), Path(sys.argv[2]))
