@@ -9,6 +9,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Result};
 use voxstream_geometry::formats::is_geometry_file_name;
+use voxstream_store::formats::dicom::has_dicom_extension;
+use voxstream_store::formats::dicom_header::has_dicom_magic;
 use voxstream_store::import::{aside_paths, partial_path};
 use voxstream_store::store_lock::leftover_aside_paths;
 
@@ -16,9 +18,9 @@ use crate::near_names::{closest_name, sibling_hint};
 use crate::scenes::SCENE_NAMES;
 
 /// File-name endings of the volume formats `voxstream import` reads.
-const VOLUME_FILE_ENDINGS: [&str; 17] = [
+const VOLUME_FILE_ENDINGS: [&str; 20] = [
     ".nrrd", ".nhdr", ".nii", ".nii.gz", ".mha", ".mhd", ".inr", ".inr.gz", ".vti", ".npy", ".npz", ".tif", ".tiff",
-    ".vdb", ".raw", ".den", ".img",
+    ".vdb", ".raw", ".den", ".img", ".dcm", ".dicom", ".ima",
 ];
 
 /// File-name endings of raw sample files: `voxstream import` reads them only with `--dims` and `--dtype`.
@@ -61,6 +63,13 @@ pub fn check_store_path(path: &Path, command: &str) -> Result<()> {
                  then `voxstream {command} {store}`"
             );
         }
+        if holds_dicom_files(path) {
+            let (input, store) = (shell_word(&shown.to_string()), suggested_store_name(path));
+            bail!(
+                "{shown} is a folder of DICOM files, not a store: run `voxstream import {input} --out {store}` first \
+                 (one series per folder), then `voxstream {command} {store}`"
+            );
+        }
     }
     if path.is_dir() || partial_path(path).is_dir() || !aside_paths(path).is_empty() {
         return Ok(());
@@ -90,7 +99,7 @@ pub fn check_store_path(path: &Path, command: &str) -> Result<()> {
                  {command} {store}`"
             );
         }
-        if VOLUME_FILE_ENDINGS.iter().any(|ending| lower.ends_with(ending)) {
+        if VOLUME_FILE_ENDINGS.iter().any(|ending| lower.ends_with(ending)) || has_dicom_magic(path) {
             bail!(
                 "{shown} is a volume file, not a store: run `voxstream import {input} --out {store}` first, then \
                  `voxstream {command} {store}`"
@@ -157,6 +166,20 @@ fn is_store(folder: &Path) -> bool {
 }
 
 /// Whether `folder` holds `.tif`/`.tiff` files and no Zarr metadata (among its first entries).
+/// `true` when `folder` (not a store) holds DICOM files, or its subfolders do (a PACS export's study folder).
+fn holds_dicom_files(folder: &Path) -> bool {
+    let has_metadata = ["zarr.json", ".zattrs", ".zgroup"].iter().any(|name| folder.join(name).exists());
+    let Ok(entries) = std::fs::read_dir(folder) else { return false };
+    let is_dicom = |path: &Path| path.is_file() && (has_dicom_extension(path) || has_dicom_magic(path));
+    !has_metadata
+        && entries.take(MAX_LISTED_ENTRIES).filter_map(|entry| entry.ok()).any(|entry| {
+            let path = entry.path();
+            is_dicom(&path)
+                || path.is_dir()
+                    && std::fs::read_dir(&path).is_ok_and(|inner| inner.take(16).flatten().any(|e| is_dicom(&e.path())))
+        })
+}
+
 fn holds_tiff_slices(folder: &Path) -> bool {
     let has_metadata = ["zarr.json", ".zattrs", ".zgroup"].iter().any(|name| folder.join(name).exists());
     let Ok(entries) = std::fs::read_dir(folder) else { return false };

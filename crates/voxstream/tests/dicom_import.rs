@@ -117,7 +117,8 @@ fn series_that_cannot_be_one_volume_are_refused_in_one_line_writing_nothing() {
     ];
     for (input, expected) in cases {
         let store = work.join("out.zarr");
-        let output = voxstream(&["import", dicom.join(input).to_str().unwrap(), "--out", store.to_str().unwrap()], &work);
+        let output =
+            voxstream(&["import", dicom.join(input).to_str().unwrap(), "--out", store.to_str().unwrap()], &work);
         let message = stderr(&output);
         assert!(!output.status.success(), "{input} was imported");
         assert!(message.contains(expected), "{input}: {message}");

@@ -104,6 +104,29 @@ fn a_folder_of_tiff_slices_gets_an_import_command() {
 }
 
 #[test]
+fn dicom_folders_and_files_get_an_import_command() {
+    let dir = scratch("dicom");
+    // A PACS export: a study folder, a series folder, files named without extension but marked as DICOM.
+    std::fs::create_dir_all(dir.join("study/SE0001")).unwrap();
+    let marked = [vec![0u8; 128], b"DICM".to_vec(), vec![0u8; 64]].concat();
+    std::fs::write(dir.join("study/SE0001/IM0001"), &marked).unwrap();
+    let output = voxstream(&["render", "study"], &dir);
+    assert_eq!(output.status.code(), Some(1));
+    assert_eq!(
+        stderr(&output).trim_end(),
+        "error: study is a folder of DICOM files, not a store: run `voxstream import study --out study.zarr` first \
+         (one series per folder), then `voxstream render study.zarr`"
+    );
+    let output = voxstream(&["info", "study/SE0001/IM0001"], &dir);
+    assert_eq!(output.status.code(), Some(1));
+    assert_eq!(
+        stderr(&output).trim_end(),
+        "error: study/SE0001/IM0001 is a volume file, not a store: run `voxstream import study/SE0001/IM0001 --out \
+         IM0001.zarr` first, then `voxstream info IM0001.zarr`"
+    );
+}
+
+#[test]
 fn store_and_mesh_typos_get_the_near_name() {
     let dir = scratch("typos");
     import_ramp(&dir);
