@@ -131,6 +131,45 @@ def tiff(pages):
 
 
 put("import_tiff", "two-pages", tiff(2))
+
+
+def dicom_element(group, element, vr, value):
+    if isinstance(value, str):
+        value = value.encode()
+    if len(value) % 2:
+        value += b"\0" if vr == "UI" else b" "
+    tag = struct.pack("<HH", group, element) + vr.encode()
+    if vr in ("OB", "OW", "OF", "SQ", "UT", "UN"):
+        return tag + b"\0\0" + struct.pack("<I", len(value)) + value
+    return tag + struct.pack("<H", len(value)) + value
+
+
+def dicom(frames):
+    """A CT slice (or an RT-dose-like grid of `frames` frames) of 4x3 u16 samples, explicit VR little endian."""
+    us = lambda v: struct.pack("<H", v)
+    syntax = "1.2.840.10008.1.2.1"
+    meta = dicom_element(0x0002, 0x0001, "OB", b"\0\1") + dicom_element(0x0002, 0x0002, "UI", "1.2.840.10008.5.1.4.1.1.2") \
+        + dicom_element(0x0002, 0x0003, "UI", "2.25.1") + dicom_element(0x0002, 0x0010, "UI", syntax)
+    meta = dicom_element(0x0002, 0x0000, "UL", struct.pack("<I", len(meta))) + meta
+    body = [dicom_element(0x0008, 0x0016, "UI", "1.2.840.10008.5.1.4.1.1.2"), dicom_element(0x0008, 0x0060, "CS", "CT"),
+            dicom_element(0x0020, 0x000E, "UI", "2.25.2"), dicom_element(0x0020, 0x0032, "DS", "0\\0\\0"),
+            dicom_element(0x0020, 0x0037, "DS", "1\\0\\0\\0\\1\\0"), dicom_element(0x0028, 0x0002, "US", us(1)),
+            dicom_element(0x0028, 0x0004, "CS", "MONOCHROME2")]
+    if frames > 1:
+        body.append(dicom_element(0x0028, 0x0008, "IS", str(frames)))
+    body += [dicom_element(0x0028, 0x0010, "US", us(3)), dicom_element(0x0028, 0x0011, "US", us(4)),
+             dicom_element(0x0028, 0x0030, "DS", "0.5\\0.5"), dicom_element(0x0028, 0x0100, "US", us(16)),
+             dicom_element(0x0028, 0x0101, "US", us(12)), dicom_element(0x0028, 0x0102, "US", us(11)),
+             dicom_element(0x0028, 0x0103, "US", us(0)), dicom_element(0x0028, 0x1052, "DS", "-1024"),
+             dicom_element(0x0028, 0x1053, "DS", "1")]
+    if frames > 1:
+        body.append(dicom_element(0x3004, 0x000C, "DS", "\\".join(str(2 * i) for i in range(frames))))
+    body.append(dicom_element(0x7FE0, 0x0010, "OW", struct.pack("<%dH" % (12 * frames), *range(12 * frames))))
+    return b"\0" * 128 + b"DICM" + meta + b"".join(body)
+
+
+put("import_dicom", "ct-slice", dicom(1))
+put("import_dicom", "dose-grid", dicom(3))
 put("import_raw", "u8", struct.pack("<3HBB", *DIMS, 0, 0) + U8)
 put("import_raw", "f32-big", struct.pack("<3HBB", *DIMS, 7, 4) + b"skip" + struct.pack(">%df" % N, *range(N)))
 put("vdb_converter_header", "fog", json.dumps({"name": "density", "class": "fog volume", "dims": [4, 3, 2],

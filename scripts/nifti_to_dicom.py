@@ -4,26 +4,24 @@ with Rescale Intercept -1024 (stored = value + 1024), every tenth slice RLE-comp
 (crates/voxstream/tests/dicom_import.rs) compares the store with the NIfTI's own import.
 
     python scripts/nifti_to_dicom.py IN.nii.gz OUT_FOLDER
+
+`write_series` writes any array so (the Python package's tests use it).
 """
 import random
 import sys
 from pathlib import Path
 
-import nibabel
 import numpy as np
-import pydicom
 from pydicom.dataset import Dataset, FileMetaDataset
 from pydicom.uid import CTImageStorage, ExplicitVRLittleEndian, RLELossless, generate_uid
 
 
-def main(nifti: Path, out: Path):
-    image = nibabel.load(nifti)
-    data = np.asarray(image.dataobj)  # (x, y, z), stored values
+def write_series(data, spacing, origin, out: Path, description="MNI152 as CT"):
+    """Writes `data` (indexed x, y, z; values within -1024..3071) with `spacing` and `origin` (x, y, z, mm) as an
+    axial CT series into `out`."""
     if data.min() < -1024 or data.max() > 4095 - 1024:
-        sys.exit(f"{nifti}: values {data.min()}..{data.max()} do not fit 12 bits with intercept -1024")
-    header = image.header
-    dx, dy, dz = (float(v) for v in header.get_zooms()[:3])
-    origin = [float(header["qoffset_x"]), float(header["qoffset_y"]), float(header["qoffset_z"])]
+        sys.exit(f"values {data.min()}..{data.max()} do not fit 12 bits with intercept -1024")
+    dx, dy, dz = (float(v) for v in spacing)
     series, study = generate_uid(), generate_uid()
     rng = random.Random(7)
     names = [f"{rng.getrandbits(40):010x}" for _ in range(data.shape[2])]
@@ -38,9 +36,9 @@ def main(nifti: Path, out: Path):
         ds.SOPInstanceUID = meta.MediaStorageSOPInstanceUID
         ds.StudyInstanceUID, ds.SeriesInstanceUID = study, series
         ds.Modality = "CT"
-        ds.SeriesDescription = "MNI152 as CT"
+        ds.SeriesDescription = description
         ds.InstanceNumber = rng.randrange(1, 10_000)
-        ds.ImagePositionPatient = [origin[0], origin[1], origin[2] + k * dz]
+        ds.ImagePositionPatient = [float(origin[0]), float(origin[1]), float(origin[2]) + k * dz]
         ds.ImageOrientationPatient = [1, 0, 0, 0, 1, 0]
         ds.PixelSpacing = [dy, dx]
         ds.SliceThickness = dz
@@ -56,6 +54,15 @@ def main(nifti: Path, out: Path):
         folder = out / ("a" if k % 2 else "b")
         folder.mkdir(parents=True, exist_ok=True)
         ds.save_as(folder / name, enforce_file_format=True)
+
+
+def main(nifti: Path, out: Path):
+    import nibabel
+
+    image = nibabel.load(nifti)
+    header = image.header
+    origin = [float(header["qoffset_x"]), float(header["qoffset_y"]), float(header["qoffset_z"])]
+    write_series(np.asarray(image.dataobj), header.get_zooms()[:3], origin, out)
 
 
 if __name__ == "__main__":

@@ -15,7 +15,7 @@ fi
 # Pinned: the build tool and what the tests use.
 "$venv/bin/pip" install --quiet --disable-pip-version-check \
     maturin==1.16.0 numpy==2.4.6 pytest==9.2.0 pillow==13.0.0 "napari[pyqt5]==0.9.2" nbclient==0.11.0 nbformat==5.11.1 ipykernel==7.4.0 \
-    dask==2026.8.0 distributed==2026.8.0 imageio-ffmpeg==0.8.1
+    dask==2026.8.0 distributed==2026.8.0 imageio-ffmpeg==0.8.1 pydicom==3.0.1
 # The wheel, built against this checkout in release mode (sharing target/ with cargo), then installed.
 rm -rf target/wheels
 "$venv/bin/maturin" build --release --quiet -m crates/voxstream-python/Cargo.toml --out target/wheels

@@ -11,6 +11,8 @@ use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context, Result};
+use voxstream_store::formats::dicom::{has_dicom_extension, DicomSeries};
+use voxstream_store::formats::dicom_header::has_dicom_magic;
 use voxstream_store::formats::sample_type::DTYPE_NAMES;
 use voxstream_store::formats::{open_volume, Endian, RawLayout, SampleConversion, SampleType, WithGeometry};
 use voxstream_store::{
@@ -62,6 +64,8 @@ pub struct ImportSettings {
     pub particle_memory: Option<u64>,
     /// How bricks are compressed (`--codec`, `--max-error`).
     pub codec: BrickCodec,
+    /// A DICOM folder's series to import (`--series`): its number in the list of series, or its UID.
+    pub series: Option<String>,
 }
 
 impl Default for ImportSettings {
@@ -78,6 +82,7 @@ impl Default for ImportSettings {
             amplify: None,
             smoothing_scale: None,
             particle_memory: None,
+            series: None,
             codec: BrickCodec::Zstd,
         }
     }
@@ -155,9 +160,18 @@ pub fn open_input(input: &Path, settings: &ImportSettings) -> Result<ImportInput
     if let (Some(layout), Some(raw)) = (&raw, &settings.raw) {
         check_raw_dims_against_header(input, raw.dims, layout.header_bytes)?;
     }
-    let source: Box<dyn VolumeSource> = Box::new(
-        WithGeometry::new(open_volume(input, raw.as_ref())?, settings.spacing, settings.origin).with_unit(unit),
-    );
+    let opened = match &settings.series {
+        Some(series) => {
+            let is_dicom = input.is_dir() || has_dicom_extension(input) || has_dicom_magic(input);
+            if raw.is_some() || !is_dicom {
+                bail!("--series chooses among the series of a DICOM folder; {} is not one", input.display());
+            }
+            Box::new(DicomSeries::open_series(input, Some(series))?) as Box<dyn VolumeSource>
+        }
+        None => open_volume(input, raw.as_ref())?,
+    };
+    let source: Box<dyn VolumeSource> =
+        Box::new(WithGeometry::new(opened, settings.spacing, settings.origin).with_unit(unit));
     if let Some(s) = settings.spacing.filter(|s| s.iter().any(|v| *v <= 0.0)) {
         bail!("--spacing must be positive, got {s:?}");
     }

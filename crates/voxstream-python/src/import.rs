@@ -67,7 +67,7 @@ impl VolumeSource for ArraySource {
 /// `s3://BUCKET/NAME.zarr`, `gs://…`, `az://…`: built in a temporary folder, then uploaded); returns what was written.
 #[pyfunction]
 #[pyo3(signature = (source, out, *, spacing=None, origin=None, brick_size=32, overwrite=false, nan_as=None,
-    resolution=None, amplify=None, progress=None, codec="zstd", max_error=None))]
+    resolution=None, amplify=None, progress=None, codec="zstd", max_error=None, series=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn import_volume<'py>(
     py: Python<'py>,
@@ -83,6 +83,7 @@ pub fn import_volume<'py>(
     progress: Option<Py<PyAny>>,
     codec: &str,
     max_error: Option<f64>,
+    series: Option<String>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let codec = BrickCodec::from_choice(codec, max_error).map_err(PyValueError::new_err)?;
     if let Some(s) = spacing.filter(|s| s.iter().any(|v| !(v.is_finite() && *v > 0.0))) {
@@ -97,6 +98,7 @@ pub fn import_volume<'py>(
         resolution,
         amplify,
         codec,
+        series,
         ..ImportSettings::default()
     };
     // A remote `out` (s3://, gs://, az://) is checked before the source is read; the store is built in a temporary

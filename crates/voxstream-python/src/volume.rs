@@ -136,6 +136,8 @@ impl PyVolume {
                 info.set_item("dtype", volume.dtype.name())?;
                 info.set_item("spacing", volume.spacing)?;
                 info.set_item("origin", volume.origin)?;
+                // The spacing's unit as OME-Zarr names it ("millimeter", …), or None when the store has none.
+                info.set_item("unit", volume.unit.map(|u| u.name()))?;
                 info.set_item("levels", store.layout().levels())?;
                 info.set_item("brick_size", store.layout().brick_size)?;
                 info.set_item("native", store.is_native())?;

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import voxstream as vs
-from conftest import ball, run_cli
+from conftest import REPO, ball, run_cli
 
 
 def cli_error(cli, *args):
@@ -93,6 +93,28 @@ def test_a_mesh_file_is_baked_into_a_store_as_the_cli_does(cli, tmp_path):
     assert np.array_equal(ours, theirs) and ours[..., :3].any()
     with pytest.raises(ValueError, match="--resolution and --amplify apply to mesh and particle files"):
         vs.import_volume(tmp_path / "x.npy", tmp_path / "q.zarr", resolution=32)
+
+
+def test_a_dicom_series_folder_imports_from_python_as_its_array(cli, tmp_path):
+    """A CT series written by pydicom (scripts/nifti_to_dicom.py's writer: file names in no order, two subfolders, 12
+    bits stored with intercept -1024, some slices RLE-compressed) imports from Python as `voxstream import FOLDER`
+    does (issue 42 item 6): in the modality's units, as int16, rendering as the array itself."""
+    import sys
+
+    sys.path.insert(0, str(REPO / "scripts"))
+    from nifti_to_dicom import write_series
+
+    volume = ball(24).astype(np.int16) * 3 - 200  # [z, y, x], Hounsfield-like values
+    write_series(volume.transpose(2, 1, 0), (0.5, 0.75, 1.5), (0.0, 0.0, 0.0), tmp_path / "series")
+    report = vs.import_volume(tmp_path / "series", tmp_path / "ct.zarr")
+    assert report["dtype"] == "i16" and tuple(report["dims"]) == (32, 24, 16), report
+    info = vs.open(tmp_path / "ct.zarr").info
+    assert tuple(info["spacing"]) == (0.5, 0.75, 1.5) and info["unit"] == "millimeter", info
+    result = run_cli(cli, "import", str(tmp_path / "series"), "--out", str(tmp_path / "cli.zarr"), "--quiet")
+    assert result.returncode == 0, result.stderr
+    vs.import_volume(volume, tmp_path / "array.zarr", spacing=(0.5, 0.75, 1.5))
+    images = [vs.open(tmp_path / name, size=(48, 48)).render() for name in ("ct.zarr", "cli.zarr", "array.zarr")]
+    assert np.array_equal(images[0], images[1]) and np.array_equal(images[0], images[2]) and images[0][..., :3].any()
 
 
 def test_arrays_of_other_types_and_shapes_are_refused_with_the_fix(tmp_path):

@@ -9,6 +9,7 @@ use dicom_core::value::{PrimitiveValue, C};
 use dicom_core::{DataElement, VR};
 use dicom_dictionary_std::{tags, uids};
 use dicom_object::{FileMetaTableBuilder, InMemDicomObject};
+use voxstream_store::formats::dicom::DicomSeries;
 use voxstream_store::formats::open_volume;
 use voxstream_store::{DType, StoreError, VolumeSource};
 
@@ -253,5 +254,21 @@ fn a_folder_without_dicom_or_tiff_files_says_so() {
     std::fs::write(dir.join("notes.txt"), "nothing here").unwrap();
     let message = error_of(&dir);
     assert!(message.contains("neither .tif/.tiff slices nor DICOM files"), "{message}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn series_chooses_one_of_a_folders_series_by_number_or_uid() {
+    let dir = scratch("choose");
+    for k in 0..5 {
+        let series = if k < 2 { "2.25.1" } else { "2.25.2" };
+        write_slice(&dir.join(format!("{k}.dcm")), &Slice { series, ..slice(k, [0.0, 0.0, k as f64], AXIAL) }, k);
+    }
+    let depth = |choice: &str| DicomSeries::open_series(&dir, Some(choice)).map(|s| s.info().dims[2]);
+    assert_eq!(depth("1").unwrap(), 2);
+    assert_eq!(depth("2").unwrap(), 3);
+    assert_eq!(depth("2.25.2").unwrap(), 3);
+    let message = depth("3").unwrap_err().to_string();
+    assert!(message.contains("--series 3 is neither a number from 1 to 2 nor the UID"), "{message}");
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -521,6 +521,10 @@ pub struct ImportArgs {
     /// (integer samples: its whole part); 0, the default, is lossless.
     #[arg(long, value_name = "E", allow_negative_numbers = true)]
     pub max_error: Option<f64>,
+    /// A DICOM folder holding several series: the one to import, by its number in the list the import prints
+    /// when it is not given (1, 2, …), or by its Series Instance UID.
+    #[arg(long, value_name = "N|UID")]
+    pub series: Option<String>,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,

@@ -49,6 +49,7 @@ pub fn run(args: &ImportArgs) -> Result<()> {
         smoothing_scale: args.smoothing_scale,
         particle_memory: args.particle_memory,
         codec: brick_codec(args)?,
+        series: args.series.clone(),
     };
     // A remote --out is checked (and its bucket asked) before the input is read.
     let remote = remote_output(&args.out, &settings)?;

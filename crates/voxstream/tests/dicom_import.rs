@@ -112,6 +112,7 @@ fn series_that_cannot_be_one_volume_are_refused_in_one_line_writing_nothing() {
         ("CT2", "slices are unevenly spaced: 1.2500 mm apart, but 202.5000 mm"),
         ("mr_study/MR700", "slices in different orientations"),
         ("mr_study", "7 series found: 1. MR \"ANGIO Projected from   C\" (7 slices of 16x16"),
+        ("mr_study", "choose it with --series N (its number here) or --series UID"),
         ("MR_small_jpeg_ls_lossless.dcm", "JPEG-LS Lossless Image Compression"),
         ("JPEG-lossy.dcm", "SamplePrecision(12)"),
     ];
@@ -126,5 +127,33 @@ fn series_that_cannot_be_one_volume_are_refused_in_one_line_writing_nothing() {
         assert!(!message.contains("panicked"), "{input}: {message}");
         assert!(!store.exists() && !work.join("out.zarr.partial").exists(), "{input}: something was written");
     }
+    std::fs::remove_dir_all(&work).unwrap();
+}
+
+#[test]
+fn series_chooses_one_series_of_a_study_folder() {
+    let Some(real) = real_data_dir() else { return };
+    let study = real.join("dicom/mr_study");
+    let work = scratch("dicom_import", "series");
+    let import = |series: &str, store: &str| {
+        voxstream(&["import", study.to_str().unwrap(), "--series", series, "--out", store, "--quiet"], &work)
+    };
+    // The list the refusal gives numbers the series by UID; number 2 is MR1's first "FAST LOCALIZER", one slice.
+    let uid = "1.3.6.1.4.1.5962.1.1.0.0.0.1196533885.18148.0.134";
+    for (choice, store) in [("2", "by-number.zarr"), (uid, "by-uid.zarr")] {
+        let output = import(choice, store);
+        assert!(output.status.success(), "--series {choice}: {}", stderr(&output));
+        let reader = StoreReader::open(&work.join(store)).unwrap();
+        assert_eq!(reader.info().dims, [16, 16, 1], "--series {choice}");
+    }
+    let by_number = level_zero(&StoreReader::open(&work.join("by-number.zarr")).unwrap());
+    assert_eq!(by_number, level_zero(&StoreReader::open(&work.join("by-uid.zarr")).unwrap()));
+    let output = import("9", "none.zarr");
+    assert!(!output.status.success());
+    assert!(stderr(&output).contains("--series 9 is neither a number from 1 to 7 nor the UID"), "{}", stderr(&output));
+    let nifti = real.join("mni152_t1.nii.gz");
+    let output = voxstream(&["import", nifti.to_str().unwrap(), "--series", "1", "--out", "n.zarr"], &work);
+    assert!(stderr(&output).contains("--series chooses among the series of a DICOM folder"), "{}", stderr(&output));
+    assert!(!work.join("none.zarr").exists() && !work.join("n.zarr").exists());
     std::fs::remove_dir_all(&work).unwrap();
 }

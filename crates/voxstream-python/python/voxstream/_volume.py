@@ -67,7 +67,7 @@ class Volume:
 
     @property
     def info(self) -> Dict[str, Any]:
-        """Kind (scene, store, geometry), and for stores: dims (x, y, z), dtype, spacing, origin, levels,
+        """Kind (scene, store, geometry), and for stores: dims (x, y, z), dtype, spacing, origin, unit, levels,
         brick_size, value_range, typical_range (0.5th to 99.5th percentile), percentiles, native, remote."""
         return dict(self._native.info)
 

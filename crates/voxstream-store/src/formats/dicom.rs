@@ -180,6 +180,12 @@ fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
 impl DicomSeries {
     /// A folder holding one series (in any number of files and subfolders), or one DICOM file.
     pub fn open(path: &Path) -> Result<DicomSeries, StoreError> {
+        Self::open_series(path, None)
+    }
+
+    /// [`DicomSeries::open`], choosing among a folder's series by `series`: its number in the list a folder of
+    /// several series is refused with (1, 2, …, in UID order), or its Series Instance UID.
+    pub fn open_series(path: &Path, choice: Option<&str>) -> Result<DicomSeries, StoreError> {
         let files = if path.is_dir() {
             let all = files_in(path)?;
             let dicom: Vec<PathBuf> =
@@ -210,18 +216,39 @@ impl DicomSeries {
         for header in headers {
             series.entry(header.series.clone()).or_default().push(header);
         }
-        if series.len() > 1 {
-            return Err(StoreError::Unsupported {
-                path: path.into(),
-                message: format!(
-                    "{} series found: {}. Import one at a time: give the folder (or files moved into a folder of \
-                     their own) of the series to import",
-                    series.len(),
-                    describe_series(&series)
-                ),
-            });
-        }
-        let (_, headers) = series.into_iter().next().expect("one series");
+        let chosen = match choice {
+            Some(choice) => {
+                let by_number = choice.parse::<usize>().ok().filter(|n| (1..=series.len()).contains(n));
+                let key = match by_number {
+                    Some(n) => series.keys().nth(n - 1).cloned(),
+                    None => series.contains_key(choice.trim()).then(|| choice.trim().to_string()),
+                };
+                let Some(key) = key else {
+                    return Err(StoreError::Unsupported {
+                        path: path.into(),
+                        message: format!(
+                            "--series {choice} is neither a number from 1 to {} nor the UID of one of its series: {}",
+                            series.len(),
+                            describe_series(&series)
+                        ),
+                    });
+                };
+                key
+            }
+            None if series.len() > 1 => {
+                return Err(StoreError::Unsupported {
+                    path: path.into(),
+                    message: format!(
+                        "{} series found: {}. Import one at a time: choose it with --series N (its number here) or \
+                         --series UID",
+                        series.len(),
+                        describe_series(&series)
+                    ),
+                })
+            }
+            None => series.keys().next().cloned().expect("one series"),
+        };
+        let headers = series.remove(&chosen).expect("a series found above");
         Self::assemble(path, headers)
     }
 
