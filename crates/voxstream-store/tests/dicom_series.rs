@@ -272,3 +272,30 @@ fn series_chooses_one_of_a_folders_series_by_number_or_uid() {
     assert!(message.contains("--series 3 is neither a number from 1 to 2 nor the UID"), "{message}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The process's peak resident memory (`VmHWM`), in KiB.
+fn peak_rss_kib() -> u64 {
+    let status = std::fs::read_to_string("/proc/self/status").unwrap();
+    let line = status.lines().find(|l| l.starts_with("VmHWM:")).unwrap();
+    line.split_whitespace().nth(1).unwrap().parse().unwrap()
+}
+
+#[test]
+fn a_length_beyond_the_file_is_refused_before_anything_is_allocated_for_it() {
+    // dicom-rs allocates and zeroes a value by its declared length: the import_dicom fuzz target's 479-byte file
+    // declaring 3.7 GB took 3.6 GB. The element lengths are checked against the file first.
+    let dir = scratch("forged");
+    let path = dir.join("slice.dcm");
+    write_slice(&path, &slice(0, [0.0; 3], AXIAL), 1);
+    let mut bytes = std::fs::read(&path).unwrap();
+    // The Modality element (0008,0060) CS "CT": its 2-byte length becomes an OB's 4-byte 0xDDDDDDDD.
+    let at = bytes.windows(6).position(|w| w == [0x08, 0x00, 0x60, 0x00, b'C', b'S']).unwrap();
+    bytes.splice(at + 4..at + 8, [b'O', b'B', 0, 0, 0xDD, 0xDD, 0xDD, 0xDD]);
+    std::fs::write(&path, &bytes).unwrap();
+    let before = peak_rss_kib();
+    let message = error_of(&path);
+    assert!(message.contains("element (0008,0060) declares 3722304989 bytes, more than the"), "{message}");
+    let grown = peak_rss_kib().saturating_sub(before);
+    assert!(grown < 512 * 1024, "peak memory grew by {grown} KiB");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -43,6 +43,7 @@ fn replay(dir: &Path, target: &str, data: &[u8]) {
         "import_metaimage" => import_bytes(dir, "mha", data, None),
         "import_vti" => import_bytes(dir, "vti", data, None),
         "import_tiff" => import_bytes(dir, "tif", data, None),
+        "import_dicom" => import_bytes(dir, "dcm", data, None),
         "import_nifti" => selected("nii", "nii.gz"),
         "import_inr" => selected("inr", "inr.gz"),
         "import_npy" => selected("npy", "npz"),

@@ -131,6 +131,8 @@ fn rescale_in(object: &InMemDicomObject) -> Option<(f64, f64)> {
 /// Reads `path`'s header (everything before its pixel data). `Ok(None)` for a DICOM file that holds no image (a
 /// DICOMDIR, a structured report, a structure set): a folder of a study holds such files beside its images.
 pub fn read_header(path: &Path) -> Result<Option<DicomHeader>, StoreError> {
+    super::dicom_lengths::check_element_lengths(path)
+        .map_err(|reason| StoreError::format(path, format!("damaged DICOM file: {reason}")))?;
     let object = OpenFileOptions::new()
         .read_until(tags::PIXEL_DATA)
         .open_file(path)

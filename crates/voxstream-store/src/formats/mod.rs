@@ -18,6 +18,7 @@
 
 pub mod dicom;
 pub mod dicom_header;
+pub mod dicom_lengths;
 pub mod header_text;
 pub mod inr;
 pub mod metaimage;
