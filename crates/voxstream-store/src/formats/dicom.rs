@@ -35,6 +35,9 @@ pub const MAX_DICOM_FILES: usize = 200_000;
 /// How deep below the folder given files are looked for (PACS exports nest patient/study/series folders).
 const MAX_FOLDER_DEPTH: usize = 6;
 
+/// The most slices a volume may have (the store's limit per axis).
+const MAX_SLICES: u64 = 1 << 20;
+
 /// The most a decoded frame may hold: a 32768² f32 slice.
 const MAX_FRAME_BYTES: u64 = 4 << 30;
 
@@ -293,6 +296,13 @@ impl DicomSeries {
             frame_bytes: first.frame_bytes(),
         };
 
+        let total: u64 = headers.iter().map(|h| h.frames as u64).sum();
+        if total > MAX_SLICES {
+            return Err(StoreError::format(
+                path,
+                format!("{total} slices: more than {MAX_SLICES}, the most a volume has"),
+            ));
+        }
         // The slices, each with its position where the files say it.
         let mut slices: Vec<(Slice, Option<[f64; 3]>, Option<i64>)> = Vec::new();
         for h in &headers {
@@ -324,11 +334,17 @@ impl DicomSeries {
         }
         let with_position = slices.iter().filter(|s| s.1.is_some()).count();
         let z_spacing = match orientation {
-            Some(o) if with_position == slices.len() && slices.len() > 1 => sort_by_position(path, &o, &first, &mut slices)?,
+            Some(o) if with_position == slices.len() && slices.len() > 1 => {
+                sort_by_position(path, &o, &first, &mut slices)?
+            }
             _ if with_position > 0 && with_position < slices.len() => {
                 return Err(StoreError::format(
                     path,
-                    format!("{with_position} of {} slices say their Image Position, the others do not: the order of the slices is unknown", slices.len()),
+                    format!(
+                        "{with_position} of {} slices say their Image Position, the others do not: the order of the \
+                         slices is unknown",
+                        slices.len()
+                    ),
                 ))
             }
             _ => {
@@ -490,6 +506,9 @@ fn check_decodable(h: &DicomHeader) -> Result<(), StoreError> {
             h.transfer_syntax
         ));
     }
+    if h.frames as u64 > MAX_SLICES {
+        return Err(StoreError::format(path, format!("Number of Frames {} is more than {MAX_SLICES}", h.frames)));
+    }
     let file_len = std::fs::metadata(path).map_err(|e| StoreError::io(path, e))?.len();
     let frame_bytes = h.frame_bytes();
     let all = frame_bytes.saturating_mul(h.frames as u64);
@@ -506,7 +525,11 @@ fn check_decodable(h: &DicomHeader) -> Result<(), StoreError> {
     if all > limit {
         return Err(StoreError::format(
             path,
-            format!("{} frames of {frame_bytes} bytes would expand its {file_len} bytes more than {MAX_EXPANSION} times: the header is damaged", h.frames),
+            format!(
+                "{} frames of {frame_bytes} bytes would expand its {file_len} bytes more than {MAX_EXPANSION} times: \
+                 the header is damaged",
+                h.frames
+            ),
         ));
     }
     Ok(())

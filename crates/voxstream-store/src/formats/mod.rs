@@ -11,7 +11,7 @@
 //! | TIFF stack | `.tif`, `.tiff`, or a folder of them | as the tiff crate decodes |
 //! | OpenVDB | `.vdb` (first float grid: fog volume or level set) | via Debian's python3-openvdb |
 //! | VTK XML ImageData | `.vti` | inline binary/ascii, appended raw/base64, zlib |
-//! | DICOM | a folder of a series, `.dcm` (or any file with DICOM's `DICM` mark) | uncompressed, deflate, RLE, JPEG (baseline, extended, lossless), JPEG 2000 |
+//! | DICOM | a series' folder, `.dcm`, any file marked `DICM` | plain, deflate, RLE, JPEG (8-bit, lossless), JPEG 2000 |
 //!
 //! Samples are stored as u8, u16, i16 or f32; raw, NRRD, NIfTI, MetaImage, INR and NumPy files of int8, int32,
 //! uint32 or float64 are converted on the way ([`sample_type`]).
@@ -72,8 +72,9 @@ pub fn open_volume(path: &Path, raw: Option<&RawLayout>) -> Result<Box<dyn Volum
         _ if dicom_header::has_dicom_magic(path) => return Ok(Box::new(dicom::DicomSeries::open(path)?)),
         _ => Err(StoreError::Unsupported {
             path: path.into(),
-            message: "unknown format: expected .nrrd, .nhdr, .nii, .nii.gz, .mha, .mhd, .inr, .inr.gz, .npy, .npz, .vti, .vdb or .dcm, \
-                      .tif/.tiff (or a folder of slices), a folder of a DICOM series, or a raw file with --dims and --dtype"
+            message: "unknown format: expected .nrrd, .nhdr, .nii, .nii.gz, .mha, .mhd, .inr, .inr.gz, .npy, .npz, .vti, \
+                      .vdb or .dcm, .tif/.tiff (or a folder of slices), a folder of a DICOM series, or a raw file with \
+                      --dims and --dtype"
                 .into(),
         }),
     }?;
