@@ -295,6 +295,12 @@ fn a_length_beyond_the_file_is_refused_before_anything_is_allocated_for_it() {
     let before = peak_rss_kib();
     let message = error_of(&path);
     assert!(message.contains("element (0008,0060) declares 3722304989 bytes, more than the"), "{message}");
+    // A VR dicom-rs does not know is read as UN, with a 4-byte length: here "CT" and the next tag's first bytes.
+    let mut bytes = std::fs::read(&path).unwrap();
+    bytes.splice(at + 4..at + 12, [b'K', b'S', 2, 0, b'C', b'T', 0xF0, 0x7F]);
+    std::fs::write(&path, &bytes).unwrap();
+    let message = error_of(&path);
+    assert!(message.contains("element (0008,0060) declares 2146456643 bytes"), "{message}");
     let grown = peak_rss_kib().saturating_sub(before);
     assert!(grown < 512 * 1024, "peak memory grew by {grown} KiB");
     std::fs::remove_dir_all(&dir).unwrap();

@@ -16,9 +16,12 @@ const MAX_INFLATE: u64 = 1032;
 /// Nesting deeper than this is refused (a sequence in an item in a sequence …).
 const MAX_DEPTH: usize = 32;
 
-/// Value representations whose explicit-VR header has 2 reserved bytes and a 4-byte length.
-const LONG_VRS: [&[u8; 2]; 13] =
-    [b"OB", b"OD", b"OF", b"OL", b"OV", b"OW", b"SQ", b"SV", b"UC", b"UN", b"UR", b"UT", b"UV"];
+/// Value representations whose explicit-VR header has a 2-byte length; every other one (and an unknown one, read as
+/// UN, as dicom-rs reads it) has 2 reserved bytes and a 4-byte length.
+const SHORT_VRS: [&[u8; 2]; 21] = [
+    b"AE", b"AS", b"AT", b"CS", b"DA", b"DS", b"DT", b"FL", b"FD", b"IS", b"LO", b"LT", b"PN", b"SH", b"SL", b"SS",
+    b"ST", b"TM", b"UI", b"UL", b"US",
+];
 
 const UNDEFINED: u32 = 0xFFFF_FFFF;
 
@@ -137,7 +140,7 @@ impl<R: Skip> Walk<R> {
             }
             let (vr, length) = if self.explicit {
                 let vr = self.header::<2>()?;
-                if LONG_VRS.contains(&&vr) {
+                if !SHORT_VRS.contains(&&vr) {
                     self.header::<2>()?;
                     let b = self.header::<4>()?;
                     (Some(vr), self.u32(b))
@@ -155,21 +158,16 @@ impl<R: Skip> Walk<R> {
                     _ if pixel_data || matches!(vr, Some(v) if &v == b"OB" || &v == b"OW") => {
                         self.items(None, depth + 1, true)?
                     }
-                    Some(v) if &v == b"UN" => {
-                        // Undefined-length UN holds an implicit VR little endian sequence.
+                    None => self.items(None, depth + 1, false)?,
+                    Some(v) if &v == b"SQ" => self.items(None, depth + 1, false)?,
+                    Some(_) => {
+                        // Undefined-length UN (or a VR dicom-rs does not know, which it reads as UN) holds an
+                        // implicit VR little endian sequence.
                         let (explicit, big) = (self.explicit, self.big);
                         (self.explicit, self.big) = (false, false);
                         let walked = self.items(None, depth + 1, false);
                         (self.explicit, self.big) = (explicit, big);
                         walked?
-                    }
-                    None => self.items(None, depth + 1, false)?,
-                    Some(v) if &v == b"SQ" => self.items(None, depth + 1, false)?,
-                    Some(v) => {
-                        return Err(format!(
-                            "element ({group:04X},{element:04X}) of VR {} has an undefined length",
-                            String::from_utf8_lossy(&v)
-                        ))
                     }
                 }
                 continue;
@@ -295,7 +293,7 @@ fn transfer_syntax(meta: &[u8]) -> Option<String> {
         let (group, element) =
             (u16::from_le_bytes([meta[at], meta[at + 1]]), u16::from_le_bytes([meta[at + 2], meta[at + 3]]));
         let vr = &meta[at + 4..at + 6];
-        let (length, header) = if LONG_VRS.iter().any(|v| v.as_slice() == vr) {
+        let (length, header) = if !SHORT_VRS.iter().any(|v| v.as_slice() == vr) {
             let b = meta.get(at + 8..at + 12)?;
             (u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize, 12)
         } else {

@@ -72,10 +72,11 @@ pub fn open_volume(path: &Path, raw: Option<&RawLayout>) -> Result<Box<dyn Volum
         _ if dicom_header::has_dicom_magic(path) => return Ok(Box::new(dicom::DicomSeries::open(path)?)),
         _ => Err(StoreError::Unsupported {
             path: path.into(),
-            message: "unknown format: expected .nrrd, .nhdr, .nii, .nii.gz, .mha, .mhd, .inr, .inr.gz, .npy, .npz, .vti, \
+            message:
+                "unknown format: expected .nrrd, .nhdr, .nii, .nii.gz, .mha, .mhd, .inr, .inr.gz, .npy, .npz, .vti, \
                       .vdb or .dcm, .tif/.tiff (or a folder of slices), a folder of a DICOM series, or a raw file with \
                       --dims and --dtype"
-                .into(),
+                    .into(),
         }),
     }?;
     Ok(Box::new(stream))
