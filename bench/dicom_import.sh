@@ -50,7 +50,7 @@ measure "voxstream import (store written)" "$bin" import "$work/series" --out "$
 measure "SimpleITK ImageSeriesReader" "$python" -c '
 import sys, SimpleITK as sitk
 reader = sitk.ImageSeriesReader()
-reader.SetFileNames(reader.GetGDCMSeriesFileNames(sys.argv[1], "", True))
+reader.SetFileNames(reader.GetGDCMSeriesFileNames(sys.argv[1], recursive=True))
 print(sitk.GetArrayFromImage(reader.Execute()).shape)' "$work/series"
 measure "pydicom: read, sort, stack" "$python" -c '
 import sys, pathlib, numpy as np, pydicom
