@@ -185,7 +185,8 @@ impl ImportInput {
     /// An input the caller made (e.g. an array in memory), called `name` in messages.
     pub fn from_source(source: Box<dyn VolumeSource>, name: &Path) -> ImportInput {
         let info = source.info().clone();
-        ImportInput { source, name: name.to_path_buf(), info, description: None }
+        let description = source.description();
+        ImportInput { source, name: name.to_path_buf(), info, description }
     }
 
     /// Writes the store `out`. `progress(done, total)` hears input bytes read; returning `ControlFlow::Break` stops

@@ -126,6 +126,12 @@ pub trait VolumeSource: Send {
     fn conversion(&self) -> Option<SampleConversion> {
         None
     }
+
+    /// One line on what was found in the input, for sources whose reading involved choices the user should see
+    /// (a DICOM series: its modality, description, slice count, spacing and rescale). `None` for plain files.
+    fn description(&self) -> Option<String> {
+        None
+    }
 }
 
 /// A volume whose samples are already in memory (f32, x fastest), handed out slice by slice: for callers whose

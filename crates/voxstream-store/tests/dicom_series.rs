@@ -122,7 +122,12 @@ fn slices_are_stacked_by_position_whatever_their_names() {
         write_slice(&dir.join(name), &slice(k, p, orientation), 7 - k);
     }
     std::fs::write(dir.join("README.txt"), "exported by a PACS").unwrap();
+    // One slice a link to a file elsewhere (a series assembled from an archive's files).
+    let elsewhere = dir.with_extension("IM1");
+    std::fs::rename(dir.join("IM1"), &elsewhere).unwrap();
+    std::os::unix::fs::symlink(&elsewhere, dir.join("IM1")).unwrap();
     let mut source = open_volume(&dir, None).unwrap();
+    assert!(source.description().unwrap().contains("CT series: 7 slices of 5x4, 1.2500 mm apart"));
     let info = source.info().clone();
     assert_eq!(info.dims, [5, 4, 7]);
     assert_eq!(info.dtype, DType::I16, "12-bit CT with intercept -1024 fits int16");
@@ -143,6 +148,7 @@ fn slices_are_stacked_by_position_whatever_their_names() {
         }
     }
     std::fs::remove_dir_all(&dir).unwrap();
+    std::fs::remove_file(&elsewhere).unwrap();
 }
 
 #[test]

@@ -23,9 +23,14 @@ fn reference(dir: &Path, name: &str) -> (Vec<f32>, serde_json::Value) {
 }
 
 fn import(input: &Path, store: &Path, work: &Path) -> StoreReader {
+    import_saying(input, store, work).0
+}
+
+/// The store, and what the import printed.
+fn import_saying(input: &Path, store: &Path, work: &Path) -> (StoreReader, String) {
     let output = voxstream(&["import", input.to_str().unwrap(), "--out", store.to_str().unwrap()], work);
     assert!(output.status.success(), "import {}: {}", input.display(), stderr(&output));
-    StoreReader::open(store).unwrap()
+    (StoreReader::open(store).unwrap(), stderr(&output))
 }
 
 fn level_zero(reader: &StoreReader) -> Vec<f32> {
@@ -83,7 +88,14 @@ fn the_mni_template_as_a_scanner_series_imports_as_its_nifti() {
     let files = ["a", "b"].iter().map(|f| std::fs::read_dir(series.join(f)).unwrap().count()).sum::<usize>();
     assert_eq!(files, 189, "one file per slice");
 
-    let from_dicom = import(&series, &work.join("dicom.zarr"), &work);
+    let (from_dicom, said) = import_saying(&series, &work.join("dicom.zarr"), &work);
+    assert!(
+        said.contains(
+            "DICOM CT series \"MNI152 as CT\": 189 slices of 197x233, 1.0000 mm apart, ordered by position; stored \
+             values - 1024 (the modality's rescale)"
+        ),
+        "{said}"
+    );
     let from_nifti = import(&real.join("mni152_t1.nii.gz"), &work.join("nifti.zarr"), &work);
     let (d, n) = (from_dicom.info(), from_nifti.info());
     assert_eq!((d.dims, d.spacing, d.origin), (n.dims, n.spacing, n.origin));

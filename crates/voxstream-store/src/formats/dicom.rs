@@ -102,6 +102,8 @@ pub struct DicomSeries {
     conversion: Option<SampleConversion>,
     /// The multi-frame file being read, kept open between its frames.
     open: Option<(PathBuf, Arc<DefaultDicomObject>)>,
+    /// What was found, for the import's report.
+    summary: String,
 }
 
 fn files_in(folder: &Path) -> Result<Vec<PathBuf>, StoreError> {
@@ -113,7 +115,8 @@ fn files_in(folder: &Path) -> Result<Vec<PathBuf>, StoreError> {
             if entry.file_name().to_string_lossy().starts_with('.') {
                 continue;
             }
-            let Ok(kind) = entry.file_type() else { continue };
+            // Links are followed (a series assembled from links to an archive's files); the depth bounds loops.
+            let Ok(kind) = std::fs::metadata(&path) else { continue };
             if kind.is_dir() && depth < MAX_FOLDER_DEPTH {
                 folders.push((path, depth + 1));
             } else if kind.is_file() {
@@ -364,6 +367,26 @@ impl DicomSeries {
             unit: first.pixel_spacing.map(|_| SpaceUnit::from_name("millimeter").expect("an OME unit")),
         };
         info.validate(path)?;
+        let rescales: Vec<(f64, f64)> = slices.iter().map(|s| s.0.rescale).collect();
+        let rescale = match (rescales.first(), rescales.iter().all(|r| Some(r) == rescales.first())) {
+            (Some(&(1.0, 0.0)), true) => "values as stored".to_string(),
+            (Some(&(slope, intercept)), true) => {
+                let scaled =
+                    if slope == 1.0 { "stored values".to_string() } else { format!("stored values × {slope}") };
+                let sign = if intercept < 0.0 { '-' } else { '+' };
+                format!("{scaled} {sign} {} (the modality's rescale)", intercept.abs())
+            }
+            _ => "values rescaled slice by slice (the modality's rescale)".to_string(),
+        };
+        let summary = format!(
+            "DICOM {} series{}: {} slices of {}x{}, {:.4} mm apart, ordered by position; {rescale}",
+            if first.modality.is_empty() { "?" } else { &first.modality },
+            if first.description.is_empty() { String::new() } else { format!(" \"{}\"", first.description) },
+            slices.len(),
+            first.columns,
+            first.rows,
+            z_spacing
+        );
         let mut series = DicomSeries {
             info,
             slices: slices.into_iter().map(|s| s.0).collect(),
@@ -371,6 +394,7 @@ impl DicomSeries {
             next: 0,
             conversion,
             open: None,
+            summary,
         };
         // The first slice decoded now, so that pixel data the decoders cannot read (a 12-bit JPEG, a 32-bit RLE) is
         // refused before anything is written.
@@ -676,5 +700,9 @@ impl VolumeSource for DicomSeries {
 
     fn conversion(&self) -> Option<SampleConversion> {
         self.conversion
+    }
+
+    fn description(&self) -> Option<String> {
+        Some(self.summary.clone())
     }
 }

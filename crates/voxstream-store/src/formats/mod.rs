@@ -122,4 +122,8 @@ impl VolumeSource for WithGeometry {
     fn conversion(&self) -> Option<SampleConversion> {
         self.inner.conversion()
     }
+
+    fn description(&self) -> Option<String> {
+        self.inner.description()
+    }
 }
