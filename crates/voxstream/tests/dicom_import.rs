@@ -148,7 +148,7 @@ fn series_chooses_one_series_of_a_study_folder() {
     let study = real.join("dicom/mr_study");
     let work = scratch("dicom_import", "series");
     let import = |series: &str, store: &str| {
-        voxstream(&["import", study.to_str().unwrap(), "--series", series, "--out", store, "--quiet"], &work)
+        voxstream(&["import", study.to_str().unwrap(), "--series", series, "--out", store], &work)
     };
     // The list the refusal gives numbers the series by UID; number 2 is MR1's first "FAST LOCALIZER", one slice.
     let uid = "1.3.6.1.4.1.5962.1.1.0.0.0.1196533885.18148.0.134";
@@ -157,6 +157,11 @@ fn series_chooses_one_series_of_a_study_folder() {
         assert!(output.status.success(), "--series {choice}: {}", stderr(&output));
         let reader = StoreReader::open(&work.join(store)).unwrap();
         assert_eq!(reader.info().dims, [16, 16, 1], "--series {choice}");
+        assert!(
+            stderr(&output).contains("DICOM MR series \"FAST LOCALIZER\": one slice of 16x16; values as stored"),
+            "{}",
+            stderr(&output)
+        );
     }
     let by_number = level_zero(&StoreReader::open(&work.join("by-number.zarr")).unwrap());
     assert_eq!(by_number, level_zero(&StoreReader::open(&work.join("by-uid.zarr")).unwrap()));

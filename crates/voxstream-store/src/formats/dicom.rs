@@ -150,11 +150,12 @@ fn describe_series(series: &BTreeMap<String, Vec<DicomHeader>>) -> String {
             let folder = first.path.parent().map(|p| p.display().to_string()).unwrap_or_default();
             let frames: u64 = headers.iter().map(|h| h.frames as u64).sum();
             format!(
-                "{}. {} \"{}\" ({} slices of {}x{}, in {folder}, UID {uid})",
+                "{}. {} \"{}\" ({} slice{} of {}x{}, in {folder}, UID {uid})",
                 i + 1,
                 if first.modality.is_empty() { "?" } else { &first.modality },
                 first.description,
                 frames,
+                if frames == 1 { "" } else { "s" },
                 first.columns,
                 first.rows
             )
@@ -378,14 +379,16 @@ impl DicomSeries {
             }
             _ => "values rescaled slice by slice (the modality's rescale)".to_string(),
         };
+        let stack = match slices.len() {
+            1 => format!("one slice of {}x{}", first.columns, first.rows),
+            n => {
+                format!("{n} slices of {}x{}, {z_spacing:.4} mm apart, ordered by position", first.columns, first.rows)
+            }
+        };
         let summary = format!(
-            "DICOM {} series{}: {} slices of {}x{}, {:.4} mm apart, ordered by position; {rescale}",
+            "DICOM {} series{}: {stack}; {rescale}",
             if first.modality.is_empty() { "?" } else { &first.modality },
             if first.description.is_empty() { String::new() } else { format!(" \"{}\"", first.description) },
-            slices.len(),
-            first.columns,
-            first.rows,
-            z_spacing
         );
         let mut series = DicomSeries {
             info,
