@@ -16,9 +16,11 @@ from pydicom.dataset import Dataset, FileMetaDataset
 from pydicom.uid import CTImageStorage, ExplicitVRLittleEndian, RLELossless, generate_uid
 
 
-def write_series(data, spacing, origin, out: Path, description="MNI152 as CT"):
+def write_series(data, spacing, origin, out: Path, description="MNI152 as CT", ras=False):
     """Writes `data` (indexed x, y, z; values within -1024..3071) with `spacing` and `origin` (x, y, z, mm) as an
-    axial CT series into `out`."""
+    axial CT series into `out`: its axes as DICOM's patient axes (LPS), or with `ras`, `data` and `origin` being in
+    NIfTI's RAS (x to the right, y to the front), written in LPS as a scanner would (rows along -x, columns along -y,
+    positions with x and y negated)."""
     if data.min() < -1024 or data.max() > 4095 - 1024:
         sys.exit(f"values {data.min()}..{data.max()} do not fit 12 bits with intercept -1024")
     dx, dy, dz = (float(v) for v in spacing)
@@ -38,8 +40,9 @@ def write_series(data, spacing, origin, out: Path, description="MNI152 as CT"):
         ds.Modality = "CT"
         ds.SeriesDescription = description
         ds.InstanceNumber = rng.randrange(1, 10_000)
-        ds.ImagePositionPatient = [float(origin[0]), float(origin[1]), float(origin[2]) + k * dz]
-        ds.ImageOrientationPatient = [1, 0, 0, 0, 1, 0]
+        flip = -1.0 if ras else 1.0
+        ds.ImagePositionPatient = [flip * float(origin[0]), flip * float(origin[1]), float(origin[2]) + k * dz]
+        ds.ImageOrientationPatient = [flip, 0, 0, 0, flip, 0]
         ds.PixelSpacing = [dy, dx]
         ds.SliceThickness = dz
         ds.Rows, ds.Columns = data.shape[1], data.shape[0]
@@ -62,7 +65,8 @@ def main(nifti: Path, out: Path):
     image = nibabel.load(nifti)
     header = image.header
     origin = [float(header["qoffset_x"]), float(header["qoffset_y"]), float(header["qoffset_z"])]
-    write_series(np.asarray(image.dataobj), header.get_zooms()[:3], origin, out)
+    # The template is in RAS (its qform); the series says so in DICOM's terms.
+    write_series(np.asarray(image.dataobj), header.get_zooms()[:3], origin, out, ras=True)
 
 
 if __name__ == "__main__":

@@ -13,7 +13,14 @@ fuzz_target!(|data: &[u8]| {
     let dim = |i: usize| u16::from_le_bytes([data[i], data[i + 1]]) as u64;
     let dtype = [DType::U8, DType::U16, DType::I16, DType::F32][(data[6] % 4) as usize];
     let layout = RawLayout {
-        info: VolumeInfo { dims: [dim(0), dim(2), dim(4)], dtype, spacing: [1.0; 3], origin: [0.0; 3], unit: None },
+        info: VolumeInfo {
+            dims: [dim(0), dim(2), dim(4)],
+            dtype,
+            spacing: [1.0; 3],
+            origin: [0.0; 3],
+            unit: None,
+            orientation: None,
+        },
         file_type: None,
         endian: if data[6] & 4 == 0 { Endian::Little } else { Endian::Big },
         header_bytes: data[7] as u64,

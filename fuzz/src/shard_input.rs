@@ -30,8 +30,14 @@ fn shard_template(dir: &Path) -> Option<&'static (PathBuf, Vec<u8>)> {
             let raw = dir.join("shards.raw");
             let samples: Vec<u8> = (0..16 * 16 * 8u32).flat_map(|i| ((i * 37 % 1000) as u16).to_le_bytes()).collect();
             std::fs::write(&raw, samples).ok()?;
-            let info =
-                VolumeInfo { dims: [16, 16, 8], dtype: DType::U16, spacing: [1.0; 3], origin: [0.0; 3], unit: None };
+            let info = VolumeInfo {
+                dims: [16, 16, 8],
+                dtype: DType::U16,
+                spacing: [1.0; 3],
+                origin: [0.0; 3],
+                unit: None,
+                orientation: None,
+            };
             let layout = RawLayout { info, file_type: None, endian: Endian::Little, header_bytes: 0 };
             let mut source = open_volume(&raw, Some(&layout)).ok()?;
             let store = dir.join("shards.zarr");

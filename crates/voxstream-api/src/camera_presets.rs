@@ -3,11 +3,14 @@
 //! it looks at (VTK's `vtkCamera::Azimuth`, `Elevation` and `Dolly`), keeping its up direction instead of rolling.
 //!
 //! World axes are the data's: a store's x, y, z are its sample axes scaled by the spacing (NIfTI's i, j, k; an
-//! OME-Zarr's x, y, z), so `+z` looks along the slices' normal, down the stack.
+//! OME-Zarr's x, y, z), so `+z` looks along the slices' normal, down the stack. Where a store knows its anatomical
+//! orientation ([`Orientation`]), `--view anterior|posterior|left|right|superior|inferior` look at that side of the
+//! patient (3D Slicer's A, P, L, R, S, I views): head up, or the front up from above and below.
 
-use anyhow::{bail, Result};
+use anyhow::{anyhow, bail, Result};
 use glam::{DQuat, DVec3};
 use voxstream_render::Camera;
+use voxstream_store::Orientation;
 
 use crate::defaults::frame_box_with_fov;
 
@@ -28,11 +31,23 @@ pub enum ViewDirection {
     MinusZ,
     /// A three-quarter view from the +x, −y, +z corner, +z up.
     Iso,
+    /// The patient's front, from in front of it, head up (needs the anatomical orientation).
+    Anterior,
+    /// The patient's back, head up.
+    Posterior,
+    /// The patient's left side, head up.
+    Left,
+    /// The patient's right side, head up.
+    Right,
+    /// From above the head, the front up.
+    Superior,
+    /// From below the feet, the front up.
+    Inferior,
 }
 
 impl ViewDirection {
     /// Every preset, in the order `--help` lists them.
-    pub const ALL: [ViewDirection; 7] = [
+    pub const ALL: [ViewDirection; 13] = [
         ViewDirection::PlusX,
         ViewDirection::MinusX,
         ViewDirection::PlusY,
@@ -40,6 +55,12 @@ impl ViewDirection {
         ViewDirection::PlusZ,
         ViewDirection::MinusZ,
         ViewDirection::Iso,
+        ViewDirection::Anterior,
+        ViewDirection::Posterior,
+        ViewDirection::Left,
+        ViewDirection::Right,
+        ViewDirection::Superior,
+        ViewDirection::Inferior,
     ];
 
     /// The name on the command line.
@@ -52,6 +73,12 @@ impl ViewDirection {
             ViewDirection::PlusZ => "+z",
             ViewDirection::MinusZ => "-z",
             ViewDirection::Iso => "iso",
+            ViewDirection::Anterior => "anterior",
+            ViewDirection::Posterior => "posterior",
+            ViewDirection::Left => "left",
+            ViewDirection::Right => "right",
+            ViewDirection::Superior => "superior",
+            ViewDirection::Inferior => "inferior",
         }
     }
 
@@ -60,37 +87,56 @@ impl ViewDirection {
         let wanted = text.trim().to_ascii_lowercase();
         ViewDirection::ALL.into_iter().find(|v| v.name() == wanted).ok_or_else(|| {
             let names: Vec<&str> = ViewDirection::ALL.iter().map(|v| v.name()).collect();
-            anyhow::anyhow!("--view {text}: expected one of {}", names.join(", "))
+            anyhow!("--view {text}: expected one of {}", names.join(", "))
         })
     }
 
-    /// The direction the camera looks along (unit).
-    pub fn forward(self) -> DVec3 {
-        match self {
-            ViewDirection::PlusX => DVec3::X,
-            ViewDirection::MinusX => -DVec3::X,
-            ViewDirection::PlusY => DVec3::Y,
-            ViewDirection::MinusY => -DVec3::Y,
-            ViewDirection::PlusZ => DVec3::Z,
-            ViewDirection::MinusZ => -DVec3::Z,
-            ViewDirection::Iso => DVec3::new(-1.0, 1.0, -1.0).normalize(),
-        }
-    }
-
-    /// The up direction it keeps.
-    pub fn up(self) -> DVec3 {
-        match self {
-            ViewDirection::PlusZ | ViewDirection::MinusZ => DVec3::Y,
-            _ => DVec3::Z,
-        }
+    /// The direction the camera looks along (unit) and the up direction it keeps, in the volume's axes; an
+    /// anatomical preset needs the volume's `orientation` (`name` is the volume's, for the message).
+    pub fn axes(self, orientation: Option<Orientation>, name: &str) -> Result<(DVec3, DVec3)> {
+        // The anatomical presets: the side of the patient looked at, in RAS, and the up direction kept.
+        let (superior, anterior) = ([0.0, 0.0, 1.0], [0.0, 1.0, 0.0]);
+        let (side, up) = match self {
+            ViewDirection::PlusX => return Ok((DVec3::X, DVec3::Z)),
+            ViewDirection::MinusX => return Ok((-DVec3::X, DVec3::Z)),
+            ViewDirection::PlusY => return Ok((DVec3::Y, DVec3::Z)),
+            ViewDirection::MinusY => return Ok((-DVec3::Y, DVec3::Z)),
+            ViewDirection::PlusZ => return Ok((DVec3::Z, DVec3::Y)),
+            ViewDirection::MinusZ => return Ok((-DVec3::Z, DVec3::Y)),
+            ViewDirection::Iso => return Ok((DVec3::new(-1.0, 1.0, -1.0).normalize(), DVec3::Z)),
+            ViewDirection::Anterior => ([0.0, 1.0, 0.0], superior),
+            ViewDirection::Posterior => ([0.0, -1.0, 0.0], superior),
+            ViewDirection::Left => ([-1.0, 0.0, 0.0], superior),
+            ViewDirection::Right => ([1.0, 0.0, 0.0], superior),
+            ViewDirection::Superior => ([0.0, 0.0, 1.0], anterior),
+            ViewDirection::Inferior => ([0.0, 0.0, -1.0], anterior),
+        };
+        let orientation = orientation.ok_or_else(|| {
+            anyhow!(
+                "--view {}: {name} does not say its anatomical orientation (which way is the patient's front); \
+                 import it again with --orientation RAS (or LPS, …), or look along its axes with --view +x, -y, …",
+                self.name()
+            )
+        })?;
+        let side = DVec3::from(orientation.volume_direction(side));
+        Ok((-side, DVec3::from(orientation.volume_direction(up))))
     }
 }
 
-/// A camera looking along `direction` at the box `lower..upper`, far enough that the whole box shows in a
-/// `width × height` image with a vertical field of view of `fov` degrees.
-pub fn preset_camera(direction: ViewDirection, bounds: [[f64; 3]; 2], width: u32, height: u32, fov: f64) -> Camera {
+/// A camera looking along `direction` at the box `lower..upper` (of a volume whose anatomical orientation is
+/// `orientation`, where known), far enough that the whole box shows in a `width × height` image with a vertical
+/// field of view of `fov` degrees.
+pub fn preset_camera(
+    direction: ViewDirection,
+    orientation: Option<Orientation>,
+    name: &str,
+    bounds: [[f64; 3]; 2],
+    (width, height): (u32, u32),
+    fov: f64,
+) -> Result<Camera> {
     let [lower, upper] = bounds;
-    frame_box_with_fov(lower, upper, width, height, (-direction.forward()).to_array(), direction.up().to_array(), fov)
+    let (forward, up) = direction.axes(orientation, name)?;
+    Ok(frame_box_with_fov(lower, upper, width, height, (-forward).to_array(), up.to_array(), fov))
 }
 
 /// How a camera is turned and moved around its target: degrees about its up direction (`azimuth`, positive moves
@@ -171,10 +217,12 @@ mod tests {
     #[test]
     fn presets_look_along_their_axis_and_frame_the_box() {
         let bounds = [[0.0, 0.0, 0.0], [2.0, 1.0, 4.0]];
+        let lps = Orientation::parse("LPS").ok();
         for direction in ViewDirection::ALL {
-            let camera = preset_camera(direction, bounds, 64, 48, 30.0);
+            let camera = preset_camera(direction, lps, "v.zarr", bounds, (64, 48), 30.0).unwrap();
             let forward = (DVec3::from(camera.target) - DVec3::from(camera.eye)).normalize();
-            assert!((forward - direction.forward()).length() < 1e-9, "{direction:?}: looks along {forward}");
+            let (expected, _) = direction.axes(lps, "v.zarr").unwrap();
+            assert!((forward - expected).length() < 1e-9, "{direction:?}: looks along {forward}");
             assert!(close(camera.target, [1.0, 0.5, 2.0]), "{direction:?}: aims at the centre");
             // Every corner inside the image.
             let frame = camera.frame(64, 48).expect("valid camera");
@@ -188,8 +236,35 @@ mod tests {
             }
         }
         assert_eq!(ViewDirection::parse("-Z").unwrap(), ViewDirection::MinusZ);
+        assert_eq!(ViewDirection::parse("Anterior").unwrap(), ViewDirection::Anterior);
         let error = ViewDirection::parse("top").unwrap_err().to_string();
-        assert!(error.contains("+x, -x, +y, -y, +z, -z, iso"), "{error}");
+        assert!(error.contains("+x, -x, +y, -y, +z, -z, iso, anterior, posterior, left, right"), "{error}");
+    }
+
+    #[test]
+    fn anatomical_presets_look_at_the_patients_side_whatever_the_axes() {
+        let close_to = |a: DVec3, b: [f64; 3]| (a - DVec3::from(b)).length() < 1e-12;
+        // RAS (MNI): the front is +y; LPS (DICOM): the front is −y; PIR (Allen atlas): the front is −x, up is −y.
+        for (code, front, up) in [
+            ("RAS", [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]),
+            ("LPS", [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]),
+            ("PIR", [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]),
+        ] {
+            let orientation = Orientation::parse(code).ok();
+            let (forward, kept_up) = ViewDirection::Anterior.axes(orientation, "v").unwrap();
+            assert!(close_to(-forward, front), "{code}: the eye is in front: {forward}");
+            assert!(close_to(kept_up, up), "{code}: head up: {kept_up}");
+            let (forward, kept_up) = ViewDirection::Superior.axes(orientation, "v").unwrap();
+            assert!(close_to(-forward, up), "{code}: from above: {forward}");
+            assert!(close_to(kept_up, front), "{code}: the front up: {kept_up}");
+        }
+        // The patient's left is −x in RAS: the eye there looks along +x.
+        let (forward, _) = ViewDirection::Left.axes(Some(Orientation::RAS), "v").unwrap();
+        assert!(close_to(forward, [1.0, 0.0, 0.0]), "{forward}");
+        // The data-axes presets need no orientation; the anatomical ones say how to give it.
+        assert!(ViewDirection::PlusX.axes(None, "v").is_ok());
+        let error = ViewDirection::Anterior.axes(None, "scan.zarr").unwrap_err().to_string();
+        assert!(error.contains("scan.zarr does not say its anatomical orientation") && error.contains("--orientation"));
     }
 
     #[test]

@@ -19,19 +19,39 @@ pub fn store_placement(reader: &StoreReader) -> VolumePlacement {
     }
 }
 
-/// Direction from a store's centre towards the default eye: a three-quarter view from the front (−y), right (+x)
-/// and above (+z).
+/// Direction from a store's centre towards the default eye, in the volume's axes when it has no anatomical
+/// orientation: a three-quarter view from the −y side, +x and above (+z up). For a volume in DICOM's LPS axes this is
+/// the view from the patient's front, left and above, which [`ANATOMICAL_VIEW_DIRECTION`] gives every orientation.
 pub const STORE_VIEW_DIRECTION: [f64; 3] = [0.55, -0.65, 0.52];
+
+/// Direction from a store's centre towards the default eye, in RAS, for a volume with an anatomical orientation:
+/// from the front (anterior), the patient's left and above, superior up (3D Slicer's default 3D view, turned to three
+/// quarters as the index-axes default is).
+pub const ANATOMICAL_VIEW_DIRECTION: [f64; 3] = [-0.55, 0.65, 0.52];
+
+/// The default view's direction towards the eye and its up direction, in the volume's axes: from the patient's
+/// front-left and above, head up, where the volume's anatomical orientation is known; otherwise
+/// [`STORE_VIEW_DIRECTION`], `+z` up.
+pub fn store_view_direction(info: &voxstream_store::VolumeInfo) -> ([f64; 3], [f64; 3]) {
+    match info.orientation {
+        Some(orientation) => {
+            (orientation.volume_direction(ANATOMICAL_VIEW_DIRECTION), orientation.volume_direction([0.0, 0.0, 1.0]))
+        }
+        None => (STORE_VIEW_DIRECTION, [0.0, 0.0, 1.0]),
+    }
+}
 
 /// Fraction of the image's half-width and half-height the volume's box may fill in the default store view.
 const STORE_FRAME_FILL: f64 = 0.95;
 
-/// A three-quarter view of the volume's centre, `+z` up, 30° vertical field of view, just far enough that all eight
-/// corners of the volume's box (the sample centres) fall inside a `width × height` image.
+/// A three-quarter view of the volume's centre ([`store_view_direction`]: from the front, head up, when the volume's
+/// anatomical orientation is known), 30° vertical field of view, just far enough that all eight corners of the
+/// volume's box (the sample centres) fall inside a `width × height` image.
 pub fn store_camera(info: &voxstream_store::VolumeInfo, width: u32, height: u32) -> Camera {
     let lower = info.origin;
     let upper = [0, 1, 2].map(|a| info.origin[a] + (info.dims[a] as f64 - 1.0) * info.spacing[a]);
-    frame_box(lower, upper, width, height, STORE_VIEW_DIRECTION, [0.0, 0.0, 1.0])
+    let (towards_eye, up) = store_view_direction(info);
+    frame_box(lower, upper, width, height, towards_eye, up)
 }
 
 /// A view of the box `lower..upper` from its centre's side `towards_eye`, `up` up, 30° vertical field of view, just

@@ -66,6 +66,7 @@ impl BakedGeometry {
             // Voxel i of the level is centred at (i + ½)·voxel in the cube.
             origin: [0, 1, 2].map(|a| fit.origin[a] + (first[a] as f64 + 0.5) * voxel * size),
             unit: None,
+            orientation: None,
         };
         // A row of slices (f32) and, while it is made, its bricks (u16 with borders, about 2× more per voxel).
         let m = u64::from(shape.brick_size);

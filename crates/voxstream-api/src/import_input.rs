@@ -16,7 +16,8 @@ use voxstream_store::formats::dicom_header::has_dicom_magic;
 use voxstream_store::formats::sample_type::DTYPE_NAMES;
 use voxstream_store::formats::{open_volume, Endian, RawLayout, SampleConversion, SampleType, WithGeometry};
 use voxstream_store::{
-    import_volume, BrickCodec, ImportOptions, ImportReport, SpaceUnit, StoreError, VolumeInfo, VolumeSource,
+    import_volume, BrickCodec, ImportOptions, ImportReport, Orientation, SpaceUnit, StoreError, VolumeInfo,
+    VolumeSource,
 };
 
 use crate::geometry_import::{BakedGeometry, DEFAULT_BAKE_RESOLUTION};
@@ -48,6 +49,8 @@ pub struct ImportSettings {
     pub origin: Option<[f64; 3]>,
     /// Unit of the spacing and origin over the file's (`--unit`): an OME-Zarr space unit or an abbreviation of one.
     pub unit: Option<String>,
+    /// The anatomical direction of each axis over the file's (`--orientation`): three letters such as `RAS`.
+    pub orientation: Option<String>,
     /// Value written for NaN samples (`--nan-as`).
     pub nan_as: Option<f32>,
     /// Brick edge in samples (`--brick-size`).
@@ -75,6 +78,7 @@ impl Default for ImportSettings {
             spacing: None,
             origin: None,
             unit: None,
+            orientation: None,
             nan_as: None,
             brick_size: ImportOptions::default().brick_size,
             overwrite: false,
@@ -110,8 +114,9 @@ pub fn open_input(input: &Path, settings: &ImportSettings) -> Result<ImportInput
             || settings.origin.is_some()
             || settings.nan_as.is_some()
             || settings.unit.is_some()
+            || settings.orientation.is_some()
         {
-            bail!("--dtype, --spacing, --origin, --unit and --nan-as apply to volume files; a mesh or particle file keeps its own units");
+            bail!("--dtype, --spacing, --origin, --unit, --orientation and --nan-as apply to volume files; a mesh or particle file keeps its own units");
         }
         if !input.is_file() {
             return Err(missing_geometry_file(input));
@@ -138,6 +143,12 @@ pub fn open_input(input: &Path, settings: &ImportSettings) -> Result<ImportInput
         });
     }
     let unit = settings.unit.as_deref().map(SpaceUnit::parse).transpose().map_err(|e| anyhow!("--unit: {e}"))?;
+    let orientation = settings
+        .orientation
+        .as_deref()
+        .map(Orientation::parse)
+        .transpose()
+        .map_err(|e| anyhow!("--orientation: {e}"))?;
     let raw = match &settings.raw {
         Some(raw) => {
             let file_type = SampleType::from_name(&raw.dtype)
@@ -149,6 +160,7 @@ pub fn open_input(input: &Path, settings: &ImportSettings) -> Result<ImportInput
                     spacing: settings.spacing.unwrap_or([1.0; 3]),
                     origin: settings.origin.unwrap_or([0.0; 3]),
                     unit,
+                    orientation,
                 },
                 file_type: Some(file_type),
                 endian: if raw.big_endian { Endian::Big } else { Endian::Little },
@@ -170,8 +182,9 @@ pub fn open_input(input: &Path, settings: &ImportSettings) -> Result<ImportInput
         }
         None => open_volume(input, raw.as_ref())?,
     };
-    let source: Box<dyn VolumeSource> =
-        Box::new(WithGeometry::new(opened, settings.spacing, settings.origin).with_unit(unit));
+    let source: Box<dyn VolumeSource> = Box::new(
+        WithGeometry::new(opened, settings.spacing, settings.origin).with_unit(unit).with_orientation(orientation),
+    );
     if let Some(s) = settings.spacing.filter(|s| s.iter().any(|v| *v <= 0.0)) {
         bail!("--spacing must be positive, got {s:?}");
     }

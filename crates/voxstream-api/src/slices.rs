@@ -7,23 +7,61 @@
 //! is shown through the transfer function as projections are: its colour, its opacity relative to its most opaque
 //! point (transparent values show the background: a window). Volumes and slices in one image are not drawn yet.
 //!
-//! `axial`, `coronal` and `sagittal` name z, y and x: the anatomical planes for volumes stored with x across the
-//! body (left–right), y front to back and z feet to head, as NIfTI's RAS and LPS orientations are.
+//! `axial`, `coronal` and `sagittal` name the planes across the body's head–feet, front–back and left–right axes:
+//! where the store says its anatomical orientation ([`voxstream_store::Orientation`]), the sample axis nearest to
+//! each (a sagittal DICOM series' `sagittal` is its z), seen as radiologists show them (axial from the feet, the
+//! front up; coronal from the front; sagittal from the patient's left, head up); otherwise z, y and x, the planes of
+//! volumes stored as NIfTI's RAS and DICOM's LPS are, seen along the axis.
 
 use anyhow::{bail, Result};
 use voxstream_render::{ClipPlane, Projection};
+
+use voxstream_store::Orientation;
 
 use crate::camera_presets::ViewDirection;
 use crate::source::SourceMeta;
 use crate::view::ViewOptions;
 
-/// A slice: the plane of level-0 samples `index` along `axis` (0: x, 1: y, 2: z).
+/// A slice: the plane of level-0 samples `index` along `axis`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Slice {
-    /// 0, 1 or 2 for x, y, z.
-    pub axis: usize,
+    /// The axis across the plane.
+    pub axis: SliceAxis,
     /// The sample plane along it.
     pub index: u64,
+}
+
+/// The axis a slice is taken across: one of the data's, or the body's (resolved through the store's orientation).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SliceAxis {
+    /// 0, 1 or 2 for x, y, z.
+    Data(usize),
+    /// Across the left–right axis.
+    Sagittal,
+    /// Across the front–back axis.
+    Coronal,
+    /// Across the head–feet axis.
+    Axial,
+}
+
+impl SliceAxis {
+    /// The data axis (0, 1, 2) this is across for a volume of `orientation`, and the preset the plane is seen from.
+    fn resolve(self, orientation: Option<Orientation>) -> (usize, ViewDirection) {
+        const ALONG: [ViewDirection; 3] = [ViewDirection::PlusX, ViewDirection::PlusY, ViewDirection::MinusZ];
+        let (body_axis, seen_from) = match self {
+            SliceAxis::Data(axis) => return (axis, ALONG[axis]),
+            SliceAxis::Sagittal => (0, ViewDirection::Left),
+            SliceAxis::Coronal => (1, ViewDirection::Anterior),
+            SliceAxis::Axial => (2, ViewDirection::Inferior),
+        };
+        match orientation {
+            Some(o) => {
+                let axis = (0..3).find(|&a| o.axis(a).body_axis() == body_axis).unwrap_or(body_axis);
+                (axis, seen_from)
+            }
+            None => (body_axis, ALONG[body_axis]),
+        }
+    }
 }
 
 /// Parses `AXIS=INDEX`: `x`, `y`, `z`, or `sagittal`, `coronal`, `axial`, and a sample index.
@@ -32,9 +70,12 @@ pub fn parse_slice(text: &str) -> Result<Slice, String> {
         format!("'{text}' is not AXIS=INDEX: give e.g. --slice z=100 (x, y, z, or sagittal, coronal, axial)")
     })?;
     let axis = match name.trim().to_ascii_lowercase().as_str() {
-        "x" | "sagittal" => 0,
-        "y" | "coronal" => 1,
-        "z" | "axial" => 2,
+        "x" => SliceAxis::Data(0),
+        "y" => SliceAxis::Data(1),
+        "z" => SliceAxis::Data(2),
+        "sagittal" => SliceAxis::Sagittal,
+        "coronal" => SliceAxis::Coronal,
+        "axial" => SliceAxis::Axial,
         other => return Err(format!("'{other}' is not an axis: give x, y, z, or sagittal, coronal, axial")),
     };
     let index = index
@@ -47,18 +88,25 @@ pub fn parse_slice(text: &str) -> Result<Slice, String> {
 /// `view` with `slice` applied for `source`: the slab's two clipping planes added, the mean projection (unless
 /// another is asked for), and the camera along the axis unless the view places one.
 pub(crate) fn slice_view(view: &ViewOptions, slice: Slice, source: &SourceMeta) -> Result<ViewOptions> {
-    let axis_name = ["x", "y", "z"][slice.axis];
     let Some(store) = &source.store else {
         bail!("--slice applies to stores; {} is not one", source.name);
     };
     let info = store.info();
-    if slice.index >= info.dims[slice.axis] {
+    let (a, seen_from) = slice.axis.resolve(info.orientation);
+    let axis_name = ["x", "y", "z"][a];
+    let given = match slice.axis {
+        SliceAxis::Data(_) => axis_name.to_string(),
+        SliceAxis::Sagittal => format!("sagittal (across {axis_name})"),
+        SliceAxis::Coronal => format!("coronal (across {axis_name})"),
+        SliceAxis::Axial => format!("axial (across {axis_name})"),
+    };
+    if slice.index >= info.dims[a] {
         bail!(
-            "--slice {axis_name}={}: {} has {} samples along {axis_name} (0 to {})",
+            "--slice {given}={}: {} has {} samples along {axis_name} (0 to {})",
             slice.index,
             source.name,
-            info.dims[slice.axis],
-            info.dims[slice.axis] - 1
+            info.dims[a],
+            info.dims[a] - 1
         );
     }
     if !view.iso.values.is_empty() {
@@ -68,7 +116,6 @@ pub(crate) fn slice_view(view: &ViewOptions, slice: Slice, source: &SourceMeta) 
     if sliced.projection == Projection::Composite {
         sliced.projection = Projection::Mean;
     }
-    let a = slice.axis;
     let at = |offset: f64| {
         let mut point = info.origin;
         point[a] += info.spacing[a] * (slice.index as f64 + offset);
@@ -86,7 +133,7 @@ pub(crate) fn slice_view(view: &ViewOptions, slice: Slice, source: &SourceMeta) 
         || camera.target.is_some()
         || camera.preset.is_some();
     if !placed {
-        sliced.camera.preset = Some([ViewDirection::PlusX, ViewDirection::PlusY, ViewDirection::MinusZ][slice.axis]);
+        sliced.camera.preset = Some(seen_from);
     }
     Ok(sliced)
 }
@@ -97,11 +144,27 @@ mod tests {
 
     #[test]
     fn slices_parse_by_axis_or_anatomical_name() {
-        assert_eq!(parse_slice("z=100"), Ok(Slice { axis: 2, index: 100 }));
-        assert_eq!(parse_slice("Sagittal=7"), Ok(Slice { axis: 0, index: 7 }));
-        assert_eq!(parse_slice("coronal = 3"), Ok(Slice { axis: 1, index: 3 }));
+        assert_eq!(parse_slice("z=100"), Ok(Slice { axis: SliceAxis::Data(2), index: 100 }));
+        assert_eq!(parse_slice("Sagittal=7"), Ok(Slice { axis: SliceAxis::Sagittal, index: 7 }));
+        assert_eq!(parse_slice("coronal = 3"), Ok(Slice { axis: SliceAxis::Coronal, index: 3 }));
         assert!(parse_slice("z").unwrap_err().contains("AXIS=INDEX"));
         assert!(parse_slice("w=1").unwrap_err().contains("not an axis"));
         assert!(parse_slice("z=-1").unwrap_err().contains("not a sample index"));
+    }
+
+    #[test]
+    fn anatomical_planes_follow_the_orientation() {
+        let ras = Some(Orientation::RAS);
+        assert_eq!(SliceAxis::Axial.resolve(ras), (2, ViewDirection::Inferior));
+        assert_eq!(SliceAxis::Sagittal.resolve(ras), (0, ViewDirection::Left));
+        // A sagittal series: x front to back, y head to feet, z across the body.
+        let pir = Orientation::parse("PIR").ok();
+        assert_eq!(SliceAxis::Sagittal.resolve(pir).0, 2);
+        assert_eq!(SliceAxis::Coronal.resolve(pir).0, 0);
+        assert_eq!(SliceAxis::Axial.resolve(pir).0, 1);
+        // Without an orientation: z, y, x seen along the axis, as before.
+        assert_eq!(SliceAxis::Axial.resolve(None), (2, ViewDirection::MinusZ));
+        assert_eq!(SliceAxis::Coronal.resolve(None), (1, ViewDirection::PlusY));
+        assert_eq!(SliceAxis::Data(0).resolve(pir), (0, ViewDirection::PlusX));
     }
 }

@@ -13,6 +13,7 @@ use voxstream_render::{
     Camera, ClipPlane, IsoSurface, Projection, RenderSettings, Shading, SurfaceNormals, TransferFunction,
     VolumePlacement, MAX_SURFACES,
 };
+use voxstream_store::Orientation;
 
 use crate::camera_path::read_camera_file;
 use crate::camera_presets::{preset_camera, CameraTurn, ViewDirection};
@@ -310,6 +311,7 @@ pub fn prepare_view(view: &ViewOptions, source: &SourceMeta) -> Result<PreparedV
         (view.width, view.height),
         &source.name,
         Some(placement_bounds(&settings.placement)),
+        source.store.as_ref().and_then(|store| store.info().orientation),
     )?;
     Ok(PreparedView { transfer_function, settings, camera, drawing_surfaces, volume_adaptive_step })
 }
@@ -359,7 +361,7 @@ pub fn apply_camera_options(
     height: u32,
     name: &str,
 ) -> Result<Camera> {
-    apply_camera_options_framing(default, options, (width, height), name, None)
+    apply_camera_options_framing(default, options, (width, height), name, None, None)
 }
 
 /// The world box a placement's clip box covers, `[lower, upper]`.
@@ -369,13 +371,14 @@ pub fn placement_bounds(placement: &VolumePlacement) -> [[f64; 3]; 2] {
 }
 
 /// [`apply_camera_options`] where a preset (`--view`) frames `bounds` (the volume's world box; `None`: a preset
-/// is refused).
+/// is refused) of a volume whose anatomical orientation is `orientation` (where known: the anatomical presets).
 pub fn apply_camera_options_framing(
     default: Camera,
     options: &CameraOptions,
     (width, height): (u32, u32),
     name: &str,
     bounds: Option<[[f64; 3]; 2]>,
+    orientation: Option<Orientation>,
 ) -> Result<Camera> {
     let mut camera = match &options.file {
         Some(path) => read_camera_file(path)?,
@@ -386,7 +389,7 @@ pub fn apply_camera_options_framing(
             bail!("--view {} places the camera itself: drop --camera, --eye and --target, or --view", preset.name());
         }
         let Some(bounds) = bounds else { bail!("--view {}: {name} has no box to frame", preset.name()) };
-        camera = preset_camera(preset, bounds, width, height, options.fov.unwrap_or(camera.fov));
+        camera = preset_camera(preset, orientation, name, bounds, (width, height), options.fov.unwrap_or(camera.fov))?;
     }
     if let Some(given) = options.camera {
         camera = given;

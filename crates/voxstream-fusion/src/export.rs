@@ -76,7 +76,14 @@ impl<'a> FusedVolume<'a> {
         }
         let voxel = map.voxel();
         let origin = map.centre(lo);
-        let info = VolumeInfo { dims, dtype: DType::U8, spacing: [voxel; 3], origin: origin.to_array(), unit: None };
+        let info = VolumeInfo {
+            dims,
+            dtype: DType::U8,
+            spacing: [voxel; 3],
+            origin: origin.to_array(),
+            unit: None,
+            orientation: None,
+        };
         let area = (dims[0] * dims[1]) as usize;
         let mut volume = FusedVolume {
             map,

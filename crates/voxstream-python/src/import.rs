@@ -15,7 +15,8 @@ use pyo3::types::PyDict;
 use voxstream_api::import_input::{open_input, ImportInput, ImportSettings};
 use voxstream_api::remote_output::remote_output;
 use voxstream_store::formats::sample_type::{SampleConversion, SampleType};
-use voxstream_store::{BrickCodec, DType, ImportReport, StoreError, VolumeInfo, VolumeSource};
+use voxstream_store::formats::WithGeometry;
+use voxstream_store::{BrickCodec, DType, ImportReport, Orientation, StoreError, VolumeInfo, VolumeSource};
 
 use crate::errors::{progress_step, to_py_err};
 
@@ -67,7 +68,7 @@ impl VolumeSource for ArraySource {
 /// `s3://BUCKET/NAME.zarr`, `gs://…`, `az://…`: built in a temporary folder, then uploaded); returns what was written.
 #[pyfunction]
 #[pyo3(signature = (source, out, *, spacing=None, origin=None, brick_size=32, overwrite=false, nan_as=None,
-    resolution=None, amplify=None, progress=None, codec="zstd", max_error=None, series=None))]
+    resolution=None, amplify=None, progress=None, codec="zstd", max_error=None, series=None, orientation=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn import_volume<'py>(
     py: Python<'py>,
@@ -84,14 +85,21 @@ pub fn import_volume<'py>(
     codec: &str,
     max_error: Option<f64>,
     series: Option<String>,
+    orientation: Option<String>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let codec = BrickCodec::from_choice(codec, max_error).map_err(PyValueError::new_err)?;
     if let Some(s) = spacing.filter(|s| s.iter().any(|v| !(v.is_finite() && *v > 0.0))) {
         return Err(PyValueError::new_err(format!("spacing must be positive, got {s:?}")));
     }
+    let parsed_orientation = orientation
+        .as_deref()
+        .map(Orientation::parse)
+        .transpose()
+        .map_err(|e| PyValueError::new_err(format!("orientation: {e}")))?;
     let settings = ImportSettings {
         spacing,
         origin,
+        orientation,
         nan_as,
         brick_size,
         overwrite,
@@ -105,7 +113,10 @@ pub fn import_volume<'py>(
     // folder and uploaded.
     let remote = py.detach(|| remote_output(&out, &settings)).map_err(to_py_err)?;
     let input = match array_source(source, spacing, origin)? {
-        Some(array) => ImportInput::from_source(Box::new(array), Path::new("the array")),
+        Some(array) => ImportInput::from_source(
+            Box::new(WithGeometry::new(Box::new(array), None, None).with_orientation(parsed_orientation)),
+            Path::new("the array"),
+        ),
         None => {
             let path: PathBuf = source.extract().map_err(|_| {
                 PyValueError::new_err(
@@ -245,6 +256,7 @@ fn array_source(
         spacing: spacing.unwrap_or([1.0; 3]),
         origin: origin.unwrap_or([0.0; 3]),
         unit: None,
+        orientation: None,
     };
     Ok(Some(ArraySource { info, samples, next_slice: 0, conversion }))
 }

@@ -62,6 +62,7 @@ impl ShardImport {
             spacing: spacing.unwrap_or([1.0; 3]),
             origin: origin.unwrap_or([0.0; 3]),
             unit: None,
+            orientation: None,
         };
         let options = ImportOptions { brick_size, overwrite, nan_as, codec, ..ImportOptions::default() };
         let import =

@@ -138,6 +138,8 @@ impl PyVolume {
                 info.set_item("origin", volume.origin)?;
                 // The spacing's unit as OME-Zarr names it ("millimeter", …), or None when the store has none.
                 info.set_item("unit", volume.unit.map(|u| u.name()))?;
+                // The anatomical direction each axis points to ("RAS", "LPS", …), or None when the store has none.
+                info.set_item("orientation", volume.orientation.map(|o| o.code()))?;
                 info.set_item("levels", store.layout().levels())?;
                 info.set_item("brick_size", store.layout().brick_size)?;
                 info.set_item("native", store.is_native())?;

@@ -175,3 +175,26 @@ def test_the_wavelet_codec_stores_within_its_bound_and_says_so(tmp_path):
     with pytest.raises(ValueError, match="zstd is lossless"):
         vs.import_volume(data, tmp_path / "x.zarr", max_error=1.0)
     assert not (tmp_path / "x.zarr").exists()
+
+
+def test_an_arrays_anatomical_orientation_is_kept_and_turns_the_default_view(tmp_path):
+    """``import_volume(..., orientation=)`` (issue 42 item 7): the store says it (``info["orientation"]``), the
+    anatomical presets need it, and an array stored with x and y reversed and said to be LPS is seen as the RAS
+    array is (the same head from the same side)."""
+    volume = ball(32).astype(np.uint8)
+    volume[20:26, 26:30, 14:18] = 255  # a "nose" towards +y (anterior in RAS), off-centre in x
+    vs.import_volume(volume, tmp_path / "ras.zarr", orientation="RAS")
+    vs.import_volume(np.ascontiguousarray(volume[:, ::-1, ::-1]), tmp_path / "lps.zarr", orientation="lps")
+    vs.import_volume(volume, tmp_path / "plain.zarr")
+    ras, lps, plain = (vs.open(tmp_path / f"{n}.zarr", size=(48, 48)) for n in ("ras", "lps", "plain"))
+    assert (ras.info["orientation"], lps.info["orientation"], plain.info["orientation"]) == ("RAS", "LPS", None)
+    a, b = ras.render().astype(int), lps.render().astype(int)
+    assert np.abs(a - b).mean() < 0.05, np.abs(a - b).mean()
+    assert np.abs(a - plain.render().astype(int)).mean() > 0.5, "without an orientation: the index axes' view"
+    front = ras.render(view="anterior")
+    assert np.abs(front.astype(int) - lps.render(view="anterior").astype(int)).max() <= 3
+    with pytest.raises(ValueError, match="does not say its anatomical orientation"):
+        plain.render(view="anterior")
+    with pytest.raises(ValueError, match="names one body axis twice"):
+        vs.import_volume(volume, tmp_path / "bad.zarr", orientation="RLS")
+    assert not (tmp_path / "bad.zarr").exists()

@@ -25,7 +25,7 @@ use zarrs::storage::ReadableStorageTraits;
 
 use crate::chunk_keys::{stored_chunks_in, ChunkSource};
 use crate::error::StoreError;
-use crate::foreign_axes::{check_axes, space_unit, transform_xyz};
+use crate::foreign_axes::{anatomical_orientation, check_axes, space_unit, transform_xyz};
 use crate::image_planes::{choose_planes, leading_index, omero_channel, ImagePlanes, LeadingKind, PlaneChoice};
 use crate::layout::PyramidLayout;
 use crate::level_source::LevelSource;
@@ -148,7 +148,14 @@ pub(crate) fn open_foreign(
     let spacing = transform("scale")?.unwrap_or([1.0; 3]);
     let origin = transform("translation")?.unwrap_or([0.0; 3]);
 
-    let info = crate::volume::VolumeInfo { dims, dtype, spacing, origin, unit: space_unit(ms) };
+    let info = crate::volume::VolumeInfo {
+        dims,
+        dtype,
+        spacing,
+        origin,
+        unit: space_unit(ms),
+        orientation: anatomical_orientation(ms),
+    };
     info.validate(path)?;
     let layout = PyramidLayout::new(dims, FOREIGN_BRICK_SIZE).map_err(|e| bad(e.to_string()))?;
     let mut levels = Vec::new();

@@ -5,6 +5,7 @@
 
 use serde_json::Value;
 
+use crate::orientation::{Orientation, Towards};
 use crate::space_unit::SpaceUnit;
 
 /// An axis' name from OME-NGFF 0.4+ (`{"name": "z", "type": "space"}`) or 0.3 (`"z"`), lower case.
@@ -55,6 +56,24 @@ pub(crate) fn space_unit(multiscale: &Value) -> Option<SpaceUnit> {
     (units.len() == 3 && units.iter().all(|u| *u == first)).then_some(first).flatten()
 }
 
+/// The anatomical orientation of the last three (space) axes, when each says one of the human body's six directions
+/// (OME-NGFF RFC-4: `"orientation": {"type": "anatomical", "value": "left-to-right"}`) and together they name three
+/// different body axes; otherwise none (the image is read as before, with the index-axes default view).
+pub(crate) fn anatomical_orientation(multiscale: &Value) -> Option<Orientation> {
+    let axes = multiscale.get("axes")?.as_array()?;
+    if axes.len() < 3 {
+        return None;
+    }
+    let towards = |axis: &Value| {
+        let orientation = axis.get("orientation")?;
+        (orientation.get("type").and_then(Value::as_str) == Some("anatomical")).then_some(())?;
+        Towards::from_rfc4_value(orientation.get("value")?.as_str()?)
+    };
+    // Axes are listed z, y, x: the last is x.
+    let n = axes.len();
+    Orientation::new([towards(&axes[n - 1])?, towards(&axes[n - 2])?, towards(&axes[n - 3])?]).ok()
+}
+
 /// The first `kind` ("scale" or "translation") transform of `dataset` as (x, y, z), `None` when it has none; a
 /// transform that is not `dimensions` numbers is refused.
 pub(crate) fn transform_xyz(dataset: &Value, kind: &str, dimensions: usize) -> Result<Option<[f64; 3]>, String> {
@@ -94,6 +113,29 @@ mod tests {
         let transposed = check_axes(&json!({"axes": ["x", "y", "z"]}), 3).unwrap_err();
         assert!(transposed.contains("[x, y, z]") && transposed.contains("z, y, x"), "{transposed}");
         assert!(check_axes(&json!({"axes": ["z", "y", "x"]}), 4).unwrap_err().contains("3 axes"));
+    }
+
+    #[test]
+    fn rfc4_anatomical_orientations_are_read_from_the_space_axes() {
+        let axis = |name: &str, value: &str| json!({"name": name, "type": "space", "orientation": {"type": "anatomical", "value": value}});
+        let ras = json!({"axes": [{"name": "t", "type": "time"}, axis("z", "inferior-to-superior"),
+                                  axis("y", "posterior-to-anterior"), axis("x", "left-to-right")]});
+        assert_eq!(anatomical_orientation(&ras).map(|o| o.code()), Some("RAS".to_string()));
+        // The Allen mouse atlas' PIR: x to the back, y down, z to the right.
+        let pir = json!({"axes": [axis("z", "left-to-right"), axis("y", "superior-to-inferior"),
+                                  axis("x", "anterior-to-posterior")]});
+        assert_eq!(anatomical_orientation(&pir).map(|o| o.code()), Some("PIR".to_string()));
+        // One axis without it, a value of another anatomy, one body axis twice: none.
+        let partial = json!({"axes": [{"name": "z", "type": "space"}, axis("y", "posterior-to-anterior"),
+                                      axis("x", "left-to-right")]});
+        assert_eq!(anatomical_orientation(&partial), None);
+        let dorsal = json!({"axes": [axis("z", "dorsal-to-ventral"), axis("y", "posterior-to-anterior"),
+                                     axis("x", "left-to-right")]});
+        assert_eq!(anatomical_orientation(&dorsal), None);
+        let twice = json!({"axes": [axis("z", "right-to-left"), axis("y", "posterior-to-anterior"),
+                                    axis("x", "left-to-right")]});
+        assert_eq!(anatomical_orientation(&twice), None);
+        assert_eq!(anatomical_orientation(&json!({"axes": ["z", "y", "x"]})), None);
     }
 
     #[test]

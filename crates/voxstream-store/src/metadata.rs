@@ -29,6 +29,10 @@ pub struct StoreAttributes {
     /// say it, and in stores written before units were kept.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub unit: Option<String>,
+    /// The anatomical direction each axis (x, y, z) points to, as three letters ([`crate::Orientation`]: `RAS`);
+    /// absent when the input did not say it, and in stores written before orientations were kept.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub orientation: Option<String>,
     /// Brick (inner chunk) edge.
     pub brick_size: u64,
     /// Levels, 0 = full resolution.
@@ -59,6 +63,7 @@ impl StoreAttributes {
             spacing: info.spacing,
             origin: info.origin,
             unit: info.unit.map(|u| u.name().to_string()),
+            orientation: info.orientation.map(|o| o.code()),
             brick_size: layout.brick_size,
             levels: layout.levels(),
             value_range,
@@ -88,7 +93,7 @@ impl StoreAttributes {
     }
 }
 
-/// The `ome` attribute: axes z, y, x (with the volume's unit, when known) and one dataset per level with its scale
+/// The `ome` attribute: axes z, y, x (with the volume's unit and anatomical orientation, when known) and one dataset per level with its scale
 /// and translation.
 pub fn ome_multiscales(name: &str, info: &VolumeInfo, layout: &PyramidLayout) -> Value {
     let datasets: Vec<Value> = (0..layout.levels())
@@ -107,11 +112,18 @@ pub fn ome_multiscales(name: &str, info: &VolumeInfo, layout: &PyramidLayout) ->
             })
         })
         .collect();
-    let axes: Vec<Value> = ["z", "y", "x"]
+    let axes: Vec<Value> = [(2, "z"), (1, "y"), (0, "x")]
         .iter()
-        .map(|axis| match info.unit {
-            Some(unit) => json!({"name": axis, "type": "space", "unit": unit.name()}),
-            None => json!({"name": axis, "type": "space"}),
+        .map(|&(index, axis)| {
+            let mut entry = json!({"name": axis, "type": "space"});
+            if let Some(unit) = info.unit {
+                entry["unit"] = json!(unit.name());
+            }
+            // OME-NGFF RFC-4's anatomical orientation of the axis.
+            if let Some(orientation) = info.orientation {
+                entry["orientation"] = json!({"type": "anatomical", "value": orientation.axis(index).rfc4_value()});
+            }
+            entry
         })
         .collect();
     json!({

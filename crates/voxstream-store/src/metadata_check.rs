@@ -12,6 +12,7 @@ use serde_json::Value;
 use crate::error::StoreError;
 use crate::layout::{PyramidLayout, MAX_BRICK_SIZE, MIN_BRICK_SIZE};
 use crate::metadata::{StoreAttributes, FORMAT_VERSION};
+use crate::orientation::Orientation;
 use crate::space_unit::SpaceUnit;
 use crate::volume::{DType, VolumeInfo};
 use crate::world_extent::check_world_extent;
@@ -133,7 +134,12 @@ pub fn validate_attributes(
         Some(Ok(unit)) => Some(unit),
         Some(Err(problem)) => return bad("unit", problem),
     };
-    let info = VolumeInfo { dims, dtype, spacing: attributes.spacing, origin: attributes.origin, unit };
+    let orientation = match attributes.orientation.as_deref().map(Orientation::parse) {
+        None => None,
+        Some(Ok(orientation)) => Some(orientation),
+        Some(Err(problem)) => return bad("orientation", problem),
+    };
+    let info = VolumeInfo { dims, dtype, spacing: attributes.spacing, origin: attributes.origin, unit, orientation };
     Ok((info, layout))
 }
 
@@ -181,6 +187,7 @@ mod tests {
             spacing: [1.0, 1.0, 2.0],
             origin: [0.0; 3],
             unit: Some("millimeter".into()),
+            orientation: Some("LPS".into()),
             brick_size: 32,
             levels: 3,
             value_range: [0.0, 4000.0],
@@ -211,6 +218,8 @@ mod tests {
             ("spacing", Box::new(|a| a.spacing = [0.0, 1.0, 1.0])),
             ("origin", Box::new(|a| a.origin = [f64::INFINITY, 0.0, 0.0])),
             ("unit", Box::new(|a| a.unit = Some("furlong".into()))),
+            ("orientation", Box::new(|a| a.orientation = Some("RAR".into()))),
+            ("orientation", Box::new(|a| a.orientation = Some("up".into()))),
             ("spacing", Box::new(|a| a.spacing = [1.0, 1e308, 1.0])),
             ("origin", Box::new(|a| a.origin = [0.0, 0.0, 1e308])),
             ("brick_size", Box::new(|a| a.brick_size = 0)),

@@ -3,6 +3,7 @@
 
 use crate::error::StoreError;
 use crate::formats::SampleConversion;
+use crate::orientation::Orientation;
 use crate::space_unit::SpaceUnit;
 
 /// Sample types kept from the input.
@@ -78,6 +79,8 @@ pub struct VolumeInfo {
     pub origin: [f64; 3],
     /// Unit of `spacing` and `origin`, when the file (or the user) says it.
     pub unit: Option<SpaceUnit>,
+    /// The anatomical direction each axis points to, when the file (or the user) says it ([`Orientation`]).
+    pub orientation: Option<Orientation>,
 }
 
 impl VolumeInfo {

@@ -43,7 +43,14 @@ fn import(dir: &Path, name: &str, brick_checksums: bool) -> PathBuf {
     let raw = dir.join("volume.raw");
     let bytes: Vec<u8> = samples().iter().flat_map(|v| v.to_le_bytes()).collect();
     std::fs::write(&raw, bytes).unwrap();
-    let info = VolumeInfo { dims: DIMS, dtype: DType::U16, spacing: [1.0; 3], origin: [0.0; 3], unit: None };
+    let info = VolumeInfo {
+        dims: DIMS,
+        dtype: DType::U16,
+        spacing: [1.0; 3],
+        origin: [0.0; 3],
+        unit: None,
+        orientation: None,
+    };
     let layout = RawLayout { info, file_type: None, endian: Endian::Little, header_bytes: 0 };
     let mut source = open_volume(&raw, Some(&layout)).unwrap();
     let store = dir.join(name);

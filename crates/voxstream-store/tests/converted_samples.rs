@@ -247,6 +247,7 @@ fn metaimage_and_raw_use_the_same_conversion() {
             spacing: [1.0; 3],
             origin: [0.0; 3],
             unit: SpaceUnit::from_name("nm"),
+            orientation: None,
         },
         file_type: Some(SampleType::F64),
         endian: Endian::Big,

@@ -265,6 +265,7 @@ fn npy_and_raw() {
             spacing: [2.0, 2.0, 3.0],
             origin: [5.0, 0.0, -5.0],
             unit: None,
+            orientation: None,
         },
         file_type: None,
         endian: Endian::Big,
@@ -307,7 +308,14 @@ fn bad_files_fail_naming_the_file_and_the_problem() {
     // Header and size disagree: a raw file larger than its layout.
     std::fs::write(dir.join("big.raw"), vec![0u8; 100_000]).unwrap();
     let layout = RawLayout {
-        info: VolumeInfo { dims: DIMS, dtype: DType::U8, spacing: [1.0; 3], origin: [0.0; 3], unit: None },
+        info: VolumeInfo {
+            dims: DIMS,
+            dtype: DType::U8,
+            spacing: [1.0; 3],
+            origin: [0.0; 3],
+            unit: None,
+            orientation: None,
+        },
         file_type: None,
         endian: Endian::Little,
         header_bytes: 0,
@@ -649,4 +657,72 @@ fn vti_block_sizes_must_add_up_before_anything_inflates() {
     std::fs::write(dir.join("short.vti"), vti(1, n - 1, n - 1)).unwrap();
     let e = import_error(&dir.join("short.vti"), None).to_string();
     assert!(e.contains("short.vti") && e.contains("does not add up"), "{e}");
+}
+
+/// The orientation `open_volume` reads from `bytes` written as `name`, as three letters.
+fn orientation_of(dir: &Path, name: &str, bytes: &[u8]) -> Option<String> {
+    std::fs::write(dir.join(name), bytes).unwrap();
+    open_volume(&dir.join(name), None).unwrap().info().orientation.map(|o| o.code())
+}
+
+#[test]
+fn anatomical_orientations_come_from_each_formats_header() {
+    let dir = scratch("orientation");
+    let samples = encode(DType::U8, Endian::Little);
+    let with = |header: String| [header.into_bytes(), samples.clone()].concat();
+    // NRRD: `space directions` in the anatomical `space` (LPS: x and y flipped into RAS); none without a space.
+    let nrrd = |space: &str, directions: &str| {
+        format!(
+            "NRRD0004\ntype: uchar\ndimension: 3\n{space}sizes: {} {} {}\nspace directions: {directions}\n\
+             encoding: raw\n\n",
+            DIMS[0], DIMS[1], DIMS[2]
+        )
+    };
+    let oblique = "(0,-0.5,0.01) (0,0,0.75) (2,0.1,0)";
+    assert_eq!(orientation_of(&dir, "a.nrrd", &with(nrrd("space: LPS\n", oblique))).as_deref(), Some("ASL"));
+    assert_eq!(
+        orientation_of(&dir, "b.nrrd", &with(nrrd("space: right-anterior-superior\n", oblique))).as_deref(),
+        Some("PSR")
+    );
+    assert_eq!(orientation_of(&dir, "c.nrrd", &with(nrrd("space: 3D-right-handed\n", oblique))), None);
+    // NIfTI: the qform's quaternion (90° about z: x to the front, y to the left), its qfac flipping k; the sform's
+    // columns when there is no qform; neither: none.
+    let mut h = nifti(DType::U8, 2, 8);
+    let half = std::f32::consts::FRAC_1_SQRT_2;
+    h[264..268].copy_from_slice(&half.to_le_bytes());
+    assert_eq!(orientation_of(&dir, "q.nii", &h).as_deref(), Some("ALS"));
+    h[76..80].copy_from_slice(&(-1.0f32).to_le_bytes());
+    assert_eq!(orientation_of(&dir, "qfac.nii", &h).as_deref(), Some("ALI"));
+    let mut s = nifti(DType::U8, 2, 8);
+    s[252..254].copy_from_slice(&0i16.to_le_bytes());
+    s[254..256].copy_from_slice(&1i16.to_le_bytes());
+    // Rows of the affine: x_world = −1.5·j, y_world = −2·k, z_world = −i (a sagittal layout).
+    for (row, values) in [(280, [0.0f32, -1.5, 0.0, 0.0]), (296, [0.0, 0.0, -2.0, 0.0]), (312, [-1.0, 0.0, 0.0, 0.0])] {
+        for (n, v) in values.iter().enumerate() {
+            s[row + 4 * n..row + 4 * n + 4].copy_from_slice(&v.to_le_bytes());
+        }
+    }
+    assert_eq!(orientation_of(&dir, "s.nii", &s).as_deref(), Some("ILP"));
+    s[254..256].copy_from_slice(&0i16.to_le_bytes());
+    assert_eq!(orientation_of(&dir, "none.nii", &s), None);
+    // MetaImage: ITK's direction cosines, one axis after the other, in LPS.
+    let mha = |matrix: &str| {
+        format!(
+            "ObjectType = Image\nNDims = 3\n{matrix}DimSize = {} {} {}\nElementType = MET_UCHAR\nElementDataFile = LOCAL\n",
+            DIMS[0], DIMS[1], DIMS[2]
+        )
+    };
+    assert_eq!(
+        orientation_of(&dir, "a.mha", &with(mha("TransformMatrix = 0 1 0 -1 0 0 0 0 1\n"))).as_deref(),
+        Some("PRS")
+    );
+    assert_eq!(orientation_of(&dir, "b.mha", &with(mha(""))), None);
+    // Through an import into a store and back.
+    std::fs::write(dir.join("lps.nrrd"), with(nrrd("space: left-posterior-superior\n", "(1,0,0) (0,1,0) (0,0,1)")))
+        .unwrap();
+    let mut source = open_volume(&dir.join("lps.nrrd"), None).unwrap();
+    import_volume(source.as_mut(), &dir.join("lps.zarr"), &ImportOptions::default(), &mut |_, _| {}).unwrap();
+    let reader = StoreReader::open(&dir.join("lps.zarr")).unwrap();
+    assert_eq!(reader.info().orientation.map(|o| o.code()).as_deref(), Some("LPS"));
+    assert_eq!(reader.attributes().orientation.as_deref(), Some("LPS"));
 }

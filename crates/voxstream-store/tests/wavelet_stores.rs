@@ -49,7 +49,7 @@ fn import(dir: &Path, name: &str, dtype: DType, codec: BrickCodec) -> StoreReade
 }
 
 fn import_only(dir: &Path, name: &str, dtype: DType, codec: BrickCodec) {
-    let info = VolumeInfo { dims: DIMS, dtype, spacing: [1.0; 3], origin: [0.0; 3], unit: None };
+    let info = VolumeInfo { dims: DIMS, dtype, spacing: [1.0; 3], origin: [0.0; 3], unit: None, orientation: None };
     let mut source = SamplesInMemory::new(info, volume(dtype)).unwrap();
     let out = dir.join(name);
     let options = ImportOptions { brick_size: 16, shard_bricks: 2, codec, ..ImportOptions::default() };

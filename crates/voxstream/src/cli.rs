@@ -232,8 +232,10 @@ pub struct LookFlags {
     #[arg(long)]
     pub fov: Option<f64>,
     /// Frame the volume looking along an axis of the data (ParaView's view-direction buttons): +x, -x, +y, -y (+z
-    /// up), +z, -z (+y up), or iso (a three-quarter view from the +x, -y, +z corner). Replaces --camera and the
-    /// default view; --fov, --azimuth, --elevation and --zoom apply over it.
+    /// up), +z, -z (+y up), or iso (a three-quarter view from the +x, -y, +z corner); or at a side of the patient
+    /// where the store says its anatomical orientation (3D Slicer's views): anterior, posterior, left, right (head
+    /// up), superior, inferior (the front up). Replaces --camera and the default view; --fov, --azimuth, --elevation
+    /// and --zoom apply over it.
     #[arg(long, value_name = "DIR", value_parser = parse_view_direction, allow_hyphen_values = true)]
     pub view: Option<voxstream_api::camera_presets::ViewDirection>,
     /// Turn the camera this many degrees about its up direction through the point looked at (positive: the eye
@@ -504,6 +506,11 @@ pub struct ImportArgs {
     /// micrometer, nanometer, meter, …) or mm, µm, nm, cm, m. Replaces the file's (NIfTI and NRRD give one).
     #[arg(long)]
     pub unit: Option<String>,
+    /// The anatomical direction each axis (x, y, z) points to, as three letters: RAS (NIfTI's MNI space: x to the
+    /// patient's right, y to the front, z up), LPS (DICOM's), PIR, … Written to the store's OME-Zarr axes; the
+    /// default view then looks at the front, head up. Replaces the file's (NIfTI, DICOM, NRRD, MetaImage give one).
+    #[arg(long, value_name = "LETTERS")]
+    pub orientation: Option<String>,
     /// Brick edge in samples (even, 4..=256).
     #[arg(long, default_value_t = 32)]
     pub brick_size: u64,

@@ -24,7 +24,7 @@ fn brick_codec(args: &ImportArgs) -> Result<BrickCodec> {
 pub fn run(args: &ImportArgs) -> Result<()> {
     let is_geometry = voxstream_geometry::formats::is_geometry_file_name(&args.input) && args.dims.is_none();
     if is_geometry && args.dtype.is_some() {
-        bail!("--dtype, --spacing, --origin, --unit and --nan-as apply to volume files; a mesh or particle file keeps its own units");
+        bail!("--dtype, --spacing, --origin, --unit, --orientation and --nan-as apply to volume files; a mesh or particle file keeps its own units");
     }
     let raw = match (&args.dims, &args.dtype) {
         (Some(dims), Some(dtype)) => Some(RawSettings {
@@ -41,6 +41,7 @@ pub fn run(args: &ImportArgs) -> Result<()> {
         spacing: args.spacing,
         origin: args.origin,
         unit: args.unit.clone(),
+        orientation: args.orientation.clone(),
         nan_as: args.nan_as,
         brick_size: args.brick_size,
         overwrite: args.overwrite,
@@ -103,8 +104,9 @@ pub fn run(args: &ImportArgs) -> Result<()> {
             }
             BrickCodec::Wavelet { .. } => "; bricks wavelet-coded, lossless".into(),
         };
+        let oriented = info.orientation.map(|o| format!(", oriented {}", o.code())).unwrap_or_default();
         eprintln!(
-            "imported {} ({}x{}x{} {}) into {}: {} levels, {} bricks written, {} empty, values {} to {}{codec}{}",
+            "imported {} ({}x{}x{} {}{oriented}) into {}: {} levels, {} bricks written, {} empty, values {} to {}{codec}{}",
             args.input.display(),
             info.dims[0],
             info.dims[1],

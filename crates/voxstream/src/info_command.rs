@@ -91,6 +91,9 @@ struct StoreInfo {
     /// Unit of the spacing and origin (an OME-Zarr name); absent when the store has none.
     #[serde(skip_serializing_if = "Option::is_none")]
     unit: Option<String>,
+    /// The anatomical direction each axis points to, as three letters (`RAS`); absent when the store has none.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    orientation: Option<String>,
     brick_size: u64,
     /// The bricks' codec when not zstd (`{"name": "wavelet", "max_error": E}`).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -147,6 +150,7 @@ pub fn run(args: &InfoArgs) -> Result<()> {
         spacing: attributes.spacing,
         origin: attributes.origin,
         unit: reader.info().unit.map(|u| u.name().to_string()),
+        orientation: reader.info().orientation.map(|o| o.code()),
         brick_size: attributes.brick_size,
         brick_codec: attributes.brick_codec,
         value_range: attributes.value_range,
@@ -175,6 +179,9 @@ pub fn run(args: &InfoArgs) -> Result<()> {
     let unit = info.unit.as_ref().map(|u| format!(" {u}")).unwrap_or_default();
     println!("spacing      {} {} {}{unit}", info.spacing[0], info.spacing[1], info.spacing[2]);
     println!("origin       {} {} {}{unit}", info.origin[0], info.origin[1], info.origin[2]);
+    if let Some(orientation) = reader.info().orientation {
+        println!("orientation  {orientation}");
+    }
     println!("value range  {} to {}", info.value_range[0], info.value_range[1]);
     if let Some(percentiles) = &info.value_percentiles {
         let text: Vec<String> = percentiles.iter().map(|[p, v]| format!("{p}%: {v}")).collect();

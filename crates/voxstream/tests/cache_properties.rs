@@ -250,7 +250,7 @@ fn producing_new_children_at_once_keeps_a_store_image() {
     let raw = dir.join("ball.raw");
     std::fs::write(&raw, &samples).unwrap();
     let layout = RawLayout {
-        info: VolumeInfo { dims, dtype: DType::U8, spacing: [1.0; 3], origin: [0.0; 3], unit: None },
+        info: VolumeInfo { dims, dtype: DType::U8, spacing: [1.0; 3], origin: [0.0; 3], unit: None, orientation: None },
         file_type: None,
         endian: Endian::Little,
         header_bytes: 0,

@@ -98,7 +98,12 @@ fn the_mni_template_as_a_scanner_series_imports_as_its_nifti() {
     );
     let from_nifti = import(&real.join("mni152_t1.nii.gz"), &work.join("nifti.zarr"), &work);
     let (d, n) = (from_dicom.info(), from_nifti.info());
-    assert_eq!((d.dims, d.spacing, d.origin), (n.dims, n.spacing, n.origin));
+    assert_eq!((d.dims, d.spacing), (n.dims, n.spacing));
+    // Written by a scanner's rules (rows towards the patient's right, in LPS): the same RAS axes as the NIfTI's
+    // qform, the origin in DICOM's patient frame (x and y negated).
+    assert_eq!(n.orientation.map(|o| o.code()).as_deref(), Some("RAS"));
+    assert_eq!(d.orientation, n.orientation);
+    assert_eq!(d.origin, [-n.origin[0], -n.origin[1], n.origin[2]]);
     assert_eq!(d.dtype, DType::I16, "12-bit CT with intercept -1024 fits int16");
     let (a, b) = (level_zero(&from_dicom), level_zero(&from_nifti));
     let differing = a.iter().zip(&b).filter(|(x, y)| x != y).count();

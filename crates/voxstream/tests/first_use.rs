@@ -168,7 +168,7 @@ fn the_default_store_camera_frames_all_eight_corners() {
         ([32, 32, 900], [2.0, 2.0, 0.3], [0.0, 0.0, 0.0]),
     ];
     for (dims, spacing, origin) in volumes {
-        let info = VolumeInfo { dims, dtype: DType::U8, spacing, origin, unit: None };
+        let info = VolumeInfo { dims, dtype: DType::U8, spacing, origin, unit: None, orientation: None };
         for (width, height) in [(512, 512), (1024, 256), (200, 700)] {
             let camera = store_camera(&info, width, height);
             let mut widest: f64 = 0.0;

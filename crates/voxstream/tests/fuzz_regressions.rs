@@ -57,6 +57,7 @@ fn replay(dir: &Path, target: &str, data: &[u8]) {
                     spacing: [1.0; 3],
                     origin: [0.0; 3],
                     unit: None,
+                    orientation: None,
                 },
                 file_type: None,
                 endian: if data[6] & 4 == 0 { Endian::Little } else { Endian::Big },

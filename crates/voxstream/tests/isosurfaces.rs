@@ -316,7 +316,7 @@ fn a_stores_subtree_ranges_bound_every_value_below_them() {
     let raw = dir.join("volume.raw");
     std::fs::write(&raw, &samples).unwrap();
     let layout = RawLayout {
-        info: VolumeInfo { dims, dtype: DType::U8, spacing: [1.0; 3], origin: [0.0; 3], unit: None },
+        info: VolumeInfo { dims, dtype: DType::U8, spacing: [1.0; 3], origin: [0.0; 3], unit: None, orientation: None },
         file_type: None,
         endian: Endian::Little,
         header_bytes: 0,

@@ -34,6 +34,7 @@ fn volumes() -> Vec<(&'static str, &'static str, Option<RawLayout>)> {
                     spacing: [1.0; 3],
                     origin: [0.0; 3],
                     unit: None,
+                    orientation: None,
                 },
                 file_type: None,
                 endian: Endian::Little,

@@ -14,7 +14,8 @@ def import_volume(source, out, *, spacing: Optional[Sequence[float]] = None,
                   nan_as: Optional[float] = None, resolution: Optional[int] = None,
                   amplify: Optional[float] = None,
                   progress: Optional[Callable[[int, int], Any]] = None, codec: str = "zstd",
-                  max_error: Optional[float] = None, series: Optional[str] = None) -> Dict[str, Any]:
+                  max_error: Optional[float] = None, series: Optional[str] = None,
+                  orientation: Optional[str] = None) -> Dict[str, Any]:
     """Writes ``source`` as a voxstream store at ``out``: a file's or folder's path (any format ``voxstream import``
     reads: NumPy, NIfTI, NRRD, MetaImage, VTK, TIFF stacks, a DICOM series' folder, …; meshes and particle files are
     baked into a grid of ``resolution`` voxels per axis, meshes with noise of ``amplify``) or a 3-D numpy
@@ -32,12 +33,20 @@ def import_volume(source, out, *, spacing: Optional[Sequence[float]] = None,
     ``series`` chooses among the series of a DICOM folder that holds several: its number in the list the error
     without it gives (``"1"``, ``"2"``, …) or its Series Instance UID (``voxstream import --series``).
 
+    ``orientation`` names the anatomical direction each axis (x, y, z; an array's last, middle and first index)
+    points to, as three letters: ``"RAS"`` (NIfTI's MNI space), ``"LPS"`` (DICOM's), … It replaces the file's and is
+    written to the store's OME-Zarr axes; the default view then looks at the front, head up
+    (``voxstream import --orientation``).
+
     A dask array is imported on the active Dask cluster (``distributed.Client``; without one, Dask's local
     scheduler), one task per shard, into the same store byte for byte; ``out`` must then be on a filesystem every
     worker sees, and ``progress(done, total)`` counts finished shards."""
     if is_dask_array(source):
         if series is not None:
             raise ValueError("series chooses among the series of a DICOM folder, not of an array")
+        if orientation is not None:
+            raise ValueError("orientation is not taken by a dask import yet: import the array with numpy, or "
+                             "write the store and import a NIfTI or NRRD file that says its orientation")
         if resolution is not None or amplify is not None:
             raise ValueError("resolution and amplify apply to meshes and particle files, not to arrays")
         return import_dask(source, out, spacing=spacing, origin=origin, brick_size=brick_size, overwrite=overwrite,
@@ -51,4 +60,5 @@ def import_volume(source, out, *, spacing: Optional[Sequence[float]] = None,
         origin=None if origin is None else tuple(float(v) for v in origin), brick_size=int(brick_size),
         overwrite=bool(overwrite), nan_as=nan_as, resolution=resolution, amplify=amplify, progress=progress,
         codec=str(codec), max_error=None if max_error is None else float(max_error),
-        series=None if series is None else str(series)))
+        series=None if series is None else str(series),
+        orientation=None if orientation is None else str(orientation)))

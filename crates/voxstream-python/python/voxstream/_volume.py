@@ -67,8 +67,9 @@ class Volume:
 
     @property
     def info(self) -> Dict[str, Any]:
-        """Kind (scene, store, geometry), and for stores: dims (x, y, z), dtype, spacing, origin, unit, levels,
-        brick_size, value_range, typical_range (0.5th to 99.5th percentile), percentiles, native, remote."""
+        """Kind (scene, store, geometry), and for stores: dims (x, y, z), dtype, spacing, origin, unit, orientation
+        (``"RAS"``, ``"LPS"``, …, or None), levels, brick_size, value_range, typical_range (0.5th to 99.5th
+        percentile), percentiles, native, remote."""
         return dict(self._native.info)
 
     @property
@@ -107,7 +108,9 @@ class Volume:
         - ``clip_planes``: ``[((x, y, z), (nx, ny, nz)), ...]``, each keeping the side of the plane through the
           point that the normal points to (world units; ``--clip-plane``; CPU backend);
         - ``view``: ``"+x"``, ``"-x"``, ``"+y"``, ``"-y"``, ``"+z"``, ``"-z"`` or ``"iso"``, framing the volume
-          looking along that axis in place of ``camera`` (``--view``); ``azimuth``, ``elevation`` (degrees) and
+          looking along that axis in place of ``camera``, or ``"anterior"``, ``"posterior"``, ``"left"``,
+          ``"right"``, ``"superior"``, ``"inferior"`` looking at that side of the patient where the store says its
+          anatomical orientation (``info()["orientation"]``; ``--view``); ``azimuth``, ``elevation`` (degrees) and
           ``zoom`` (a factor) turn and move the camera around its target (``--azimuth``, ``--elevation``,
           ``--zoom``);
         - ``slice``: ``"z=100"`` (``x``, ``y``, ``z``, or ``sagittal``, ``coronal``, ``axial``), one plane of the

@@ -10,7 +10,7 @@
 //! orientations (a localizer) or shift in-plane from slice to slice (a gantry tilt) is refused with what was found,
 //! never stacked into a wrong volume. Values are the modality's (`stored × Rescale Slope + Rescale Intercept`: CT in
 //! Hounsfield units), kept as u8, u16 or i16 when every slice's rescale is an integer shift whose range fits one of
-//! them, as f32 otherwise. As for NIfTI, the orientation's rotation is not applied: the volume is axis-aligned in
+//! them, as f32 otherwise. The anatomical orientation is the nearest to the slices' (LPS, [`crate::Orientation`]); as for NIfTI, its rotation is not applied: the volume is axis-aligned in
 //! voxstream's world (x along the rows, y down the columns, z along the normal), its origin the first slice's
 //! position, in millimetres.
 
@@ -26,6 +26,7 @@ use rayon::prelude::*;
 use super::dicom_header::{has_dicom_magic, normal, read_header, DicomHeader};
 use super::sample_type::{SampleConversion, SampleType};
 use crate::error::StoreError;
+use crate::orientation::Orientation;
 use crate::space_unit::SpaceUnit;
 use crate::volume::{DType, VolumeInfo, VolumeSource};
 
@@ -366,6 +367,11 @@ impl DicomSeries {
             spacing,
             origin,
             unit: first.pixel_spacing.map(|_| SpaceUnit::from_name("millimeter").expect("an OME unit")),
+            // x along the rows, y down the columns, z along the normal: the slices are sorted that way when every
+            // one has a position (otherwise the stack's direction is not known).
+            orientation: orientation
+                .filter(|_| with_position == slices.len())
+                .and_then(|o| Orientation::nearest_lps([[o[0], o[1], o[2]], [o[3], o[4], o[5]], normal(&o)])),
         };
         info.validate(path)?;
         let rescales: Vec<(f64, f64)> = slices.iter().map(|s| s.0.rescale).collect();

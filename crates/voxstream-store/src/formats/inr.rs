@@ -68,7 +68,7 @@ pub fn open(path: &Path, is_gzip: bool) -> Result<SampleStream, StoreError> {
             return Err(StoreError::Unsupported { path: path.into(), message: format!("TYPE={k} PIXSIZE={b} bits") })
         }
     };
-    let info = VolumeInfo { dims, dtype: dtype.stored(), spacing, origin, unit: None };
+    let info = VolumeInfo { dims, dtype: dtype.stored(), spacing, origin, unit: None, orientation: None };
     let header_len = header.len() as u64;
     if is_gzip {
         SampleStream::open(path, 0, Compression::Gzip, header_len, info, dtype, endian)

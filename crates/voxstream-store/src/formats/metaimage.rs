@@ -1,14 +1,16 @@
 //! MetaImage (`.mha` with local data, `.mhd` with a data file), ITK's text-header format, raw or zlib-compressed.
-//! `MET_CHAR`, `MET_INT`, `MET_UINT` and `MET_DOUBLE` samples are converted ([`super::sample_type`]).
+//! `MET_CHAR`, `MET_INT`, `MET_UINT` and `MET_DOUBLE` samples are converted ([`super::sample_type`]). The direction
+//! cosines (`TransformMatrix`, in ITK's LPS) give the axes' anatomical orientation ([`crate::Orientation`]).
 
 use std::fs::File;
 use std::io::BufReader;
 use std::path::Path;
 
-use super::header_text::{read_line, three};
+use super::header_text::{numbers, read_line, three};
 use super::sample_stream::{Compression, Endian, SampleStream};
 use super::sample_type::SampleType;
 use crate::error::StoreError;
+use crate::orientation::Orientation;
 use crate::volume::VolumeInfo;
 
 /// Opens a MetaImage volume.
@@ -20,6 +22,7 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
     let (mut dims, mut dtype, mut data_file) = (None, None, None::<String>);
     let (mut spacing, mut origin, mut endian, mut compression) =
         ([1.0; 3], [0.0; 3], Endian::Little, Compression::None);
+    let mut orientation = None;
     loop {
         let read = read_line(path, &mut reader, &mut line, &mut header_bytes)?;
         if read == 0 {
@@ -36,6 +39,11 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
             "DimSize" => dims = Some(three::<u64>(path, "DimSize", value)?),
             "ElementSpacing" | "ElementSize" => spacing = three(path, "ElementSpacing", value)?,
             "Offset" | "Position" | "Origin" => origin = three(path, "Offset", value)?,
+            // ITK's direction cosines, one axis after the other, in LPS.
+            "TransformMatrix" | "Rotation" | "Orientation" => {
+                let v = numbers::<f64>(path, "TransformMatrix", value, 9)?;
+                orientation = Orientation::nearest_lps([0, 1, 2].map(|a| [v[3 * a], v[3 * a + 1], v[3 * a + 2]]));
+            }
             "ElementNumberOfChannels" if value != "1" => {
                 return Err(StoreError::Unsupported { path: path.into(), message: "multi-channel images".into() })
             }
@@ -76,7 +84,7 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
     let dims = dims.ok_or_else(|| StoreError::format(path, "header has no DimSize"))?;
     let dtype = dtype.ok_or_else(|| StoreError::format(path, "header has no ElementType"))?;
     let data_file = data_file.ok_or_else(|| StoreError::format(path, "header has no ElementDataFile"))?;
-    let info = VolumeInfo { dims, dtype: dtype.stored(), spacing, origin, unit: None };
+    let info = VolumeInfo { dims, dtype: dtype.stored(), spacing, origin, unit: None, orientation };
     if data_file == "LOCAL" {
         SampleStream::open(path, header_bytes, compression, 0, info, dtype, endian)
     } else {

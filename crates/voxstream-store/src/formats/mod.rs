@@ -39,6 +39,7 @@ pub use sample_stream::{Compression, Endian, SampleStream};
 pub use sample_type::{SampleConversion, SampleType};
 
 use crate::error::StoreError;
+use crate::orientation::Orientation;
 use crate::space_unit::SpaceUnit;
 use crate::volume::{VolumeInfo, VolumeSource};
 
@@ -82,7 +83,7 @@ pub fn open_volume(path: &Path, raw: Option<&RawLayout>) -> Result<Box<dyn Volum
     Ok(Box::new(stream))
 }
 
-/// A source whose spacing, origin and unit are replaced (for formats that carry none, or a user's correction).
+/// A source whose spacing, origin, unit and orientation are replaced (for formats that carry none, or a user's correction).
 pub struct WithGeometry {
     inner: Box<dyn VolumeSource>,
     info: VolumeInfo,
@@ -105,6 +106,14 @@ impl WithGeometry {
     pub fn with_unit(mut self, unit: Option<SpaceUnit>) -> WithGeometry {
         if unit.is_some() {
             self.info.unit = unit;
+        }
+        self
+    }
+
+    /// The same, with the anatomical orientation replaced where `orientation` is given.
+    pub fn with_orientation(mut self, orientation: Option<Orientation>) -> WithGeometry {
+        if orientation.is_some() {
+            self.info.orientation = orientation;
         }
         self
     }

@@ -1,8 +1,9 @@
 //! NIfTI-1 (`.nii`, `.nii.gz`): the 348-byte header, then samples at `vox_offset`.
 //!
 //! Spacing comes from `pixdim[1..3]`, in the unit `xyzt_units` names (meter, millimeter or micrometer; none when it
-//! says "unknown"), the origin from the qform offsets (or the sform translation). Rotations in
-//! the qform/sform are not applied: the volume is axis-aligned in voxstream's world, as in VTK's image data. Values
+//! says "unknown"), the origin from the qform offsets (or the sform translation), the anatomical orientation from the
+//! qform's rotation (or the sform's columns; [`crate::Orientation`]). Rotations in the qform/sform are not applied:
+//! the volume is axis-aligned in voxstream's world, as in VTK's image data. Values
 //! are kept as stored, unless the header sets a `scl_slope`/`scl_inter` scaling other than the identity: then the
 //! scaled values are imported, as f32. int8, int32, uint32 and float64 data are converted ([`super::sample_type`]).
 //! `datatype` and `bitpix` must agree: a header where they do not is refused, never read by either one.
@@ -13,6 +14,7 @@ use std::path::Path;
 use super::sample_stream::{Compression, Endian, SampleStream};
 use super::sample_type::SampleType;
 use crate::error::StoreError;
+use crate::orientation::Orientation;
 use crate::space_unit::SpaceUnit;
 use crate::volume::VolumeInfo;
 
@@ -102,7 +104,25 @@ pub fn open(path: &Path, is_gzip: bool) -> Result<SampleStream, StoreError> {
     }
     let (slope, intercept) = (f32_at(112), f32_at(116));
     let unit = SpaceUnit::from_nifti(h[123]);
-    let info = VolumeInfo { dims: dim.map(|d| d as u64), dtype: file_type.stored(), spacing, origin, unit };
+    // The axes' directions in RAS: the qform's rotation (with its qfac flip of k), else the sform's columns.
+    let orientation = if i16_at(252) > 0 {
+        let [b, c, d] = [f32_at(256), f32_at(260), f32_at(264)].map(|v| v as f64);
+        let a = (1.0 - (b * b + c * c + d * d)).max(0.0).sqrt();
+        let qfac = if f32_at(76) < 0.0 { -1.0 } else { 1.0 };
+        Orientation::nearest_ras([
+            [a * a + b * b - c * c - d * d, 2.0 * (b * c + a * d), 2.0 * (b * d - a * c)],
+            [2.0 * (b * c - a * d), a * a + c * c - b * b - d * d, 2.0 * (c * d + a * b)],
+            [2.0 * (b * d + a * c) * qfac, 2.0 * (c * d - a * b) * qfac, (a * a + d * d - b * b - c * c) * qfac],
+        ])
+    } else if i16_at(254) > 0 {
+        let row = |o: usize| [f32_at(o), f32_at(o + 4), f32_at(o + 8)].map(|v| v as f64);
+        let [x, y, z] = [row(280), row(296), row(312)];
+        Orientation::nearest_ras([[x[0], y[0], z[0]], [x[1], y[1], z[1]], [x[2], y[2], z[2]]])
+    } else {
+        None
+    };
+    let info =
+        VolumeInfo { dims: dim.map(|d| d as u64), dtype: file_type.stored(), spacing, origin, unit, orientation };
     let stream = if is_gzip {
         SampleStream::open(path, 0, Compression::Gzip, vox_offset as u64, info, file_type, endian)?
     } else {

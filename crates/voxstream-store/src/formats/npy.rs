@@ -234,7 +234,14 @@ fn parse_header(file: &mut dyn Read, path: &Path) -> Result<(VolumeInfo, SampleT
         }
     };
     let dims = if fortran { [shape[0], shape[1], shape[2]] } else { [shape[2], shape[1], shape[0]] };
-    let info = VolumeInfo { dims, dtype: file_type.stored(), spacing: [1.0; 3], origin: [0.0; 3], unit: None };
+    let info = VolumeInfo {
+        dims,
+        dtype: file_type.stored(),
+        spacing: [1.0; 3],
+        origin: [0.0; 3],
+        unit: None,
+        orientation: None,
+    };
     info.validate(path)?;
     Ok((info, file_type, endian, prefix + header_len))
 }

@@ -2,7 +2,8 @@
 //! (http://teem.sourceforge.net/nrrd/format.html).
 //!
 //! `signed char`, `int`, `unsigned int` and `double` samples are converted ([`super::sample_type`]). `space units`
-//! gives the spacing's unit when all three are one OME-Zarr unit (`"mm" "mm" "mm"`); other units are left out.
+//! gives the spacing's unit when all three are one OME-Zarr unit (`"mm" "mm" "mm"`); other units are left out. An
+//! anatomical `space` (RAS, LAS, LPS) with `space directions` gives the axes' orientation ([`crate::Orientation`]).
 
 use std::fs::File;
 use std::io::BufReader;
@@ -12,6 +13,7 @@ use super::header_text::{numbers, read_line, three};
 use super::sample_stream::{Compression, Endian, SampleStream};
 use super::sample_type::SampleType;
 use crate::error::StoreError;
+use crate::orientation::Orientation;
 use crate::space_unit::SpaceUnit;
 use crate::volume::VolumeInfo;
 
@@ -24,7 +26,7 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
     let mut first = true;
     let (mut dtype, mut dims, mut encoding, mut endian) = (None, None, None, Endian::Little);
     let (mut spacing, mut origin, mut data_file) = ([1.0; 3], [0.0; 3], None::<String>);
-    let mut unit = None;
+    let (mut unit, mut space, mut directions) = (None, None::<String>, None::<[[f64; 3]; 3]>);
     loop {
         let read = read_line(path, &mut reader, &mut line, &mut header_bytes)?;
         if read == 0 {
@@ -90,8 +92,10 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
             "space directions" => {
                 let v = numbers::<f64>(path, "space directions", value, 9)?;
                 spacing = [0, 1, 2].map(|a| (v[3 * a].powi(2) + v[3 * a + 1].powi(2) + v[3 * a + 2].powi(2)).sqrt());
+                directions = Some([0, 1, 2].map(|a| [v[3 * a], v[3 * a + 1], v[3 * a + 2]]));
             }
             "space origin" => origin = three(path, "space origin", value)?,
+            "space" => space = Some(value.to_ascii_lowercase()),
             "space units" => unit = space_units(value),
             "data file" | "datafile" => data_file = Some(value.to_string()),
             _ => {}
@@ -110,7 +114,18 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
         }
         None => return Err(StoreError::format(path, "header has no 'encoding'")),
     };
-    let info = VolumeInfo { dims, dtype: dtype.stored(), spacing, origin, unit };
+    // The axes' directions in the anatomical `space` the file names, turned into RAS.
+    let flips = match space.as_deref() {
+        Some("right-anterior-superior" | "ras") => Some([1.0, 1.0, 1.0]),
+        Some("left-anterior-superior" | "las") => Some([-1.0, 1.0, 1.0]),
+        Some("left-posterior-superior" | "lps") => Some([-1.0, -1.0, 1.0]),
+        _ => None,
+    };
+    let orientation = match (flips, directions) {
+        (Some(f), Some(d)) => Orientation::nearest_ras(d.map(|v| [v[0] * f[0], v[1] * f[1], v[2] * f[2]])),
+        _ => None,
+    };
+    let info = VolumeInfo { dims, dtype: dtype.stored(), spacing, origin, unit, orientation };
     match data_file {
         Some(name) => {
             let data_path = path.parent().unwrap_or(Path::new(".")).join(name);

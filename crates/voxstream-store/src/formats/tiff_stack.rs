@@ -137,6 +137,7 @@ impl TiffStack {
             spacing: [1.0; 3],
             origin: [0.0; 3],
             unit: None,
+            orientation: None,
         };
         info.validate(path)?;
         // The page size is checked now, not when the first page is decoded: the importer sizes its slabs by it.

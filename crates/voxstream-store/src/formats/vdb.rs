@@ -78,8 +78,14 @@ pub fn parse_converter_header(path: &Path, line: &str) -> Result<VolumeInfo, Sto
             ),
         });
     }
-    let info =
-        VolumeInfo { dims, dtype: DType::F32, spacing: triple("spacing")?, origin: triple("origin")?, unit: None };
+    let info = VolumeInfo {
+        dims,
+        dtype: DType::F32,
+        spacing: triple("spacing")?,
+        origin: triple("origin")?,
+        unit: None,
+        orientation: None,
+    };
     info.validate(path)?;
     Ok(info)
 }

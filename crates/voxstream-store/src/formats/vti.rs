@@ -149,7 +149,7 @@ pub fn open(path: &Path) -> Result<SampleStream, StoreError> {
         }
     };
     let origin = [0, 1, 2].map(|a| h.origin[a] + h.spacing[a] * extent[2 * a] as f64);
-    let info = VolumeInfo { dims, dtype, spacing: h.spacing, origin, unit: None };
+    let info = VolumeInfo { dims, dtype, spacing: h.spacing, origin, unit: None, orientation: None };
     info.validate(path)?;
     if info.byte_len() > MAX_VTI_SAMPLE_BYTES {
         return Err(bad(format!(

@@ -16,7 +16,7 @@ fn scratch(name: &str) -> PathBuf {
 }
 
 fn info(dims: [u64; 3], dtype: DType) -> VolumeInfo {
-    VolumeInfo { dims, dtype, spacing: [1.0, 0.5, 2.0], origin: [3.0, 0.0, -1.0], unit: None }
+    VolumeInfo { dims, dtype, spacing: [1.0, 0.5, 2.0], origin: [3.0, 0.0, -1.0], unit: None, orientation: None }
 }
 
 /// A volume with empty corners, smooth parts and noise (so bricks are empty, uniform and varied).

@@ -230,7 +230,14 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
         let store = dir.join("ramp.zarr");
-        let info = VolumeInfo { dims: [16, 16, 8], dtype: DType::U16, spacing: [1.0; 3], origin: [0.0; 3], unit: None };
+        let info = VolumeInfo {
+            dims: [16, 16, 8],
+            dtype: DType::U16,
+            spacing: [1.0; 3],
+            origin: [0.0; 3],
+            unit: None,
+            orientation: None,
+        };
         let mut source = Ramp { info, z: 0 };
         let options = ImportOptions { brick_size: 8, shard_bricks: 2, ..ImportOptions::default() };
         import_volume(&mut source, &store, &options, &mut |_, _| {}).unwrap();
