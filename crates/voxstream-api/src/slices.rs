@@ -5,7 +5,9 @@
 //! mean value through it (¾ of the plane's own samples and ⅛ of each neighbouring plane's, the trilinear
 //! interpolant's mean over the slab), and the camera looks along the axis unless another view is given. The value
 //! is shown through the transfer function as projections are: its colour, its opacity relative to its most opaque
-//! point (transparent values show the background: a window). Volumes and slices in one image are not drawn yet.
+//! point (transparent values show the background: a window). With `--with-volume` the plane is drawn inside the
+//! volume rendering instead: the volume on the eye's side of it over it, seen from the default view
+//! ([`voxstream_render::slice_in_volume`]).
 //!
 //! `axial`, `coronal` and `sagittal` name the planes across the body's head–feet, front–back and left–right axes:
 //! where the store says its anatomical orientation ([`voxstream_store::Orientation`]), the sample axis nearest to
@@ -29,6 +31,9 @@ pub struct Slice {
     pub axis: SliceAxis,
     /// The sample plane along it.
     pub index: u64,
+    /// Drawn with the volume (`--with-volume`): the volume on the eye's side of the plane over the plane, the
+    /// source's default view (see [`voxstream_render::slice_in_volume`]); otherwise the plane alone, face-on.
+    pub with_volume: bool,
 }
 
 /// The axis a slice is taken across: one of the data's, or the body's (resolved through the store's orientation).
@@ -82,7 +87,7 @@ pub fn parse_slice(text: &str) -> Result<Slice, String> {
         .trim()
         .parse::<u64>()
         .map_err(|_| format!("'{}' is not a sample index: give a whole number, e.g. --slice z=100", index.trim()))?;
-    Ok(Slice { axis, index })
+    Ok(Slice { axis, index, with_volume: false })
 }
 
 /// `view` with `slice` applied for `source`: the slab's two clipping planes added, the mean projection (unless
@@ -112,8 +117,11 @@ pub(crate) fn slice_view(view: &ViewOptions, slice: Slice, source: &SourceMeta) 
     if !view.iso.values.is_empty() {
         bail!("--slice draws the values in a plane, not isosurfaces: drop --iso or --slice");
     }
+    if slice.with_volume && view.projection != Projection::Composite {
+        bail!("--slice … --with-volume draws the plane inside a volume rendering: drop --projection or --with-volume");
+    }
     let mut sliced = view.clone();
-    if sliced.projection == Projection::Composite {
+    if sliced.projection == Projection::Composite && !slice.with_volume {
         sliced.projection = Projection::Mean;
     }
     let at = |offset: f64| {
@@ -123,9 +131,15 @@ pub(crate) fn slice_view(view: &ViewOptions, slice: Slice, source: &SourceMeta) 
     };
     let mut normal = [0.0; 3];
     normal[a] = 1.0;
-    sliced.clip_planes.push(ClipPlane { point: at(-0.5), normal });
+    let lower = ClipPlane { point: at(-0.5), normal };
     normal[a] = -1.0;
-    sliced.clip_planes.push(ClipPlane { point: at(0.5), normal });
+    let upper = ClipPlane { point: at(0.5), normal };
+    if slice.with_volume {
+        // The source's default view (or the one given) sees the plane inside the volume.
+        sliced.volume_slice = Some([lower, upper]);
+        return Ok(sliced);
+    }
+    sliced.clip_planes.extend([lower, upper]);
     let camera = &view.camera;
     let placed = camera.file.is_some()
         || camera.camera.is_some()
@@ -144,9 +158,10 @@ mod tests {
 
     #[test]
     fn slices_parse_by_axis_or_anatomical_name() {
-        assert_eq!(parse_slice("z=100"), Ok(Slice { axis: SliceAxis::Data(2), index: 100 }));
-        assert_eq!(parse_slice("Sagittal=7"), Ok(Slice { axis: SliceAxis::Sagittal, index: 7 }));
-        assert_eq!(parse_slice("coronal = 3"), Ok(Slice { axis: SliceAxis::Coronal, index: 3 }));
+        let slice = |axis, index| Ok(Slice { axis, index, with_volume: false });
+        assert_eq!(parse_slice("z=100"), slice(SliceAxis::Data(2), 100));
+        assert_eq!(parse_slice("Sagittal=7"), slice(SliceAxis::Sagittal, 7));
+        assert_eq!(parse_slice("coronal = 3"), slice(SliceAxis::Coronal, 3));
         assert!(parse_slice("z").unwrap_err().contains("AXIS=INDEX"));
         assert!(parse_slice("w=1").unwrap_err().contains("not an axis"));
         assert!(parse_slice("z=-1").unwrap_err().contains("not a sample index"));

@@ -123,6 +123,9 @@ pub struct ViewOptions {
     pub clip_planes: Vec<ClipPlane>,
     /// A store's plane of samples, drawn alone and face-on (`--slice z=K`; see [`crate::slices`]).
     pub slice: Option<crate::slices::Slice>,
+    /// A plane of samples drawn with the volume (its slab's two planes): set from `slice` when it is drawn with the
+    /// volume ([`crate::slices`]), not given directly.
+    pub volume_slice: Option<[ClipPlane; 2]>,
 }
 
 impl Default for ViewOptions {
@@ -146,6 +149,7 @@ impl Default for ViewOptions {
             projection: Projection::Composite,
             clip_planes: Vec::new(),
             slice: None,
+            volume_slice: None,
         }
     }
 }
@@ -301,6 +305,7 @@ pub fn prepare_view(view: &ViewOptions, source: &SourceMeta) -> Result<PreparedV
         placement: region_placement(source, view.region)?,
         projection: view.projection,
         clip_planes: view.clip_planes.clone(),
+        volume_slice: view.volume_slice,
         ..RenderSettings::default()
     };
     check_placement(&source.name, &source.placement)?;

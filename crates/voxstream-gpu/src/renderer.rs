@@ -217,6 +217,10 @@ impl GpuRenderer {
             let (what, instead) = ("clipping planes (--clip-plane)", "--backend cpu, or --crop for a box");
             return Err(GpuError::Unsupported { what, instead }.into());
         }
+        if settings.volume_slice.is_some() {
+            let (what, instead) = ("slices drawn with the volume (--with-volume)", "--backend cpu");
+            return Err(GpuError::Unsupported { what, instead }.into());
+        }
         let (width, height) = (settings.width, settings.height);
         if progressive.image.width != width || progressive.image.height != height {
             return Err(RenderError::InvalidSetting("progressive image size differs from the settings".into()));

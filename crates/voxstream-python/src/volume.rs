@@ -239,8 +239,8 @@ impl PyVolume {
         tf_points=None, tf_file=None, iso=Vec::new(), iso_colors=Vec::new(), iso_opacities=Vec::new(),
         shadows=false, light=None, background=[0.0; 3], step=0.5, lod_bias=0.0, shading=None, blending=true,
         preintegrate=false, adaptive_step=None, faithful=false, float32=false, region=None, projection="composite",
-        clip_planes=Vec::new(), view=None, azimuth=None, elevation=None, zoom=None, slice=None, color_bar=false,
-        scale_bar=false))]
+        clip_planes=Vec::new(), view=None, azimuth=None, elevation=None, zoom=None, slice=None, slice_with_volume=false,
+        color_bar=false, scale_bar=false))]
     #[allow(clippy::too_many_arguments)]
     fn render<'py>(
         &self,
@@ -275,6 +275,7 @@ impl PyVolume {
         elevation: Option<f64>,
         zoom: Option<f64>,
         slice: Option<&str>,
+        slice_with_volume: bool,
         color_bar: bool,
         scale_bar: bool,
     ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyDict>)> {
@@ -344,7 +345,7 @@ impl PyVolume {
             region,
             projection,
             clip_planes,
-            slice,
+            slice: slice.map(|slice| voxstream_api::slices::Slice { with_volume: slice_with_volume, ..slice }),
         };
         let session = SessionOptions { budget_mb, backend, blending, ..SessionOptions::default() };
         let rendered = self.render_on_thread(py, view, session, mode, float32, annotations)?;

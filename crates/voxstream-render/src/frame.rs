@@ -15,6 +15,7 @@ use crate::projection::{Projection, ProjectionCaster};
 use crate::ray_caster::RayCaster;
 use crate::sampler::LANES;
 use crate::settings::RenderSettings;
+use crate::slice_in_volume::SliceInVolume;
 use crate::surface_caster::SurfaceCaster;
 use crate::transfer_function::TransferLut;
 use crate::traversal::{DescentPath, RayStats};
@@ -175,7 +176,10 @@ pub fn render_pass(
     let tiles_y = height.div_ceil(edge);
     let pending = &progressive.pending;
     let grid = TileGrid { tiles_x, tiles_y, edge };
-    let results = if settings.projection != Projection::Composite {
+    let results = if let Some(slab) = settings.volume_slice.filter(|_| settings.surfaces.is_empty()) {
+        let caster = SliceInVolume::new(view, feedback, lut, settings, slab, camera.eye);
+        trace_tiles(&caster, grid, &frame, settings, feedback, pending)
+    } else if settings.projection != Projection::Composite {
         let caster = ProjectionCaster::new(view, feedback, lut, settings);
         trace_tiles(&caster, grid, &frame, settings, feedback, pending)
     } else if settings.surfaces.is_empty() {

@@ -49,6 +49,7 @@ pub mod projection;
 pub mod ray_caster;
 pub mod sampler;
 pub mod settings;
+pub mod slice_in_volume;
 pub mod step_table;
 pub mod surface_caster;
 pub mod surfaces_in_volume;

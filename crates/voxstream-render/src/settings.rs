@@ -159,6 +159,10 @@ pub struct RenderSettings {
     pub projection: Projection,
     /// Half-spaces the view keeps ([`crate::clip_plane`]); at most [`MAX_CLIP_PLANES`].
     pub clip_planes: Vec<ClipPlane>,
+    /// A plane of samples drawn with the volume ([`crate::slice_in_volume`]): the slab's two clipping planes (each
+    /// keeping the slab's side); the volume on the eye's side of it is composited over its mean value. Volume
+    /// rendering only; the clipping planes count towards [`MAX_CLIP_PLANES`].
+    pub volume_slice: Option<[ClipPlane; 2]>,
 }
 
 /// The colour [`RenderSettings::colour_by_level`] gives tree level `level`: eight hues around the colour wheel,
@@ -225,6 +229,7 @@ impl Default for RenderSettings {
             colour_by_level: false,
             projection: Projection::Composite,
             clip_planes: Vec::new(),
+            volume_slice: None,
         }
     }
 }
@@ -298,6 +303,22 @@ impl RenderSettings {
         }
         if let Some(i) = self.clip_planes.iter().position(|p| !p.is_valid()) {
             return bad(format!("clipping plane {} needs a finite point and a non-zero finite normal", i + 1));
+        }
+        if let Some(slab) = &self.volume_slice {
+            if self.projection != Projection::Composite || !self.surfaces.is_empty() {
+                return bad("a slice drawn with the volume goes with volume rendering: drop --iso and --projection, \
+                            or --with-volume"
+                    .into());
+            }
+            if self.clip_planes.len() + slab.len() > MAX_CLIP_PLANES {
+                return bad(format!(
+                    "a slice drawn with the volume takes 2 of the {MAX_CLIP_PLANES} clipping planes; {} are given",
+                    self.clip_planes.len()
+                ));
+            }
+            if !slab.iter().all(ClipPlane::is_valid) {
+                return bad("the slice's planes need finite points and non-zero finite normals".into());
+            }
         }
         let p = &self.placement;
         if !(p.scale.iter().all(|s| s.is_finite() && *s > 0.0) && p.origin.iter().all(|v| v.is_finite())) {

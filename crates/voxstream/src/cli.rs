@@ -262,10 +262,15 @@ pub struct LookFlags {
     /// gives the dimensions, upper bounds excluded); the rest stays transparent.
     #[arg(long, value_name = "X0,Y0,Z0,X1,Y1,Z1", value_parser = parse_crop)]
     pub crop: Option<[[u64; 3]; 2]>,
-    /// Stores: draw one plane of level-0 samples alone, face-on: x=K, y=K, z=K (or sagittal=K, coronal=K, axial=K),
-    /// as the mean through the one-sample slab around it, in the transfer function's colours. CPU backend.
+    /// Stores: draw one plane of level-0 samples alone, face-on: x=K, y=K, z=K (or sagittal=K, coronal=K, axial=K:
+    /// the body's planes where the store says its anatomical orientation), as the mean through the one-sample slab
+    /// around it, in the transfer function's colours (--with-volume: inside the volume). CPU backend.
     #[arg(long, value_name = "AXIS=INDEX", value_parser = voxstream_api::slices::parse_slice)]
     pub slice: Option<voxstream_api::slices::Slice>,
+    /// With --slice: draw the plane inside the volume rendering, seen from the default view (or the one given): the
+    /// volume on the eye's side of the plane over the plane's values, the volume beyond it hidden. CPU backend.
+    #[arg(long, requires = "slice")]
+    pub with_volume: bool,
     /// Draw the transfer function's colour bar at the right edge: its colours from its first to its last point
     /// (labelled, data units) and its opacity as a white curve.
     #[arg(long, alias = "colour-bar")]

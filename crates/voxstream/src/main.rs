@@ -122,6 +122,7 @@ fn unreachable_default() -> RenderArgs {
             projection: voxstream::cli::ProjectionArg::Composite,
             clip_plane: Vec::new(),
             slice: None,
+            with_volume: false,
             color_bar: false,
             scale_bar: false,
             crop: None,

@@ -67,7 +67,8 @@ pub fn view_options(look: &LookFlags, width: u32, height: u32) -> ViewOptions {
         region: look.crop,
         projection: look.projection.projection(),
         clip_planes: look.clip_plane.clone(),
-        slice: look.slice,
+        slice: look.slice.map(|slice| voxstream_api::slices::Slice { with_volume: look.with_volume, ..slice }),
+        volume_slice: None,
     }
 }
 

@@ -72,7 +72,7 @@ fn run(dir: &Path, args: &[&str]) -> String {
 /// The image `render` makes of `store` with `extra` flags.
 fn render(dir: &Path, store: &str, extra: &[&str]) -> Vec<u8> {
     let out = format!("{store}-{}.png", extra.join("").replace(['=', '-', ' '], "_"));
-    let mut args = vec!["render", store, "--size", "96", "--mode", "converged", "--out", &out, "--quiet"];
+    let mut args = vec!["render", store, "--width", "96", "--height", "96", "--out", &out, "--quiet"];
     args.extend_from_slice(extra);
     run(dir, &args);
     read_png(&dir.join(&out)).2

@@ -271,3 +271,66 @@ fn a_slice_draws_the_plane_of_samples_it_names() {
     run_fails(&["render", "ball.zarr", "--slice", "w=3", "--out", "x.png"], &dir, "not an axis");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `--slice … --with-volume` is the volume on the eye's side of the slab composited over the slab, the far side
+/// hidden: checked against that composition made of two independent renders, the near half alone (a clipping plane
+/// at the slab's near face; its coverage from a second render over a white background) and the slice alone from the
+/// same camera: `with = near + (1 − coverage) · slice`, pixel by pixel, within the 8-bit images' rounding.
+#[test]
+fn a_slice_drawn_with_the_volume_is_the_near_half_over_the_plane() {
+    let dir = scratch("viewing_tools", "slice-with-volume");
+    import_ball(&dir, "ball.zarr");
+    // Translucent, so that the plane shows through the half in front of it.
+    std::fs::write(
+        dir.join("tf.json"),
+        r#"{"points": [[0, 0, 0, 0, 0], [400, 0.2, 0.5, 1, 0.05], [3050, 1, 0.9, 0.6, 0.3]]}"#,
+    )
+    .unwrap();
+    let render = |name: &str, extra: &[&str]| {
+        let (out, stats) = (format!("{name}.png"), format!("{name}.json"));
+        let mut args = vec!["render", "ball.zarr", "--tf", "tf.json", "--width", "96", "--height", "96", "--out", &out];
+        args.extend_from_slice(&["--stats", &stats]);
+        args.extend_from_slice(extra);
+        run_ok(&args, &dir);
+        let pixels: Vec<f64> = read_png(&dir.join(&out)).2.into_iter().map(|b| b as f64 / 255.0).collect();
+        (pixels, stats_camera(&dir.join(&stats)))
+    };
+    let (with, (eye, target, up)) = render("with", &["--slice", "z=18", "--with-volume"]);
+    assert!(eye.z > 18.5, "the default view looks from above the plane: {eye}");
+    // The slab is 17.5 ≤ z ≤ 18.5: the eye's side of it is z ≥ 18.5.
+    let (near, _) = render("near", &["--clip-plane", "0,0,18.5,0,0,1"]);
+    let (near_on_white, _) = render("near-white", &["--clip-plane", "0,0,18.5,0,0,1", "--background", "1,1,1"]);
+    let vector = |v: DVec3| format!("{},{},{}", v.x, v.y, v.z);
+    let (eye, target, up) = (vector(eye), vector(target), vector(up));
+    let (plane, _) =
+        render("plane", &["--slice", "z=18", "--eye", &eye, "--target", &target, "--up", &up, "--fov", "30"]);
+    let mut largest: f64 = 0.0;
+    let mut total = 0.0;
+    for i in 0..with.len() {
+        let through = near_on_white[i] - near[i];
+        let expected = near[i] + through * plane[i];
+        largest = largest.max((with[i] - expected).abs());
+        total += (with[i] - expected).abs();
+    }
+    let mean = total / with.len() as f64;
+    assert!(
+        largest <= 3.5 / 255.0 && mean < 0.3 / 255.0,
+        "differs by {:.2}/255 at most, {:.3}/255 on average",
+        largest * 255.0,
+        mean * 255.0
+    );
+    // The plane shows (not only the near half), and the far half is hidden: the whole volume looks otherwise.
+    let lit = |image: &[f64]| image.iter().filter(|v| **v > 0.02).count();
+    assert!(lit(&with) > lit(&near) + 200, "{} lit pixels with the plane, {} without", lit(&with), lit(&near));
+    let (whole, _) = render("whole", &[]);
+    let changed = whole.iter().zip(&with).filter(|(a, b)| (*a - *b).abs() > 0.02).count();
+    assert!(changed > 500, "{changed} pixels differ from the whole volume's");
+    // What it cannot be drawn with: one line each.
+    run_fails(&["render", "ball.zarr", "--with-volume", "--out", "x.png"], &dir, "--slice");
+    run_fails(
+        &["render", "ball.zarr", "--slice", "z=3", "--with-volume", "--projection", "max", "--out", "x.png"],
+        &dir,
+        "drop --projection or --with-volume",
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

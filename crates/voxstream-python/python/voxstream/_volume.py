@@ -85,8 +85,8 @@ class Volume:
                preintegrate: bool = False, adaptive_step: Optional[float] = None,
                faithful: bool = False, region=None, projection: str = "composite", clip_planes=(),
                view: Optional[str] = None, azimuth: Optional[float] = None, elevation: Optional[float] = None,
-               zoom: Optional[float] = None, slice: Optional[str] = None, color_bar: bool = False,
-               scale_bar: bool = False) -> np.ndarray:
+               zoom: Optional[float] = None, slice: Optional[str] = None, slice_with_volume: bool = False,
+               color_bar: bool = False, scale_bar: bool = False) -> np.ndarray:
         """Renders the volume; returns an (height, width, 4) array, RGBA: ``uint8`` (the CLI's PNG, plus alpha) or
         ``float32`` (linear, unclamped). The array's memory is Rust's buffer, handed over without a copy.
 
@@ -114,7 +114,9 @@ class Volume:
           ``zoom`` (a factor) turn and move the camera around its target (``--azimuth``, ``--elevation``,
           ``--zoom``);
         - ``slice``: ``"z=100"`` (``x``, ``y``, ``z``, or ``sagittal``, ``coronal``, ``axial``), one plane of the
-          store's level-0 samples alone and face-on (``--slice``; CPU backend);
+          store's level-0 samples alone and face-on (``--slice``; CPU backend); with ``slice_with_volume=True``
+          drawn inside the volume rendering from the default view, the volume on the eye's side over it
+          (``--with-volume``);
         - ``color_bar``, ``scale_bar``: the transfer function's colour bar at the right edge, a scale bar in the
           data's units at the bottom left (``--color-bar``, ``--scale-bar``).
 
@@ -141,7 +143,8 @@ class Volume:
             clip_planes=[(tuple(float(v) for v in p), tuple(float(v) for v in n)) for p, n in clip_planes],
             view=view, azimuth=None if azimuth is None else float(azimuth),
             elevation=None if elevation is None else float(elevation), zoom=None if zoom is None else float(zoom),
-            slice=None if slice is None else str(slice), color_bar=bool(color_bar), scale_bar=bool(scale_bar))
+            slice=None if slice is None else str(slice), slice_with_volume=bool(slice_with_volume),
+            color_bar=bool(color_bar), scale_bar=bool(scale_bar))
         self.last_stats = dict(stats)
         return pixels
 
