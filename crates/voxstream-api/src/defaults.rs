@@ -6,16 +6,18 @@ use voxstream_render::{Camera, TransferFunction, VolumePlacement};
 use voxstream_store::StoreReader;
 
 /// Where a store's tree cube sits in the world: sample `(i, j, k)` at `origin + spacing·(i, j, k)` (VTK/ITK), the
-/// rays clipped to the box of the sample centres, as VTK's ray casters do.
+/// rays clipped to the box of the sample centres, as VTK's ray casters do. Along an axis of one sample (a single
+/// slice), where that box would be flat and show nothing, the box is the sample's cell, one spacing thick.
 pub fn store_placement(reader: &StoreReader) -> VolumePlacement {
     let info = reader.info();
     let layout = reader.layout();
     let span = (layout.brick_size << layout.max_tree_level()) as f64;
+    let single = |a: usize| info.dims[a] <= 1;
     VolumePlacement {
         origin: [0, 1, 2].map(|a| info.origin[a] - 0.5 * info.spacing[a]),
         scale: [0, 1, 2].map(|a| info.spacing[a] * span),
-        clip_lower: [0.5 / span; 3],
-        clip_upper: [0, 1, 2].map(|a| ((info.dims[a] as f64 - 0.5) / span).max(0.5 / span + 1e-9)),
+        clip_lower: [0, 1, 2].map(|a| if single(a) { 0.0 } else { 0.5 / span }),
+        clip_upper: [0, 1, 2].map(|a| if single(a) { 1.0 / span } else { (info.dims[a] as f64 - 0.5) / span }),
     }
 }
 

@@ -334,3 +334,40 @@ fn a_slice_drawn_with_the_volume_is_the_near_half_over_the_plane() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A volume of one slice (a single DICOM image, a 2-D array stacked once) is drawn as a slab one sample thick: the
+/// box of its sample centres would be flat and show nothing. Its slice alone shows its values as a thicker
+/// volume's middle plane shows the same values.
+#[test]
+fn a_volume_of_one_slice_draws_as_a_slab_one_sample_thick() {
+    let dir = scratch("viewing_tools", "one-slice");
+    let (nx, ny) = (40usize, 32usize);
+    let plane: Vec<u8> =
+        (0..nx * ny).map(|i| if (i % nx).abs_diff(20) + (i / nx).abs_diff(16) < 12 { 200 } else { 0 }).collect();
+    let npy = |depth: usize| {
+        let data: Vec<u8> = (0..depth).flat_map(|_| plane.iter().copied()).collect();
+        voxstream_store::formats::npy::npy_bytes("|u1", [depth as u64, ny as u64, nx as u64], &data)
+    };
+    std::fs::write(dir.join("one.npy"), npy(1)).unwrap();
+    std::fs::write(dir.join("three.npy"), npy(3)).unwrap();
+    run_ok(&["import", "one.npy", "--out", "one.zarr", "--quiet"], &dir);
+    // The three-slice volume's middle plane at the one slice's place (z = 0).
+    run_ok(&["import", "three.npy", "--out", "three.zarr", "--origin", "0,0,-1", "--quiet"], &dir);
+    let render = |args: &[&str]| {
+        run_ok(args, &dir);
+        let (_, _, pixels) = read_png(&dir.join(args[args.iter().position(|a| *a == "--out").unwrap() + 1]));
+        pixels
+    };
+    let lit = |pixels: &[u8]| pixels.chunks_exact(3).filter(|p| p.iter().any(|&v| v > 4)).count();
+    let drawn = lit(&render(&["render", "one.zarr", "--width", "64", "--height", "64", "--out", "one.png"]));
+    assert!(drawn > 100, "the default view of one slice: {drawn} pixels lit");
+    // The same camera above both planes.
+    let camera =
+        ["--eye", "19.5,15.5,80", "--target", "19.5,15.5,0", "--up", "0,1,0", "--width", "64", "--height", "64"];
+    let one = render(&[&["render", "one.zarr", "--slice", "z=0", "--out", "s1.png"], &camera[..]].concat());
+    let middle = render(&[&["render", "three.zarr", "--slice", "z=1", "--out", "s3.png"], &camera[..]].concat());
+    assert!(lit(&one) > 500, "the slice alone: {} pixels lit", lit(&one));
+    let largest = one.iter().zip(&middle).map(|(a, b)| a.abs_diff(*b)).max().unwrap();
+    assert!(largest <= 1, "the one slice differs from the same plane of a thicker volume by {largest}");
+    std::fs::remove_dir_all(&dir).ok();
+}
