@@ -137,6 +137,12 @@ pub fn omero_transfer_function(window: [f64; 2], color: Option<[f32; 3]>) -> Res
 
 pub use voxstream_render::annotations::shown_number;
 
+/// `n` and the noun in its number: `1 level`, `4 levels` (`singular` or `plural` as `n` asks).
+pub fn counted(n: impl Into<u64>, singular: &str, plural: &str) -> String {
+    let n = n.into();
+    format!("{n} {}", if n == 1 { singular } else { plural })
+}
+
 /// The volume's place in the world is the source's (a store's spacing and origin, a mesh's bounds), not the flags':
 /// a bad one is blamed on the source.
 pub fn check_placement(name: &str, placement: &VolumePlacement) -> Result<()> {

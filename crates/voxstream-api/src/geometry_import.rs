@@ -8,9 +8,12 @@
 
 use rayon::prelude::*;
 use voxstream_core::{NodeContent, NodeKey, Producer};
-use voxstream_store::{DType, StoreError, VolumeInfo, VolumeSource};
+use voxstream_store::{DType, Orientation, StoreError, VolumeInfo, VolumeSource};
 
 use crate::geometry_source::GeometryProducer;
+
+/// The orientation of mesh and particle files: `+x` the model's left (the viewer's right), `+y` up, `+z` its front.
+pub const MESH_CONVENTION: Orientation = Orientation::LSA;
 
 /// The most memory one row of bricks may take while baking (the rest of the import streams).
 pub const MAX_ROW_BYTES: u64 = 4 << 30;
@@ -66,7 +69,10 @@ impl BakedGeometry {
             // Voxel i of the level is centred at (i + ½)·voxel in the cube.
             origin: [0, 1, 2].map(|a| fit.origin[a] + (first[a] as f64 + 0.5) * voxel * size),
             unit: None,
-            orientation: None,
+            // Mesh and particle files' convention, `+y` up and `+z` the front (the model faces the viewer of an
+            // OpenGL camera), said as an anatomical orientation: the store's default view and `--view anterior`
+            // are then the file's own default view and front, not a model lying on its side.
+            orientation: Some(MESH_CONVENTION),
         };
         // A row of slices (f32) and, while it is made, its bricks (u16 with borders, about 2× more per voxel).
         let m = u64::from(shape.brick_size);

@@ -6,7 +6,8 @@
 //! interpolant's mean over the slab), and the camera looks along the axis unless another view is given. The value
 //! is shown through the transfer function as projections are: its colour, its opacity relative to its most opaque
 //! point (transparent values show the background: a window). With `--with-volume` the plane is drawn inside the
-//! volume rendering instead: the volume on the eye's side of it over it, seen from the default view
+//! volume rendering instead: the volume between the eye and the plane cut away, the plane over the volume beyond it,
+//! seen from the default view
 //! ([`voxstream_render::slice_in_volume`]).
 //!
 //! `axial`, `coronal` and `sagittal` name the planes across the body's head–feet, front–back and left–right axes:
@@ -31,7 +32,8 @@ pub struct Slice {
     pub axis: SliceAxis,
     /// The sample plane along it.
     pub index: u64,
-    /// Drawn with the volume (`--with-volume`): the volume on the eye's side of the plane over the plane, the
+    /// Drawn with the volume (`--with-volume`): the plane over the volume beyond it (what lies between the eye and
+    /// the plane cut away), the
     /// source's default view (see [`voxstream_render::slice_in_volume`]); otherwise the plane alone, face-on.
     pub with_volume: bool,
 }

@@ -274,6 +274,16 @@ pub fn prepare_view(view: &ViewOptions, source: &SourceMeta) -> Result<PreparedV
     let mut surfaces = surfaces(&view.iso, view.light, source.value_range)?;
     if surfaces.is_empty() && !tf_given {
         surfaces = source.default_surfaces.clone();
+        // A mesh or molecule is drawn as its surface unless a transfer function is given: say so, rather than
+        // naming an --iso the user never gave.
+        if !surfaces.is_empty() && view.projection != Projection::Composite {
+            bail!(
+                "--projection {} draws values along rays, but {} is drawn as an isosurface by default (meshes and \
+                 molecules are): add --tf FILE to draw its values as a volume, or drop --projection",
+                view.projection.name(),
+                source.name
+            );
+        }
     }
     let drawing_surfaces = !surfaces.is_empty();
     let adaptive_step = step_choice(view, drawing_surfaces)?;
@@ -309,7 +319,7 @@ pub fn prepare_view(view: &ViewOptions, source: &SourceMeta) -> Result<PreparedV
         ..RenderSettings::default()
     };
     check_placement(&source.name, &source.placement)?;
-    settings.validate().context("invalid flags")?;
+    settings.validate()?;
     let camera = apply_camera_options_framing(
         source.camera,
         &view.camera,

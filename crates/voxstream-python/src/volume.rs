@@ -346,6 +346,7 @@ impl PyVolume {
             projection,
             clip_planes,
             slice: slice.map(|slice| voxstream_api::slices::Slice { with_volume: slice_with_volume, ..slice }),
+            volume_slice: None,
         };
         let session = SessionOptions { budget_mb, backend, blending, ..SessionOptions::default() };
         let rendered = self.render_on_thread(py, view, session, mode, float32, annotations)?;

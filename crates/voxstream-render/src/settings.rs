@@ -160,7 +160,8 @@ pub struct RenderSettings {
     /// Half-spaces the view keeps ([`crate::clip_plane`]); at most [`MAX_CLIP_PLANES`].
     pub clip_planes: Vec<ClipPlane>,
     /// A plane of samples drawn with the volume ([`crate::slice_in_volume`]): the slab's two clipping planes (each
-    /// keeping the slab's side); the volume on the eye's side of it is composited over its mean value. Volume
+    /// keeping the slab's side); the volume between the eye and it is cut away, its mean value drawn over the volume
+    /// beyond it. Volume
     /// rendering only; the clipping planes count towards [`MAX_CLIP_PLANES`].
     pub volume_slice: Option<[ClipPlane; 2]>,
 }

@@ -95,6 +95,14 @@ impl Orientation {
         Towards { axis: 2, positive: true },
     ]);
 
+    /// LSA: mesh and particle files' convention (`+y` up, `+z` towards the viewer of an OpenGL camera, the front of
+    /// a model facing it; `+x` its left).
+    pub const LSA: Orientation = Orientation([
+        Towards { axis: 0, positive: false },
+        Towards { axis: 2, positive: true },
+        Towards { axis: 1, positive: true },
+    ]);
+
     /// An orientation from one direction per axis, refused unless they name three different body axes.
     pub fn new(axes: [Towards; 3]) -> Result<Orientation, String> {
         let [a, b, c] = axes.map(|t| t.axis);
@@ -178,6 +186,7 @@ mod tests {
             assert_eq!(Orientation::parse(code).unwrap().code(), code);
         }
         assert_eq!(Orientation::parse(" ras ").unwrap(), Orientation::RAS);
+        assert_eq!(Orientation::LSA.code(), "LSA");
         let twice = Orientation::parse("RLS").unwrap_err();
         assert!(twice.contains("names one body axis twice"), "{twice}");
         for bad in ["RA", "RASX", "XYZ", ""] {

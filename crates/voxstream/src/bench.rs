@@ -201,6 +201,7 @@ fn new_session(
             height: args.size,
             shading: meta.shading,
             light_direction: meta.light,
+            placement: meta.placement,
             ..RenderSettings::default()
         }
     } else {
@@ -211,6 +212,7 @@ fn new_session(
             light_direction: Some(BENCH_LIGHT),
             shadows: args.shadows,
             surfaces,
+            placement: meta.placement,
             ..RenderSettings::default()
         }
     };

@@ -268,7 +268,7 @@ pub struct LookFlags {
     #[arg(long, value_name = "AXIS=INDEX", value_parser = voxstream_api::slices::parse_slice)]
     pub slice: Option<voxstream_api::slices::Slice>,
     /// With --slice: draw the plane inside the volume rendering, seen from the default view (or the one given): the
-    /// volume on the eye's side of the plane over the plane's values, the volume beyond it hidden. CPU backend.
+    /// volume between the eye and the plane cut away, the plane's values over the volume beyond it. CPU backend.
     #[arg(long, requires = "slice")]
     pub with_volume: bool,
     /// Draw the transfer function's colour bar at the right edge: its colours from its first to its last point

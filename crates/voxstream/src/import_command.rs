@@ -4,6 +4,7 @@ use std::ops::ControlFlow;
 
 use anyhow::{bail, Result};
 use indicatif::{ProgressBar, ProgressStyle};
+use voxstream_api::defaults::counted;
 use voxstream_api::import_input::{open_input, ImportSettings, RawSettings};
 use voxstream_api::remote_output::remote_output;
 
@@ -106,15 +107,15 @@ pub fn run(args: &ImportArgs) -> Result<()> {
         };
         let oriented = info.orientation.map(|o| format!(", oriented {}", o.code())).unwrap_or_default();
         eprintln!(
-            "imported {} ({}x{}x{} {}{oriented}) into {}: {} levels, {} bricks written, {} empty, values {} to {}{codec}{}",
+            "imported {} ({}x{}x{} {}{oriented}) into {}: {}, {} written, {} empty, values {} to {}{codec}{}",
             args.input.display(),
             info.dims[0],
             info.dims[1],
             info.dims[2],
             info.dtype.name(),
             out,
-            report.levels,
-            report.bricks_written.iter().sum::<u64>(),
+            counted(report.levels as u64, "level", "levels"),
+            counted(report.bricks_written.iter().sum::<u64>(), "brick", "bricks"),
             report.bricks_empty.iter().sum::<u64>(),
             report.value_range[0],
             report.value_range[1],

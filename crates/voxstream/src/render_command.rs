@@ -8,7 +8,8 @@ use voxstream_api::{PreparedView, SessionOptions, Source, SourceMeta, SourceOpti
 use voxstream_engine::{MemoryBudget, Mode, MAX_BUDGET_MB};
 
 pub use voxstream_api::defaults::{
-    default_store_transfer_function, frame_box, shown_number, store_camera, store_placement, STORE_VIEW_DIRECTION,
+    counted, default_store_transfer_function, frame_box, shown_number, store_camera, store_placement,
+    STORE_VIEW_DIRECTION,
 };
 
 use crate::camera_path::path_cameras;
@@ -221,7 +222,14 @@ fn render_source(args: &RenderArgs, source: Source, budget: &MemoryBudget) -> Re
                     write_png(image, &out)?;
                 }
                 let volume = !drawing_surfaces || surfaces_in_volume;
-                if let Some(warning) = empty_image(&result.image, drawing_surfaces, volume) {
+                if let Some(mut warning) = empty_image(&result.image, drawing_surfaces, volume) {
+                    if prepared.settings.projection == voxstream_render::Projection::Minimum {
+                        warning.push_str(
+                            "; a minimum projection shows the smallest value along each ray, which a background of \
+                             zeros makes transparent under most transfer functions: --crop or --clip-plane inside \
+                             the object, or a --tf opaque at low values",
+                        );
+                    }
                     if empty_images == 0 {
                         progress.warn(&format!("{}: {warning}", out.display()));
                     }
@@ -301,7 +309,10 @@ fn summary_line(written: &[std::path::PathBuf], args: &RenderArgs, stats: &RunSt
     };
     let passes: u32 = stats.passes.iter().sum();
     format!(
-        "wrote {files} ({}x{}, {state}, {passes} passes, {} bricks loaded)",
-        args.width, args.height, stats.bricks_produced
+        "wrote {files} ({}x{}, {state}, {}, {} loaded)",
+        args.width,
+        args.height,
+        counted(passes, "pass", "passes"),
+        counted(stats.bricks_produced, "brick", "bricks")
     )
 }

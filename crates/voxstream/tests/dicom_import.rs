@@ -129,6 +129,7 @@ fn series_that_cannot_be_one_volume_are_refused_in_one_line_writing_nothing() {
         ("CT2", "slices are unevenly spaced: 1.2500 mm apart, but 202.5000 mm"),
         ("mr_study/MR700", "slices in different orientations"),
         ("mr_study", "7 series found: 1. MR \"ANGIO Projected from   C\" (7 slices of 16x16"),
+        ("mr_study", "of 16x16, in several orientations: a localizer, not one volume, in "),
         ("mr_study", "choose it with --series N (its number here) or --series UID"),
         ("MR_small_jpeg_ls_lossless.dcm", "JPEG-LS Lossless Image Compression"),
         ("JPEG-lossy.dcm", "SamplePrecision(12)"),

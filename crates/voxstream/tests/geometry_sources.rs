@@ -545,6 +545,14 @@ fn a_mesh_baked_into_a_store_renders_like_the_mesh() {
         "baked and produced silhouettes differ: IoU {}",
         both as f64 / either as f64
     );
+    // The store keeps the mesh's convention (+y up, +z the front): its default view is upright, from the front
+    // right and above, as the mesh's own.
+    let reader = voxstream_store::StoreReader::open(&store).unwrap();
+    assert_eq!(reader.info().orientation.map(|o| o.code()).as_deref(), Some("LSA"));
+    let camera = voxstream_api::defaults::store_camera(reader.info(), 64, 64);
+    assert_eq!(camera.up, [0.0, 1.0, 0.0]);
+    let towards: Vec<f64> = (0..3).map(|a| camera.eye[a] - camera.target[a]).collect();
+    assert!(towards[0] > 0.0 && towards[1] > 0.0 && towards[2] > 0.0, "from the front right and above: {towards:?}");
     // A resolution whose brick rows cannot be held is refused before anything is produced.
     assert_fails(
         &[

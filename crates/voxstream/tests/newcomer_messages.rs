@@ -146,6 +146,11 @@ fn store_and_mesh_typos_get_the_near_name() {
     );
     let message = stderr(&voxstream(&["import", "buny.ply", "--out", "b.zarr"], &dir));
     assert!(message.contains("(did you mean `bunny.ply`?)"), "{message}");
+    // A volume file to import, misspelled.
+    std::fs::write(dir.join("t1.nii"), b"").unwrap();
+    let output = voxstream(&["import", "t1.ni", "--out", "t.zarr"], &dir);
+    assert_eq!(output.status.code(), Some(1));
+    assert_eq!(stderr(&output).trim_end(), "error: t1.ni: not found (did you mean `t1.nii`?)");
     let message = stderr(&voxstream(&["info", "elsewhere.zarr"], &dir));
     assert!(!message.contains("did you mean"), "nothing near: {message}");
 }

@@ -443,6 +443,20 @@ fn bench_measures_a_store_over_http_as_from_its_folder() {
         assert!(figure["bricks_resident"].as_u64().is_some_and(|b| b > 0), "{figure}");
         figures.push(figure);
     }
+    // The view `render` draws of the store: bench's orbit around it keeps about as many bricks, and samples them
+    // (an orbit framed outside the store's place in the world once kept one brick and took no sample).
+    let out = voxstream(
+        &["render", "www/ball.zarr", "--width", "48", "--height", "48", "--out", "r.png", "--stats", "r.json"],
+        &dir,
+    );
+    assert!(out.status.success(), "render: {}", stderr(&out));
+    let stats: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("r.json")).unwrap()).unwrap();
+    let rendered = stats["bricks_resident"].as_u64().unwrap();
+    for figure in &figures {
+        let kept = figure["bricks_resident"].as_u64().unwrap();
+        assert!(2 * kept >= rendered, "bench kept {kept} bricks, render's view {rendered}: {figure}");
+        assert!(figure["samples_per_second"].as_f64().is_some_and(|s| s > 0.0), "{figure}");
+    }
     // The same view of the same data: the same converged work, wherever the bytes come from (interactive frames
     // never wait on the network, so their counts may differ).
     for field in ["converged_passes", "voxel_bytes"] {

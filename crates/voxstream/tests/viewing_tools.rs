@@ -272,15 +272,15 @@ fn a_slice_draws_the_plane_of_samples_it_names() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// `--slice … --with-volume` is the volume on the eye's side of the slab composited over the slab, the far side
-/// hidden: checked against that composition made of two independent renders, the near half alone (a clipping plane
-/// at the slab's near face; its coverage from a second render over a white background) and the slice alone from the
-/// same camera: `with = near + (1 − coverage) · slice`, pixel by pixel, within the 8-bit images' rounding.
+/// `--slice … --with-volume` is the slab drawn over the volume beyond it, what lies between the eye and the plane cut
+/// away: checked against that composition made of independent renders, the slice alone from the same camera (its
+/// coverage from a second render over a white background) and the far part alone (a clipping plane at the slab's
+/// face away from the eye): `with = plane + (1 − coverage) · far`, pixel by pixel, within the 8-bit images' rounding.
 #[test]
-fn a_slice_drawn_with_the_volume_is_the_near_half_over_the_plane() {
+fn a_slice_drawn_with_the_volume_is_the_plane_over_the_far_part() {
     let dir = scratch("viewing_tools", "slice-with-volume");
     import_ball(&dir, "ball.zarr");
-    // Translucent, so that the plane shows through the half in front of it.
+    // Translucent, so that the volume shows through the plane where its values are low.
     std::fs::write(
         dir.join("tf.json"),
         r#"{"points": [[0, 0, 0, 0, 0], [400, 0.2, 0.5, 1, 0.05], [3050, 1, 0.9, 0.6, 0.3]]}"#,
@@ -297,18 +297,18 @@ fn a_slice_drawn_with_the_volume_is_the_near_half_over_the_plane() {
     };
     let (with, (eye, target, up)) = render("with", &["--slice", "z=18", "--with-volume"]);
     assert!(eye.z > 18.5, "the default view looks from above the plane: {eye}");
-    // The slab is 17.5 ≤ z ≤ 18.5: the eye's side of it is z ≥ 18.5.
-    let (near, _) = render("near", &["--clip-plane", "0,0,18.5,0,0,1"]);
-    let (near_on_white, _) = render("near-white", &["--clip-plane", "0,0,18.5,0,0,1", "--background", "1,1,1"]);
+    // The slab is 17.5 ≤ z ≤ 18.5: beyond it from the eye is z ≤ 17.5.
+    let (far, _) = render("far", &["--clip-plane", "0,0,17.5,0,0,-1"]);
     let vector = |v: DVec3| format!("{},{},{}", v.x, v.y, v.z);
     let (eye, target, up) = (vector(eye), vector(target), vector(up));
-    let (plane, _) =
-        render("plane", &["--slice", "z=18", "--eye", &eye, "--target", &target, "--up", &up, "--fov", "30"]);
+    let camera = ["--slice", "z=18", "--eye", &eye, "--target", &target, "--up", &up, "--fov", "30"];
+    let (plane, _) = render("plane", &camera);
+    let (plane_on_white, _) = render("plane-white", &[&camera[..], &["--background", "1,1,1"]].concat());
     let mut largest: f64 = 0.0;
     let mut total = 0.0;
     for i in 0..with.len() {
-        let through = near_on_white[i] - near[i];
-        let expected = near[i] + through * plane[i];
+        let through = plane_on_white[i] - plane[i];
+        let expected = plane[i] + through * far[i];
         largest = largest.max((with[i] - expected).abs());
         total += (with[i] - expected).abs();
     }
@@ -319,12 +319,10 @@ fn a_slice_drawn_with_the_volume_is_the_near_half_over_the_plane() {
         largest * 255.0,
         mean * 255.0
     );
-    // The plane shows (not only the near half), and the far half is hidden: the whole volume looks otherwise.
-    let shown = near.iter().zip(&with).filter(|(a, b)| (*a - *b).abs() > 0.02).count();
-    assert!(shown > 500, "the plane changes {shown} pixel channels of the near half's image");
-    let (whole, _) = render("whole", &[]);
-    let changed = whole.iter().zip(&with).filter(|(a, b)| (*a - *b).abs() > 0.02).count();
-    assert!(changed > 500, "{changed} pixels differ from the whole volume's");
+    // Both parts show: the plane changes the far part's image, the far part the plane's.
+    let changed = |a: &[f64], b: &[f64]| a.iter().zip(b).filter(|(x, y)| (*x - *y).abs() > 0.02).count();
+    assert!(changed(&far, &with) > 500, "the plane changes {} channels of the far part's image", changed(&far, &with));
+    assert!(changed(&plane, &with) > 500, "the far part changes {} channels of the plane's", changed(&plane, &with));
     // What it cannot be drawn with: one line each.
     run_fails(&["render", "ball.zarr", "--with-volume", "--out", "x.png"], &dir, "--slice");
     run_fails(

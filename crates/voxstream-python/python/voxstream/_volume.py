@@ -115,8 +115,8 @@ class Volume:
           ``--zoom``);
         - ``slice``: ``"z=100"`` (``x``, ``y``, ``z``, or ``sagittal``, ``coronal``, ``axial``), one plane of the
           store's level-0 samples alone and face-on (``--slice``; CPU backend); with ``slice_with_volume=True``
-          drawn inside the volume rendering from the default view, the volume on the eye's side over it
-          (``--with-volume``);
+          drawn inside the volume rendering from the default view, over the volume beyond it (what lies between
+          the eye and the plane cut away; ``--with-volume``);
         - ``color_bar``, ``scale_bar``: the transfer function's colour bar at the right edge, a scale bar in the
           data's units at the bottom left (``--color-bar``, ``--scale-bar``).
 

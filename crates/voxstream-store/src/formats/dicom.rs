@@ -150,15 +150,21 @@ fn describe_series(series: &BTreeMap<String, Vec<DicomHeader>>) -> String {
             let first = &headers[0];
             let folder = first.path.parent().map(|p| p.display().to_string()).unwrap_or_default();
             let frames: u64 = headers.iter().map(|h| h.frames as u64).sum();
+            // Said here so that the list shows which series can be one volume.
+            let several = headers.iter().any(|h| match (h.orientation, first.orientation) {
+                (Some(a), Some(b)) => !same_orientation(&a, &b),
+                _ => false,
+            });
             format!(
-                "{}. {} \"{}\" ({} slice{} of {}x{}, in {folder}, UID {uid})",
+                "{}. {} \"{}\" ({} slice{} of {}x{}{}, in {folder}, UID {uid})",
                 i + 1,
                 if first.modality.is_empty() { "?" } else { &first.modality },
                 first.description,
                 frames,
                 if frames == 1 { "" } else { "s" },
                 first.columns,
-                first.rows
+                first.rows,
+                if several { ", in several orientations: a localizer, not one volume" } else { "" }
             )
         })
         .collect::<Vec<_>>()

@@ -116,18 +116,21 @@ pub struct SampleConversion {
     pub rounded: u64,
     /// The largest difference between a file value and its stored value.
     pub largest_error: f64,
+    /// The largest magnitude of a file value.
+    pub largest_magnitude: f64,
 }
 
 impl SampleConversion {
     /// Nothing counted yet, for samples of `from`.
     pub fn new(from: SampleType) -> SampleConversion {
-        SampleConversion { from, samples: 0, rounded: 0, largest_error: 0.0 }
+        SampleConversion { from, samples: 0, rounded: 0, largest_error: 0.0, largest_magnitude: 0.0 }
     }
 
     /// Counts one sample: `value` in the file, `stored` in the store.
     #[inline]
     pub fn count(&mut self, value: f64, stored: f32) {
         self.samples += 1;
+        self.largest_magnitude = self.largest_magnitude.max(value.abs());
         let error = (value - stored as f64).abs();
         if error > 0.0 {
             self.rounded += 1;
@@ -143,8 +146,11 @@ impl fmt::Display for SampleConversion {
         write!(f, "{} converted to {}", t.from.name(), SampleType::from(t.from.stored()).name())?;
         match t.from {
             SampleType::I8 => write!(f, " (every int8 value is an int16: exact)"),
-            SampleType::I32 | SampleType::U32 if t.rounded == 0 => {
+            SampleType::I32 | SampleType::U32 if t.rounded == 0 && t.largest_magnitude <= F32_EXACT_INTEGERS => {
                 write!(f, ": exact (every value within ±2^24, where float32 holds every integer)")
+            }
+            SampleType::I32 | SampleType::U32 if t.rounded == 0 => {
+                write!(f, ": exact (values beyond ±2^24, up to {}, but each one a float32)", t.largest_magnitude)
             }
             SampleType::I32 | SampleType::U32 => write!(
                 f,
@@ -247,7 +253,12 @@ mod tests {
     fn the_note_says_whether_the_conversion_was_exact() {
         let mut tally = SampleConversion::new(SampleType::I32);
         tally.count(5.0, 5.0);
-        assert!(tally.to_string().contains("int32 converted to float32: exact"));
+        assert!(tally.to_string().contains("int32 converted to float32: exact (every value within ±2^24"));
+        // Large multiples of 64 are float32s too: exact, for that reason.
+        let mut multiples = SampleConversion::new(SampleType::U32);
+        multiples.count(28_760_000.0, 28_760_000.0f32);
+        let note = multiples.to_string();
+        assert!(note.contains("exact (values beyond ±2^24, up to 28760000, but each one a float32)"), "{note}");
         let big = 16_777_217i64;
         tally.count(big as f64, big as f32);
         let note = tally.to_string();

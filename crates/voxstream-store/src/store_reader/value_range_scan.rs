@@ -1,9 +1,11 @@
-//! Foreign stores' value range: scanned at open from the stored samples of one level ([`crate::value_range`]), and
-//! the samples read later that lie outside it (they saturate when normalised).
+//! Foreign stores' value range and percentiles: scanned at open from the stored samples of one level
+//! ([`crate::value_range`], [`crate::value_histogram`]), and the samples read later that lie outside the range (they
+//! saturate when normalised).
 
 use crate::error::StoreError;
 use crate::level_source::LevelSource;
 use crate::metadata_check::validate_attributes;
+use crate::value_histogram::ValueHistogram;
 use crate::value_range::{bricks_over_stored_chunks, fold_samples, unwritten_fill_value, ScanProgress, EMPTY_RANGE};
 
 use super::StoreReader;
@@ -29,16 +31,23 @@ impl StoreReader {
         if let Some(fill) = unwritten_fill_value(array, leading, self.info.dtype, stored) {
             range = [fill, fill];
         }
+        // The stored samples' percentiles too, as an import keeps them: the default transfer function is placed
+        // over the bulk of the values, not stretched by a few outliers.
+        let mut histogram = ValueHistogram::new(self.info.dtype);
         let total = bricks.len() as u64;
         for (done, ijk) in bricks.into_iter().enumerate() {
             // A brick that cannot be read is left out here: reading it fails again when it is wanted, and is
             // reported then (its ancestor stands in), as for any unreadable brick.
             if let Ok(samples) = self.brick(level, ijk) {
-                fold_samples(&samples.to_f32(), &mut range);
+                let values = samples.to_f32();
+                fold_samples(&values, &mut range);
+                histogram.add(&values);
             }
             progress(done as u64 + 1, total);
         }
         self.attributes.value_range = if range[0] <= range[1] { range } else { [0.0, 1.0] };
+        let percentiles = histogram.stored_percentiles();
+        self.attributes.value_percentiles = (!percentiles.is_empty()).then_some(percentiles);
         validate_attributes(&self.path, &self.attributes)?;
         // The bricks were read against the placeholder range.
         self.clipped.store(0, std::sync::atomic::Ordering::Relaxed);
