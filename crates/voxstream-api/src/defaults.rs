@@ -137,6 +137,20 @@ pub fn omero_transfer_function(window: [f64; 2], color: Option<[f32; 3]>) -> Res
 
 pub use voxstream_render::annotations::shown_number;
 
+/// A sample value as a user would read it: values that are float32s (every stored sample is) with float32's
+/// shortest digits (`5.4288025`, not `5.428802490234375`), otherwise as [`shown_number`].
+pub fn shown_value(value: f64) -> String {
+    let single = value as f32;
+    if !(value.is_finite() && f64::from(single) == value) {
+        return shown_number(value);
+    }
+    if value == 0.0 || (1e-4..1e15).contains(&value.abs()) {
+        format!("{single}")
+    } else {
+        format!("{single:e}")
+    }
+}
+
 /// `n` and the noun in its number: `1 level`, `4 levels` (`singular` or `plural` as `n` asks).
 pub fn counted(n: impl Into<u64>, singular: &str, plural: &str) -> String {
     let n = n.into();
@@ -156,4 +170,21 @@ pub fn check_placement(name: &str, placement: &VolumePlacement) -> Result<()> {
         );
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn values_and_counts_read_as_a_user_would_write_them() {
+        assert_eq!(shown_value(f64::from(5.428_802_5f32)), "5.4288025");
+        assert_eq!(shown_value(f64::from(2.171_455_2e-13f32)), "2.1714552e-13");
+        assert_eq!(shown_value(3050.0), "3050");
+        assert_eq!(shown_value(-888.0), "-888");
+        assert_eq!(shown_value(0.1), "0.1", "not a float32: as shown_number");
+        assert_eq!(counted(1u64, "level", "levels"), "1 level");
+        assert_eq!(counted(4u64, "level", "levels"), "4 levels");
+        assert_eq!(counted(0u64, "brick", "bricks"), "0 bricks");
+    }
 }

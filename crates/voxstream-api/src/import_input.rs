@@ -106,12 +106,12 @@ pub struct ImportInput {
 /// Opens `input` as `settings` say (volume file, raw samples, or a mesh or particle file to bake).
 pub fn open_input(input: &Path, settings: &ImportSettings) -> Result<ImportInput> {
     let is_geometry = voxstream_geometry::formats::is_geometry_file_name(input) && settings.raw.is_none();
+    if !is_geometry && (settings.resolution.is_some() || settings.amplify.is_some()) {
+        bail!("--resolution and --amplify apply to mesh and particle files; {} is not one", input.display());
+    }
     // A missing input, with the nearest name beside it (as `render` says of stores and meshes).
     if !is_geometry && std::fs::symlink_metadata(input).is_err() {
         bail!("{}: not found{}", input.display(), crate::near_names::sibling_hint(input, false));
-    }
-    if !is_geometry && (settings.resolution.is_some() || settings.amplify.is_some()) {
-        bail!("--resolution and --amplify apply to mesh and particle files; {} is not one", input.display());
     }
     if is_geometry {
         if settings.spacing.is_some()

@@ -4,7 +4,7 @@ use std::ops::ControlFlow;
 
 use anyhow::{bail, Result};
 use indicatif::{ProgressBar, ProgressStyle};
-use voxstream_api::defaults::counted;
+use voxstream_api::defaults::{counted, shown_value};
 use voxstream_api::import_input::{open_input, ImportSettings, RawSettings};
 use voxstream_api::remote_output::remote_output;
 
@@ -117,8 +117,8 @@ pub fn run(args: &ImportArgs) -> Result<()> {
             counted(report.levels as u64, "level", "levels"),
             counted(report.bricks_written.iter().sum::<u64>(), "brick", "bricks"),
             report.bricks_empty.iter().sum::<u64>(),
-            report.value_range[0],
-            report.value_range[1],
+            shown_value(report.value_range[0]),
+            shown_value(report.value_range[1]),
             uploaded.map(|u| format!("; {} objects ({} bytes) uploaded", u.objects, u.bytes)).unwrap_or_default()
         );
     }

@@ -2,6 +2,7 @@
 
 use anyhow::Result;
 use serde::Serialize;
+use voxstream_api::defaults::shown_value;
 use voxstream_store::image_planes::PlaneChoice;
 use voxstream_store::{BrickCodec, StoreReader};
 
@@ -182,9 +183,9 @@ pub fn run(args: &InfoArgs) -> Result<()> {
     if let Some(orientation) = reader.info().orientation {
         println!("orientation  {orientation}");
     }
-    println!("value range  {} to {}", info.value_range[0], info.value_range[1]);
+    println!("value range  {} to {}", shown_value(info.value_range[0]), shown_value(info.value_range[1]));
     if let Some(percentiles) = &info.value_percentiles {
-        let text: Vec<String> = percentiles.iter().map(|[p, v]| format!("{p}%: {v}")).collect();
+        let text: Vec<String> = percentiles.iter().map(|[p, v]| format!("{p}%: {}", shown_value(*v))).collect();
         println!("percentiles  {}", text.join(", "));
     }
     if let Some(planes) = planes_description(reader.image_planes()) {

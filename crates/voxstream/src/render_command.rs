@@ -35,6 +35,8 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         check_budget(args.budget_mb, args.width, args.height, "--width/--height")?;
         return crate::fluid_command::run(args);
     }
+    // Bytes read before the store is open: its metadata, and for other tools' stores the scan of their values.
+    let read_at_start = bytes_read();
     crate::fluid_command::check_no_fluid_flags(&args.input.fluid)?;
     check_flags(args)?;
     let budget = check_budget(args.budget_mb, args.width, args.height, "--width/--height")?;
@@ -264,6 +266,7 @@ fn render_source(args: &RenderArgs, source: Source, budget: &MemoryBudget) -> Re
     if let (Some(before), Some(after)) = (read_before, bytes_read()) {
         if source.producer_cache_bytes > 0 {
             stats.file_bytes_read = Some(after - before);
+            stats.file_bytes_read_opening = read_at_start.map(|start| before.saturating_sub(start));
             let m = session.cache().shape().brick_size as u64;
             stats.brick_bytes_used = Some(residency.bricks as u64 * m * m * m * source.sample_bytes);
         }

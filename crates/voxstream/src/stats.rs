@@ -54,6 +54,10 @@ pub struct RunStats {
     pub bytes_uploaded: u64,
     /// Bytes read from files while rendering (stores only: compressed shards and metadata).
     pub file_bytes_read: Option<u64>,
+    /// Bytes read from files while opening the store, before rendering (its metadata; for other tools' OME-Zarr,
+    /// also the scan of one level's stored samples for its value range, unless `--value-range` is given).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub file_bytes_read_opening: Option<u64>,
     /// Stores: the host caches' budgets (decoded bricks, and bricks as stored: compressed), and what the compressed
     /// one held at the end and served (reads not made again).
     #[serde(skip_serializing_if = "Option::is_none")]

@@ -120,3 +120,54 @@ fn channels_and_time_points_are_chosen_listed_and_drawn() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Other tools' images (zarr-python, as the walk-through wrote them): one bright outlier does not stretch the default
+/// transfer function over an empty image (the open-time scan keeps the samples' percentiles), the scan's bytes are
+/// counted in `--stats` apart from rendering's, and OME-NGFF RFC-4's anatomical orientation is read.
+#[test]
+fn an_outlier_an_orientation_and_the_opening_scan_of_other_tools_images() {
+    let dir = scratch("channels_and_time", "outlier");
+    let script = r#"
+import sys, numpy as np, zarr
+out = sys.argv[1]
+z, y, x = np.mgrid[0:48, 0:48, 0:48].astype(np.float64)
+r = np.sqrt((x - 24) ** 2 + (y - 24) ** 2 + (z - 24) ** 2) / 18
+data = np.where(r < 1, 1000 + 2000 * (1 - r), 0).astype(np.uint16)
+data[20:26, 20:26, 20:26] = 60000
+def write(path, axes):
+    group = zarr.open_group(path, mode="w", zarr_format=2)
+    for i, a in enumerate([data, data[::2, ::2, ::2]]):
+        group.create_array(str(i), shape=a.shape, chunks=(16, 16, 16), dtype=a.dtype)[:] = a
+    datasets = [{"path": str(i), "coordinateTransformations": [{"type": "scale", "scale": [2.0 ** i] * 3}]}
+                for i in range(2)]
+    group.attrs["multiscales"] = [{"version": "0.4", "axes": axes, "datasets": datasets}]
+write(out + "/outlier.ome.zarr", [{"name": n, "type": "space"} for n in "zyx"])
+values = {"z": "superior-to-inferior", "y": "anterior-to-posterior", "x": "left-to-right"}
+write(out + "/oriented.ome.zarr",
+      [{"name": n, "type": "space", "orientation": {"type": "anatomical", "value": values[n]}} for n in "zyx"])
+"#;
+    let python = data_folder().join("venv/bin/python");
+    let status = Command::new(&python).args(["-c", script, &dir.display().to_string()]).status().unwrap();
+    assert!(status.success(), "writing the OME-Zarr images failed");
+    let (output, pixels) = render(&dir, &["outlier.ome.zarr", "--stats", "s.json"], "outlier.png");
+    assert!(output.status.success(), "{}", stderr(&output));
+    let lit = pixels.chunks_exact(3).filter(|p| p.iter().any(|&v| v > 8)).count();
+    assert!(lit > 300, "the ball shows under the default transfer function: {lit} pixels lit");
+    assert!(!stderr(&output).contains("the image is empty"), "{}", stderr(&output));
+    let info = String::from_utf8_lossy(&voxstream(&["info", "outlier.ome.zarr"], &dir).stdout).to_string();
+    assert!(info.contains("value range  0 to 60000") && info.contains("99.5%:"), "{info}");
+    // The open-time scan read level 0's chunks (48³ u16, ~220 kB raw); with --value-range it is not made.
+    let stats = |name: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(dir.join(name)).unwrap()).unwrap()
+    };
+    let scanned = stats("s.json")["file_bytes_read_opening"].as_u64().unwrap();
+    let (output, _) = render(&dir, &["outlier.ome.zarr", "--value-range", "0,60000", "--stats", "v.json"], "v.png");
+    assert!(output.status.success(), "{}", stderr(&output));
+    let given = stats("v.json")["file_bytes_read_opening"].as_u64().unwrap();
+    assert!(scanned > given + 20_000, "opening read {scanned} bytes with the scan, {given} without");
+    // RFC-4: x left-to-right (R), y anterior-to-posterior (P), z superior-to-inferior (I).
+    let output = voxstream(&["info", "oriented.ome.zarr", "--json"], &dir);
+    let json: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    assert_eq!(json["orientation"], "RPI", "{json}");
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -407,13 +407,15 @@ fn foreign_ome_zarr_v2_and_v3_render_like_the_native_store() {
     let Some(dir) = real_data_dir() else { return };
     let work = scratch("foreign");
     let native = import(&dir, "mni152_t1.nii.gz", None, &work.join("native.zarr"));
+    let native_orientation = native.info().orientation;
+    assert_eq!(native_orientation.map(|o| o.code()).as_deref(), Some("RAS"), "the template's sform");
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scripts/make_foreign_ome_zarr.py");
     let output = std::process::Command::new(venv_python())
         .arg(&script)
         .arg(dir.join("mni152_t1.reference.npy"))
         .arg(work.join("v3.zarr"))
         .arg(work.join("v2.zarr"))
-        .args(["-98", "-134", "-72"])
+        .args(["-98", "-134", "-72", "RAS"])
         .output()
         .expect("python3");
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
@@ -446,6 +448,8 @@ fn foreign_ome_zarr_v2_and_v3_render_like_the_native_store() {
         assert!(!reader.is_native());
         assert_eq!(reader.info().dims, [197, 233, 189]);
         assert_eq!(reader.info().origin, [-98.0, -134.0, -72.0]);
+        // The RFC-4 orientation zarr-python's metadata carries: the same default view as the native import's.
+        assert_eq!(reader.info().orientation, native_orientation);
         let level0 = reader.read_region(0, [0, 0, 0], [197, 233, 189]).unwrap();
         let (expected, _) = reference(&dir, "mni152_t1");
         assert!(level0 == expected, "{name}: level 0 differs");
@@ -473,7 +477,7 @@ fn the_gpu_renders_real_stores_and_a_foreign_ome_zarr_like_the_cpu() {
         .arg(dir.join("mni152_t1.reference.npy"))
         .arg(work.join("v3.zarr"))
         .arg(work.join("v2.zarr"))
-        .args(["-98", "-134", "-72"])
+        .args(["-98", "-134", "-72", "RAS"])
         .output()
         .expect("python3");
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
