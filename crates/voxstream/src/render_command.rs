@@ -42,7 +42,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let budget = check_budget(args.budget_mb, args.width, args.height, "--width/--height")?;
     let source = open_source(args, &budget)?;
     let meta = source.meta.clone();
-    let result = render_source(args, source, &budget);
+    let result = render_source(args, source, &budget, read_at_start);
     if let Some(warning) = meta.clipped_warning() {
         eprintln!("{warning}");
     }
@@ -123,7 +123,8 @@ pub fn check_fade_frames(fade_frames: u32) -> Result<()> {
     Ok(())
 }
 
-fn render_source(args: &RenderArgs, source: Source, budget: &MemoryBudget) -> Result<()> {
+/// Renders `source` as `args` say; `read_at_start`: the process' bytes read before the source was opened.
+fn render_source(args: &RenderArgs, source: Source, budget: &MemoryBudget, read_at_start: Option<u64>) -> Result<()> {
     let Source { producer, meta: source } = source;
     let prepared = prepare_view(args, &source)?;
     let PreparedView { transfer_function, camera: view, drawing_surfaces, .. } = &prepared;
