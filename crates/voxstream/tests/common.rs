@@ -194,3 +194,41 @@ pub fn write_nrrd<V: NrrdSample>(
     }
     std::fs::write(path, bytes).unwrap();
 }
+
+/// A NIfTI-1 header (352 bytes, little endian, `n+1`) for `dims` uint8 samples following it, `pixdim` being
+/// `[qfac, dx, dy, dz]` and `units` the `xyzt_units` byte; no qform or sform (the caller sets them).
+pub fn nifti_u8_header(dims: [usize; 3], pixdim: [f32; 4], units: u8) -> Vec<u8> {
+    let mut h = vec![0u8; 352];
+    h[0..4].copy_from_slice(&348i32.to_le_bytes());
+    for (n, d) in [3i16, dims[0] as i16, dims[1] as i16, dims[2] as i16, 1, 1, 1, 1].iter().enumerate() {
+        h[40 + 2 * n..42 + 2 * n].copy_from_slice(&d.to_le_bytes());
+    }
+    h[70..72].copy_from_slice(&2i16.to_le_bytes()); // uint8
+    h[72..74].copy_from_slice(&8i16.to_le_bytes());
+    for (n, p) in pixdim.iter().enumerate() {
+        h[76 + 4 * n..80 + 4 * n].copy_from_slice(&p.to_le_bytes());
+    }
+    h[108..112].copy_from_slice(&352f32.to_le_bytes());
+    h[123] = units;
+    h[344..348].copy_from_slice(b"n+1\0");
+    h
+}
+
+/// A reference array written by `scripts/make_references.py` (`NAME.reference.npy`, C order, uint8 or float32, as
+/// f32) and its JSON geometry (`NAME.reference.json`), from the real-data folder `dir`.
+pub fn reference(dir: &Path, name: &str) -> (Vec<f32>, serde_json::Value) {
+    let bytes = std::fs::read(dir.join(format!("{name}.reference.npy"))).unwrap();
+    let header_len = u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
+    let header = String::from_utf8_lossy(&bytes[10..10 + header_len]).into_owned();
+    let body = &bytes[10 + header_len..];
+    let values = if header.contains("'|u1'") {
+        body.iter().map(|&b| b as f32).collect()
+    } else if header.contains("'<f4'") {
+        body.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
+    } else {
+        panic!("unexpected reference dtype in {header}");
+    };
+    let meta =
+        serde_json::from_str(&std::fs::read_to_string(dir.join(format!("{name}.reference.json"))).unwrap()).unwrap();
+    (values, meta)
+}

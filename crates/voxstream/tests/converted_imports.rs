@@ -129,19 +129,7 @@ fn raw_dtype_f64_with_a_unit_and_info_shows_it() {
 #[test]
 fn nifti_millimetres_reach_the_store_and_info() {
     let dir = scratch("converted-imports", "nifti");
-    let mut h = vec![0u8; 352];
-    h[0..4].copy_from_slice(&348i32.to_le_bytes());
-    for (n, d) in [3i16, DIMS[0] as i16, DIMS[1] as i16, DIMS[2] as i16, 1, 1, 1, 1].iter().enumerate() {
-        h[40 + 2 * n..42 + 2 * n].copy_from_slice(&d.to_le_bytes());
-    }
-    h[70..72].copy_from_slice(&2i16.to_le_bytes()); // uint8
-    h[72..74].copy_from_slice(&8i16.to_le_bytes());
-    for (n, p) in [1.0f32, 0.9, 0.9, 1.2].iter().enumerate() {
-        h[76 + 4 * n..80 + 4 * n].copy_from_slice(&p.to_le_bytes());
-    }
-    h[108..112].copy_from_slice(&352f32.to_le_bytes());
-    h[123] = 2 | 8; // millimetres, seconds
-    h[344..348].copy_from_slice(b"n+1\0");
+    let mut h = common::nifti_u8_header(DIMS.map(|d| d as usize), [1.0, 0.9, 0.9, 1.2], 2 | 8); // millimetres, seconds
     h.extend((0..count()).map(|i| (i % 200) as u8));
     std::fs::write(dir.join("t1.nii"), h).unwrap();
     let err = import(&dir, &["import", "t1.nii", "--out", "t1.zarr"]);

@@ -7,20 +7,8 @@ use std::path::Path;
 
 mod common;
 
-use common::{data_folder, real_data_dir, scratch, stderr, voxstream};
+use common::{data_folder, real_data_dir, reference, scratch, stderr, voxstream};
 use voxstream_store::{DType, StoreReader};
-
-/// Reads a float32 reference `.npy` (C order) and its JSON geometry.
-fn reference(dir: &Path, name: &str) -> (Vec<f32>, serde_json::Value) {
-    let bytes = std::fs::read(dir.join(format!("{name}.reference.npy"))).unwrap();
-    let header_len = u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
-    let header = String::from_utf8_lossy(&bytes[10..10 + header_len]).into_owned();
-    assert!(header.contains("'<f4'"), "{name}: float32 reference expected, header {header}");
-    let values =
-        bytes[10 + header_len..].chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
-    let json = std::fs::read_to_string(dir.join(format!("{name}.reference.json"))).unwrap();
-    (values, serde_json::from_str(&json).unwrap())
-}
 
 fn import(input: &Path, store: &Path, work: &Path) -> StoreReader {
     import_saying(input, store, work).0

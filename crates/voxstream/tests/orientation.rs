@@ -7,7 +7,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{read_png, scratch, stderr, voxstream};
+use common::{nifti_u8_header, read_png, scratch, stderr, voxstream};
 use voxstream_store::StoreReader;
 
 /// Samples per axis of the test head (even at every level, so that a flipped copy's levels are the same blocks).
@@ -34,25 +34,13 @@ fn head(i: usize, j: usize, k: usize) -> u8 {
 /// A NIfTI-1 of the head: `flip` stores it with x and y reversed (LPS index axes) and says so with a qform of 180°
 /// about z; `qform` false writes no orientation at all.
 fn write_nifti(path: &Path, flip: bool, qform: bool) {
-    let mut h = vec![0u8; 352];
-    h[0..4].copy_from_slice(&348i32.to_le_bytes());
-    for (n, d) in [3i16, N as i16, N as i16, N as i16, 1, 1, 1, 1].iter().enumerate() {
-        h[40 + 2 * n..42 + 2 * n].copy_from_slice(&d.to_le_bytes());
-    }
-    h[70..72].copy_from_slice(&2i16.to_le_bytes()); // uint8
-    h[72..74].copy_from_slice(&8i16.to_le_bytes());
-    for (n, p) in [1.0f32, 1.0, 1.0, 1.0].iter().enumerate() {
-        h[76 + 4 * n..80 + 4 * n].copy_from_slice(&p.to_le_bytes());
-    }
-    h[108..112].copy_from_slice(&352f32.to_le_bytes());
-    h[123] = 2; // millimetres
+    let mut h = nifti_u8_header([N; 3], [1.0; 4], 2); // millimetres
     if qform {
         h[252..254].copy_from_slice(&1i16.to_le_bytes());
         // Quaternion (b, c, d): none is the identity (RAS), d = 1 is 180° about z (x and y reversed).
         let d = if flip { 1.0f32 } else { 0.0 };
         h[264..268].copy_from_slice(&d.to_le_bytes());
     }
-    h[344..348].copy_from_slice(b"n+1\0");
     for k in 0..N {
         for j in 0..N {
             for i in 0..N {

@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 mod common;
 
-use common::{data_folder, real_data_dir};
+use common::{data_folder, real_data_dir, reference};
 use glam::DVec3;
 use voxstream::render_command::{default_store_transfer_function, store_camera, store_placement};
 use voxstream_engine::{LoopLimits, Mode, Session};
@@ -50,24 +50,6 @@ fn venv_python() -> PathBuf {
     let python = data_folder().join("venv/bin/python");
     assert!(python.exists(), "{} missing: run scripts/fetch-real-data.sh", python.display());
     python
-}
-
-/// Reads a reference `.npy` (C order) as f32, with its JSON geometry.
-fn reference(dir: &Path, name: &str) -> (Vec<f32>, serde_json::Value) {
-    let bytes = std::fs::read(dir.join(format!("{name}.reference.npy"))).unwrap();
-    let header_len = u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
-    let header = String::from_utf8_lossy(&bytes[10..10 + header_len]).into_owned();
-    let body = &bytes[10 + header_len..];
-    let values = if header.contains("'|u1'") {
-        body.iter().map(|&b| b as f32).collect()
-    } else if header.contains("'<f4'") {
-        body.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
-    } else {
-        panic!("unexpected reference dtype in {header}");
-    };
-    let meta =
-        serde_json::from_str(&std::fs::read_to_string(dir.join(format!("{name}.reference.json"))).unwrap()).unwrap();
-    (values, meta)
 }
 
 fn import(dir: &Path, file: &str, raw: Option<&RawLayout>, store: &Path) -> Arc<StoreReader> {
