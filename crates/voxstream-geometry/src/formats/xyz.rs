@@ -37,7 +37,6 @@ pub(super) fn column_role(name: &str) -> ColumnRole {
 }
 
 /// Which column holds what.
-#[derive(Clone)]
 struct Layout {
     columns: usize,
     position: [usize; 3],
@@ -107,68 +106,13 @@ fn fields(line: &str) -> Vec<&str> {
     }
 }
 
-/// Bytes of text below which [`parse`] reads on one thread, and the least it hands each task above.
-const PARALLEL_CHUNK_BYTES: usize = 1 << 20;
-
-/// Parses columns of text: the lines up to the one that fixes the columns' layout one after another, the rest in
-/// chunks of whole lines on every core (a million text points took seconds on one), joined in file order; an error is
-/// the first in file order, with its line number, as one thread would find it.
+/// Parses columns of text.
 pub fn parse(bytes: &[u8], path: &Path) -> Result<RawParticles, GeometryError> {
-    use rayon::prelude::*;
     let mut lines = Lines::default();
-    let mut rest = bytes;
-    let mut number = 1u64;
-    while lines.layout.is_none() {
-        let (line, tail) = match rest.iter().position(|&b| b == b'\n') {
-            Some(end) => (&rest[..end], Some(&rest[end + 1..])),
-            None => (rest, None),
-        };
+    for (line, number) in bytes.split(|&b| b == b'\n').zip(1u64..) {
         lines.read(line, number, path)?;
-        number += 1;
-        match tail {
-            Some(tail) => rest = tail,
-            None => return Ok(lines.raw),
-        }
     }
-    // Chunks of whole lines, each with the number of its first line.
-    let size = PARALLEL_CHUNK_BYTES.max(rest.len() / (4 * rayon::current_num_threads().max(1)) + 1);
-    let mut chunks = Vec::new();
-    while !rest.is_empty() {
-        let cut = if rest.len() <= size {
-            rest.len()
-        } else {
-            rest[size..].iter().position(|&b| b == b'\n').map_or(rest.len(), |i| size + i + 1)
-        };
-        chunks.push(&rest[..cut]);
-        rest = &rest[cut..];
-    }
-    let breaks: Vec<u64> = chunks.par_iter().map(|c| c.iter().filter(|&&b| b == b'\n').count() as u64).collect();
-    let starts: Vec<u64> = breaks.iter().scan(number, |next, n| Some(std::mem::replace(next, *next + n))).collect();
-    let (layout, first_line) = (lines.layout.clone(), lines.first_line);
-    let parts: Vec<Result<RawParticles, GeometryError>> = chunks
-        .par_iter()
-        .zip(starts)
-        .map(|(chunk, start)| {
-            let mut part = Lines { layout: layout.clone(), first_line, raw: RawParticles::default() };
-            let chunk = chunk.strip_suffix(b"\n").unwrap_or(chunk);
-            for (line, number) in chunk.split(|&b| b == b'\n').zip(start..) {
-                part.read(line, number, path)?;
-            }
-            Ok(part.raw)
-        })
-        .collect();
-    let mut raw = lines.raw;
-    for part in parts {
-        let part = part?;
-        raw.positions.extend_from_slice(&part.positions);
-        raw.smoothing.extend_from_slice(&part.smoothing);
-        raw.masses.extend_from_slice(&part.masses);
-        raw.values.extend_from_slice(&part.values);
-        if raw.value_name.is_empty() {
-            raw.value_name = part.value_name;
-        }
-    }
-    Ok(raw)
+    Ok(lines.raw)
 }
 
 /// The reading state: the columns' layout once the first line has given it, and the particles read since the last
@@ -405,48 +349,6 @@ mod tests {
         assert_eq!(p.positions, vec![[1.0, 2.0, 3.0]]);
         assert_eq!(p.smoothing, vec![0.5]);
         assert!(p.values.is_empty());
-    }
-
-    /// [`parse`] on one thread, line after line: the reference of the parallel reading.
-    fn parse_serially(bytes: &[u8]) -> Result<RawParticles, GeometryError> {
-        let mut lines = Lines::default();
-        for (line, number) in bytes.split(|&b| b == b'\n').zip(1u64..) {
-            lines.read(line, number, Path::new("t.csv"))?;
-        }
-        Ok(lines.raw)
-    }
-
-    #[test]
-    fn a_large_file_read_on_every_core_is_what_one_thread_reads() {
-        // Several chunks: a comment and blank lines first, a header, comments and blank lines among the rows.
-        let mut text = String::from("# made by a test\n\n x , y , z , mass , T \n");
-        for i in 0..200_000u32 {
-            if i % 997 == 0 {
-                text.push_str("# a comment\n\n");
-            }
-            text.push_str(&format!(
-                "{},{},{},{},{}\r\n",
-                i as f64 * 0.5,
-                -(i as f64),
-                i % 7,
-                1 + i % 3,
-                0.25 * i as f64
-            ));
-        }
-        assert!(text.len() > 4 * PARALLEL_CHUNK_BYTES, "{} bytes", text.len());
-        let parallel = parse(text.as_bytes(), Path::new("t.csv")).unwrap();
-        assert_eq!(parallel, parse_serially(text.as_bytes()).unwrap());
-        assert_eq!(parallel.positions.len(), 200_000);
-        assert_eq!(parallel.value_name, "T");
-        // A bad field far into the file: the same message and line number, and the first of two bad lines.
-        let bad = text.replacen("50000,-100000,", "50000,oops,", 1).replacen("60000,-120000,", "60000,also,", 1);
-        let (expected, found) =
-            (parse_serially(bad.as_bytes()).unwrap_err(), parse(bad.as_bytes(), Path::new("t.csv")).unwrap_err());
-        assert_eq!(found.to_string(), expected.to_string());
-        assert!(found.to_string().contains("'oops' is not a number"), "{found}");
-        // Without a header, and ending without a line break.
-        let plain: String = (0..60_000).map(|i| format!("{i} {} 3\n", i * 2)).collect::<String>() + "1 2 3";
-        assert_eq!(parse(plain.as_bytes(), Path::new("t.csv")).unwrap(), parse_serially(plain.as_bytes()).unwrap());
     }
 
     #[test]
