@@ -469,3 +469,44 @@ fn the_viewer_draws_the_bars_render_draws() {
     assert!(mean_difference(&plain, &shown) > 0.5, "no bars were drawn");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Issue 42 items 7 and 8 in the viewer: with `--projection max`, a clipping plane, a slice alone and a slice drawn
+/// with the volume, each script's screenshot (the image as shown) is `render`'s image with the same camera, transfer
+/// function and flags.
+#[test]
+fn the_viewer_draws_projections_planes_and_slices_as_render_does() {
+    require("xvfb-run");
+    let dir = scratch("tools");
+    store(&dir);
+    let viewer = env!("CARGO_BIN_EXE_voxstream");
+    let cases: [&[&str]; 4] = [
+        &["--projection", "max"],
+        &["--clip-plane", "20,0,0,1,0,0"],
+        &["--slice", "z=18"],
+        &["--slice", "z=18", "--with-volume"],
+    ];
+    let mut images = Vec::new();
+    for (n, flags) in cases.iter().enumerate() {
+        let script = format!("wait-final 600\nscreenshot v{n}.png\nsave-camera c{n}.json\nsave-tf t{n}.json\nquit\n");
+        std::fs::write(dir.join(format!("s{n}.txt")), script).unwrap();
+        let command = format!(
+            "{viewer} view balls.zarr --width 160 --height 120 --budget-mb 64 {} --script s{n}.txt",
+            flags.join(" ")
+        );
+        let out = under_xvfb(&dir, &command);
+        assert!(out.status.success(), "viewer {flags:?}: {}", String::from_utf8_lossy(&out.stderr));
+        let shown = pixels(&dir.join(format!("v{n}.png")));
+        let (camera, tf) = (format!("c{n}.json"), format!("t{n}.json"));
+        let args = [&["--camera", camera.as_str(), "--tf", tf.as_str()][..], flags].concat();
+        let rendered = render_balls(&dir, &args, &format!("r{n}.png"));
+        assert_eq!(shown, rendered, "{flags:?}: the viewer's image and render's differ");
+        images.push(shown);
+    }
+    // Four different pictures: each flag changed what was drawn.
+    for a in 0..images.len() {
+        for b in a + 1..images.len() {
+            assert!(mean_difference(&images[a], &images[b]) > 0.5, "{:?} and {:?} draw alike", cases[a], cases[b]);
+        }
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
