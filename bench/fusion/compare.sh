@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Depth-camera fusion against Open3D (issue 49, BENCHMARKS.md "Depth fusion"): synthetic Kinect-like sequences of
 # the two real meshes (the CGAL bunny and the Stanford dragon, on a floor and in a room) fused by `voxstream fuse` and by Open3D's tensor TSDF
-# (VoxelBlockGrid) on the same frames and voxel size, both with ground-truth poses and with tracking; surfaces
-# measured against the true scene by surface_error.py. Prints a markdown table; everything else lands in $WORK.
+# (VoxelBlockGrid) on the same frames and voxel size, both with ground-truth poses and with tracking (voxstream also
+# with --sign-only, the thesis' two bits without surface offsets); surfaces measured against the true scene by
+# surface_error.py. SKIP_O3D=1 reuses Open3D's results already in $WORK. Prints a markdown table; everything else lands in $WORK.
 #
 #   bash bench/fusion/compare.sh [FRAMES]        (default 300: one orbit of 10 s at 30 Hz)
 #
@@ -24,11 +25,13 @@ for case in bunny:data/real/bunny00.off:0 dragon:data/real/dragon_vrip.ply.gz:0 
     echo "== $name: $FRAMES frames" >&2
     "$VOXSTREAM" synth-rgbd "$file" --out "$seq" --frames "$FRAMES" --walls "$walls" --overwrite --quiet
     "$VOXSTREAM" fuse "$seq" --voxel "$VOXEL" --points "$WORK/$name-vx.ply" --stats "$WORK/$name-vx.json" --quiet
+    "$VOXSTREAM" fuse "$seq" --voxel "$VOXEL" --sign-only --points "$WORK/$name-vx-sign.ply" \
+        --stats "$WORK/$name-vx-sign.json" --quiet
     "$VOXSTREAM" fuse "$seq" --voxel "$VOXEL" --poses track --points "$WORK/$name-vx-track.ply" \
         --trajectory "$WORK/$name-vx-track.txt" --stats "$WORK/$name-vx-track.json" --quiet
-    "$PY" bench/fusion/open3d_peer.py "$seq" --voxel "$VOXEL" --depth-max 5 --half-pixel-fix --odometry \
+    [ "${SKIP_O3D:-0}" = 1 ] && [ -f "$WORK/$name-o3d-err.json" ] || "$PY" bench/fusion/open3d_peer.py "$seq" --voxel "$VOXEL" --depth-max 5 --half-pixel-fix --odometry \
         --json "$WORK/$name-o3d.json" --points "$WORK/$name-o3d.ply" --trajectory "$WORK/$name-o3d-track.txt" >/dev/null
-    for run in vx vx-track o3d; do
+    for run in vx vx-sign vx-track $([ "${SKIP_O3D:-0}" = 1 ] && [ -f "$WORK/$name-o3d-err.json" ] || echo o3d); do
         "$PY" bench/fusion/surface_error.py --truth "$seq/scene.ply" --points "$WORK/$name-$run.ply" \
             --dataset "$seq" --json "$WORK/$name-$run-err.json" >/dev/null
     done

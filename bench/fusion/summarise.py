@@ -31,6 +31,11 @@ def main(work):
         scene = vx["peak_brick_bytes"] / MiB
         print(row(f"{name}, voxstream (ground truth)", load(work / f"{name}-vx-err.json"), vx["frames_per_second"],
                   scene, scene + vx["ring_bytes"] / MiB, vx["peak_rss_bytes"] / MiB, "–"))
+        if (work / f"{name}-vx-sign.json").exists():
+            vs = load(work / f"{name}-vx-sign.json")
+            sign = vs["peak_brick_bytes"] / MiB
+            print(row(f"{name}, voxstream --sign-only (ground truth)", load(work / f"{name}-vx-sign-err.json"),
+                      vs["frames_per_second"], sign, sign + vs["ring_bytes"] / MiB, vs["peak_rss_bytes"] / MiB, "–"))
         print(row(f"{name}, voxstream (tracked)", load(work / f"{name}-vx-track-err.json"),
                   vt["frames_per_second"], vt["peak_brick_bytes"] / MiB,
                   (vt["peak_brick_bytes"] + vt["ring_bytes"]) / MiB, vt["peak_rss_bytes"] / MiB,

@@ -1,10 +1,19 @@
 //! A binary brick of the fused scene (seed 004 §8.4.1): 8³ voxels, two bits each — the *sign* of the voxel centre's
 //! averaged distance to the surface (set = behind the surface) and whether that sign is *confident* (§8.3.4) — the
-//! average error of the samples that last set it, and the colours of its surface voxels (§8.5).
+//! average error of the samples that last set it, the colours of its surface voxels (§8.5), and their surface
+//! offsets.
 //!
 //! Bits are stored as eight 64-bit words, one per z slice, bit `x + 8·y`. Colours are kept in blocks of 4×4×2 voxels
 //! (the thesis' sub-brick of 32 voxels) as RGB565, and only for blocks that hold a surface voxel: a brick is 16
 //! blocks, and a typical surface brick colours a few of them.
+//!
+//! **Surface offsets** (our addition to the thesis' two bits): a voxel whose averaged distance lies within
+//! [`OFFSET_RANGE`] voxels of the surface also keeps that distance, as one signed byte (1/63.5 of a voxel), with a byte
+//! of the weight it was averaged over, in blocks of the same 4×4×2 shape kept only where such a voxel is. A sign bit
+//! alone places the surface on a voxel face, up to half a voxel from where the frames saw it; two distances of opposite
+//! sign place it between the voxel centres, as a TSDF's zero crossing does. The distances are projective (along the
+//! line of sight), larger than the distance to the surface where it is seen at a slant, so the range is two voxels:
+//! both voxels of a face then keep one even at grazing views. `--sign-only` fusions keep none.
 
 /// Voxels along a brick's edge.
 pub const BRICK: i32 = 8;
@@ -66,6 +75,26 @@ pub fn colour_slot(x: i32, y: i32, z: i32) -> (u8, usize) {
     (block, slot)
 }
 
+/// Surface offsets of the 32 voxels of one 4×4×2 block (slots as [`ColourBlock`]'s): the averaged signed distance
+/// in 1/63.5 of a voxel ([`NO_OFFSET`] where a voxel keeps none) and the weight it was averaged over (frames).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct OffsetBlock {
+    pub block: u8,
+    pub offset: [i8; 32],
+    pub weight: [u8; 32],
+}
+
+/// The most weight a surface offset accumulates (frames; windows overlap by half, so about half as many frames
+/// seen): later frames still move it by at least 1/255 of their distance each.
+pub const MAX_OFFSET_WEIGHT: f32 = 255.0;
+
+/// The offset byte of a voxel that has none.
+pub const NO_OFFSET: i8 = i8::MIN;
+/// The largest surface offset kept, voxels.
+pub const OFFSET_RANGE: f32 = 2.0;
+/// Offset bytes per voxel of distance.
+const OFFSET_SCALE: f32 = 127.0 / OFFSET_RANGE;
+
 /// RGB565 of an sRGB colour; never 0 (0 marks "no colour"), pure black becomes the darkest blue.
 pub fn to_rgb565(rgb: [u8; 3]) -> u16 {
     let value = (u16::from(rgb[0] >> 3) << 11) | (u16::from(rgb[1] >> 2) << 5) | u16::from(rgb[2] >> 3);
@@ -94,6 +123,8 @@ pub struct BinaryBrick {
     pub integrated: bool,
     /// Colours of surface voxels, in blocks sorted by block index.
     pub colours: Vec<ColourBlock>,
+    /// Surface offsets, in blocks sorted by block index.
+    pub offsets: Vec<OffsetBlock>,
 }
 
 impl Default for BinaryBrick {
@@ -104,14 +135,17 @@ impl Default for BinaryBrick {
             error: f32::INFINITY,
             integrated: false,
             colours: Vec::new(),
+            offsets: Vec::new(),
         }
     }
 }
 
 impl BinaryBrick {
-    /// Bytes this brick holds, counting its colour blocks.
+    /// Bytes this brick holds, counting its colour and offset blocks.
     pub fn bytes(&self) -> usize {
-        std::mem::size_of::<BinaryBrick>() + self.colours.capacity() * std::mem::size_of::<ColourBlock>()
+        std::mem::size_of::<BinaryBrick>()
+            + self.colours.capacity() * std::mem::size_of::<ColourBlock>()
+            + self.offsets.capacity() * std::mem::size_of::<OffsetBlock>()
     }
 
     /// The colour of voxel `(x, y, z)`, if it has one.
@@ -133,6 +167,45 @@ impl BinaryBrick {
             }
         };
         self.colours[at].rgb565[slot] = to_rgb565(rgb);
+    }
+
+    /// The surface offset of voxel `(x, y, z)`: its averaged signed distance in voxels (within ±[`OFFSET_RANGE`],
+    /// negative behind the surface), if it keeps one.
+    pub fn offset(&self, x: i32, y: i32, z: i32) -> Option<f32> {
+        let (block, slot) = colour_slot(x, y, z);
+        let found = self.offsets.binary_search_by_key(&block, |b| b.block).ok()?;
+        let value = self.offsets[found].offset[slot];
+        (value != NO_OFFSET).then(|| f32::from(value) / OFFSET_SCALE)
+    }
+
+    /// The surface offset of voxel `(x, y, z)` (voxels) and the weight it was averaged over, if it keeps one.
+    pub fn offset_and_weight(&self, x: i32, y: i32, z: i32) -> Option<(f32, f32)> {
+        let (block, slot) = colour_slot(x, y, z);
+        let found = &self.offsets[self.offsets.binary_search_by_key(&block, |b| b.block).ok()?];
+        (found.offset[slot] != NO_OFFSET)
+            .then(|| (f32::from(found.offset[slot]) / OFFSET_SCALE, f32::from(found.weight[slot])))
+    }
+
+    /// Keeps `distance` (voxels, clamped to ±[`OFFSET_RANGE`]) averaged over `weight` (clamped to 1 to
+    /// [`MAX_OFFSET_WEIGHT`]) as the surface offset of voxel `(x, y, z)`, allocating its block on first use.
+    pub fn set_offset(&mut self, x: i32, y: i32, z: i32, distance: f32, weight: f32) {
+        let (block, slot) = colour_slot(x, y, z);
+        let at = match self.offsets.binary_search_by_key(&block, |b| b.block) {
+            Ok(at) => at,
+            Err(at) => {
+                self.offsets.insert(at, OffsetBlock { block, offset: [NO_OFFSET; 32], weight: [0; 32] });
+                at
+            }
+        };
+        self.offsets[at].offset[slot] = (distance.clamp(-OFFSET_RANGE, OFFSET_RANGE) * OFFSET_SCALE).round() as i8;
+        self.offsets[at].weight[slot] = weight.clamp(1.0, MAX_OFFSET_WEIGHT).round() as u8;
+    }
+
+    /// Copies voxel `(x, y, z)`'s colour from `from`, where it has one.
+    pub fn keep_colour(&mut self, from: &BinaryBrick, x: i32, y: i32, z: i32) {
+        if let Some(rgb) = from.colour(x, y, z) {
+            self.set_colour(x, y, z, rgb);
+        }
     }
 
     /// Whether the brick holds nothing a reader needs: no voxel behind the surface. Outside is what an absent
@@ -187,5 +260,26 @@ mod tests {
         assert!(c.iter().zip([255u8, 128, 0]).all(|(&a, b)| (a as i32 - b as i32).abs() <= 8), "{c:?}");
         assert!(brick.colour(0, 0, 0).is_some(), "black is a colour, not none");
         assert_eq!(brick.colour(1, 0, 0), None);
+    }
+
+    #[test]
+    fn offsets_and_their_weights_round_trip() {
+        let mut brick = BinaryBrick::default();
+        brick.set_colour(5, 2, 7, [255, 128, 0]);
+        brick.set_offset(5, 2, 7, -0.3, 12.0);
+        brick.set_offset(4, 3, 6, 3.0, 1000.0);
+        brick.set_offset(0, 0, 0, 0.0, 0.0);
+        assert_eq!(brick.offsets.len(), 2, "(5,2,7) and (4,3,6) share a block");
+        let (d, w) = brick.offset_and_weight(5, 2, 7).unwrap();
+        assert!((d + 0.3).abs() <= 0.5 / OFFSET_SCALE && w == 12.0, "{d} {w}");
+        assert_eq!(brick.offset(4, 3, 6), Some(OFFSET_RANGE), "clamped to the range");
+        assert_eq!(brick.offset_and_weight(4, 3, 6).unwrap().1, MAX_OFFSET_WEIGHT);
+        assert_eq!(brick.offset_and_weight(0, 0, 0), Some((0.0, 1.0)), "zero is an offset, not none");
+        assert_eq!(brick.colour(0, 0, 0), None, "an offset without a colour");
+        assert_eq!(brick.offset(1, 1, 1), None);
+        let mut copy = BinaryBrick::default();
+        copy.keep_colour(&brick, 5, 2, 7);
+        assert_eq!(copy.colours, brick.colours);
+        assert!(copy.offsets.is_empty());
     }
 }

@@ -1,6 +1,9 @@
 //! Ray casting the binary bricks (seed 004 §8.4.4): every pixel's ray steps voxel by voxel (Amanatides–Woo) through
 //! the bricks it crosses, skipping absent bricks whole, until it enters a voxel behind the surface; the hit is
-//! that voxel's cube, so the depth image is made of voxel faces. It is then smoothed in screen space by the
+//! that voxel's cube, so the depth image is made of voxel faces. In views of the confident surface, where the voxel
+//! and the one the ray came from keep surface offsets ([`crate::brick`]) that cross zero, the hit moves along the
+//! ray to the crossing. (Not in the views tracking aligns to: there it made the trajectory worse, 2.8 → 4.8 mm ATE
+//! on the bunny's orbit, see BENCHMARKS.md.) It is then smoothed in screen space by the
 //! fluids' Rudin–Osher–Fatemi filter ([`voxstream_fluid::screen_space`], shared with ch. 6 as the thesis does), and
 //! the smoothed depth is what is shaded and what tracking aligns new frames to (§8.2).
 
@@ -55,6 +58,8 @@ fn cast(map: &BrickMap, origin: DVec3, direction: DVec3, t_max: f64, surface: Su
     let t_delta = DVec3::new(inv.x.abs(), inv.y.abs(), inv.z.abs());
     let mut t = 0.0f64;
     let mut current: Option<(IVec3, Option<&BinaryBrick>)> = None;
+    // The axis of the last voxel step, while the ray walks voxel by voxel.
+    let mut last_axis: Option<usize> = None;
     while t < t_max {
         let (key, local) = BrickMap::split(cell);
         let brick = match current {
@@ -70,7 +75,13 @@ fn cast(map: &BrickMap, origin: DVec3, direction: DVec3, t_max: f64, surface: Su
                 let i = voxel_index(local.x, local.y, local.z);
                 let hit = b.inside.get(i) && (surface == Surface::Any || b.confident.get(i));
                 if hit && t > 0.0 {
-                    return Some((t, cell));
+                    let t_hit = match last_axis {
+                        Some(axis) if surface == Surface::Confident => {
+                            t + crossing_shift(map, b, cell, local, axis, step) * t_delta[axis]
+                        }
+                        _ => t,
+                    };
+                    return Some((t_hit.max(0.0), cell));
                 }
             }
             None => {
@@ -92,6 +103,7 @@ fn cast(map: &BrickMap, origin: DVec3, direction: DVec3, t_max: f64, surface: Su
                 // Re-enter the voxel walk just past the exit plane (1e-6 m further along the ray is a hundredth
                 // of a voxel at the finest voxel allowed, and far above rounding).
                 t = exit.max(t);
+                last_axis = None;
                 cell = (o + d * (t + 1e-6)).floor().as_ivec3();
                 t_next = DVec3::new(
                     boundary(cell.x, step.x, o.x, inv.x),
@@ -116,8 +128,26 @@ fn cast(map: &BrickMap, origin: DVec3, direction: DVec3, t_max: f64, surface: Su
         t = t_next[axis];
         cell[axis] += step[axis];
         t_next[axis] += t_delta[axis];
+        last_axis = Some(axis);
     }
     None
+}
+
+/// How far (in voxel steps along `axis`) the surface lies past the face the ray entered the hit voxel by: the zero
+/// crossing of the surface offsets of the voxel before it and of the hit voxel, between their centres, less the
+/// face's half step; 0 where either keeps none.
+fn crossing_shift(map: &BrickMap, hit: &BinaryBrick, cell: IVec3, local: IVec3, axis: usize, step: IVec3) -> f64 {
+    let Some(inside) = hit.offset(local.x, local.y, local.z) else { return 0.0 };
+    let mut before = cell;
+    before[axis] -= step[axis];
+    let (key, before_local) = BrickMap::split(before);
+    let Some(outside) = map.brick(key).and_then(|b| b.offset(before_local.x, before_local.y, before_local.z)) else {
+        return 0.0;
+    };
+    if outside <= inside {
+        return 0.0;
+    }
+    f64::from(outside / (outside - inside)) - 0.5
 }
 
 fn sign(x: f64) -> i32 {

@@ -1,19 +1,25 @@
 //! The fused scene saved as a store that `render` and `view` open like any other (seed 004 §8.3: "once the scene
 //! has been scanned, a smooth surface can be reconstructed from the binary representation").
 //!
-//! Each sample is a weighted share of confident voxels behind the surface around it, as `u8` (0–255): the voxel
-//! itself weighs 6, its six face neighbours 1 each. The isosurface at 127.5 (`render SCENE --iso 128`) then runs
-//! along the voxel faces with its stairs rounded off, and a sheet one voxel thick (a floor seen from above, whose
-//! inside the sensor never saw deeper) keeps its surface: a 3×3×3 box filter would lower it to 9/27 and lose it. The volume spans the bricks' bounds plus one voxel; slices are made one at a time
-//! from the bricks of their brick layer, and [`crate::export::FusedVolume::new`] refuses a scene whose import slab
-//! would not fit the memory it is given, naming the numbers.
+//! Each sample is a weighted share of confident voxels behind the surface around it, as `u8` (0–255): the voxel itself
+//! weighs 6, its six face neighbours 1 each. The isosurface at 127.5 (`render SCENE --iso 128`) then runs along the
+//! voxel faces with its stairs rounded off, and a sheet one voxel thick (a floor seen from above, whose inside the
+//! sensor never saw deeper) keeps its surface: a 3×3×3 box filter would lower it to 9/27 and lose it. The volume spans
+//! the bricks' bounds plus one voxel; slices are made one at a time from the bricks of their brick layer, and
+//! [`crate::export::FusedVolume::new`] refuses a scene whose import slab would not fit the memory it is given, naming
+//! the numbers.
+//!
+//! A voxel that keeps a surface offset ([`crate::brick`]) is sampled from it instead: `127.5 · (1 − d / R)` for its
+//! distance `d` in voxels and the offsets' range `R` (255 at `R` voxels behind the surface, 0 at `R` in front), so
+//! the isosurface at 127.5 passes where the frames' averaged distances cross zero, between voxel centres, rather
+//! than along the faces.
 
 use glam::IVec3;
 use rustc_hash::FxHashMap;
 use voxstream_store::volume::{DType, VolumeInfo, VolumeSource};
 use voxstream_store::StoreError;
 
-use crate::brick::{voxel_index, BRICK};
+use crate::brick::{voxel_index, BRICK, NO_OFFSET, OFFSET_RANGE};
 use crate::brick_map::BrickMap;
 use crate::FusionError;
 
@@ -29,6 +35,8 @@ pub struct FusedVolume<'a> {
     lo: IVec3,
     /// Brick keys by brick z.
     layers: FxHashMap<i32, Vec<IVec3>>,
+    /// Keys of the bricks that keep surface offsets (also outside-only ones), by brick z.
+    surface_layers: FxHashMap<i32, Vec<IVec3>>,
     /// The next slice to hand out.
     next: i64,
     /// Occupancy planes of slices `next - 1`, `next`, `next + 1` (0 or 1 per sample).
@@ -43,7 +51,11 @@ impl<'a> FusedVolume<'a> {
     pub fn new(map: &'a BrickMap, memory: u64) -> Result<Option<FusedVolume<'a>>, FusionError> {
         let mut bounds: Option<(IVec3, IVec3)> = None;
         let mut layers: FxHashMap<i32, Vec<IVec3>> = FxHashMap::default();
+        let mut surface_layers: FxHashMap<i32, Vec<IVec3>> = FxHashMap::default();
         for (key, brick) in map.iter() {
+            if !brick.offsets.is_empty() {
+                surface_layers.entry(key.z).or_default().push(*key);
+            }
             if brick.inside.and(&brick.confident).is_empty() {
                 continue;
             }
@@ -90,6 +102,7 @@ impl<'a> FusedVolume<'a> {
             info,
             lo,
             layers,
+            surface_layers,
             next: 0,
             planes: [vec![0; area], vec![0; area], vec![0; area]],
             classes: [vec![OUTSIDE; area], vec![OUTSIDE; area], vec![OUTSIDE; area]],
@@ -123,6 +136,33 @@ impl<'a> FusedVolume<'a> {
                     };
                     let v = *key * BRICK + IVec3::new(x, y, local_z) - self.lo;
                     plane[v.y as usize * nx as usize + v.x as usize] = class;
+                }
+            }
+        }
+        plane
+    }
+
+    /// Surface offsets of slice `z`'s samples as `d / R · 127` (distance `d` in voxels, range `R`), [`NO_OFFSET`]
+    /// where a sample keeps none.
+    fn offsets(&self, z: i64) -> Vec<i8> {
+        let [nx, ny, nz] = self.info.dims;
+        let mut plane = vec![NO_OFFSET; (nx * ny) as usize];
+        if z < 0 || z >= nz as i64 {
+            return plane;
+        }
+        let world_z = self.lo.z + z as i32;
+        let (brick_z, local_z) = (world_z.div_euclid(BRICK), world_z.rem_euclid(BRICK));
+        for key in self.surface_layers.get(&brick_z).into_iter().flatten() {
+            let brick = self.map.brick(*key).expect("listed from the map");
+            for y in 0..BRICK {
+                for x in 0..BRICK {
+                    let v = *key * BRICK + IVec3::new(x, y, local_z) - self.lo;
+                    if v.x < 0 || v.y < 0 || v.x as u64 >= nx || v.y as u64 >= ny {
+                        continue;
+                    }
+                    if let Some(d) = brick.offset(x, y, local_z) {
+                        plane[v.y as usize * nx as usize + v.x as usize] = (d / OFFSET_RANGE * 127.0).round() as i8;
+                    }
                 }
             }
         }
@@ -180,10 +220,15 @@ impl VolumeSource for FusedVolume<'_> {
             self.classes[2] = self.classes(z + 3);
             // 6 × the voxel + its six face neighbours, of 12 (the volume's one-voxel margin is empty, so edges
             // read zeros).
+            let offsets = self.offsets(z);
             let [below, here, above] = &self.planes;
             for y in 0..ny {
                 for x in 0..nx {
                     let i = y * nx + x;
+                    if offsets[i] != NO_OFFSET {
+                        out.push((127.5 * (1.0 - f32::from(offsets[i]) / 127.0)).round().clamp(0.0, 255.0));
+                        continue;
+                    }
                     let mut s = 6 * here[i] + below[i] + above[i];
                     if x > 0 {
                         s += here[i - 1];

@@ -49,6 +49,7 @@ impl Default for FusionSettings {
                 min_band_voxels: 3.0,
                 confidence_weight: 3.0,
                 prior_weight: 4.0,
+                surface_offsets: true,
             },
             window: 16,
             sub_cache: 2,

@@ -11,10 +11,16 @@
 //! kept; the voxel is confident when the frames' weights add up to the confidence weight, and a confident voxel is
 //! replaced only by a confident one from samples no less accurate than those that set it (§8.3.4). Surface voxels
 //! (average within `voxel/√2` of the surface) get the weighted average colour (§8.5).
+//!
+//! **Surface offsets** (our addition, [`crate::brick`]) are kept beside the bits and never change them: every voxel
+//! a window sees with the confidence weight averages the frames' truncated distances with equal weights (the
+//! thesis' fall-off behind the surface would bias a mean towards the front wherever the noise is a sizeable share
+//! of the band) into its kept offset, weighted by the frames it was averaged over, as a TSDF averages, up to
+//! [`MAX_OFFSET_WEIGHT`]. Voxels farther than [`OFFSET_RANGE`] voxels from the surface keep none.
 
 use glam::{IVec3, Mat3, Vec3};
 
-use crate::brick::{voxel_index, BinaryBrick, BRICK, BRICK_VOXELS};
+use crate::brick::{voxel_index, BinaryBrick, BRICK, BRICK_VOXELS, MAX_OFFSET_WEIGHT, OFFSET_RANGE};
 use crate::brick_map::BrickMap;
 use crate::camera::{Intrinsics, Pose};
 
@@ -34,6 +40,9 @@ pub struct IntegrationSettings {
     pub confidence_weight: f32,
     /// Weight of a confident voxel's earlier result, for a brick whose error equals the voxel size.
     pub prior_weight: f32,
+    /// Keep the averaged distance of voxels within [`OFFSET_RANGE`] voxels of the surface (a byte, and a byte of
+    /// weight), not only the sign: the surface then lies between voxel centres, not on voxel faces.
+    pub surface_offsets: bool,
 }
 
 impl IntegrationSettings {
@@ -188,7 +197,7 @@ pub fn integrate_brick(
     let voxel = settings.voxel;
     let prior_scale =
         if old.error.is_finite() && old.error > 0.0 { (voxel as f32 / old.error).clamp(0.5, 4.0) } else { 0.0 };
-    let mut out = BinaryBrick { colours: Vec::new(), ..old.clone() };
+    let mut out = BinaryBrick { colours: Vec::new(), offsets: Vec::new(), ..old.clone() };
     let mut error_sum = 0.0f64;
     let mut error_weight = 0.0f64;
     let origin = key * BRICK;
@@ -203,6 +212,9 @@ pub fn integrate_brick(
     let mut wd_sums = [0.0f32; BRICK_VOXELS];
     let mut sigma_sums = [0.0f32; BRICK_VOXELS];
     let mut colours = [[0.0f32; 4]; BRICK_VOXELS];
+    // Equal-weight sums for the surface offsets: frames, and their truncated distances.
+    let mut n_sums = [0.0f32; BRICK_VOXELS];
+    let mut d_sums = [0.0f32; BRICK_VOXELS];
     for frame in frames {
         if !frame.may_see(brick_centre, brick_radius) {
             continue;
@@ -217,6 +229,8 @@ pub fn integrate_brick(
             let w = if distance > 0.0 { 1.0 } else { (band + distance) / band };
             w_sums[i] += w;
             wd_sums[i] += w * distance.min(band);
+            n_sums[i] += 1.0;
+            d_sums[i] += distance.min(band);
             sigma_sums[i] += w * IntegrationSettings::sensor_sigma(d);
             if distance.abs() < band {
                 let colour = &mut colours[i];
@@ -242,6 +256,18 @@ pub fn integrate_brick(
         let v = origin + local;
         let was_inside = old.inside.get(i);
         let was_confident = old.confident.get(i);
+        if settings.surface_offsets {
+            let kept = old.offset_and_weight(local.x, local.y, local.z);
+            if pass == Pass::Window && n_sums[i] >= settings.confidence_weight {
+                let (d0, w0) = kept.unwrap_or((0.0, 0.0));
+                let d = (w0 * d0 + d_sums[i] / voxel as f32) / (w0 + n_sums[i]);
+                if d.abs() < OFFSET_RANGE {
+                    out.set_offset(local.x, local.y, local.z, d, (w0 + n_sums[i]).min(MAX_OFFSET_WEIGHT));
+                }
+            } else if let Some((d0, w0)) = kept {
+                out.set_offset(local.x, local.y, local.z, d0, w0);
+            }
+        }
         let (prior, psi) = match (was_confident, prior_scale > 0.0) {
             (true, true) => match prior_distance(map, v, was_inside, voxel) {
                 Some(phi) => (phi, settings.prior_weight * prior_scale),
@@ -251,18 +277,14 @@ pub fn integrate_brick(
         };
         if w_sum + psi <= 0.0 {
             // Unseen: keeps its state (and colour).
-            if let Some(rgb) = old.colour(local.x, local.y, local.z) {
-                out.set_colour(local.x, local.y, local.z, rgb);
-            }
+            out.keep_colour(&old, local.x, local.y, local.z);
             continue;
         }
         let average = (psi * prior + wd_sum) / (psi + w_sum);
         let inside = average < 0.0;
         let confident = pass == Pass::Window && w_sum >= settings.confidence_weight;
         if was_confident && !(confident && may_replace_confident) {
-            if let Some(rgb) = old.colour(local.x, local.y, local.z) {
-                out.set_colour(local.x, local.y, local.z, rgb);
-            }
+            out.keep_colour(&old, local.x, local.y, local.z);
             continue;
         }
         changed_confident |= confident;

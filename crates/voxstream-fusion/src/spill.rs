@@ -1,9 +1,9 @@
 //! World chunks streamed to disk and back (seed 004 §8.6): a chunk far from the camera is written as one file and
 //! dropped from memory; it is read back when a frame touches it again.
 //!
-//! A chunk file is `VXFC`, a format version, the chunk key, the brick count, then per brick its key, error,
-//! integrated flag, sign and confidence bits and colour blocks, and a CRC-32 of everything before it. The files are
-//! the fusion's own scratch space, but they are read back as untrusted input all the same: counts are checked
+//! A chunk file is `VXFC`, a format version, the chunk key, the brick count, then per brick its key, error, integrated
+//! flag, sign and confidence bits, colour blocks and surface offset blocks, and a CRC-32 of everything before it. The
+//! files are the fusion's own scratch space, but they are read back as untrusted input all the same: counts are checked
 //! against the file's length before anything is allocated, keys must lie in the chunk, and a checksum mismatch is an
 //! error, never a wrong brick. The thesis compresses colour pages with RLE + Huffman here; these files are not
 //! compressed (bits are 128 bytes per brick; colours go as they are).
@@ -13,14 +13,14 @@ use std::path::{Path, PathBuf};
 
 use glam::IVec3;
 
-use crate::brick::{BinaryBrick, Bits, ColourBlock};
+use crate::brick::{BinaryBrick, Bits, ColourBlock, OffsetBlock};
 use crate::brick_map::{chunk_of, CHUNK_BRICKS};
 use crate::FusionError;
 
 const MAGIC: &[u8; 4] = b"VXFC";
-const VERSION: u32 = 1;
-/// Key, error, flag, two bit sets, colour block count.
-const BRICK_HEADER: usize = 12 + 4 + 1 + 128 + 1;
+const VERSION: u32 = 2;
+/// Key, error, flag, two bit sets, colour and offset block counts.
+const BRICK_HEADER: usize = 12 + 4 + 1 + 128 + 2;
 const COLOUR_BLOCK: usize = 1 + 64;
 
 /// The file of chunk `chunk` in `dir`.
@@ -60,6 +60,12 @@ pub fn write_chunk(dir: &Path, chunk: IVec3, bricks: &[(IVec3, BinaryBrick)]) ->
             for c in block.rgb565 {
                 bytes.extend_from_slice(&c.to_le_bytes());
             }
+        }
+        bytes.push(brick.offsets.len() as u8);
+        for block in &brick.offsets {
+            bytes.push(block.block);
+            bytes.extend(block.offset.map(|o| o as u8));
+            bytes.extend(block.weight);
         }
     }
     let crc = crc32fast::hash(&bytes);
@@ -165,7 +171,22 @@ pub fn decode_chunk(bytes: &[u8], chunk: IVec3, path: &Path) -> Result<Vec<(IVec
             }
             colours.push(ColourBlock { block, rgb565 });
         }
-        bricks.push((key, BinaryBrick { inside, confident, error, integrated, colours }));
+        let blocks = r.u8()? as usize;
+        if blocks > 16 {
+            return Err(file_error(path, format!("brick {key} claims {blocks} offset blocks, more than 16")));
+        }
+        let mut offsets = Vec::with_capacity(blocks);
+        for _ in 0..blocks {
+            let block = r.u8()?;
+            let raw = r.take(32)?;
+            let offset: [i8; 32] = std::array::from_fn(|i| raw[i] as i8);
+            let weight: [u8; 32] = r.take(32)?.try_into().expect("32 bytes");
+            if block >= 16 || offsets.last().is_some_and(|b: &OffsetBlock| b.block >= block) {
+                return Err(file_error(path, format!("brick {key}'s offset blocks are out of order")));
+            }
+            offsets.push(OffsetBlock { block, offset, weight });
+        }
+        bricks.push((key, BinaryBrick { inside, confident, error, integrated, colours, offsets }));
     }
     if r.at != body.len() {
         return Err(file_error(path, "the chunk file has bytes after its last brick"));
@@ -189,6 +210,8 @@ mod tests {
         a.confident.set(17, true);
         a.set_colour(1, 2, 3, [200, 100, 50]);
         a.set_colour(7, 7, 7, [10, 20, 30]);
+        a.set_offset(7, 7, 7, -0.25, 30.0);
+        a.set_offset(0, 0, 0, 0.5, 3.0);
         let b = BinaryBrick::default();
         vec![(IVec3::new(-32, 5, 31), a), (IVec3::new(-1, 0, 0), b)]
     }

@@ -3,8 +3,15 @@
 //! Faces towards voxels no window was sure of are not surface: behind the band the sensor never saw, the inside
 //! region simply ends. These points are what surface error is measured on, and what `fuse --points` writes.
 //!
+//! Where voxels keep surface offsets ([`crate::brick`]), the points are where the offsets of two neighbours cross
+//! zero, on the segment between their centres, as a TSDF's surface is found (so the offsets, averaged over every
+//! window, also decide where the surface is, not only the bits), and [`smooth_points`] leaves their positions alone;
+//! faces of the bits whose two voxels do not both keep an offset still give their centres. (One voxel's distance
+//! alone does not place a point: distances are projective, along the line of sight, so only the ratio of two is a
+//! position on the segment.)
+//!
 //! Face centres make stairs: a plane at a slant is drawn as voxel faces up to half a voxel from it.
-//! [`smooth_points`] moves every point to the average of the points within 1.5 voxels that face its way (normals
+//! [`smooth_points`] moves every other point to the average of the points within 1.5 voxels that face its way (normals
 //! no more than 90° apart, so the two sides of a thin wall never mix), which puts the stairs' points on the plane
 //! they approximate: the object-space counterpart of the screen-space smoothing rendered views get, and what the
 //! thesis suggests for extracting a surface from the bits ("mesh-based smoothing algorithms", §8.3).
@@ -37,34 +44,61 @@ pub struct SurfacePoint {
     pub position: DVec3,
     pub normal: DVec3,
     pub colour: Option<[u8; 3]>,
+    /// Placed where two voxels' surface offsets cross zero (not moved by [`smooth_points`]).
+    pub interpolated: bool,
+}
+
+/// The surface offset of voxel `v`, where it keeps one.
+fn offset_at(map: &BrickMap, v: IVec3) -> Option<f32> {
+    let (key, local) = BrickMap::split(v);
+    map.brick(key)?.offset(local.x, local.y, local.z)
 }
 
 /// The surface points of the resident bricks.
 pub fn surface_points(map: &BrickMap) -> Vec<SurfacePoint> {
     let keys: Vec<IVec3> = map.iter().map(|(k, _)| *k).collect();
     let voxel = map.voxel();
+    const AXES: [IVec3; 6] = [IVec3::X, IVec3::Y, IVec3::Z, IVec3::NEG_X, IVec3::NEG_Y, IVec3::NEG_Z];
     keys.par_iter()
         .flat_map_iter(|&key| {
             let brick = map.brick(key).expect("listed");
             let mut points = Vec::new();
             let both = brick.inside.and(&brick.confident);
-            if both.is_empty() {
+            if both.is_empty() && brick.offsets.is_empty() {
                 return points.into_iter();
             }
             for z in 0..BRICK {
                 for y in 0..BRICK {
                     for x in 0..BRICK {
+                        let v = key * BRICK + IVec3::new(x, y, z);
+                        let offset = brick.offset(x, y, z);
+                        // Zero crossings of the offsets, from the voxel behind the surface to each neighbour in
+                        // front of it, as a TSDF's surface is found.
+                        if let Some(a) = offset.filter(|&a| a < 0.0) {
+                            for axis in AXES {
+                                let Some(b) = offset_at(map, v + axis).filter(|&b| b >= 0.0) else { continue };
+                                let t = f64::from(-a) / f64::from(b - a);
+                                let normal = axis.as_dvec3();
+                                points.push(SurfacePoint {
+                                    position: map.centre(v) + normal * (t * voxel),
+                                    normal,
+                                    colour: brick.colour(x, y, z),
+                                    interpolated: true,
+                                });
+                            }
+                        }
                         if !both.get(voxel_index(x, y, z)) {
                             continue;
                         }
-                        let v = key * BRICK + IVec3::new(x, y, z);
-                        for axis in [IVec3::X, IVec3::Y, IVec3::Z, -IVec3::X, -IVec3::Y, -IVec3::Z] {
-                            if known_outside(map, v + axis) {
+                        // Faces of the bits where neither voxel keeps an offset.
+                        for axis in AXES {
+                            if known_outside(map, v + axis) && offset.is_none() && offset_at(map, v + axis).is_none() {
                                 let normal = axis.as_dvec3();
                                 points.push(SurfacePoint {
                                     position: map.centre(v) + normal * (0.5 * voxel),
                                     normal,
                                     colour: brick.colour(x, y, z),
+                                    interpolated: false,
                                 });
                             }
                         }
@@ -76,8 +110,8 @@ pub fn surface_points(map: &BrickMap) -> Vec<SurfacePoint> {
         .collect()
 }
 
-/// Each point moved to the average position (and normal) of the points within `radius` (metres) whose normals
-/// are within 90° of its own, itself included.
+/// Each point given the average normal of the points within `radius` (metres) whose normals are within 90° of its
+/// own, itself included, and, unless it was interpolated from surface offsets, their average position.
 pub fn smooth_points(points: &[SurfacePoint], radius: f64) -> Vec<SurfacePoint> {
     let cell = |p: DVec3| (p / radius).floor().as_ivec3();
     let mut grid: rustc_hash::FxHashMap<IVec3, Vec<u32>> = rustc_hash::FxHashMap::default();
@@ -106,7 +140,12 @@ pub fn smooth_points(points: &[SurfacePoint], radius: f64) -> Vec<SurfacePoint> 
                     }
                 }
             }
-            SurfacePoint { position: sum / count, normal: normal.normalize_or(p.normal), colour: p.colour }
+            SurfacePoint {
+                position: if p.interpolated { p.position } else { sum / count },
+                normal: normal.normalize_or(p.normal),
+                colour: p.colour,
+                interpolated: p.interpolated,
+            }
         })
         .collect()
 }

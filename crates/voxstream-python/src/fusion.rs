@@ -17,7 +17,7 @@ use crate::errors::{progress_step, to_py_err};
 /// Fuses the TUM RGB-D folder `dataset` into the store `out` (and/or surface `points`, a PLY); returns what was done.
 #[pyfunction]
 #[pyo3(signature = (dataset, out=None, *, points=None, trajectory=None, poses="ground-truth", voxel=0.01, window=16,
-    sub_cache=2, confidence=3.0, frames=None, memory_mb=1024, overwrite=false, progress=None))]
+    sub_cache=2, confidence=3.0, frames=None, memory_mb=1024, overwrite=false, sign_only=false, progress=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn fuse<'py>(
     py: Python<'py>,
@@ -33,6 +33,7 @@ pub fn fuse<'py>(
     frames: Option<usize>,
     memory_mb: u64,
     overwrite: bool,
+    sign_only: bool,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let poses = match poses {
@@ -49,6 +50,7 @@ pub fn fuse<'py>(
     let mut settings = FusionSettings::default();
     settings.integration.voxel = voxel;
     settings.integration.confidence_weight = confidence;
+    settings.integration.surface_offsets = !sign_only;
     settings.window = window;
     settings.sub_cache = sub_cache;
     settings.memory_budget = usize::try_from(memory_mb.saturating_mul(1 << 20)).unwrap_or(usize::MAX);

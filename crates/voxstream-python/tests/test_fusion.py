@@ -43,6 +43,14 @@ def test_a_fused_sequence_reports_its_work_and_opens_as_a_store(sequence, tmp_pa
     assert (image[..., 3] > 0).mean() > 0.05, "the fused surface is drawn"
 
 
+def test_sign_only_keeps_the_thesis_two_bits_in_less_memory(sequence, tmp_path):
+    with_offsets = vs.fuse(sequence, points=tmp_path / "offsets.ply")
+    sign_only = vs.fuse(sequence, points=tmp_path / "sign.ply", sign_only=True)
+    assert sign_only["frames"] == with_offsets["frames"] == 24
+    assert 0 < sign_only["peak_brick_bytes"] < with_offsets["peak_brick_bytes"]
+    assert len(read_points(tmp_path / "sign.ply")) == sign_only["surface_points"] > 2000
+
+
 def test_an_exception_in_progress_stops_the_fusion_and_saves_nothing(sequence, tmp_path):
     def stop(done, total):
         if done == 3:

@@ -51,6 +51,11 @@ pub struct FuseArgs {
     /// at least this many, more where the sensor's noise is larger (3σ).
     #[arg(long, default_value_t = 3.0, value_name = "VOXELS")]
     pub truncation: f32,
+    /// Keep only the thesis' two bits a voxel (sign and confidence), without the surface offsets (each surface
+    /// voxel's averaged distance, two bytes): the surface then lies on voxel faces, up to half a voxel from where
+    /// the frames saw it, and the bricks take less memory.
+    #[arg(long)]
+    pub sign_only: bool,
     /// Fuse only the first N frames.
     #[arg(long, value_name = "N")]
     pub frames: Option<usize>,
@@ -61,12 +66,13 @@ pub struct FuseArgs {
     /// Memory for the bricks, MiB: beyond it, chunks far from the camera are streamed to disk next to --out.
     #[arg(long, default_value_t = 1024)]
     pub memory_mb: u64,
-    /// Also write the surface as points (binary PLY with normals and colours): the centres of the faces between
-    /// voxels behind and in front of it, smoothed (see --raw-points).
+    /// Also write the surface as points (binary PLY with normals and colours): where the kept distances of two
+    /// neighbouring voxels cross zero, and the centres of the faces between voxels behind and in front of it where
+    /// neither keeps a distance (all of them with --sign-only), smoothed (see --raw-points).
     #[arg(long, value_name = "PLY")]
     pub points: Option<PathBuf>,
-    /// With --points: write the voxel faces' centres as they are (stairs on slanted surfaces), not moved to the
-    /// average of their neighbours within 1.5 voxels.
+    /// With --points: write the faces' centres as they are (stairs on slanted surfaces), not moved to the average
+    /// of their neighbours within 1.5 voxels.
     #[arg(long)]
     pub raw_points: bool,
     /// Also write the poses used (TUM trajectory format).
@@ -177,6 +183,7 @@ pub fn run_fuse(args: &FuseArgs) -> Result<()> {
     settings.integration.voxel = args.voxel;
     settings.integration.confidence_weight = args.confidence;
     settings.integration.min_band_voxels = args.truncation;
+    settings.integration.surface_offsets = !args.sign_only;
     settings.window = args.window;
     settings.sub_cache = args.sub_cache;
     settings.memory_budget = usize::try_from(args.memory_mb.saturating_mul(1 << 20)).unwrap_or(usize::MAX);

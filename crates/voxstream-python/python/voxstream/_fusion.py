@@ -11,19 +11,21 @@ from . import _native
 
 def fuse(dataset, out=None, *, points=None, trajectory=None, poses: str = "ground-truth", voxel: float = 0.01,
          window: int = 16, sub_cache: int = 2, confidence: float = 3.0, frames: Optional[int] = None,
-         memory_mb: int = 1024, overwrite: bool = False,
+         memory_mb: int = 1024, overwrite: bool = False, sign_only: bool = False,
          progress: Optional[Callable[[int, int], Any]] = None) -> Dict[str, Any]:
     """Fuses the TUM RGB-D folder ``dataset`` (``rgb/``, ``depth/``, ``rgb.txt``, ``depth.txt``, optional
     ``groundtruth.txt``) into binary bricks of ``voxel`` metres and saves them as the store ``out`` (open it with
     ``voxstream.open(out)`` and ``iso=[128]``), the surface as ``points`` (PLY) and the poses as ``trajectory``.
     ``poses="track"`` estimates each frame's pose by ICP against the surface fused so far. ``progress(done, total)``
-    is called after every frame; Ctrl-C or an exception in it stops the fusion, saving nothing. Returns frames,
+    is called after every frame; Ctrl-C or an exception in it stops the fusion, saving nothing. ``sign_only=True``
+    keeps the thesis' two bits a voxel, without the surface offsets that place the surface between voxel centres
+    (less memory, the surface on voxel faces). Returns frames,
     windows, bricks, memory, time and (tracked, with ground truth) the ATE RMSE in metres."""
     path = lambda p: None if p is None else os.fspath(p)  # noqa: E731
     return dict(_native.fuse(os.fspath(dataset), path(out), points=path(points), trajectory=path(trajectory),
                              poses=poses, voxel=float(voxel), window=int(window), sub_cache=int(sub_cache),
                              confidence=float(confidence), frames=frames, memory_mb=int(memory_mb),
-                             overwrite=bool(overwrite), progress=progress))
+                             overwrite=bool(overwrite), sign_only=bool(sign_only), progress=progress))
 
 
 def synthesize_rgbd(mesh, out, *, frames: int = 300, noise: bool = True, object_size: float = 0.5,
