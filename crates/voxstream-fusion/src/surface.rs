@@ -6,15 +6,15 @@
 //! Where voxels keep surface offsets ([`crate::brick`]), the points are where the offsets of two neighbours cross
 //! zero, on the segment between their centres, as a TSDF's surface is found (so the offsets, averaged over every
 //! window, also decide where the surface is, not only the bits), and [`smooth_points`] leaves their positions alone;
-//! faces of the bits whose two voxels do not both keep an offset still give their centres. (One voxel's distance
+//! faces of the bits where neither voxel keeps an offset still give their centres. (One voxel's distance
 //! alone does not place a point: distances are projective, along the line of sight, so only the ratio of two is a
 //! position on the segment.)
 //!
-//! Face centres make stairs: a plane at a slant is drawn as voxel faces up to half a voxel from it.
-//! [`smooth_points`] moves every other point to the average of the points within 1.5 voxels that face its way (normals
-//! no more than 90° apart, so the two sides of a thin wall never mix), which puts the stairs' points on the plane
-//! they approximate: the object-space counterpart of the screen-space smoothing rendered views get, and what the
-//! thesis suggests for extracting a surface from the bits ("mesh-based smoothing algorithms", §8.3).
+//! Face centres make stairs: a plane at a slant is drawn as voxel faces up to half a voxel from it. [`smooth_points`]
+//! moves every other point to the average of the points within 1.5 voxels that face its way (normals no more than 90°
+//! apart, so the two sides of a thin wall never mix), which puts the stairs' points on the plane they approximate: the
+//! object-space counterpart of the screen-space smoothing rendered views get, and what the thesis suggests for
+//! extracting a surface from the bits ("mesh-based smoothing algorithms", §8.3).
 
 use std::io::Write;
 use std::path::Path;
