@@ -176,6 +176,21 @@ put("vdb_converter_header", "fog", json.dumps({"name": "density", "class": "fog 
                                                "spacing": [0.5, 0.5, 0.5], "origin": [0, 0, 0], "background": 0.0}))
 attributes = {"format_version": 1, "dims": [40, 30, 20], "dtype": "u8", "spacing": [1, 1, 2], "origin": [0, 0, 0],
               "brick_size": 32, "levels": 2, "value_range": [0, 255], "complete": True}
+# fusion_chunks: a chunk file of chunk (-1, 0, 2) (crates/voxstream-fusion/src/spill.rs): one brick with a colour
+# block and a surface offset block, and an empty chunk; the CRC-32 is zlib's (the same polynomial as crc32fast).
+def fusion_chunk(bricks):
+    body = b"VXFC" + struct.pack("<I3iI", 2, -1, 0, 2, len(bricks))
+    for key, colours, offsets in bricks:
+        body += struct.pack("<3ifB", *key, 0.004, 1) + struct.pack("<16Q", *([0x0F0F] * 8 + [0x0F0F] * 8))
+        body += bytes([len(colours)]) + b"".join(bytes([b]) + struct.pack("<32H", *([0xF800] * 32)) for b in colours)
+        body += bytes([len(offsets)]) + b"".join(bytes([b]) + struct.pack("<32b", *range(-16, 16)) + bytes([7] * 32)
+                                                for b in offsets)
+    return body + struct.pack("<I", zlib.crc32(body))
+
+
+put("fusion_chunks", "one_brick", fusion_chunk([((-32, 5, 64), [3], [3, 9])]))
+put("fusion_chunks", "empty", fusion_chunk([]))
+
 # wavelet_brick: a first byte choosing decoding (even) or a round trip (odd), then bytes; the round trips' seeds are a
 # smooth ramp and noise (the codec's own encodings are reached through the round trip and libFuzzer's mutations).
 put("wavelet_brick", "decode_zeros", bytes(64))
