@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Remote stores over emulated round trips (issue 43; not part of CI): one store served by nginx (byte ranges, ETags),
-# scripts/fault_proxy.py adding a fixed delay before every answer, and voxstream rendering it:
+# a proxy delaying every byte by half the round trip each way (bench/lib/http_store.sh), and voxstream rendering it:
 #   - the converged image must be the local folder's, byte for byte;
 #   - time to the first image with data (`--mode interactive --frames 2`: the root brick arrives after the first frame) and to the complete view (`--mode converged`),
 #     wall clock, opening included;

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # voxstream against tensorstore over the same emulated link (issue 43; not part of CI): STORE served by nginx
-# (byte ranges), scripts/fault_proxy.py adding RTT ms before every answer. voxstream renders the URL converged at
+# (byte ranges), a proxy adding RTT ms to every exchange (bench/lib/http_store.sh). voxstream renders the URL converged at
 # 512² (wall clock, opening and rendering included); tensorstore (pip, into target/peers/ts-venv) then reads exactly
 # the bricks that render fetched (bench/peers/tensorstore_fetch.py), without and with a cache pool. Prints one line
 # per RTT: voxstream's seconds and requests, tensorstore's seconds and requests (as nginx logged them).
