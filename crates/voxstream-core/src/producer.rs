@@ -68,6 +68,13 @@ pub trait Producer: Send + Sync {
     fn prefetch(&self, keys: &[NodeKey]) {
         let _ = keys;
     }
+    /// Brings the data of `keys` within reach and returns when it is there: called on the producer's own pool (see
+    /// [`Producer::concurrency`]) before a batch whose frame waits for its data is produced, so that a producer
+    /// reading a network has every request of the batch in flight at once, rather than the few of each `produce`
+    /// call one after another. Failures are left to `produce`, which reports them. The default does nothing.
+    fn fetch(&self, keys: &[NodeKey]) {
+        let _ = keys;
+    }
     /// How many nodes this producer should be asked for at once: a producer whose reads wait on a network (a remote
     /// store) serves a batch fastest with that many requests in flight, so the cache manager produces its batches on
     /// a pool of that many threads of its own. The default, 0, uses the shared worker pool (one thread per core).
@@ -105,6 +112,9 @@ impl<P: Producer + ?Sized> Producer for Box<P> {
     }
     fn prefetch(&self, keys: &[NodeKey]) {
         (**self).prefetch(keys)
+    }
+    fn fetch(&self, keys: &[NodeKey]) {
+        (**self).fetch(keys)
     }
     fn concurrency(&self) -> usize {
         (**self).concurrency()

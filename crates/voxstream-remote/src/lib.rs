@@ -4,7 +4,8 @@
 //!
 //! - [`RemoteLocation`]: a URL parsed once, its credentials kept out of everything shown.
 //! - [`RemoteStore`]: zarrs's storage traits over `object_store`, one ranged request per brick, retried, checked for
-//!   length, bounded, with a deadline.
+//!   length, bounded, with a deadline; [`RemoteStore::get_ranges`] fetches many ranges at once, abutting ones
+//!   merged ([`merged_ranges`]).
 //! - [`DiskCache`]: fetched bytes kept on disk within a limit, least recently used out first.
 //! - [`StoreUpload`]: a store built in a local folder, written to S3, GCS or Azure, its root metadata last.
 //!
@@ -15,6 +16,7 @@ mod client;
 pub mod disk_cache;
 pub mod error;
 pub mod location;
+pub mod merged_ranges;
 pub mod remote_store;
 pub mod upload;
 

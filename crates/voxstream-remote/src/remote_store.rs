@@ -105,7 +105,7 @@ pub struct RemoteStore {
     store: Arc<dyn ObjectStore>,
     location: RemoteLocation,
     options: RemoteOptions,
-    runtime: tokio::runtime::Runtime,
+    pub(crate) runtime: tokio::runtime::Runtime,
     stats: RemoteStats,
     cache: Option<DiskCache>,
 }
@@ -127,7 +127,7 @@ fn is_metadata_key(key: &str) -> bool {
 /// Retries: the client retries failed requests (5xx, 429, timeouts, resets before a response) with backoff, and
 /// resumes a body cut mid-stream where the server sends an ETag; [`RemoteStore::fetch`] retries what is left, a
 /// body that ended early or is not the length asked for.
-enum Fetched {
+pub(crate) enum Fetched {
     Bytes(Bytes),
     Missing,
 }
@@ -174,7 +174,7 @@ impl RemoteStore {
         }
     }
 
-    fn error(&self, key: &str, problem: impl std::fmt::Display) -> StorageError {
+    pub(crate) fn error(&self, key: &str, problem: impl std::fmt::Display) -> StorageError {
         StorageError::Other(format!("{}/{key}: {problem}", self.location.shown()))
     }
 
@@ -191,13 +191,45 @@ impl RemoteStore {
 
     /// [`RemoteStore::fetch`] with a whole value held to at most `limit` bytes (and the store's own cap).
     async fn fetch_capped(&self, key: &str, range: Option<GetRange>, limit: u64) -> Result<Fetched, StorageError> {
-        let cache_key = self.cache.as_ref().map(|_| format!("{}/{key}#{range:?}", self.location.shown()));
-        if let (Some(cache), Some(cache_key)) = (&self.cache, &cache_key) {
-            if let Some(bytes) = cache.get(cache_key) {
-                self.stats.cache_hits.fetch_add(1, Ordering::Relaxed);
-                return Ok(Fetched::Bytes(bytes));
+        if let Some(bytes) = self.cached_on_disk(key, &range) {
+            return Ok(Fetched::Bytes(bytes));
+        }
+        let fetched = self.fetch_uncached(key, range.clone(), limit).await?;
+        if let Fetched::Bytes(bytes) = &fetched {
+            // Metadata is always read fresh (it says what the bytes mean); bricks and chunks are cached.
+            if !is_metadata_key(key) {
+                self.keep_on_disk(key, &range, bytes);
             }
         }
+        Ok(fetched)
+    }
+
+    /// The name of `range` of `key` in the disk cache.
+    fn disk_cache_key(&self, key: &str, range: &Option<GetRange>) -> String {
+        format!("{}/{key}#{range:?}", self.location.shown())
+    }
+
+    /// `range` of `key` from the disk cache, where there is one and it holds it (counted as a hit).
+    pub(crate) fn cached_on_disk(&self, key: &str, range: &Option<GetRange>) -> Option<Bytes> {
+        let bytes = self.cache.as_ref()?.get(&self.disk_cache_key(key, range))?;
+        self.stats.cache_hits.fetch_add(1, Ordering::Relaxed);
+        Some(bytes)
+    }
+
+    /// Keeps `bytes`, `range` of `key`, in the disk cache where there is one.
+    pub(crate) fn keep_on_disk(&self, key: &str, range: &Option<GetRange>, bytes: &Bytes) {
+        if let Some(cache) = &self.cache {
+            cache.put(&self.disk_cache_key(key, range), bytes);
+        }
+    }
+
+    /// [`RemoteStore::fetch_capped`] from the network only (the disk cache neither read nor written).
+    pub(crate) async fn fetch_uncached(
+        &self,
+        key: &str,
+        range: Option<GetRange>,
+        limit: u64,
+    ) -> Result<Fetched, StorageError> {
         let path = self.object_path(key);
         let cap = if is_metadata_key(key) { self.options.max_metadata_bytes } else { self.options.max_value_bytes };
         let cap = cap.min(limit);
@@ -274,21 +306,14 @@ impl RemoteStore {
             }
             self.stats.requests.fetch_add(1, Ordering::Relaxed);
             self.stats.bytes.fetch_add(got, Ordering::Relaxed);
-            let bytes = Bytes::from(body);
-            if let (Some(cache), Some(cache_key)) = (&self.cache, &cache_key) {
-                // Metadata is always read fresh (it says what the bytes mean); bricks and chunks are cached.
-                if !is_metadata_key(key) {
-                    cache.put(cache_key, &bytes);
-                }
-            }
-            return Ok(Fetched::Bytes(bytes));
+            return Ok(Fetched::Bytes(Bytes::from(body)));
         }
         self.stats.failures.fetch_add(1, Ordering::Relaxed);
         Err(self.error(key, format!("failed after {} retries: {last_problem}", self.options.retries)))
     }
 
     /// The deadline of one read: every attempt's timeout and backoff, and a margin.
-    fn deadline(&self) -> Duration {
+    pub(crate) fn deadline(&self) -> Duration {
         let attempts = self.options.retries as u32 + 1;
         (self.options.request_timeout + Duration::from_secs(7)) * attempts
     }

@@ -57,6 +57,46 @@ pub struct CheckedStore {
     /// Whole values read ahead ([`CheckedStore::read_ahead`]) by key, `None` where the value is missing: the next
     /// whole read of the key takes its entry, and a size request is answered from it.
     ahead: std::sync::Mutex<std::collections::HashMap<String, Option<zarrs::storage::Bytes>>>,
+    /// Brick ranges being fetched now (by key, offset and length), by [`CheckedStore::warm_ranges`] or a read: a read
+    /// of one waits for it and takes it from the range cache, and `warm_ranges` leaves it out, so that no range is
+    /// fetched twice at once.
+    in_flight: InFlight,
+}
+
+/// Ranges being fetched, and a signal when any is done.
+#[derive(Debug, Default)]
+struct InFlight {
+    ranges: std::sync::Mutex<std::collections::HashSet<(String, u64, u64)>>,
+    done: std::sync::Condvar,
+}
+
+impl InFlight {
+    /// Waits while `id` is being fetched, then claims it: returns a guard that releases it (and wakes waiters)
+    /// when dropped.
+    fn claim(&self, id: &(String, u64, u64)) -> InFlightGuard<'_> {
+        let mut ranges = self.ranges.lock().unwrap_or_else(|p| p.into_inner());
+        while ranges.contains(id) {
+            ranges = self.done.wait(ranges).unwrap_or_else(|p| p.into_inner());
+        }
+        ranges.insert(id.clone());
+        InFlightGuard { in_flight: self, ids: vec![id.clone()] }
+    }
+}
+
+/// Ranges claimed in an [`InFlight`], released when dropped.
+struct InFlightGuard<'a> {
+    in_flight: &'a InFlight,
+    ids: Vec<(String, u64, u64)>,
+}
+
+impl Drop for InFlightGuard<'_> {
+    fn drop(&mut self) {
+        let mut ranges = self.in_flight.ranges.lock().unwrap_or_else(|p| p.into_inner());
+        for id in &self.ids {
+            ranges.remove(id);
+        }
+        self.in_flight.done.notify_all();
+    }
 }
 
 impl CheckedStore {
@@ -70,6 +110,7 @@ impl CheckedStore {
             ranges: None,
             max_range_bytes,
             ahead: Default::default(),
+            in_flight: Default::default(),
         })
     }
 
@@ -82,6 +123,7 @@ impl CheckedStore {
             ranges: None,
             max_range_bytes,
             ahead: Default::default(),
+            in_flight: Default::default(),
         }
     }
 
@@ -242,6 +284,64 @@ impl CheckedStore {
         self.suffix(key, length).map(|_| ())
     }
 
+    /// The shard index `key`'s last `length` bytes (read once, then kept); `None` where the shard is not there.
+    pub(crate) fn shard_index_bytes(
+        &self,
+        key: &StoreKey,
+        length: u64,
+    ) -> Result<Option<zarrs::storage::Bytes>, StorageError> {
+        match self.suffix(key, length)? {
+            None => Ok(None),
+            Some(mut parts) => parts.next().transpose(),
+        }
+    }
+
+    /// A remote store's bricks as stored, fetched ahead into the cache of brick ranges: of `wanted` (per shard key,
+    /// each brick's offset and length as the shard's index gives them) the ranges the cache lacks, those that abut in
+    /// a shard in one request, all at once (`RemoteStore::get_ranges`), so that the reads that follow find them in
+    /// memory. A range longer than a brick can be encoded is skipped (the read that asks for it refuses it); failures
+    /// are left to the reads, which retry and report. Nothing for a local folder or without a range cache. Returns
+    /// how many ranges were fetched.
+    pub(crate) fn warm_ranges(&self, wanted: Vec<(StoreKey, Vec<(u64, u64)>)>) -> usize {
+        let (Inner::Remote(remote), Some(cache)) = (&self.inner, &self.ranges) else { return 0 };
+        // Ranges cached or being fetched already are left out; the rest are claimed until they are cached.
+        let mut claimed = InFlightGuard { in_flight: &self.in_flight, ids: Vec::new() };
+        let wanted: Vec<(String, Vec<std::ops::Range<u64>>)> = {
+            let cache = cache.lock().unwrap_or_else(|p| p.into_inner());
+            let mut in_flight = self.in_flight.ranges.lock().unwrap_or_else(|p| p.into_inner());
+            wanted
+                .into_iter()
+                .map(|(key, ranges)| {
+                    let ranges = ranges
+                        .into_iter()
+                        .filter(|&(offset, length)| {
+                            length > 0
+                                && length <= self.max_range_bytes
+                                && offset.checked_add(length).is_some()
+                                && !cache.lru.contains(&(key.as_str().to_string(), offset, length))
+                                && in_flight.insert((key.as_str().to_string(), offset, length))
+                        })
+                        .inspect(|&(offset, length)| claimed.ids.push((key.as_str().to_string(), offset, length)))
+                        .map(|(offset, length)| offset..offset + length)
+                        .collect();
+                    (key.as_str().to_string(), ranges)
+                })
+                .filter(|(_, ranges): &(String, Vec<std::ops::Range<u64>>)| !ranges.is_empty())
+                .collect()
+        };
+        let mut fetched = 0;
+        for ((key, ranges), answer) in wanted.iter().zip(remote.get_ranges(&wanted)) {
+            let Ok(Some(pieces)) = answer else { continue };
+            let mut cache = cache.lock().unwrap_or_else(|p| p.into_inner());
+            for (range, bytes) in ranges.iter().zip(pieces) {
+                cache.keep((key.clone(), range.start, range.end - range.start), bytes);
+                fetched += 1;
+            }
+        }
+        drop(claimed);
+        fetched
+    }
+
     /// The shard index `key`'s last `length` bytes, read once and then kept.
     fn suffix(&self, key: &StoreKey, length: u64) -> Result<MaybeBytesIterator<'_>, StorageError> {
         let cache_key = (key.as_str().to_string(), length);
@@ -309,6 +409,12 @@ impl ReadableStorageTraits for CheckedStore {
                 }
                 hit
             };
+            if let Some(bytes) = hit {
+                return Ok(Some(Box::new(std::iter::once(Ok(bytes)))));
+            }
+            // Being fetched already (ahead, or by another read): wait for it and take it from the cache.
+            let _claim = self.in_flight.claim(&id);
+            let hit = cache.lock().unwrap_or_else(|p| p.into_inner()).lru.get(&id).cloned();
             if let Some(bytes) = hit {
                 return Ok(Some(Box::new(std::iter::once(Ok(bytes)))));
             }

@@ -45,6 +45,12 @@ pub trait BrickSource: Send + Sync {
         0
     }
 
+    /// Reads what these regions `(level, lower, size)` need into a cache, many reads in flight at once, and returns
+    /// when they are there (see [`Producer::fetch`]); failures are left to `read_region`. The default: nothing.
+    fn fetch_regions(&self, regions: &[(usize, [u64; 3], [u64; 3])]) {
+        let _ = regions;
+    }
+
     /// Whether `[lower, lower + size)` of `level` can be read without waiting on slow storage; if not, its reading
     /// starts in the background (see [`Producer::ready`]). The default: always.
     fn region_ready(self: &Arc<Self>, level: usize, lower: [u64; 3], size: [u64; 3]) -> bool {
@@ -78,6 +84,9 @@ impl BrickSource for StoreReader {
     }
     fn concurrency(&self) -> usize {
         StoreReader::remote(self).map_or(0, |remote| remote.concurrency())
+    }
+    fn fetch_regions(&self, regions: &[(usize, [u64; 3], [u64; 3])]) {
+        StoreReader::fetch_regions(self, regions);
     }
     fn region_ready(self: &Arc<Self>, level: usize, lower: [u64; 3], size: [u64; 3]) -> bool {
         StoreReader::region_ready(self, level, lower, size)
@@ -307,6 +316,11 @@ impl<S: BrickSource> Producer for StoreProducer<S> {
 
     fn concurrency(&self) -> usize {
         self.reader.concurrency()
+    }
+
+    fn fetch(&self, keys: &[NodeKey]) {
+        let regions: Vec<_> = keys.iter().filter_map(|key| self.region(key)).collect();
+        self.reader.fetch_regions(&regions);
     }
 
     fn ready(&self, key: NodeKey) -> bool {

@@ -185,6 +185,36 @@ fn s3_env(port: u16) -> Vec<(&'static str, String)> {
     ]
 }
 
+/// For an nginx log line `GET /STORE/LEVEL/c/Z/Y/X HTTP/1.1 "bytes=A-B" 206` of a shard served from `root`: how
+/// many bricks the range holds by the shard's index if it is exactly whole bricks, 0 if it is not; `None` for
+/// other lines (a suffix read of the index, metadata).
+fn bricks_in_range(root: &Path, line: &str) -> Option<usize> {
+    let path = line.split(' ').nth(1)?.trim_start_matches('/');
+    let range = line.split("\"bytes=").nth(1)?.split('"').next()?;
+    let (first, last) = range.split_once('-')?;
+    let (first, last): (u64, u64) = (first.parse().ok()?, last.parse().ok()?);
+    let (store_and_level, _) = path.split_once("/c/")?;
+    let level: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(root.join(store_and_level).join("zarr.json")).ok()?).ok()?;
+    let shape =
+        |v: &serde_json::Value| -> Vec<u64> { v.as_array().unwrap().iter().map(|e| e.as_u64().unwrap()).collect() };
+    let outer = shape(&level["chunk_grid"]["configuration"]["chunk_shape"]);
+    let inner = shape(&level["codecs"][0]["configuration"]["chunk_shape"]);
+    let count: u64 = outer.iter().zip(&inner).map(|(o, i)| o / i).product();
+    let shard = std::fs::read(root.join(path)).unwrap();
+    let index = &shard[shard.len() - (16 * count as usize + 4)..];
+    let (mut held, mut bytes) = (0, 0);
+    for entry in index[..16 * count as usize].chunks_exact(16) {
+        let offset = u64::from_le_bytes(entry[..8].try_into().unwrap());
+        let length = u64::from_le_bytes(entry[8..].try_into().unwrap());
+        if offset != u64::MAX && offset >= first && offset + length <= last + 1 {
+            held += 1;
+            bytes += length;
+        }
+    }
+    Some(if bytes == last + 1 - first { held } else { 0 })
+}
+
 #[test]
 fn http_and_s3_give_the_local_image_byte_for_byte() {
     let dir = scratch("remote_stores", "identical");
@@ -205,6 +235,10 @@ fn http_and_s3_give_the_local_image_byte_for_byte() {
     let lines: Vec<&str> = log.lines().filter(|l| l.starts_with("GET") && l.contains("/c/")).collect();
     let distinct: std::collections::HashSet<&str> = lines.iter().copied().collect();
     assert!(!lines.is_empty(), "no chunk was fetched: {log}");
+    // Bricks that abut in a shard come in one request, and every request is whole bricks, no byte more.
+    let spans: Vec<usize> = lines.iter().filter_map(|line| bricks_in_range(&dir.join("www"), line)).collect();
+    assert!(spans.iter().all(|&n| n > 0), "a range that is not whole bricks: {spans:?}\n{log}");
+    assert!(spans.iter().any(|&n| n > 1), "no request held more than one brick: {spans:?}\n{log}");
 
     let s3 = moto();
     upload(s3.port, &dir.join("www/ball.zarr"), "scans", "volumes/ball.zarr");

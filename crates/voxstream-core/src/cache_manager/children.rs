@@ -10,6 +10,7 @@ use crate::node::{NodeData, NodeId, TileId};
 use crate::producer::Producer;
 
 use super::analysis::{produce_analysed, AnalysedBrick, AnalysedContent};
+use super::production::produce_fetching;
 use super::space_order::in_space_order;
 use super::tree_updates::Eviction;
 #[cfg(doc)]
@@ -41,6 +42,7 @@ impl<P: Producer> CacheManager<P> {
         }
         let batch_size = self.capacities.production_batch.max(1) as usize;
         let mut remaining = candidates.as_slice();
+        let mut first = true;
         while !remaining.is_empty() {
             // Produce no more than the free slots can take: constant children need no slot, so recount each time.
             let room = (self.brick_pool.free_slots() as usize).min(batch_size).min(remaining.len());
@@ -69,10 +71,13 @@ impl<P: Producer> CacheManager<P> {
                     },
                 )
             };
-            let results: Vec<Option<Result<AnalysedBrick, ProduceError>>> = match &self.io_pool {
-                Some(pool) => pool.install(produce_batch),
-                None => produce_batch(),
-            };
+            // A producer on a network fetches the first batch's data, then each next batch's while one is produced.
+            let keys = |items: &[(NodeId, NodeKey)]| items.iter().map(|&(_, key)| key).collect::<Vec<_>>();
+            let this = first.then(|| keys(batch));
+            first = false;
+            let next = if wait { keys(&rest[..rest.len().min(batch_size)]) } else { vec![] };
+            let results: Vec<Option<Result<AnalysedBrick, ProduceError>>> =
+                produce_fetching(producer, self.io_pool.as_ref(), wait, this.as_deref(), &next, produce_batch);
             for (&(node_id, _), result) in batch.iter().zip(results) {
                 let Some(Ok(brick)) = result else {
                     report.children_left_missing += 1;

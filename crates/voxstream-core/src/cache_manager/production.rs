@@ -21,6 +21,44 @@ pub(super) struct Work {
     pub(super) forced: bool,
 }
 
+/// Runs `produce` (a batch) on the producer's own pool where it has one, else on the calling thread. With `fetch`,
+/// a producer on a network brings in data while the batch is produced (see [`Producer::fetch`]): first `this` (the
+/// batch's own keys, when nothing fetched them yet), then `next` (the following batch's) at the same time as the
+/// batch is produced, so that its round trips overlap this batch's decoding instead of following it.
+pub(super) fn produce_fetching<P: Producer, T: Send>(
+    producer: &P,
+    pool: Option<&rayon::ThreadPool>,
+    fetch: bool,
+    this: Option<&[NodeKey]>,
+    next: &[NodeKey],
+    produce: impl FnOnce() -> T + Send,
+) -> T {
+    let Some(pool) = pool else {
+        return produce();
+    };
+    if !fetch {
+        return pool.install(produce);
+    }
+    if let Some(this) = this.filter(|keys| !keys.is_empty()) {
+        producer.fetch(this);
+    }
+    if next.is_empty() {
+        return pool.install(produce);
+    }
+    std::thread::scope(|scope| {
+        scope.spawn(|| producer.fetch(next));
+        pool.install(produce)
+    })
+}
+
+/// The keys of `work` whose data a batch would read (productions that are not premature).
+fn produced_keys(work: &[Work], premature: impl Fn(&Work) -> bool) -> Vec<NodeKey> {
+    work.iter()
+        .filter(|item| item.request.kind == RequestKind::Produce && !premature(item))
+        .map(|item| item.key)
+        .collect()
+}
+
 pub(super) enum WorkResult {
     Produced(Result<AnalysedBrick, ProduceError>),
     Children(Vec<Option<f32>>),
@@ -40,7 +78,8 @@ impl<P: Producer> CacheManager<P> {
         new_tiles: &mut Vec<(TileId, NodeKey)>,
         unserved: &mut Vec<(Request, NodeKey)>,
     ) {
-        for batch in work.chunks(self.capacities.production_batch.max(1) as usize) {
+        let batch_size = self.capacities.production_batch.max(1) as usize;
+        for (index, batch) in work.chunks(batch_size).enumerate() {
             // Under the restriction, what is premature already is not produced at all.
             let premature: Vec<bool> = batch.iter().map(|item| self.is_premature(item.request, item.key)).collect();
             let producer = &self.producer;
@@ -69,10 +108,13 @@ impl<P: Producer> CacheManager<P> {
                     },
                 )
             };
-            let results: Vec<WorkResult> = match &self.io_pool {
-                Some(pool) => pool.install(produce_batch),
-                None => produce_batch(),
-            };
+            // A producer on a network fetches the first batch's data, then each next batch's while one is produced.
+            let this = (index == 0).then(|| produced_keys(batch, |item| self.is_premature(item.request, item.key)));
+            let next = work.get((index + 1) * batch_size..).map_or(&[][..], |rest| &rest[..rest.len().min(batch_size)]);
+            let next =
+                if wait { produced_keys(next, |item| self.is_premature(item.request, item.key)) } else { vec![] };
+            let results: Vec<WorkResult> =
+                produce_fetching(producer, self.io_pool.as_ref(), wait, this.as_deref(), &next, produce_batch);
             for (item, result) in batch.iter().zip(results) {
                 let (request, key) = (item.request, item.key);
                 // A forced step served earlier in the batch, or a recycled tile, may have made it moot; under the
@@ -132,6 +174,57 @@ mod tests {
         fn ready(&self, _: NodeKey) -> bool {
             false
         }
+    }
+
+    /// [`Ramp`] on "a network": its own pool of threads, and a record of what was fetched and what was produced
+    /// without having been fetched first.
+    #[derive(Default)]
+    struct Fetching {
+        fetched: std::sync::Mutex<Vec<Vec<NodeKey>>>,
+        unfetched: std::sync::Mutex<Vec<NodeKey>>,
+    }
+    impl Producer for Fetching {
+        fn shape(&self) -> TreeShape {
+            Ramp.shape()
+        }
+        fn oracle(&self, key: NodeKey) -> Option<f32> {
+            Ramp.oracle(key)
+        }
+        fn produce(&self, key: NodeKey, voxels: &mut [u16]) -> Result<Produced, ProduceError> {
+            if !self.fetched.lock().unwrap().iter().flatten().any(|&k| k == key) {
+                self.unfetched.lock().unwrap().push(key);
+            }
+            Ramp.produce(key, voxels)
+        }
+        fn concurrency(&self) -> usize {
+            4
+        }
+        fn fetch(&self, keys: &[NodeKey]) {
+            self.fetched.lock().unwrap().push(keys.to_vec());
+        }
+    }
+
+    #[test]
+    fn a_producer_on_a_network_fetches_each_batch_before_it_is_produced_and_only_when_frames_wait() {
+        // A budget whose production batches are 3 bricks: the root's 7 non-constant children take 3 batches.
+        let mut cache = CacheManager::new(Fetching::default(), 100_000).unwrap();
+        assert_eq!(cache.capacities().production_batch, 3);
+        let serve = |cache: &mut CacheManager<Fetching>, kind, wait_for_data| {
+            cache.begin_frame();
+            cache.feedback().push_requests(&[Request { node: NodeId::ROOT, kind, deficit: 1 }]);
+            cache.end_frame(ServeOptions { limit: None, prefetch_new_children: true, wait_for_data })
+        };
+        // A frame that does not wait fetches nothing (its producer fetches in the background, see `ready`).
+        serve(&mut cache, RequestKind::Produce, false);
+        assert!(cache.producer().fetched.lock().unwrap().is_empty());
+        cache.producer().unfetched.lock().unwrap().clear();
+        let report = serve(&mut cache, RequestKind::Subdivide, true);
+        assert_eq!(report.bricks_prefetched, 7, "{report:?}");
+        let producer = cache.producer();
+        assert_eq!(producer.unfetched.lock().unwrap().as_slice(), &[], "produced before it was fetched");
+        // The first batch, then each next one while the one before is produced.
+        let batches: Vec<usize> = producer.fetched.lock().unwrap().iter().map(|keys| keys.len()).collect();
+        assert_eq!(batches, [3, 3, 1], "{batches:?}");
     }
 
     #[test]

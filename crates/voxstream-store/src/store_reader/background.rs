@@ -100,6 +100,55 @@ impl StoreReader {
         false
     }
 
+    /// Remote stores: reads every brick that these regions `(level, lower, size)` overlap into the brick cache, as
+    /// many at once as there are threads in the calling pool (the producer's own, see `Producer::concurrency`), and
+    /// returns when all are there or have failed (failures are left to the read that needs the brick, which
+    /// reports them). Reading region by region instead waits a round trip for each region's few uncached bricks in
+    /// turn. Local stores: nothing (their reads do not wait on a network).
+    pub fn fetch_regions(&self, regions: &[(usize, [u64; 3], [u64; 3])]) {
+        if self.remote.is_none() {
+            return;
+        }
+        let b = self.layout.brick_size;
+        let mut wanted = std::collections::BTreeSet::new();
+        {
+            let cache = self.brick_cache.lock().unwrap_or_else(|p| p.into_inner());
+            for &(level, lower, size) in regions {
+                if size.contains(&0) {
+                    continue;
+                }
+                let first = lower.map(|v| v / b);
+                let last = [0, 1, 2].map(|a| (lower[a] + size[a] - 1) / b);
+                for z in first[2]..=last[2] {
+                    for y in first[1]..=last[1] {
+                        for x in first[0]..=last[0] {
+                            let key = (level, [x, y, z]);
+                            if !cache.contains(&key) && !self.holds_only_zero(level, key.1) {
+                                wanted.insert(key);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        // A native store's bricks as byte ranges of their shards, abutting ones in one request; the rest one by one.
+        let wanted = self.fetch_bricks_by_range(wanted.into_iter().collect());
+        // Plain threads, each taking the next brick: a rayon worker blocked on a round trip would steal other work
+        // while it waits and chain the waits of unrelated reads.
+        let threads = self.remote.as_ref().map_or(1, |r| r.concurrency()).clamp(1, wanted.len().max(1));
+        let next = std::sync::atomic::AtomicUsize::new(0);
+        std::thread::scope(|scope| {
+            for _ in 0..threads {
+                scope.spawn(|| {
+                    while let Some(&(level, ijk)) = wanted.get(next.fetch_add(1, std::sync::atomic::Ordering::Relaxed))
+                    {
+                        let _ = self.brick(level, ijk);
+                    }
+                });
+            }
+        });
+    }
+
     /// Starts reading `bricks` on the remote store's fetch threads (each at most once at a time), so that no worker
     /// of the shared pool, which draws the frames, waits on the network; with `whole`, all of them or (when they
     /// would not fit under the bound of bricks in flight) none. Failures are remembered (see

@@ -15,7 +15,7 @@
 //! - `opening`: opening a local or remote store and validating its metadata and per-brick min/max once.
 //! - `brick_reads`: regions assembled from bricks, each read once through the brick cache and checked.
 //! - `background`: fetching ahead (prefetch, and the non-blocking frames of a remote session).
-//! - `shard_indexes`: a remote store's coarse shard indexes, fetched at open.
+//! - `shard_indexes`: a remote store's coarse shard indexes, fetched at open; bricks' byte ranges from the indexes.
 //! - `value_range_scan`: a foreign store's value range, scanned at open, and the samples it clips.
 
 mod background;
@@ -75,6 +75,8 @@ pub struct StoreReader {
     metrics: Option<Arc<PerformanceMetricsStorageAdapter<CheckedStore>>>,
     /// The storage a native store's bricks are read through (it holds the compressed-brick cache).
     bricks_store: Option<Arc<CheckedStore>>,
+    /// Per level, its bricks per shard and the length of a shard's index where `shard_indexes` can read them.
+    shard_geometries: std::sync::OnceLock<Vec<Option<([u64; 3], u64)>>>,
     /// Bytes the decoded-brick cache may hold.
     decoded_cache_bytes: u64,
     /// Samples read from a foreign store that lay outside its value range (they saturate).
@@ -128,6 +130,7 @@ impl StoreReader {
             chunk_cache,
             metrics: None,
             bricks_store: None,
+            shard_geometries: Default::default(),
             decoded_cache_bytes: capacity.get() as u64 * brick_bytes,
             clipped: std::sync::atomic::AtomicU64::new(0),
             value_range_level: 0,

@@ -8,6 +8,10 @@
 //! The index is read through [`CheckedStore`]'s suffix cache with the length zarrs's sharding codec asks for
 //! (16 bytes per brick, and 4 for the `crc32c` index codec voxstream writes), so that the first brick read of a
 //! shard finds it there. A store whose index is encoded otherwise is left alone: nothing is fetched ahead.
+//!
+//! The same indexes say where each brick lies in its shard ([`StoreReader::fetch_bricks_by_range`]): a batch of bricks
+//! is fetched as byte ranges, those that abut in a shard (neighbours along x, stored one after another) in one
+//! request, into the compressed-brick cache the reads that follow are answered from.
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -69,6 +73,81 @@ impl StoreReader {
                 });
             }
         });
+    }
+}
+
+/// A shard's key, the length of its index, and the bricks wanted in it (each its place in the index and its ijk).
+type ShardBricks = (StoreKey, u64, Vec<(u64, [u64; 3])>);
+
+impl StoreReader {
+    /// Per level, its bricks per shard (z, y, x) and its shard index's length, where [`shard_geometry`] reads them.
+    fn shard_geometries(&self) -> &[Option<([u64; 3], u64)>] {
+        self.shard_geometries.get_or_init(|| {
+            self.levels
+                .iter()
+                .map(|level| match level {
+                    LevelSource::Array { array, .. } => shard_geometry(
+                        &serde_json::to_value(array.metadata()).unwrap_or_default(),
+                        self.layout.brick_size,
+                    ),
+                    LevelSource::Synthesized => None,
+                })
+                .collect()
+        })
+    }
+
+    /// Remote native stores: fetches `bricks` (level, ijk) as byte ranges of their shards into the compressed-brick
+    /// cache, abutting ones in one request (see the module docs): their shards' indexes first where not known yet,
+    /// then every brick's range at once. Returns the bricks this could not take (a level whose shards it cannot
+    /// read, a shard or index that failed, a brick the index says is empty): the caller reads those brick by brick,
+    /// and a failure is reported by that read.
+    pub(super) fn fetch_bricks_by_range(&self, bricks: Vec<(usize, [u64; 3])>) -> Vec<(usize, [u64; 3])> {
+        let Some(store) = &self.bricks_store else { return bricks };
+        let geometries = self.shard_geometries();
+        let mut rest = Vec::new();
+        // Per shard: its key, its index length, and its bricks' places in the index.
+        let mut shards: std::collections::BTreeMap<(usize, [u64; 3]), ShardBricks> = Default::default();
+        for (level, ijk) in bricks {
+            let (Some(Some((per_shard, index_bytes))), Some(LevelSource::Array { array, .. })) =
+                (geometries.get(level), self.levels.get(level))
+            else {
+                rest.push((level, ijk));
+                continue;
+            };
+            // Shard and inner indices in the array's axis order (z, y, x).
+            let zyx = [ijk[2], ijk[1], ijk[0]];
+            let shard = [0, 1, 2].map(|a| zyx[a] / per_shard[a]);
+            let inner = [0, 1, 2].map(|a| zyx[a] % per_shard[a]);
+            let place = (inner[0] * per_shard[1] + inner[1]) * per_shard[2] + inner[2];
+            shards
+                .entry((level, shard))
+                .or_insert_with(|| (array.chunk_key(&shard), *index_bytes, Vec::new()))
+                .2
+                .push((place, ijk));
+        }
+        let indexes: Vec<(StoreKey, u64)> = shards.values().map(|(key, length, _)| (key.clone(), *length)).collect();
+        StoreReader::fetch_shard_indexes(store, &indexes);
+        let mut wanted = Vec::new();
+        for (&(level, _), (key, length, places)) in &shards {
+            let index = store.shard_index_bytes(key, *length).ok().flatten().filter(|i| i.len() as u64 == *length);
+            let mut ranges = Vec::new();
+            for &(place, ijk) in places {
+                let entry = index.as_ref().and_then(|index| {
+                    let at = (place * 16) as usize;
+                    let field = |from: usize| Some(u64::from_le_bytes(index.get(from..from + 8)?.try_into().ok()?));
+                    Some((field(at)?, field(at + 8)?))
+                });
+                match entry {
+                    Some((offset, length)) if offset != u64::MAX && length != u64::MAX => ranges.push((offset, length)),
+                    _ => rest.push((level, ijk)),
+                }
+            }
+            if !ranges.is_empty() {
+                wanted.push((key.clone(), ranges));
+            }
+        }
+        store.warm_ranges(wanted);
+        rest
     }
 }
 
