@@ -1,8 +1,8 @@
 //! Many byte ranges fetched at once, those that abut in a value merged into one request (issue 43: "adjacent ranges
 //! of a shard merged where that saves round trips"). A shard stores its bricks one after another, so the bricks of a
 //! view that neighbour each other in a shard's row are one request instead of one each; the requests of every value
-//! asked for are in flight together, up to the store's concurrency, on its client's runtime (no thread waits per
-//! request).
+//! asked for are in flight together, up to the store's concurrency (one bound shared by every call at once), on its
+//! client's runtime (no thread waits per request).
 //!
 //! Each range asked for is answered with exactly its own bytes (cut from the merged body), or its error; a merged
 //! request that fails fails only the ranges it held. Ranges already in the disk cache are not fetched, and every
@@ -81,6 +81,8 @@ impl RemoteStore {
             futures::stream::iter(requests)
                 .map(|(value, span, members)| async move {
                     let key = wanted[value].0.as_str();
+                    // Every call's requests share the store's bound (calls from several threads at once).
+                    let _permit = self.permits.acquire().await;
                     let limit = span.end - span.start;
                     let fetch = self.fetch_uncached(key, Some(GetRange::Bounded(span.clone())), limit);
                     let result = match tokio::time::timeout(deadline, fetch).await {

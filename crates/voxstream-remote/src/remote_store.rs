@@ -108,6 +108,8 @@ pub struct RemoteStore {
     pub(crate) runtime: tokio::runtime::Runtime,
     stats: RemoteStats,
     cache: Option<DiskCache>,
+    /// Merged requests in flight across every [`RemoteStore::get_ranges`] call, at most `options.concurrency`.
+    pub(crate) permits: tokio::sync::Semaphore,
 }
 
 impl std::fmt::Debug for RemoteStore {
@@ -141,7 +143,8 @@ impl RemoteStore {
     ) -> Result<RemoteStore, RemoteError> {
         let store = build_client(&location, &options)?;
         let runtime = client_runtime(&location, "voxstream-remote")?;
-        Ok(RemoteStore { store, location, options, runtime, stats: RemoteStats::default(), cache })
+        let permits = tokio::sync::Semaphore::new(options.concurrency.max(1));
+        Ok(RemoteStore { store, location, options, runtime, stats: RemoteStats::default(), cache, permits })
     }
 
     /// Where the store is (as shown: no credentials).

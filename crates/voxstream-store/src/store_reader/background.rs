@@ -175,13 +175,26 @@ impl StoreReader {
         if whole && !fetching.is_empty() && fetching.len() + new > limit {
             return true;
         }
+        let mut started = Vec::new();
         for key in bricks {
             if fetching.len() >= limit {
                 break;
             }
             if fetching.insert(key) {
-                let reader = Arc::clone(self);
-                pool.spawn(move || {
+                started.push(key);
+            }
+        }
+        if started.is_empty() {
+            return true;
+        }
+        // A native store's bricks as byte ranges of their shards first (abutting ones in one request), then each
+        // brick decoded (or, where that could not take it, read) on a thread of its own.
+        let reader = Arc::clone(self);
+        pool.spawn(move || {
+            reader.fetch_bricks_by_range(started.clone());
+            for key in started {
+                let reader = Arc::clone(&reader);
+                rayon::spawn(move || {
                     match reader.brick(key.0, key.1) {
                         Ok(_) => reader.background.forget_failure(key),
                         Err(_) => reader.background.note_failure(key),
@@ -189,7 +202,7 @@ impl StoreReader {
                     reader.background.fetching.lock().unwrap_or_else(|p| p.into_inner()).remove(&key);
                 });
             }
-        }
+        });
         true
     }
 
