@@ -3,7 +3,8 @@ peer comparison ("voxstream's time to a complete view, rendering included, no lo
 read them").
 
 The bricks are recovered from the HTTP server's access log of the voxstream run: every bounded range GET of a shard
-is matched, through the shard's index in the local copy of the store, to the inner chunk at that offset. tensorstore
+is matched, through the shard's index in the local copy of the store, to the inner chunks it holds (one, or several
+that abut where voxstream merged their ranges). tensorstore
 then opens each level's array over the same URL (through the same latency proxy) and reads those chunks' boxes, all
 issued at once, with its default HTTP concurrency (32 requests) and either no cache (its default) or a 256 MiB cache
 pool (so that each shard index is fetched once, as voxstream does). Prints the chunks, the time from open to the
@@ -38,7 +39,7 @@ def chunks_from_log(store, name, log):
         m = pattern.match(line)
         if not m:
             continue
-        level, sz, sy, sx, start, _ = m.groups()
+        level, sz, sy, sx, start, end = m.groups()
         shape, shard, inner = shard_chunks(store, level)
         path = os.path.join(store, level, "c", sz, sy, sx)
         if path not in indexes:
@@ -46,16 +47,16 @@ def chunks_from_log(store, name, log):
             n = per[0] * per[1] * per[2]
             data = open(path, "rb").read()
             index = data[-(n * 16 + 4):-4]
-            entries = {struct.unpack_from("<Q", index, 16 * k)[0]: k for k in range(n)}
+            entries = [struct.unpack_from("<QQ", index, 16 * k) + (k,) for k in range(n)]
             indexes[path] = (entries, per)
         entries, per = indexes[path]
-        k = entries.get(int(start))
-        if k is None:
-            continue
-        cz, cy, cx = k // (per[1] * per[2]), k // per[2] % per[1], k % per[2]
-        origin = [int(s) * sh + c * i for s, sh, c, i in zip((sz, sy, sx), shard, (cz, cy, cx), inner)]
-        box = tuple((o, min(o + i, d)) for o, i, d in zip(origin, inner, shape))
-        wanted.add((level, box))
+        held = [k for offset, length, k in entries
+                if offset != 2**64 - 1 and offset >= int(start) and offset + length <= int(end) + 1]
+        for k in held:
+            cz, cy, cx = k // (per[1] * per[2]), k // per[2] % per[1], k % per[2]
+            origin = [int(s) * sh + c * i for s, sh, c, i in zip((sz, sy, sx), shard, (cz, cy, cx), inner)]
+            box = tuple((o, min(o + i, d)) for o, i, d in zip(origin, inner, shape))
+            wanted.add((level, box))
     return sorted(wanted)
 
 
