@@ -686,3 +686,56 @@ for version, name in ((3, "v3.zarr"), (2, "v2.zarr")):
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn a_forged_shard_index_over_http_fails_its_bricks_and_fetches_no_forged_range() {
+    // Fetching ahead reads shard indexes before zarrs checks them: forged entries (past 2^64, longer than a brick
+    // can be, past the shard's end) must cost no request beyond a brick's bound, and the bricks fail as from disk.
+    let dir = scratch("remote_stores", "forged_index");
+    import_ball(&dir, "www/ball.zarr");
+    let store = dir.join("www/ball.zarr");
+    let level: serde_json::Value = serde_json::from_slice(&std::fs::read(store.join("0/zarr.json")).unwrap()).unwrap();
+    let shape =
+        |v: &serde_json::Value| -> Vec<u64> { v.as_array().unwrap().iter().map(|e| e.as_u64().unwrap()).collect() };
+    let outer = shape(&level["chunk_grid"]["configuration"]["chunk_shape"]);
+    let inner = shape(&level["codecs"][0]["configuration"]["chunk_shape"]);
+    let count = outer.iter().zip(&inner).map(|(o, i)| o / i).product::<u64>() as usize;
+    let mut forged = 0;
+    for shard in ["0/c/1/0/0"] {
+        let path = store.join(shard);
+        let mut data = std::fs::read(&path).unwrap();
+        let end = data.len() as u64;
+        let start = data.len() - (16 * count + 4);
+        for (k, entry) in data[start..start + 16 * count].chunks_exact_mut(16).enumerate() {
+            if entry[..8] == [0xff; 8] {
+                continue;
+            }
+            let (offset, length): (u64, u64) = match k % 3 {
+                0 => (u64::MAX - 10, 100),
+                1 => (0, 1 << 62),
+                _ => (end + 1000, 500),
+            };
+            entry[..8].copy_from_slice(&offset.to_le_bytes());
+            entry[8..].copy_from_slice(&length.to_le_bytes());
+            forged += 1;
+        }
+        std::fs::write(&path, data).unwrap();
+    }
+    assert!(forged > 0, "no brick to forge");
+    let server = nginx(&dir, &dir.join("www"));
+    let url = format!("http://127.0.0.1:{}/ball.zarr", server.port);
+    let started = Instant::now();
+    let (_, out) = render(&dir, &url, "forged.png", &[], &[]);
+    assert_eq!(out.status.code(), Some(3), "failed bricks exit 3: {}", stderr(&out));
+    // The index's CRC32C no longer matches: zarrs refuses it, and the bricks fail as they would from disk.
+    assert!(stderr(&out).contains("the shard is corrupt"), "{}", stderr(&out));
+    assert!(started.elapsed() < Duration::from_secs(120), "the render took {:?}", started.elapsed());
+    let log = std::fs::read_to_string(dir.join("nginx/access.log")).unwrap();
+    for line in log.lines().filter(|l| l.contains("\"bytes=") && !l.contains("\"bytes=-")) {
+        let range = line.split("\"bytes=").nth(1).unwrap().split('"').next().unwrap();
+        let (first, last) = range.split_once('-').unwrap();
+        let (first, last): (u64, u64) = (first.parse().unwrap(), last.parse().unwrap());
+        assert!(last - first < 4 << 20 && first < u64::MAX - 100, "a forged range was fetched: {line}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
