@@ -100,10 +100,11 @@ impl StoreReader {
         false
     }
 
-    /// Remote stores: reads every brick that these regions `(level, lower, size)` overlap into the brick cache, as
-    /// many at once as there are threads in the calling pool (the producer's own, see `Producer::concurrency`), and
-    /// returns when all are there or have failed (failures are left to the read that needs the brick, which
-    /// reports them). Reading region by region instead waits a round trip for each region's few uncached bricks in
+    /// Remote stores: brings every brick that these regions `(level, lower, size)` overlap within reach, and returns
+    /// when all are there or have failed (failures are left to the read that needs the brick, which reports them).
+    /// A native store's bricks come as byte ranges of their shards into the compressed-brick cache, abutting ones
+    /// in one request (`fetch_bricks_by_range`); the others are read into the brick cache on `--concurrent-requests`
+    /// plain threads. Reading region by region instead waits a round trip for each region's few uncached bricks in
     /// turn. Local stores: nothing (their reads do not wait on a network).
     pub fn fetch_regions(&self, regions: &[(usize, [u64; 3], [u64; 3])]) {
         if self.remote.is_none() {
