@@ -109,7 +109,14 @@ impl<P: Producer> CacheManager<P> {
                 )
             };
             // A producer on a network fetches the first batch's data, then each next batch's while one is produced.
-            let this = (index == 0).then(|| produced_keys(batch, |item| self.is_premature(item.request, item.key)));
+            let this = (index == 0).then(|| {
+                batch
+                    .iter()
+                    .zip(&premature)
+                    .filter(|(item, &premature)| item.request.kind == RequestKind::Produce && !premature)
+                    .map(|(item, _)| item.key)
+                    .collect::<Vec<_>>()
+            });
             let next = work.get((index + 1) * batch_size..).map_or(&[][..], |rest| &rest[..rest.len().min(batch_size)]);
             let next =
                 if wait { produced_keys(next, |item| self.is_premature(item.request, item.key)) } else { vec![] };

@@ -48,6 +48,21 @@ impl Background {
     }
 }
 
+/// Calls `work` on every item, from up to `threads` plain threads (each taking the next item), and returns when all
+/// are done: for reads that wait on a network, where a rayon worker would steal other work while it waits.
+pub(super) fn on_plain_threads<T: Sync>(items: &[T], threads: usize, work: impl Fn(&T) + Sync) {
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    std::thread::scope(|scope| {
+        for _ in 0..threads.clamp(1, items.len().max(1)) {
+            scope.spawn(|| {
+                while let Some(item) = items.get(next.fetch_add(1, std::sync::atomic::Ordering::Relaxed)) {
+                    work(item);
+                }
+            });
+        }
+    });
+}
+
 impl StoreReader {
     /// Sessions over a remote store: with `on`, [`StoreReader::region_ready`] starts fetching what is missing in
     /// the background and answers "not yet", so that interactive frames never wait on the network (converged
@@ -64,22 +79,10 @@ impl StoreReader {
         if !self.background.on.load(Ordering::Relaxed) {
             return true;
         }
-        let b = self.layout.brick_size;
-        let first = lower.map(|v| v / b);
-        let last = [0, 1, 2].map(|a| (lower[a] + size[a]).saturating_sub(1) / b);
         let mut missing = Vec::new();
         {
             let cache = self.brick_cache.lock().unwrap_or_else(|p| p.into_inner());
-            for z in first[2]..=last[2] {
-                for y in first[1]..=last[1] {
-                    for x in first[0]..=last[0] {
-                        let ijk = [x, y, z];
-                        if !cache.contains(&(level, ijk)) && !self.holds_only_zero(level, ijk) {
-                            missing.push(ijk);
-                        }
-                    }
-                }
-            }
+            self.uncached_bricks(&cache, level, lower, size, |ijk| missing.push(ijk));
         }
         if missing.is_empty() {
             return true;
@@ -110,44 +113,51 @@ impl StoreReader {
         if self.remote.is_none() {
             return;
         }
-        let b = self.layout.brick_size;
         let mut wanted = std::collections::BTreeSet::new();
         {
             let cache = self.brick_cache.lock().unwrap_or_else(|p| p.into_inner());
             for &(level, lower, size) in regions {
-                if size.contains(&0) {
-                    continue;
-                }
-                let first = lower.map(|v| v / b);
-                let last = [0, 1, 2].map(|a| (lower[a] + size[a] - 1) / b);
-                for z in first[2]..=last[2] {
-                    for y in first[1]..=last[1] {
-                        for x in first[0]..=last[0] {
-                            let key = (level, [x, y, z]);
-                            if !cache.contains(&key) && !self.holds_only_zero(level, key.1) {
-                                wanted.insert(key);
-                            }
-                        }
+                self.uncached_bricks(&cache, level, lower, size, |ijk| {
+                    wanted.insert((level, ijk));
+                });
+            }
+        }
+        // A native store's bricks as byte ranges of their shards, abutting ones in one request; the rest one by one
+        // on plain threads: a rayon worker blocked on a round trip would steal other work while it waits and chain
+        // the waits of unrelated reads.
+        let wanted = self.fetch_bricks_by_range(wanted.into_iter().collect());
+        let threads = self.remote.as_ref().map_or(1, |r| r.concurrency());
+        on_plain_threads(&wanted, threads, |&(level, ijk)| {
+            let _ = self.brick(level, ijk);
+        });
+    }
+
+    /// Calls `found` with each brick of `[lower, lower + size)` of `level` that `cache` lacks and whose min/max does
+    /// not say it holds only 0 (none for an empty region).
+    fn uncached_bricks(
+        &self,
+        cache: &lru::LruCache<(usize, [u64; 3]), Arc<super::decoded_brick::DecodedBrick>>,
+        level: usize,
+        lower: [u64; 3],
+        size: [u64; 3],
+        mut found: impl FnMut([u64; 3]),
+    ) {
+        if size.contains(&0) {
+            return;
+        }
+        let b = self.layout.brick_size;
+        let first = lower.map(|v| v / b);
+        let last = [0, 1, 2].map(|a| (lower[a] + size[a] - 1) / b);
+        for z in first[2]..=last[2] {
+            for y in first[1]..=last[1] {
+                for x in first[0]..=last[0] {
+                    let ijk = [x, y, z];
+                    if !cache.contains(&(level, ijk)) && !self.holds_only_zero(level, ijk) {
+                        found(ijk);
                     }
                 }
             }
         }
-        // A native store's bricks as byte ranges of their shards, abutting ones in one request; the rest one by one.
-        let wanted = self.fetch_bricks_by_range(wanted.into_iter().collect());
-        // Plain threads, each taking the next brick: a rayon worker blocked on a round trip would steal other work
-        // while it waits and chain the waits of unrelated reads.
-        let threads = self.remote.as_ref().map_or(1, |r| r.concurrency()).clamp(1, wanted.len().max(1));
-        let next = std::sync::atomic::AtomicUsize::new(0);
-        std::thread::scope(|scope| {
-            for _ in 0..threads {
-                scope.spawn(|| {
-                    while let Some(&(level, ijk)) = wanted.get(next.fetch_add(1, std::sync::atomic::Ordering::Relaxed))
-                    {
-                        let _ = self.brick(level, ijk);
-                    }
-                });
-            }
-        });
     }
 
     /// Starts reading `bricks` on the remote store's fetch threads (each at most once at a time), so that no worker

@@ -13,13 +13,12 @@
 //! is fetched as byte ranges, those that abut in a shard (neighbours along x, stored one after another) in one
 //! request, into the compressed-brick cache the reads that follow are answered from.
 
-use std::sync::atomic::{AtomicUsize, Ordering};
-
 use zarrs::storage::StoreKey;
 
 use crate::checked_store::CheckedStore;
 use crate::level_source::LevelSource;
 
+use super::background::on_plain_threads;
 use super::StoreReader;
 
 /// Most shard indexes fetched at open: with 64 bricks per shard, 256 indexes are 263 KB and cover 16,384 bricks.
@@ -63,15 +62,8 @@ impl StoreReader {
     /// Reads the indexes `wanted` into `store`'s suffix cache, [`FETCH_THREADS`] at a time. A failure is left alone:
     /// the brick read that needs the index fetches it again and reports what persists.
     pub(super) fn fetch_shard_indexes(store: &CheckedStore, wanted: &[(StoreKey, u64)]) {
-        let next = AtomicUsize::new(0);
-        std::thread::scope(|scope| {
-            for _ in 0..FETCH_THREADS.min(wanted.len()) {
-                scope.spawn(|| {
-                    while let Some((key, length)) = wanted.get(next.fetch_add(1, Ordering::Relaxed)) {
-                        let _ = store.shard_index(key, *length);
-                    }
-                });
-            }
+        on_plain_threads(wanted, FETCH_THREADS, |(key, length)| {
+            let _ = store.shard_index(key, *length);
         });
     }
 }
